@@ -1,0 +1,3 @@
+from fricli.cli import main
+
+main()

@@ -1,0 +1,373 @@
+"""The log contract: read a Parquet log, check it, convert units, derive what is missing.
+
+A log holds one row per sample. Columns (SI units unless the Parquet field metadata key
+``unit`` says otherwise; see docs/log-format.md):
+
+    t [s]  q [rad]  qd [rad/s]  qdd [rad/s^2]  tau_m [Nm] (or i_m [A] with kt)
+    tau_g [Nm]  tau_dyn [Nm]  tau_ext [Nm]  temp [degC]  tau_f_true [Nm]  joint
+
+A linear axis uses m, m/s, m/s^2 and N in the same columns. Every model kind sees a log
+through ``Log.signals``: float64 arrays of shape (n,) in canonical units.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import os
+import sys
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from scipy import signal as sps
+
+from fricli.atomic import atomic_open
+from fricli.errors import DataError, LogError
+
+TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
+KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
+DEFAULT_CUTOFF_HZ = 50.0
+
+# unit spelling -> (dimension, factor to canonical)
+_UNITS = {
+    "s": ("time", 1.0), "ms": ("time", 1e-3),
+    "rad": ("angle", 1.0), "deg": ("angle", np.pi / 180), "m": ("length", 1.0), "mm": ("length", 1e-3),
+    "rad/s": ("angle/s", 1.0), "deg/s": ("angle/s", np.pi / 180),
+    "m/s": ("length/s", 1.0), "mm/s": ("length/s", 1e-3),
+    "rad/s^2": ("angle/s2", 1.0), "deg/s^2": ("angle/s2", np.pi / 180),
+    "m/s^2": ("length/s2", 1.0), "mm/s^2": ("length/s2", 1e-3),
+    "Nm": ("torque", 1.0), "N": ("force", 1.0),
+    "A": ("current", 1.0), "degC": ("temperature", 1.0),
+}
+_ALIASES = {"sec": "s", "radian": "rad", "rad/s2": "rad/s^2", "rad/s²": "rad/s^2",
+            "deg/s2": "deg/s^2", "deg/s²": "deg/s^2", "m/s2": "m/s^2", "m/s²": "m/s^2",
+            "mm/s2": "mm/s^2", "mm/s²": "mm/s^2", "N·m": "Nm", "N*m": "Nm", "N m": "Nm",
+            "N.m": "Nm", "°": "deg", "°/s": "deg/s", "°/s²": "deg/s^2", "°C": "degC",
+            "C": "degC", "celsius": "degC", "amp": "A"}
+# column -> dimensions it may have, by axis kind
+_EXPECTED = {
+    "t": {"rotary": "time", "linear": "time"},
+    "q": {"rotary": "angle", "linear": "length"},
+    "qd": {"rotary": "angle/s", "linear": "length/s"},
+    "qdd": {"rotary": "angle/s2", "linear": "length/s2"},
+    "i_m": {"rotary": "current", "linear": "current"},
+    "temp": {"rotary": "temperature", "linear": "temperature"},
+    **{c: {"rotary": "torque", "linear": "force"} for c in TORQUES},
+}
+CANONICAL = {
+    "rotary": {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau": "Nm"},
+    "linear": {"q": "m", "qd": "m/s", "qdd": "m/s^2", "tau": "N"},
+}
+
+
+def canonical_unit(spelling: str) -> str:
+    s = spelling.strip()
+    s = _ALIASES.get(s, s)
+    if s not in _UNITS:
+        raise LogError(f"unknown unit {spelling!r}")
+    return s
+
+
+def field_unit(field: pa.Field) -> str | None:
+    meta = field.metadata or {}
+    raw = meta.get(b"unit")
+    return raw.decode("utf-8", "replace") if raw is not None else None
+
+
+# ---------------------------------------------------------------------------- reading
+
+
+def read_bytes(path: str) -> bytes:
+    """Whole file (or stdin for ``-``) as bytes; stdin may be a pipe, so it is read first."""
+    if path == "-":
+        return sys.stdin.buffer.read()
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogError(f"{path}: is a folder, not a log") from None
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read ({exc.strerror})") from None
+
+
+def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
+    if not data:
+        raise LogError(f"{name}: empty input, not a Parquet log")
+    try:
+        return pq.ParquetFile(io.BytesIO(data))
+    except Exception:  # pyarrow raises several types for corrupt input
+        raise LogError(f"{name}: not a Parquet file") from None
+
+
+def read_table(path: str) -> tuple[pa.Table, str]:
+    """The whole table and the sha256 of the file's bytes."""
+    data = read_bytes(path)
+    name = "stdin" if path == "-" else path
+    pf = parquet_file(data, name)
+    try:
+        table = pf.read()
+    except Exception as exc:
+        raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
+    return table, hashlib.sha256(data).hexdigest()
+
+
+# ------------------------------------------------------------------------- the Log
+
+
+@dataclasses.dataclass
+class Log:
+    """One joint's samples. ``table`` keeps the original columns (and field metadata);
+    ``signals`` holds float64 arrays in canonical units, including derived qd/qdd."""
+
+    table: pa.Table
+    signals: dict[str, np.ndarray]
+    axis: str                      # "rotary" or "linear"
+    joint: object | None
+    sha256: str
+    name: str
+    derived: dict                  # {"columns": [...], "cutoff_hz": float} when derived
+
+    @property
+    def units(self) -> dict:
+        return dict(CANONICAL[self.axis], temp="degC")
+
+    def __len__(self) -> int:
+        return len(self.signals["t"])
+
+    def has(self, column: str) -> bool:
+        return column in self.signals
+
+
+def axis_of(schema: pa.Schema, name: str) -> str:
+    """``rotary`` or ``linear`` from the units of the motion and torque columns."""
+    kinds = set()
+    for field in schema:
+        unit = field_unit(field)
+        if unit is None or field.name not in _EXPECTED:
+            continue
+        dim = _UNITS[canonical_unit(unit)][0]
+        if dim in ("angle", "angle/s", "angle/s2", "torque"):
+            kinds.add("rotary")
+        elif dim in ("length", "length/s", "length/s2", "force"):
+            kinds.add("linear")
+    if len(kinds) > 1:
+        raise LogError(f"{name}: mixes rotary (rad, Nm) and linear (m, N) units")
+    return kinds.pop() if kinds else "rotary"
+
+
+def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> np.ndarray:
+    col = table.column(column)
+    typ = col.type
+    if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_boolean(typ)):
+        raise LogError(f"{name}: column {column!r} has type {typ}, expected numbers")
+    if col.null_count:
+        first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
+        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first})")
+    return np.asarray(col.to_numpy(zero_copy_only=False), dtype=np.float64)
+
+
+def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None) -> dict[str, np.ndarray]:
+    """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation)."""
+    out: dict[str, np.ndarray] = {}
+    for field in table.schema:
+        column = field.name
+        if column == "joint":
+            continue
+        typ = field.type
+        if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
+            continue  # non-numeric extra columns are carried through, not used
+        values = _numeric(table, column, name)
+        unit = field_unit(field)
+        if unit is not None and column in _EXPECTED:
+            spelling = canonical_unit(unit)
+            dim, factor = _UNITS[spelling]
+            if dim != _EXPECTED[column][axis]:
+                raise LogError(f"{name}: column {column!r} has unit {unit!r}, which does not fit a {axis} axis")
+            if factor != 1.0:
+                values = values * factor
+        out[column] = values
+    if "tau_m" not in out and "i_m" in out:
+        if kt is None:
+            raise LogError(f"{name}: the log has motor current 'i_m' but no 'tau_m': give --kt (Nm/A)")
+        out["tau_m"] = out["i_m"] * kt
+    return out
+
+
+def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
+                  warn=None) -> np.ndarray | None:
+    """Check finiteness and time order. Returns a row mask when rows were dropped."""
+    if "t" not in sig:
+        raise LogError(f"{name}: missing required column 't'")
+    if "tau_m" not in sig:
+        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt)")
+    if "q" not in sig and "qd" not in sig:
+        raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'")
+    n = len(sig["t"])
+    if n == 0:
+        raise LogError(f"{name}: the log is empty")
+    bad = np.zeros(n, dtype=bool)
+    for column, values in sig.items():
+        bad |= ~np.isfinite(values)
+    mask = None
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        cols = sorted(c for c, v in sig.items() if not np.isfinite(v).all())
+        if not drop_invalid:
+            raise LogError(f"{name}: {int(bad.sum())} rows hold NaN or infinite values "
+                           f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
+        mask = ~bad
+        if warn:
+            warn(f"warning: dropped {int(bad.sum())} of {n} rows with NaN or infinite values ({', '.join(cols)})")
+        for column in sig:
+            sig[column] = sig[column][mask]
+        if len(sig["t"]) == 0:
+            raise LogError(f"{name}: no valid rows left after dropping invalid ones")
+    dt = np.diff(sig["t"])
+    if (dt == 0).any():
+        row = int(np.flatnonzero(dt == 0)[0]) + 1
+        raise LogError(f"{name}: duplicate timestamps (first at row {row}, t = {sig['t'][row]:g} s)")
+    if (dt < 0).any():
+        row = int(np.flatnonzero(dt < 0)[0]) + 1
+        raise LogError(f"{name}: 't' is not increasing (first at row {row}, t = {sig['t'][row]:g} s)")
+    return mask
+
+
+def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
+    if len(x) < 16:
+        return x.copy()
+    fs = 1.0 / float(np.median(np.diff(t)))
+    if cutoff_hz >= 0.5 * fs:
+        return x.copy()
+    sos = sps.butter(order, cutoff_hz, fs=fs, output="sos")
+    return sps.sosfiltfilt(sos, x)
+
+
+def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
+    """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
+    derived = []
+    t = sig["t"]
+    if len(t) < 3 and ("qd" not in sig or "qdd" not in sig):
+        raise DataError("too few samples to derive velocity and acceleration")
+    if "qd" not in sig:
+        sig["qd"] = np.gradient(lowpass(sig["q"], t, cutoff_hz), t)
+        derived.append("qd")
+        if "qdd" not in sig:
+            sig["qdd"] = np.gradient(sig["qd"], t)
+            derived.append("qdd")
+    elif "qdd" not in sig:
+        sig["qdd"] = np.gradient(lowpass(sig["qd"], t, cutoff_hz), t)
+        derived.append("qdd")
+    return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
+
+
+def joints_of(table: pa.Table) -> list:
+    if "joint" not in table.column_names:
+        return [None]
+    return list(dict.fromkeys(table.column("joint").to_pylist()))
+
+
+def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
+    """Rows of one joint. ``joint=None`` means the only joint; several need a choice."""
+    joints = joints_of(table)
+    if joints == [None]:
+        return table, joint
+    if joint is None:
+        if len(joints) > 1:
+            listed = ", ".join(str(j) for j in joints)
+            raise LogError(f"{name}: the log holds joints {listed}: choose one with --joint")
+        joint = joints[0]
+    match = [j for j in joints if str(j) == str(joint)]
+    if not match:
+        listed = ", ".join(str(j) for j in joints)
+        raise LogError(f"{name}: no joint {joint} in the log (it holds {listed})")
+    import pyarrow.compute as pc
+    return table.filter(pc.equal(table.column("joint"), pa.scalar(match[0]))), match[0]
+
+
+def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
+               cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None) -> Log:
+    """Check ``table`` against the contract and build a ``Log`` for one joint."""
+    table, joint = select_joint(table, joint, name)
+    axis = axis_of(table.schema, name)
+    sig = table_signals(table, axis, name, kt=kt)
+    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
+    if mask is not None:
+        table = table.filter(pa.array(mask))
+    derived = derive_motion(sig, cutoff_hz)
+    return Log(table=table, signals=sig, axis=axis, joint=joint, sha256=sha256, name=name, derived=derived)
+
+
+def load_log(path: str, **kwargs) -> Log:
+    """Read and check a log file (``-`` for stdin). Keyword arguments as ``from_table``."""
+    table, digest = read_table(path)
+    return from_table(table, name="stdin" if path == "-" else path, sha256=digest, **kwargs)
+
+
+# ------------------------------------------------------------------------- targets
+
+
+def friction_target(sig: dict[str, np.ndarray]) -> np.ndarray:
+    """tau_f = tau_m + tau_ext - tau_g - tau_dyn [Nm]: the torque lost to friction,
+    positive along the motion. Absent optional terms count as zero."""
+    out = sig["tau_m"].copy()
+    for column, sign in (("tau_ext", 1.0), ("tau_g", -1.0), ("tau_dyn", -1.0)):
+        if column in sig:
+            out += sign * sig[column]
+    return out
+
+
+def external_torque(sig: dict[str, np.ndarray], tau_f_pred: np.ndarray) -> np.ndarray:
+    """tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m [Nm]."""
+    out = tau_f_pred - sig["tau_m"]
+    for column in ("tau_g", "tau_dyn"):
+        if column in sig:
+            out = out + sig[column]
+    return out
+
+
+def column(sig: dict[str, np.ndarray], name: str) -> np.ndarray:
+    """A signal, or zeros for the optional torque terms."""
+    if name in sig:
+        return sig[name]
+    if name in ("tau_g", "tau_dyn", "tau_ext"):
+        return np.zeros_like(sig["t"])
+    raise DataError(f"the log has no column {name!r}")
+
+
+# ------------------------------------------------------------------------- writing
+
+
+def with_column(table: pa.Table, name: str, values: np.ndarray, unit: str | None) -> pa.Table:
+    """``table`` with a float64 column set (replaced if present), keeping field metadata."""
+    field = pa.field(name, pa.float64(), metadata={"unit": unit} if unit else None)
+    array = pa.array(np.asarray(values, dtype=np.float64))
+    idx = table.schema.get_field_index(name)
+    if idx >= 0:
+        return table.set_column(idx, field, array)
+    return table.append_column(field, array)
+
+
+def write_table(table: pa.Table, path: str) -> None:
+    """Write Parquet atomically (``-`` for stdout). Same table, same bytes."""
+    with atomic_open(path) as fh:
+        pq.write_table(table, fh, compression="zstd")
+
+
+def table_from_arrays(columns: dict[str, np.ndarray], units: dict[str, str]) -> pa.Table:
+    """A table with field metadata ``unit`` for every column named in ``units``."""
+    fields, arrays = [], []
+    for name, values in columns.items():
+        arr = pa.array(values)
+        unit = units.get(name)
+        fields.append(pa.field(name, arr.type, metadata={"unit": unit} if unit else None))
+        arrays.append(arr)
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
+
+
+def file_exists(path: str) -> bool:
+    return path != "-" and os.path.exists(path)

@@ -1,0 +1,93 @@
+"""The model file contract: a ``.npz`` with a ``meta`` JSON string and namespaced arrays.
+
+    meta            0-d unicode array: JSON (format, format_version, kind, model spec tree,
+                    joint, axis, units, inputs, provenance, fit, versions); sorted keys
+    <path>/<name>   float arrays of the model and its parts, e.g. ``base/W0``, ``add/W0``
+
+Files load with ``allow_pickle=False`` and are written atomically. The zip entries carry a
+fixed timestamp, so the same model gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import zipfile
+
+import numpy as np
+
+from fricli import __version__
+from fricli.atomic import atomic_write_bytes
+from fricli.errors import ModelFileError
+
+FORMAT = "fricli-model"
+FORMAT_VERSION = 1
+_EPOCH = (1980, 1, 1, 0, 0, 0)
+
+
+def dumps(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
+    """Serialise ``meta`` and ``arrays`` to npz bytes, deterministically."""
+    buf = io.BytesIO()
+    entries = {"meta": np.array(json.dumps(meta, sort_keys=True, allow_nan=False))}
+    entries.update(arrays)
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name in sorted(entries):
+            arr = np.asarray(entries[name])
+            if arr.dtype == object:
+                raise ValueError(f"array {name!r} has dtype object")
+            info = zipfile.ZipInfo(name + ".npy", date_time=_EPOCH)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            with zf.open(info, "w") as fh:
+                np.lib.format.write_array(fh, arr if arr.flags.c_contiguous else arr.copy(), allow_pickle=False)
+    return buf.getvalue()
+
+
+def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]]:
+    """Parse npz bytes into (meta, arrays); refuses pickles and unknown versions."""
+    if not data.startswith(b"PK\x03\x04"):
+        raise ModelFileError(f"{name}: not a fricli model file (not an .npz archive)")
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+            arrays = {key: npz[key] for key in npz.files}
+    except ValueError as exc:
+        if "pickle" in str(exc).lower():
+            raise ModelFileError(f"{name}: holds a pickled object; refused (model files never load pickles)") from None
+        raise ModelFileError(f"{name}: not a fricli model file (or truncated)") from None
+    except Exception:  # zip, EOF and format errors from corrupt or truncated files
+        raise ModelFileError(f"{name}: not a fricli model file (or truncated)") from None
+    if "meta" not in arrays:
+        raise ModelFileError(f"{name}: not a fricli model file (no 'meta' entry)")
+    try:
+        meta = json.loads(str(arrays.pop("meta").reshape(-1)[0]))
+    except Exception:
+        raise ModelFileError(f"{name}: not a fricli model file (meta is not JSON)") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise ModelFileError(f"{name}: not a fricli model file")
+    version = meta.get("format_version")
+    if version != FORMAT_VERSION:
+        raise ModelFileError(f"{name}: model format version {version} is not supported "
+                             f"(this fricli reads version {FORMAT_VERSION})")
+    return meta, arrays
+
+
+def read(path: str) -> tuple[dict, dict[str, np.ndarray]]:
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise ModelFileError(f"{path}: is a folder, not a model file") from None
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read ({exc.strerror})") from None
+    return loads(data, path)
+
+
+def write(path: str, meta: dict, arrays: dict[str, np.ndarray]) -> None:
+    atomic_write_bytes(path, dumps(meta, arrays))
+
+
+def base_meta() -> dict:
+    return {"format": FORMAT, "format_version": FORMAT_VERSION,
+            "fricli_version": __version__, "numpy_version": np.__version__}

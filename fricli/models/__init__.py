@@ -1,0 +1,89 @@
+"""Model kinds, and saving/loading any of them through the model file.
+
+Every kind subclasses ``FrictionModel``. A model made of other models (a base plus a
+residual network, a model plus diagnosed effects) lists them in ``children()``; their arrays
+are stored under ``<child>/`` in the file and their specs nested in ``meta["model"]``.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from fricli import modelfile
+from fricli.errors import ModelFileError
+from fricli.models.base import FrictionModel
+
+_KIND_MODULES = ("lugre", "neural", "residual", "augmented")
+KINDS: dict[str, type[FrictionModel]] = {}
+
+
+def register(cls: type[FrictionModel]) -> type[FrictionModel]:
+    KINDS[cls.kind] = cls
+    return cls
+
+
+def _load_kinds() -> None:
+    for name in _KIND_MODULES:
+        module = f"fricli.models.{name}"
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as exc:
+            if exc.name != module:
+                raise
+
+
+def to_parts(model: FrictionModel, prefix: str = "") -> tuple[dict, dict[str, np.ndarray]]:
+    """(spec, arrays) of a model tree; arrays keyed by ``prefix + name``."""
+    spec = {"kind": model.kind, "params": model.get_params()}
+    arrays = {prefix + k: np.asarray(v) for k, v in model.get_arrays().items()}
+    children = model.children()
+    if children:
+        spec["children"] = {}
+        for name, child in children.items():
+            child_spec, child_arrays = to_parts(child, f"{prefix}{name}/")
+            spec["children"][name] = child_spec
+            arrays.update(child_arrays)
+    return spec, arrays
+
+
+def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name: str = "model") -> FrictionModel:
+    _load_kinds()
+    try:
+        cls = KINDS[spec["kind"]]
+    except KeyError:
+        raise ModelFileError(f"{name}: unknown model kind {spec.get('kind')!r}") from None
+    own = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix) and "/" not in k[len(prefix):]}
+    children = {child: from_parts(child_spec, arrays, f"{prefix}{child}/", name)
+                for child, child_spec in spec.get("children", {}).items()}
+    try:
+        return cls.from_parts(spec.get("params", {}), own, children)
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ModelFileError(f"{name}: damaged {spec['kind']} model ({exc})") from None
+
+
+def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,
+         fit: dict | None = None) -> dict:
+    """Write ``model`` with its meta; returns the meta."""
+    spec, arrays = to_parts(model)
+    meta = modelfile.base_meta()
+    meta.update(kind=model.kind, model=spec, joint=joint, axis=axis, units=units,
+                inputs=sorted(model.required_inputs()), provenance=provenance, fit=fit or {})
+    modelfile.write(path, meta, arrays)
+    return meta
+
+
+def load(path: str) -> tuple[FrictionModel, dict]:
+    meta, arrays = modelfile.read(path)
+    if "model" not in meta:
+        raise ModelFileError(f"{path}: not a fricli model file (no model spec)")
+    return from_parts(meta["model"], arrays, name=path), meta
+
+
+def check_log(meta: dict, log, model_name: str = "model") -> None:
+    """Refuse a log whose axis kind (rotary/linear) differs from the model's."""
+    if meta.get("axis") and meta["axis"] != log.axis:
+        mu, lu = meta.get("units", {}), log.units
+        raise ModelFileError(f"{model_name}: the model was fitted in {mu.get('q')}, {mu.get('tau')} "
+                             f"but the log {log.name} is in {lu['q']}, {lu['tau']}")

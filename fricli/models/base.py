@@ -1,0 +1,47 @@
+"""The interface every friction model kind implements."""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+
+class FrictionModel:
+    """A friction model: ``predict`` maps a log's signals to tau_f [Nm] (positive along motion).
+
+    Signals are float64 arrays of shape (n,) in canonical units (see ``fricli.logs``).
+    ``state`` carries history (e.g. the LuGre bristle state) from one batch of rows to the
+    next; stateless kinds ignore it and return None.
+    """
+
+    kind: ClassVar[str] = ""
+
+    def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
+        raise NotImplementedError
+
+    def required_inputs(self) -> set[str]:
+        """Signal names ``predict`` reads."""
+        raise NotImplementedError
+
+    def get_params(self) -> dict:
+        """JSON-serialisable hyperparameters and scalar parameters."""
+        return {}
+
+    def get_arrays(self) -> dict[str, np.ndarray]:
+        """Array parameters by name (no '/' in names)."""
+        return {}
+
+    def children(self) -> dict[str, "FrictionModel"]:
+        return {}
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict[str, "FrictionModel"]):
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        """One line per parameter with units, for people."""
+        return self.kind
+
+    def __call__(self, signals: dict[str, np.ndarray]) -> np.ndarray:
+        return self.predict(signals)[0]
