@@ -87,3 +87,20 @@ def check_log(meta: dict, log, model_name: str = "model") -> None:
         mu, lu = meta.get("units", {}), log.units
         raise ModelFileError(f"{model_name}: the model was fitted in {mu.get('q')}, {mu.get('tau')} "
                              f"but the log {log.name} is in {lu['q']}, {lu['tau']}")
+
+
+def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict:
+    """Where a model came from: enough to reproduce it (no wall-clock time)."""
+    import os
+
+    out = {"log_sha256": log.sha256, "log_name": os.path.basename(log.name), "log_rows": len(log),
+           "rows_used": int(rows_used), "seed": seed, "derived": log.derived}
+    out.update(extra)
+    return out
+
+
+def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: int | None = None,
+                 fit: dict | None = None, **extra) -> dict:
+    """``save`` with joint, units and provenance taken from the log the model was fitted on."""
+    return save(path, model, joint=log.joint, axis=log.axis, units=log.units,
+                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit)

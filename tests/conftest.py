@@ -1,0 +1,44 @@
+import os
+import pathlib
+
+import numpy as np
+import pytest
+
+from fricli.logs import table_from_arrays
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "sample_data"
+SHARED_DATA = ROOT.parent / "shared" / "data"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def make_table(n=500, rate=100.0, units=None, **extra):
+    """A small valid log: sinusoidal motion, friction = 5 sign(qd) + 10 qd."""
+    t = np.arange(n) / rate
+    q = 0.5 * np.sin(0.5 * t)
+    qd = 0.25 * np.cos(0.5 * t)
+    tau_g = 20 * np.sin(q)
+    tau_m = tau_g + 5 * np.sign(qd) + 10 * qd
+    cols = {"t": t, "q": q, "qd": qd, "tau_m": tau_m, "tau_g": tau_g}
+    cols.update(extra)
+    default_units = {"t": "s", "q": "rad", "qd": "rad/s", "tau_m": "Nm", "tau_g": "Nm"}
+    default_units.update(units or {})
+    return table_from_arrays(cols, default_units)
+
+
+def write(table, path):
+    import pyarrow.parquet as pq
+
+    pq.write_table(table, path)
+    return str(path)
+
+
+def shared_data(name):
+    path = SHARED_DATA / name
+    if not path.exists():
+        pytest.skip(f"{path} is absent")
+    return path

@@ -1,0 +1,171 @@
+"""The log contract: required columns, units, derived motion, friction target sign."""
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from conftest import make_table
+from fricli import logs
+from fricli.errors import DataError, LogError
+
+
+def test_reads_si_log():
+    log = logs.from_table(make_table(), name="x")
+    assert log.axis == "rotary" and log.units["tau"] == "Nm"
+    assert set(["t", "q", "qd", "qdd", "tau_m", "tau_g"]) <= set(log.signals)
+
+
+def test_degrees_are_converted_to_radians():
+    ref = make_table()
+    t = ref.column("t").to_numpy()
+    q = np.rad2deg(ref.column("q").to_numpy())
+    qd = np.rad2deg(ref.column("qd").to_numpy())
+    deg = logs.table_from_arrays({"t": t, "q": q, "qd": qd, "tau_m": ref.column("tau_m").to_numpy()},
+                                 {"t": "s", "q": "deg", "qd": "deg/s", "tau_m": "N·m"})
+    a = logs.from_table(ref, name="rad").signals
+    b = logs.from_table(deg, name="deg").signals
+    np.testing.assert_allclose(b["q"], a["q"], rtol=1e-12)
+    np.testing.assert_allclose(b["qd"], a["qd"], rtol=1e-12)
+
+
+def test_linear_axis_units():
+    table = logs.table_from_arrays({"t": np.arange(10.0), "q": np.linspace(0, 1, 10), "tau_m": np.ones(10)},
+                                   {"t": "s", "q": "mm", "tau_m": "N"})
+    log = logs.from_table(table, name="lin")
+    assert log.axis == "linear" and log.units["tau"] == "N"
+    np.testing.assert_allclose(log.signals["q"], np.linspace(0, 1e-3, 10))
+
+
+def test_mixed_axis_units_refused():
+    table = logs.table_from_arrays({"t": np.arange(10.0), "q": np.zeros(10), "tau_m": np.ones(10)},
+                                   {"q": "rad", "tau_m": "N"})
+    with pytest.raises(LogError, match="mixes"):
+        logs.from_table(table, name="x")
+
+
+def test_unit_of_wrong_dimension_refused():
+    table = make_table(units={"tau_g": "rad"})
+    with pytest.raises(LogError, match="tau_g"):
+        logs.from_table(table, name="x")
+
+
+@pytest.mark.parametrize("drop,needle", [("t", "'t'"), ("tau_m", "tau_m")])
+def test_missing_required_column_is_named(drop, needle):
+    table = make_table().drop_columns([drop])
+    with pytest.raises(LogError, match=needle):
+        logs.from_table(table, name="x")
+
+
+def test_needs_q_or_qd():
+    with pytest.raises(LogError, match="'q', 'qd'"):
+        logs.from_table(make_table().drop_columns(["q", "qd"]), name="x")
+
+
+def test_current_needs_kt():
+    ref = make_table()
+    table = logs.table_from_arrays({"t": ref.column("t").to_numpy(), "q": ref.column("q").to_numpy(),
+                                    "i_m": ref.column("tau_m").to_numpy()}, {"i_m": "A"})
+    with pytest.raises(LogError, match="--kt"):
+        logs.from_table(table, name="x")
+    log = logs.from_table(table, name="x", kt=2.0)
+    np.testing.assert_allclose(log.signals["tau_m"], 2.0 * table.column("i_m").to_numpy())
+
+
+def test_derived_velocity_and_acceleration_match_analytic():
+    rate, n = 1000.0, 4000
+    t = np.arange(n) / rate
+    w = 2 * np.pi * 0.5
+    q = 0.3 * np.sin(w * t)
+    table = logs.table_from_arrays({"t": t, "q": q, "tau_m": np.zeros(n)}, {})
+    log = logs.from_table(table, name="x", cutoff_hz=20.0)
+    inner = slice(200, n - 200)  # away from the filter's edges
+    np.testing.assert_allclose(log.signals["qd"][inner], 0.3 * w * np.cos(w * t[inner]), atol=2e-4 * 0.3 * w)
+    np.testing.assert_allclose(log.signals["qdd"][inner], -0.3 * w * w * np.sin(w * t[inner]), atol=2e-3 * 0.3 * w * w)
+    assert log.derived == {"columns": ["qd", "qdd"], "cutoff_hz": 20.0}
+
+
+def test_given_velocity_is_kept():
+    log = logs.from_table(make_table(), name="x")
+    assert log.derived["columns"] == ["qdd"]
+    np.testing.assert_array_equal(log.signals["qd"], make_table().column("qd").to_numpy())
+
+
+def test_friction_target_sign_positive_along_motion():
+    log = logs.from_table(make_table(), name="x")
+    target = logs.friction_target(log.signals)
+    qd = log.signals["qd"]
+    assert np.all(np.sign(target[qd != 0]) == np.sign(qd[qd != 0]))
+    np.testing.assert_allclose(target, 5 * np.sign(qd) + 10 * qd, atol=1e-12)
+
+
+def test_target_and_external_torque_are_consistent():
+    sig = {"t": np.arange(3.0), "tau_m": np.array([1.0, 2, 3]), "tau_g": np.array([0.5, 0, -1]),
+           "tau_dyn": np.array([0.1, 0.2, 0.3]), "tau_ext": np.array([2.0, -1, 0])}
+    target = logs.friction_target(sig)
+    np.testing.assert_allclose(target, sig["tau_m"] + sig["tau_ext"] - sig["tau_g"] - sig["tau_dyn"])
+    # a perfect friction prediction recovers the external torque exactly
+    np.testing.assert_allclose(logs.external_torque(sig, target), sig["tau_ext"], atol=1e-12)
+
+
+def test_nan_refused_with_count_and_row():
+    tau = make_table().column("tau_m").to_numpy().copy()
+    tau[[7, 9]] = np.nan
+    table = make_table().set_column(3, "tau_m", pa.array(tau))
+    with pytest.raises(LogError, match=r"2 rows.*row 7"):
+        logs.from_table(table, name="x")
+    messages = []
+    log = logs.from_table(table, name="x", drop_invalid=True, warn=messages.append)
+    assert len(log) == 498 and len(log.table) == 498 and "dropped 2" in messages[0]
+
+
+@pytest.mark.parametrize("kind,needle", [("dup", "duplicate"), ("back", "not increasing")])
+def test_time_order(kind, needle):
+    t = make_table().column("t").to_numpy().copy()
+    t[5] = t[4] if kind == "dup" else t[4] - 1
+    table = make_table().set_column(0, "t", pa.array(t))
+    with pytest.raises(LogError, match=needle):
+        logs.from_table(table, name="x")
+
+
+def test_wrong_type_column():
+    table = make_table().set_column(3, "tau_m", pa.array(["a"] * 500))
+    with pytest.raises(LogError, match="tau_m.*type"):
+        logs.from_table(table, name="x")
+
+
+def test_empty_log():
+    with pytest.raises(LogError, match="empty"):
+        logs.from_table(make_table().slice(0, 0), name="x")
+
+
+def test_joint_selection():
+    a, b = make_table(), make_table()
+    a = a.append_column("joint", pa.array([2] * 500))
+    b = b.append_column("joint", pa.array([4] * 500))
+    both = pa.concat_tables([a, b])
+    with pytest.raises(LogError, match="choose one with --joint"):
+        logs.from_table(both, name="x")
+    assert logs.from_table(both, name="x", joint="4").joint == 4
+    with pytest.raises(LogError, match="no joint 3"):
+        logs.from_table(both, name="x", joint=3)
+
+
+def test_with_column_keeps_field_metadata():
+    table = logs.with_column(make_table(), "tau_f_pred", np.zeros(500), "Nm")
+    assert logs.field_unit(table.schema.field("q")) == "rad"
+    assert logs.field_unit(table.schema.field("tau_f_pred")) == "Nm"
+
+
+def test_unreadable_inputs(tmp_path):
+    with pytest.raises(LogError, match="no such file"):
+        logs.load_log(str(tmp_path / "missing.parquet"))
+    bad = tmp_path / "bad.parquet"
+    bad.write_text("not parquet")
+    with pytest.raises(LogError, match="not a Parquet file"):
+        logs.load_log(str(bad))
+
+
+def test_too_short_to_derive():
+    table = logs.table_from_arrays({"t": np.arange(2.0), "q": np.zeros(2), "tau_m": np.zeros(2)}, {})
+    with pytest.raises(DataError):
+        logs.from_table(table, name="x")
