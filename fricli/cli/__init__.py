@@ -58,7 +58,7 @@ def cli() -> None:
 
 
 # Each module adds its commands to ``cli``.
-from fricli.cli import inspect_cmd  # noqa: E402,F401
+from fricli.cli import evaluate, inspect_cmd  # noqa: E402,F401
 
 
 def main() -> None:

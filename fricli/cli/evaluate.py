@@ -1,0 +1,88 @@
+"""fricli evaluate, fricli report."""
+
+from __future__ import annotations
+
+import os
+
+import click
+
+from fricli import evaluation, logs, report
+from fricli.cli import cli
+from fricli.cli.options import common, emit_json, json_flag, log_reading, reading_kwargs, say
+
+
+def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for value in values:
+        name, sep, path = value.partition("=")
+        if not sep:
+            name, path = os.path.splitext(os.path.basename(value))[0], value
+        if not name or not path:
+            raise click.BadParameter(f"expected NAME=PATH or PATH, got {value!r}", param_hint=f"--{what}")
+        if name in out:
+            raise click.BadParameter(f"the name {name!r} is used twice", param_hint=f"--{what}")
+        out[name] = path
+    return out
+
+
+@cli.command("evaluate")
+@click.option("--model", "model_specs", multiple=True, required=True, metavar="[NAME=]MODEL.npz",
+              help="A model to evaluate (repeatable).")
+@click.option("--log", "log_specs", multiple=True, required=True, metavar="[NAME=]LOG.parquet",
+              help="A log to evaluate on (repeatable).")
+@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Zero-phase low-pass [Hz] on the external-torque estimate.")
+@log_reading
+@json_flag
+@common
+def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invalid, as_json, quiet):
+    """Friction (and external-torque) MAE of every model on every log, as a table.
+
+    The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
+    external-torque error is against the log's sensor column tau_ext, when it has one.
+
+    \b
+    Example:
+      fricli evaluate --model lugre=lugre.npz --model adapted=adapted.npz \\
+          --log asym=sample_data/joint2_extended_asym.parquet --json
+    """
+    model_paths = _named(model_specs, "model")
+    log_paths = _named(log_specs, "log")
+    results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
+                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid))
+    if as_json:
+        emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
+    else:
+        click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+
+
+@cli.command("report")
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("log")
+@click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Folder for the figures and index.html.")
+@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
+              help="Zero-phase low-pass [Hz] on the external-torque estimate.")
+@log_reading
+@common
+def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, quiet):
+    """PNG figures of MODEL on LOG and an index.html that shows them.
+
+    Figures: training/validation loss, friction against velocity, a heat map over velocity and
+    gravity torque, friction over time, the four quadrants, and the external torque against the
+    sensor when the log has one.
+
+    \b
+    Example:
+      fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
+    """
+    from fricli import models
+
+    _, meta = models.load(model)
+    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
+    table, digest = logs.read_table(log)
+    if kwargs["joint"] is None and "joint" in table.column_names:
+        kwargs["joint"] = meta.get("joint")
+    the_log = logs.from_table(table, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
+    summary = report.write_report(model, the_log, output, lowpass_hz=lowpass)
+    say(f"wrote {len(summary['figures'])} figures and index.html to {output} "
+        f"(friction MAE {summary['friction']['mae']:.3f})", quiet)

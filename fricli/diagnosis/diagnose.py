@@ -1,0 +1,151 @@
+"""The diagnosis driver: residual of a model on a log -> ranked effects -> augmented model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fricli import logs
+from fricli.diagnosis import effects as E
+from fricli.diagnosis import selection
+from fricli.diagnosis import terms as T
+from fricli.errors import DataError, FitError
+
+DEFAULT_FOLDS = 10
+DEFAULT_MIN_GAIN = 0.1
+DEFAULT_ALPHA = 0.01
+MIN_ROWS_PER_FOLD = 20
+
+
+@dataclasses.dataclass
+class EffectResult:
+    name: str
+    significant: bool
+    gain: float                    # share of the model's held-out squared residual it explains
+    params: dict[str, dict]        # {name: {"value", "unit"}}
+    added: bool
+    summary: str
+    terms: list[dict]
+
+
+@dataclasses.dataclass
+class Diagnosis:
+    """What ``diagnose`` found. ``effects`` is ranked: the added effects in the order they were
+    added, then the others by the share they would still explain on top of them."""
+
+    effects: list[EffectResult]
+    added: list[str]
+    mae_before: float              # held-out MAE of the model's friction [Nm or N]
+    mae_after: float               # held-out MAE with the added effects fitted on the other blocks
+    terms: list[dict]              # the added effects' terms, in order
+    coef: dict[str, float]         # their coefficients fitted on the whole log
+    rows: int
+    folds: int
+    min_gain: float
+    alpha: float
+    skipped: dict[str, str]        # effects that do not apply to this log, with the reason
+    tau_unit: str
+
+    def to_json(self) -> dict:
+        """The ``--json`` schema."""
+        return {"mae_before": self.mae_before, "mae_after": self.mae_after,
+                "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params}
+                            for e in self.effects],
+                "added": list(self.added)}
+
+
+def column_units(table) -> dict[str, str]:
+    out = {}
+    for field in table.schema:
+        unit = logs.field_unit(field)
+        if unit:
+            out[field.name] = unit
+    return out
+
+
+def residual(model, log: logs.Log) -> tuple[np.ndarray, np.ndarray]:
+    """(tau_f_pred, friction_target - tau_f_pred), shapes (n,)."""
+    sig = log.signals
+    pred = np.asarray(model.predict(sig)[0], dtype=np.float64)
+    if pred.shape != sig["t"].shape or not np.isfinite(pred).all():
+        raise FitError("the model's prediction on this log is not finite")
+    return pred, logs.friction_target(sig) - pred
+
+
+def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: float = DEFAULT_MIN_GAIN,
+             alpha: float = DEFAULT_ALPHA, only: list[str] | None = None,
+             max_effects: int | None = None) -> Diagnosis:
+    """Test the residual of ``model`` on ``log`` against the candidate effects.
+
+    folds: blocks of the blocked cross-validation over time; min_gain: share of the remaining
+    held-out squared residual an effect must remove to be added; alpha: significance level.
+    """
+    n = len(log)
+    if folds < 3:
+        raise DataError("--folds must be at least 3")
+    if n < folds * MIN_ROWS_PER_FOLD:
+        raise DataError(f"too few rows to diagnose ({n}; need at least {folds * MIN_ROWS_PER_FOLD} "
+                        f"for {folds} blocks)")
+    sig = log.signals
+    p, r = residual(model, log)
+    ctx = E.Context(sig, p, log.axis, column_units(log.table))
+    lib = E.library(sig, only)
+    skipped = {}
+    usable = []
+    for effect in lib:
+        reason = effect.applicable(ctx)
+        if reason:
+            skipped[effect.name] = reason
+        else:
+            usable.append(effect)
+    design = selection.Design(r, selection.fold_bounds(n, folds))
+    registry: dict[str, dict] = {}
+    cache: dict[str, list[str]] = {}
+
+    def add_terms(term_list: list[dict]) -> list[str]:
+        names = []
+        for term in term_list:
+            if term["name"] not in registry:
+                registry[term["name"]] = term
+                design.add(term["name"], T.value(term, sig, p))
+            names.append(term["name"])
+        return names
+
+    def candidates(chosen_terms, current):
+        out = []
+        for effect in usable:
+            if effect.name in cache:
+                names = cache[effect.name]
+            else:
+                names = add_terms(effect.terms(ctx, current))
+                if not isinstance(effect, E.Position):
+                    cache[effect.name] = names
+            out.append(selection.Candidate(effect.name, names, effect.rivals))
+        return out
+
+    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects)
+    coef = design.fit(sel.terms)
+    by_name = {e.name: e for e in usable}
+    results = []
+    for step in sel.steps:
+        effect = by_name[step.name]
+        names = step.terms
+        own = {t: coef[t] for t in names}
+        params = effect.params(own, ctx)
+        results.append(EffectResult(step.name, True, step.gain, params, True, effect.summary(params),
+                                    [registry[t] for t in names]))
+    others = []
+    for name, sc in sel.final.items():
+        effect = by_name[name]
+        names = sc.terms
+        fit = design.fit(selection._union(sel.terms, names))
+        params = effect.params({t: fit[t] for t in names}, ctx)
+        others.append(EffectResult(name, sc.significant, sc.gain, params, False, effect.summary(params),
+                                   [registry[t] for t in names]))
+    others.sort(key=lambda e: -e.gain)
+    mae_before = float(np.mean(np.abs(r)))
+    mae_after = float(np.mean(np.abs(r - design.heldout_prediction(sel.terms)))) if sel.terms else mae_before
+    return Diagnosis(effects=results + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
+                     terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
+                     folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit)

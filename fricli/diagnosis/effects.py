@@ -1,0 +1,417 @@
+"""The library of candidate effects a friction model may be missing.
+
+Each effect is a small group of physically motivated regressor terms (``fricli.diagnosis.terms``)
+built from the log's signals and the base model's prediction p [Nm], and a rule turning the
+fitted coefficients into named physical parameters with units. Terms are shared by name: the
+level terms ``p`` (the model scaled as a whole) and ``qd`` (a viscous change) are part of the
+effects that describe how the level changes (with direction, temperature, time, velocity or
+another column), so those effects nest ``level`` and must beat it on held-out data.
+
+Parameters are reported as ``{name: {"value": float, "unit": str}}``. Coulomb and viscous
+levels of a model that is not a plain Coulomb + viscous law are its *equivalent* levels: the
+least-squares fit of tau = Fc*sign(qd) + Fv*qd to its prediction on the log's moving samples,
+per direction where it matters.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import signal as sps
+
+from fricli.diagnosis import terms as T
+from fricli.logs import KNOWN
+
+# ---------------------------------------------------------------------------- context
+
+
+@dataclasses.dataclass
+class Context:
+    """What the effects may use: signals (n,), base prediction p (n,), units, column units."""
+
+    signals: dict[str, np.ndarray]
+    p: np.ndarray
+    axis: str = "rotary"
+    column_units: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    @property
+    def tau_unit(self) -> str:
+        return "Nm" if self.axis == "rotary" else "N"
+
+    @property
+    def q_unit(self) -> str:
+        return "rad" if self.axis == "rotary" else "m"
+
+    @property
+    def v_unit(self) -> str:
+        return self.q_unit + "/s"
+
+    @property
+    def fv_unit(self) -> str:
+        return f"{self.tau_unit} s/{self.q_unit}"
+
+    @property
+    def inertia_unit(self) -> str:
+        return "kg m^2" if self.axis == "rotary" else "kg"
+
+    def moving(self) -> np.ndarray:
+        return self.signals["qd"] != 0
+
+    def v_scale(self) -> float:
+        """A typical high speed: the 95th percentile of |qd| over moving samples [rad/s]."""
+        v = np.abs(self.signals["qd"][self.moving()])
+        return float(np.percentile(v, 95)) if len(v) else 0.0
+
+
+def equivalent_levels(y: np.ndarray, qd: np.ndarray) -> dict[str, float]:
+    """Coulomb and viscous levels of a friction curve y (n,) over velocity qd (n,):
+    ``Fc``, ``Fv`` (both directions) and ``Fc+``, ``Fv+``, ``Fc-``, ``Fv-`` (one each), with
+    tau = Fc*sign(qd) + Fv*qd, i.e. Fc- is the magnitude of the Coulomb level for qd < 0."""
+    out = {}
+    moving = qd != 0
+    for key, mask in (("", moving), ("+", qd > 0), ("-", qd < 0)):
+        if mask.sum() < 3:
+            out["Fc" + key], out["Fv" + key] = float("nan"), float("nan")
+            continue
+        X = np.column_stack([np.sign(qd[mask]), qd[mask]])
+        (fc, fv), *_ = np.linalg.lstsq(X, y[mask], rcond=None)
+        out["Fc" + key], out["Fv" + key] = float(fc), float(fv)
+    return out
+
+
+def _par(value: float, unit: str) -> dict:
+    return {"value": float(value), "unit": unit}
+
+
+# ---------------------------------------------------------------------------- effects
+
+
+class Effect:
+    """A candidate effect: a group of terms and how to read their coefficients."""
+
+    name: str = ""
+    #: combinations of simpler effects this one must beat on held-out data to be chosen
+    rivals: tuple[tuple[str, ...], ...] = ()
+    description: str = ""
+
+    def applicable(self, ctx: Context) -> str | None:
+        """None when the log supports the effect, else the reason it does not."""
+        return None
+
+    def terms(self, ctx: Context, residual: np.ndarray) -> list[dict]:
+        raise NotImplementedError
+
+    def params(self, coef: dict[str, float], ctx: Context) -> dict[str, dict]:
+        raise NotImplementedError
+
+    def summary(self, params: dict[str, dict]) -> str:
+        """One line for people."""
+        return ", ".join(f"{k} {_fmt(v['value'])} {v['unit']}".rstrip() for k, v in params.items())
+
+
+def _fmt(x: float) -> str:
+    if x == 0 or not np.isfinite(x):
+        return f"{x:g}"
+    digits = max(0, 3 - int(np.floor(np.log10(abs(x)))))
+    return f"{x:.{min(digits, 6)}f}"
+
+
+LEVEL_TERMS = [T.term("p", T.P), T.term("qd", T.sig_("qd"))]
+
+
+def _level_coefs(coef: dict[str, float]) -> tuple[float, float]:
+    return coef.get("p", 0.0), coef.get("qd", 0.0)
+
+
+class Offset(Effect):
+    name = "offset"
+    description = "a constant (a bias in the torque measurement)"
+
+    def terms(self, ctx, residual):
+        return [T.term("1", T.ONE)]
+
+    def params(self, coef, ctx):
+        return {"offset": _par(coef["1"], ctx.tau_unit)}
+
+
+class Level(Effect):
+    name = "level"
+    description = "the model's Coulomb and viscous level changed as a whole"
+
+    def terms(self, ctx, residual):
+        return list(LEVEL_TERMS)
+
+    def params(self, coef, ctx):
+        bp, bv = _level_coefs(coef)
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        return {"scale": _par(1.0 + bp, ""), "Fc": _par((1.0 + bp) * lv["Fc"], ctx.tau_unit),
+                "Fv": _par((1.0 + bp) * lv["Fv"] + bv, ctx.fv_unit)}
+
+    def summary(self, params):
+        s = params["scale"]["value"]
+        return (f"Fc {_fmt(params['Fc']['value'])} {params['Fc']['unit']}, Fv {_fmt(params['Fv']['value'])} "
+                f"{params['Fv']['unit']} (model x{s:.3f})")
+
+
+class Direction(Effect):
+    name = "direction"
+    rivals = (("level", "offset"),)
+    description = "separate Coulomb and viscous levels for positive and negative velocity"
+
+    def applicable(self, ctx):
+        qd = ctx.signals["qd"]
+        if (qd > 0).sum() < 10 or (qd < 0).sum() < 10:
+            return "needs motion in both directions"
+        return None
+
+    def terms(self, ctx, residual):
+        return LEVEL_TERMS + [T.term("p*pos", T.P, T.POS), T.term("qd*pos", T.sig_("qd"), T.POS)]
+
+    def params(self, coef, ctx):
+        sig = ctx.signals
+        y = ctx.p + T.matrix(self.terms(ctx, None), sig, ctx.p) @ np.array(
+            [coef.get(t["name"], 0.0) for t in self.terms(ctx, None)])
+        lv = equivalent_levels(y, sig["qd"])
+        return {"Fc+": _par(lv["Fc+"], ctx.tau_unit), "Fc-": _par(lv["Fc-"], ctx.tau_unit),
+                "Fv+": _par(lv["Fv+"], ctx.fv_unit), "Fv-": _par(lv["Fv-"], ctx.fv_unit)}
+
+
+class _ScaledBy(Effect):
+    """Level terms plus the level terms multiplied by a slowly varying signal's deviation."""
+
+    signal = ""
+    rivals = (("level",),)
+    per = 1.0          # report slopes per this many units of the signal
+    per_unit = ""
+
+    def center(self, ctx) -> float:
+        return float(np.mean(ctx.signals[self.signal]))
+
+    def factor(self, ctx) -> dict:
+        return T.dev(self.signal, self.center(ctx))
+
+    def terms(self, ctx, residual):
+        f = self.factor(ctx)
+        return LEVEL_TERMS + [T.term(f"p*d{self.signal}", T.P, f), T.term(f"qd*d{self.signal}", T.sig_("qd"), f)]
+
+    def slopes(self, coef, ctx) -> dict:
+        bp, bv = _level_coefs(coef)
+        bps, bvs = coef.get(f"p*d{self.signal}", 0.0), coef.get(f"qd*d{self.signal}", 0.0)
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        fc0, fv0 = (1 + bp) * lv["Fc"], (1 + bp) * lv["Fv"] + bv
+        dfc, dfv = bps * lv["Fc"] * self.per, (bps * lv["Fv"] + bvs) * self.per
+        return {"fc0": fc0, "fv0": fv0, "dfc": dfc, "dfv": dfv}
+
+
+class Temperature(_ScaledBy):
+    name = "temperature"
+    signal = "temp"
+    description = "Coulomb and viscous levels scaled by the temperature deviation"
+
+    def applicable(self, ctx):
+        if "temp" not in ctx.signals:
+            return "the log has no 'temp' column"
+        if np.ptp(ctx.signals["temp"]) < 1.0:
+            return "the temperature varies by less than 1 K"
+        return None
+
+    def params(self, coef, ctx):
+        s = self.slopes(coef, ctx)
+        tc = self.center(ctx)
+        u = ctx.tau_unit
+        return {"t_ref": _par(tc, "degC"), "Fc": _par(s["fc0"], u), "Fv": _par(s["fv0"], ctx.fv_unit),
+                "dFc/dT": _par(s["dfc"], f"{u}/K"), "dFv/dT": _par(s["dfv"], f"{ctx.fv_unit}/K"),
+                "alpha_c": _par(-s["dfc"] / s["fc0"] if s["fc0"] else float("nan"), "1/K"),
+                "alpha_v": _par(-s["dfv"] / s["fv0"] if s["fv0"] else float("nan"), "1/K")}
+
+
+class Drift(_ScaledBy):
+    name = "drift"
+    signal = "t"
+    per = 3600.0
+    description = "Coulomb and viscous levels growing with time (wear)"
+
+    def applicable(self, ctx):
+        if np.ptp(ctx.signals["t"]) <= 0:
+            return "the log covers no time"
+        return None
+
+    def params(self, coef, ctx):
+        s = self.slopes(coef, ctx)
+        u = ctx.tau_unit
+        rel = s["dfc"] / s["fc0"] if s["fc0"] else float("nan")
+        return {"Fc": _par(s["fc0"], u), "Fv": _par(s["fv0"], ctx.fv_unit),
+                "dFc/dt": _par(s["dfc"], f"{u}/h"), "dFv/dt": _par(s["dfv"], f"{ctx.fv_unit}/h"),
+                "rate": _par(100.0 * rel, "%/h")}
+
+
+class Acceleration(Effect):
+    name = "acceleration"
+    description = "a term in qdd (inertia missing or wrong in tau_dyn)"
+
+    def applicable(self, ctx):
+        if np.ptp(ctx.signals["qdd"]) <= 0:
+            return "the log has no acceleration"
+        return None
+
+    def terms(self, ctx, residual):
+        return [T.term("qdd", T.sig_("qdd"))]
+
+    def params(self, coef, ctx):
+        return {"inertia": _par(coef["qdd"], ctx.inertia_unit)}
+
+    def summary(self, params):
+        return f"missing inertia {_fmt(params['inertia']['value'])} {params['inertia']['unit']}"
+
+
+class Load(Effect):
+    name = "load"
+    description = "terms in |tau_g| and tau_g*sign(qd) (quadrant dependence)"
+
+    def applicable(self, ctx):
+        if "tau_g" not in ctx.signals or np.ptp(ctx.signals["tau_g"]) <= 0:
+            return "the log has no varying 'tau_g'"
+        return None
+
+    def terms(self, ctx, residual):
+        return [T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN),
+                T.term("tau_g*moving", T.sig_("tau_g"), T.MOVING)]
+
+    def params(self, coef, ctx):
+        u = f"{ctx.tau_unit}/{ctx.tau_unit}"
+        return {"kc": _par(coef["|tau_g|*sign"], u), "kq": _par(coef["tau_g*moving"], u)}
+
+
+class Velocity(Effect):
+    name = "velocity"
+    rivals = (("level",),)
+    description = "a smooth correction in qd (a wrong curve shape)"
+    fractions = (0.05, 0.2, 0.6)
+
+    def applicable(self, ctx):
+        if ctx.v_scale() <= 0:
+            return "the joint does not move"
+        return None
+
+    def terms(self, ctx, residual):
+        vs = ctx.v_scale()
+        return LEVEL_TERMS + [T.term(f"sat{i + 1}", {"f": "sat", "scale": vs * f})
+                              for i, f in enumerate(self.fractions)]
+
+    def params(self, coef, ctx):
+        vs = ctx.v_scale()
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        out = {"v_ref": _par(vs, ctx.v_unit)}
+        for frac in (0.1, 0.5, 1.0):
+            v = frac * vs
+            d = coef.get("p", 0.0) * (lv["Fc"] + lv["Fv"] * v) + coef.get("qd", 0.0) * v
+            d += sum(coef.get(f"sat{i + 1}", 0.0) * -np.expm1(-v / (vs * f)) for i, f in enumerate(self.fractions))
+            out[f"dF_{round(100 * frac)}"] = _par(d, ctx.tau_unit)
+        return out
+
+
+class Position(Effect):
+    """Periodic in q: sine and cosine terms with harmonics of a spatial frequency found in
+    the residual by a Lomb-Scargle periodogram over q (q is unevenly spaced)."""
+
+    name = "position"
+    description = "periodic in q (gear ripple)"
+    harmonics = 3
+    max_points = 20000
+    oversample = 4
+
+    def applicable(self, ctx):
+        q = ctx.signals.get("q")
+        if q is None or np.ptp(q) <= 0:
+            return "the log has no position range"
+        return None
+
+    def frequency(self, ctx, residual) -> float:
+        """Spatial angular frequency w [rad per q unit] with the largest periodogram power."""
+        q = ctx.signals["q"]
+        step = max(1, len(q) // self.max_points)
+        qs, rs = q[::step], residual[::step]
+        span = float(np.ptp(qs))
+        dq = np.abs(np.diff(qs))
+        dq = dq[dq > 0]
+        # finest resolvable period: a few samples per period at a typical moving step
+        fine = float(np.median(dq)) if len(dq) else span / 10
+        w_min, w_max = 2 * 2 * np.pi / span, np.pi / max(fine, span / 1e5)
+        if w_max <= w_min:
+            return w_min
+        grid = np.arange(w_min, w_max, 2 * np.pi / span / self.oversample)
+        power = sps.lombscargle(qs, rs - rs.mean(), grid)
+        return float(grid[int(np.argmax(power))])
+
+    def terms(self, ctx, residual):
+        w = self.frequency(ctx, residual)
+        out = []
+        for h in range(1, self.harmonics + 1):
+            out.append(T.term(f"sin{h}@{w:.6g}", {"f": "sin", "name": "q", "w": h * w}))
+            out.append(T.term(f"cos{h}@{w:.6g}", {"f": "cos", "name": "q", "w": h * w}))
+        return out
+
+    def params(self, coef, ctx):
+        names = sorted(coef)
+        w = float(names[0].split("@")[1])
+        out = {"period": _par(2 * np.pi / w, ctx.q_unit)}
+        for h in range(1, self.harmonics + 1):
+            a = coef.get(f"sin{h}@{w:.6g}", 0.0)
+            b = coef.get(f"cos{h}@{w:.6g}", 0.0)
+            out[f"amplitude{h}"] = _par(np.hypot(a, b), ctx.tau_unit)
+        return out
+
+
+class Column(Effect):
+    """Another numeric column of the log: a Coulomb-like and an additive term in its deviation."""
+
+    rivals = (("level",),)
+
+    def __init__(self, column: str):
+        self.column = column
+        self.name = f"column:{column}"
+        self.description = f"friction depending on the column {column!r}"
+
+    def applicable(self, ctx):
+        if self.column not in ctx.signals:
+            return f"the log has no column {self.column!r}"
+        if np.ptp(ctx.signals[self.column]) <= 0:
+            return f"the column {self.column!r} is constant"
+        return None
+
+    def center(self, ctx) -> float:
+        return float(np.mean(ctx.signals[self.column]))
+
+    def terms(self, ctx, residual):
+        f = T.dev(self.column, self.center(ctx))
+        return LEVEL_TERMS + [T.term(f"sign*d{self.column}", T.SIGN, f), T.term(f"d{self.column}", f)]
+
+    def params(self, coef, ctx):
+        cu = ctx.column_units.get(self.column) or "unit"
+        u = ctx.tau_unit
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        bp = coef.get("p", 0.0)
+        return {"ref": _par(self.center(ctx), ctx.column_units.get(self.column) or ""),
+                "Fc": _par((1 + bp) * lv["Fc"], u),
+                f"dFc/d{self.column}": _par(coef.get(f"sign*d{self.column}", 0.0), f"{u}/{cu}"),
+                f"dtau/d{self.column}": _par(coef.get(f"d{self.column}", 0.0), f"{u}/{cu}")}
+
+
+BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Load, Velocity, Level, Offset)
+NAMES = tuple(cls.name for cls in BUILTIN)
+
+
+def extra_columns(signals: dict[str, np.ndarray]) -> list[str]:
+    """Numeric log columns that are not part of the contract (nor model outputs)."""
+    return [c for c in signals if c not in KNOWN and not c.startswith("tau_") and c != "i_m"]
+
+
+def library(signals: dict[str, np.ndarray], only: list[str] | None = None) -> list[Effect]:
+    """All candidate effects for these signals (``only``: names to keep, ``column`` = all columns)."""
+    out: list[Effect] = [cls() for cls in BUILTIN]
+    out += [Column(c) for c in extra_columns(signals)]
+    if only:
+        keep = set(only)
+        out = [e for e in out if e.name in keep or (e.name.startswith("column:") and "column" in keep)]
+    return out

@@ -1,0 +1,274 @@
+"""Held-out scores, significance and forward selection of candidate effects.
+
+The log is cut into K contiguous blocks over time (blocked cross-validation: a block is
+predicted by a fit on the other K-1 blocks, so slow trends and autocorrelated noise cannot
+leak from neighbouring rows). For any set of regressor columns the held-out sum of squared
+residuals per block comes from per-block Gram matrices of the standardised columns and the
+residual, so scoring a candidate costs K small solves, not a pass over the data.
+
+A candidate is *significant* when its held-out gain is positive in a one-sided t-test over
+the K per-block relative gains (level ``alpha``). It is *chosen* when it is significant, removes
+at least ``min_gain`` of the remaining held-out squared residual, beats its declared rivals
+(combinations of simpler effects it overlaps) by the same two criteria, and no candidate with
+fewer new terms does nearly as well (the richer one must beat it by the same criteria too).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import stats
+
+RIDGE = 1e-10       # relative to n: keeps exactly collinear sets solvable, far below any signal
+
+
+def fold_bounds(n: int, k: int) -> np.ndarray:
+    """Start/stop indices (k+1,) of k contiguous blocks of nearly equal size."""
+    return np.linspace(0, n, k + 1).round().astype(int)
+
+
+class Design:
+    """Named regressor columns over a log, with per-block Gram matrices for held-out scores.
+
+    columns are added by term name; ``sse(names)`` gives the held-out sum of squared residuals
+    per block (K,) for the least-squares fit of the residual on those columns.
+    """
+
+    def __init__(self, residual: np.ndarray, bounds: np.ndarray):
+        self.r = np.asarray(residual, dtype=np.float64)
+        self.bounds = bounds
+        self.k = len(bounds) - 1
+        self.names: list[str] = []
+        self.cols: list[np.ndarray] = []
+        self.scale: list[float] = []
+        self._gram = None
+        self._cache: dict[frozenset, np.ndarray] = {}
+        self.rscale = float(np.sqrt(np.mean(self.r ** 2))) or 1.0
+
+    def has(self, name: str) -> bool:
+        return name in self.names
+
+    def add(self, name: str, column: np.ndarray) -> None:
+        if name in self.names:
+            return
+        column = np.asarray(column, dtype=np.float64)
+        rms = float(np.sqrt(np.mean(column ** 2)))
+        self.names.append(name)
+        self.cols.append(column)
+        self.scale.append(rms)
+        self._gram = None
+
+    def live(self, names) -> list[int]:
+        """Column indices of ``names`` that are not identically zero."""
+        idx = [self.names.index(n) for n in names]
+        return [i for i in idx if self.scale[i] > 0]
+
+    def _z(self, a: int, b: int) -> np.ndarray:
+        m = len(self.cols)
+        z = np.empty((b - a, m + 1))
+        for j, (c, s) in enumerate(zip(self.cols, self.scale)):
+            z[:, j] = c[a:b] / s if s > 0 else 0.0
+        z[:, m] = self.r[a:b] / self.rscale
+        return z
+
+    def gram(self) -> np.ndarray:
+        if self._gram is None:
+            blocks = []
+            for a, b in zip(self.bounds[:-1], self.bounds[1:]):
+                z = self._z(a, b)
+                blocks.append(z.T @ z)
+            self._gram = np.stack(blocks)
+        return self._gram
+
+    def _solve(self, A: np.ndarray, b: np.ndarray, n_train: int) -> np.ndarray:
+        A = A + RIDGE * max(n_train, 1) * np.eye(len(A))
+        try:
+            return np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            return np.linalg.lstsq(A, b, rcond=None)[0]
+
+    def sse(self, names) -> np.ndarray:
+        """Held-out SSE per block (K,), in units of the residual's mean square."""
+        idx = self.live(names)
+        key = frozenset(idx)
+        if key in self._cache:
+            return self._cache[key]
+        G = self.gram()
+        m = G.shape[1] - 1
+        rr = G[:, m, m]
+        if not idx:
+            out = rr.copy()
+        else:
+            total = G.sum(axis=0)
+            sizes = np.diff(self.bounds)
+            out = np.empty(self.k)
+            for f in range(self.k):
+                A = total[np.ix_(idx, idx)] - G[f][np.ix_(idx, idx)]
+                b = total[idx, m] - G[f][idx, m]
+                beta = self._solve(A, b, int(sizes.sum() - sizes[f]))
+                Gf = G[f][np.ix_(idx, idx)]
+                out[f] = rr[f] - 2.0 * beta @ G[f][idx, m] + beta @ Gf @ beta
+            out = np.maximum(out, 0.0)
+        self._cache[key] = out
+        return out
+
+    def heldout_prediction(self, names) -> np.ndarray:
+        """The residual predicted on each block by a fit on the other blocks (n,)."""
+        idx = self.live(names)
+        pred = np.zeros_like(self.r)
+        if not idx:
+            return pred
+        G = self.gram()
+        m = G.shape[1] - 1
+        total = G.sum(axis=0)
+        sizes = np.diff(self.bounds)
+        for f, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
+            A = total[np.ix_(idx, idx)] - G[f][np.ix_(idx, idx)]
+            rhs = total[idx, m] - G[f][idx, m]
+            beta = self._solve(A, rhs, int(sizes.sum() - sizes[f]))
+            X = np.column_stack([self.cols[i][a:b] / self.scale[i] for i in idx])
+            pred[a:b] = X @ beta * self.rscale
+        return pred
+
+    def fit(self, names) -> dict[str, float]:
+        """Coefficients of the least-squares fit on all rows, by name (zero for dead columns)."""
+        idx = self.live(names)
+        out = {n: 0.0 for n in names}
+        if not idx:
+            return out
+        X = np.column_stack([self.cols[i] / self.scale[i] for i in idx])
+        beta, *_ = np.linalg.lstsq(X, self.r, rcond=1e-10)
+        for i, b in zip(idx, beta):
+            out[self.names[i]] = float(b / self.scale[i])
+        return out
+
+    def fitted(self, names) -> np.ndarray:
+        """The full-data fit's prediction of the residual (n,)."""
+        coef = self.fit(names)
+        out = np.zeros_like(self.r)
+        for n, b in coef.items():
+            if b:
+                out += b * self.cols[self.names.index(n)]
+        return out
+
+
+@dataclasses.dataclass
+class Comparison:
+    """Held-out comparison of a richer fit (new) against a reference fit (old)."""
+
+    gain: float            # 1 - sum(sse_new) / sum(sse_old): share of the old held-out SSE removed
+    t: float               # t statistic of the per-block relative gains
+    significant: bool
+
+    def clear(self, min_gain: float) -> bool:
+        return self.significant and self.gain >= min_gain
+
+
+def compare(sse_new: np.ndarray, sse_old: np.ndarray, alpha: float) -> Comparison:
+    old = float(sse_old.sum())
+    if old <= 0:
+        return Comparison(0.0, 0.0, False)
+    gain = 1.0 - float(sse_new.sum()) / old
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.where(sse_old > 0, 1.0 - sse_new / sse_old, 0.0)
+    k = len(per)
+    sd = float(np.std(per, ddof=1)) if k > 1 else 0.0
+    mean = float(per.mean())
+    if sd > 0:
+        t = mean / (sd / np.sqrt(k))
+    else:
+        t = float("inf") if mean > 0 else 0.0
+    crit = float(stats.t.ppf(1.0 - alpha, max(k - 1, 1)))
+    return Comparison(gain, float(t), bool(gain > 0 and t >= crit))
+
+
+@dataclasses.dataclass
+class Candidate:
+    """One effect's terms at a selection step."""
+
+    name: str
+    terms: list[str]                                  # term names
+    rivals: tuple[tuple[str, ...], ...] = ()
+
+
+@dataclasses.dataclass
+class Score:
+    name: str
+    gain: float             # share of the original held-out SSE this candidate removes (marginal)
+    step_gain: float        # share of the current held-out SSE it removes
+    t: float
+    significant: bool       # significant against the current fit and against its rivals
+    eligible: bool
+    n_new: int
+    terms: list[str] = dataclasses.field(default_factory=list)
+
+
+@dataclasses.dataclass
+class Selection:
+    added: list[str]
+    steps: list[Score]                       # the chosen candidate's score at each step
+    final: dict[str, Score]                  # every candidate not added, scored against the final set
+    terms: list[str]                         # term names of the chosen effects, in order
+    sse0: float
+    sse_final: float
+
+
+def score(design: Design, cand: Candidate, base_terms: list[str], sse_base: np.ndarray, sse0: float,
+          term_of: dict[str, list[str]], alpha: float, min_gain: float) -> Score:
+    names = _union(base_terms, cand.terms)
+    sse_new = design.sse(names)
+    cmp = compare(sse_new, sse_base, alpha)
+    ok_sig, ok_clear = cmp.significant, cmp.clear(min_gain)
+    for combo in cand.rivals:
+        rival = base_terms
+        for r in combo:
+            rival = _union(rival, term_of.get(r, []))
+        if set(rival) >= set(names):
+            continue
+        rc = compare(sse_new, design.sse(rival), alpha)
+        ok_sig = ok_sig and rc.significant
+        ok_clear = ok_clear and rc.clear(min_gain)
+    gain_total = (float(sse_base.sum()) - float(sse_new.sum())) / sse0 if sse0 > 0 else 0.0
+    n_new = len(set(design.live(names)) - set(design.live(base_terms)))
+    return Score(cand.name, gain_total, cmp.gain, cmp.t, ok_sig, ok_sig and ok_clear and n_new > 0, n_new,
+                 list(cand.terms))
+
+
+def _union(a: list[str], b: list[str]) -> list[str]:
+    return list(a) + [x for x in b if x not in a]
+
+
+def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float = 0.1,
+            max_effects: int | None = None) -> Selection:
+    """Forward selection. ``candidates(chosen_terms, residual)`` returns the list of
+    ``Candidate`` for the current step (terms already added to ``design``)."""
+    chosen: list[str] = []
+    chosen_terms: list[str] = []
+    steps: list[Score] = []
+    sse0 = float(design.sse([]).sum())
+    while True:
+        residual = design.r - design.fitted(chosen_terms)
+        cands = candidates(chosen_terms, residual)
+        term_of = {c.name: c.terms for c in cands}
+        sse_base = design.sse(chosen_terms)
+        scores = {c.name: score(design, c, chosen_terms, sse_base, sse0, term_of, alpha, min_gain)
+                  for c in cands if c.name not in chosen}
+        limit = max_effects is not None and len(chosen) >= max_effects
+        eligible = sorted((s for s in scores.values() if s.eligible), key=lambda s: -s.gain)
+        if not eligible or limit:
+            return Selection(chosen, steps, scores, chosen_terms, sse0, float(sse_base.sum()))
+        best = eligible[0]
+        for other in eligible[1:]:
+            if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],
+                                                       chosen_terms, alpha, min_gain):
+                best = other
+        chosen.append(best.name)
+        chosen_terms = _union(chosen_terms, term_of[best.name])
+        steps.append(best)
+
+
+def _beats(design: Design, richer: list[str], simpler: list[str], base: list[str], alpha: float,
+           min_gain: float) -> bool:
+    a, b = _union(base, richer), _union(base, simpler)
+    return compare(design.sse(a), design.sse(b), alpha).clear(min_gain)

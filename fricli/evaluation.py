@@ -1,0 +1,102 @@
+"""Evaluate models on logs: friction error and, where a sensor column exists, external-torque error."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fricli import logs, metrics, models
+
+
+@dataclasses.dataclass
+class Result:
+    model: str
+    log: str
+    friction: dict                 # errors of tau_f_pred against the friction target [Nm]
+    external: dict | None          # errors of tau_ext_pred against tau_ext [Nm], if measured
+
+
+def external_estimate(signals: dict, tau_f_pred: np.ndarray, lowpass_hz: float | None) -> np.ndarray:
+    """tau_ext_pred (n,) [Nm], optionally low-passed with a zero-phase Butterworth filter."""
+    est = logs.external_torque(signals, tau_f_pred)
+    if lowpass_hz:
+        est = logs.lowpass(est, signals["t"], lowpass_hz)
+    return est
+
+
+def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
+                 model_name: str = "model", log_name: str = "log") -> Result:
+    models.check_log(meta, log, model_name)
+    sig = log.signals
+    pred = model.predict(sig)[0]
+    friction = metrics.errors(logs.friction_target(sig), pred)
+    external = None
+    if "tau_ext" in sig:
+        external = metrics.errors(sig["tau_ext"], external_estimate(sig, pred, lowpass_hz))
+    return Result(model_name, log_name, friction, external)
+
+
+def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
+             read_kwargs: dict | None = None) -> list[Result]:
+    """Every model on every log. A log with several joints is read for each model's joint."""
+    loaded = {name: models.load(path) for name, path in model_paths.items()}
+    tables = {name: logs.read_table(path) for name, path in log_paths.items()}
+    read_kwargs = dict(read_kwargs or {})
+    joint_override = read_kwargs.pop("joint", None)
+    results = []
+    cache: dict = {}
+    for mname, (model, meta) in loaded.items():
+        for lname, (table, digest) in tables.items():
+            joint = joint_override if joint_override is not None else (
+                meta.get("joint") if "joint" in table.column_names else None)
+            key = (lname, str(joint))
+            if key not in cache:
+                cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint, **read_kwargs)
+            results.append(evaluate_one(model, meta, cache[key], lowpass_hz=lowpass_hz,
+                                        model_name=mname, log_name=lname))
+    return results
+
+
+def to_json(results: list[Result], model_paths: dict, log_paths: dict, lowpass_hz) -> dict:
+    return {"models": model_paths, "logs": log_paths, "lowpass_hz": lowpass_hz,
+            "results": [dataclasses.asdict(r) for r in results]}
+
+
+def markdown_table(results: list[Result], model_names: list[str], log_names: list[str]) -> str:
+    """Rows: models; columns: logs; cells: friction MAE (and external-torque MAE) in Nm."""
+    by = {(r.model, r.log): r for r in results}
+    has_ext = {ln: any(by[(mn, ln)].external for mn in model_names) for ln in log_names}
+    head = ["model"]
+    for ln in log_names:
+        head.append(f"{ln} friction MAE")
+        if has_ext[ln]:
+            head.append(f"{ln} ext. torque MAE")
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for mn in model_names:
+        row = [mn]
+        for ln in log_names:
+            r = by[(mn, ln)]
+            row.append(f"{r.friction['mae']:.3f}")
+            if has_ext[ln]:
+                row.append(f"{r.external['mae']:.3f}" if r.external else "–")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def static_friction(model, qd: np.ndarray, tau_g: np.ndarray, like: dict | None = None) -> np.ndarray:
+    """Steady-state friction [Nm] at each (qd, tau_g) pair, shapes (n,).
+
+    Points are spaced 1000 s apart with zero acceleration, so every history-dependent state
+    (e.g. the LuGre bristles) settles between them. Other inputs the model reads are held at
+    the median of ``like`` (a log's signals), or zero.
+    """
+    qd = np.asarray(qd, dtype=np.float64).ravel()
+    n = qd.size
+    sig = {"t": np.arange(n) * 1000.0, "qd": qd, "tau_g": np.broadcast_to(tau_g, qd.shape).astype(np.float64).ravel(),
+           "qdd": np.zeros(n), "tau_dyn": np.zeros(n), "tau_m": np.zeros(n)}
+    for name in model.required_inputs():
+        if name not in sig:
+            value = float(np.median(like[name])) if like is not None and name in like else 0.0
+            sig[name] = np.full(n, value)
+    return model.predict(sig)[0]

@@ -1,0 +1,382 @@
+"""Identify the extended LuGre model from a log (``fricli identify``).
+
+Two stages, both with ``scipy.optimize.least_squares``:
+
+1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
+   friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
+   grid of (vs, delta) the curve is linear in (Fc, Fs, kc, ks, Fv), so each grid point is one
+   linear least-squares solve; the best point starts a bounded nonlinear fit (log-parameters
+   for Fc, Fs, vs, delta; Fv, kc, ks >= 0).
+2. Bristle parameters sigma0, sigma1 by simulating the bristle state over the whole log (a coarse
+   grid of log-spaced values, then a bounded fit in log-parameters). With ``refine`` all
+   parameters are then fitted jointly on the whole log.
+
+Steady-state samples: the velocity has stayed within ``rel_tol``*|v| (plus a small absolute
+tolerance from the velocity noise) for ``hold`` seconds before the sample and ``hold``/4 after
+it, without a sign change, and |v| is clearly above standstill. This keeps samples away from
+reversals and accelerations, where bristle dynamics and inertia errors would bias the curve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy import optimize
+from scipy.ndimage import maximum_filter1d, minimum_filter1d
+
+from fricli import logs, metrics
+from fricli.errors import DataError, FitError
+from fricli.models.lugre import LuGreModel
+
+MIN_STEADY_PER_DIRECTION = 20
+MIN_STRIBECK_LEVELS = 6
+TAU1_MAX = 0.1            # upper bound on sigma1/sigma0 [s]
+_DELTAS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0)
+_GRID_ROWS = 20_000
+
+
+def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, travel: float = 0.002,
+                      rel_tol: float = 0.05, abs_tol: float | None = None) -> np.ndarray:
+    """Rows (n,) bool where the velocity qd (n,) [rad/s] has been held constant.
+
+    A row is steady when, over a window from H seconds before to H/4 after it, qd keeps its
+    sign and its range stays within rel_tol*|qd| + abs_tol. The hold H is ``hold`` [s] or the
+    time to cover ``travel`` [rad or m] at that speed, whichever is longer (so the bristles have
+    settled at slow speeds too), rounded up to hold*2^k and capped at 16*hold. ``abs_tol``
+    defaults to 1e-3 of the top speed or four times the sample-to-sample velocity noise,
+    whichever is larger. The window is counted in samples at the median sample rate.
+    """
+    n = len(qd)
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    dt = float(np.median(np.diff(t)))
+    speed = np.abs(qd)
+    top = float(np.percentile(speed, 99))
+    if abs_tol is None:
+        jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
+        abs_tol = max(1e-3 * top, 4 * jitter)
+    with np.errstate(divide="ignore"):
+        need = np.maximum(hold, travel / speed)            # hold required at each row [s]
+    level = np.clip(np.ceil(np.log2(need / hold) - 1e-9), 0, 4).astype(int)
+    mask = np.zeros(n, dtype=bool)
+    for k in range(5):
+        rows = level == k
+        if not rows.any():
+            continue
+        h = hold * 2 ** k
+        before = max(1, int(round(h / dt)))
+        after = max(1, int(round(h / 4 / dt)))
+        size = before + after + 1
+        origin = before - size // 2
+        vmax = maximum_filter1d(qd, size=size, origin=origin, mode="nearest")
+        vmin = minimum_filter1d(qd, size=size, origin=origin, mode="nearest")
+        ok = ((vmin > 0) | (vmax < 0)) & ((vmax - vmin) <= rel_tol * speed + abs_tol)
+        ok[:before] = False                                # the window must not run off the log
+        ok[n - after:] = False
+        mask |= rows & ok
+    return mask & (speed > max(abs_tol, 1e-3 * top))
+
+
+def speed_levels(speed: np.ndarray, width: float = 1.1) -> int:
+    """Number of distinct speeds in ``speed`` (n,) > 0: occupied bins of log-width ``width``
+    holding at least 10 samples (and 0.5 % of them)."""
+    if len(speed) == 0:
+        return 0
+    bins = np.floor(np.log(speed) / math.log(width)).astype(np.int64)
+    _, counts = np.unique(bins, return_counts=True)
+    return int((counts >= max(10, 0.005 * len(speed))).sum())
+
+
+@dataclasses.dataclass
+class _Layout:
+    """Which static parameters are free, and how the parameter vector maps onto them."""
+
+    stribeck: bool          # Fs, vs, delta identifiable (slow steady samples exist)
+    load: bool              # kc, ks identifiable (tau_g present and varying)
+
+    @property
+    def names(self) -> list[str]:
+        out = ["fc"]
+        if self.stribeck:
+            out += ["fs", "vs", "delta"]
+        out.append("fv")
+        if self.load:
+            out.append("kc")
+            if self.stribeck:
+                out.append("ks")
+        return out
+
+    _LOG = ("fc", "fs", "vs", "delta")
+
+    def encode(self, p: dict) -> np.ndarray:
+        return np.array([math.log(p[k]) if k in self._LOG else p[k] for k in self.names])
+
+    def decode(self, x: np.ndarray, fixed: dict) -> dict:
+        p = dict(fixed)
+        for k, xi in zip(self.names, x):
+            p[k] = math.exp(xi) if k in self._LOG else float(xi)
+        if not self.stribeck:
+            p["fs"] = p["fc"]
+            p["ks"] = p.get("kc", 0.0)
+        if not self.load:
+            p["kc"] = p["ks"] = 0.0
+        return p
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        lo = {"delta": math.log(0.2), "fv": 0.0, "kc": 0.0, "ks": 0.0}
+        hi = {"delta": math.log(5.0)}
+        return (np.array([lo.get(k, -np.inf) for k in self.names]),
+                np.array([hi.get(k, np.inf) for k in self.names]))
+
+
+class LuGreIdentifier:
+    """Fit an extended LuGre model to a log's friction target.
+
+    hold [s], travel [rad or m], rel_tol [-]: the steady-state sample selection
+    (``steady_state_mask``);
+    refine: after the two stages, fit all parameters jointly on the whole log;
+    max_nfev: evaluations allowed per least-squares stage.
+
+    Fitted attributes: ``model_`` (LuGreModel), ``steady_`` (bool mask of the steady rows),
+    ``fit_`` (error figures and stage details), ``notes_`` (what could not be identified).
+    """
+
+    def __init__(self, *, hold: float = 0.2, travel: float = 0.002, rel_tol: float = 0.05,
+                 refine: bool = False, max_nfev: int = 400):
+        self.hold = hold
+        self.travel = travel
+        self.rel_tol = rel_tol
+        self.refine = refine
+        self.max_nfev = max_nfev
+
+    # ------------------------------------------------------------------ checks
+
+    def _check(self, sig: dict, units: dict) -> np.ndarray:
+        v = sig["qd"]
+        top = float(np.max(np.abs(v)))
+        vu = units["qd"]
+        if not top > 0:
+            raise DataError("the joint does not move (qd is zero everywhere)")
+        moving = np.abs(v) > 1e-3 * top
+        if not (v[moving] < 0).any():
+            raise DataError("no samples with negative velocity: identify needs motion in both directions")
+        if not (v[moving] > 0).any():
+            raise DataError("no samples with positive velocity: identify needs motion in both directions")
+        steady = steady_state_mask(sig["t"], v, hold=self.hold, travel=self.travel, rel_tol=self.rel_tol)
+        for name, side in (("positive", v > 0), ("negative", v < 0)):
+            count = int((steady & side).sum())
+            if count < MIN_STEADY_PER_DIRECTION:
+                raise DataError(
+                    f"too few steady-state samples with {name} velocity ({count}, need at least "
+                    f"{MIN_STEADY_PER_DIRECTION}): the log needs constant-velocity motion held for at "
+                    f"least {self.hold:g} s (--hold)")
+        speeds = np.abs(v[steady])
+        lo, hi = np.percentile(speeds, [5, 95])
+        if hi < 1.5 * lo:
+            raise DataError(f"the steady-state samples cover only one speed (about {np.median(speeds):.3g} {vu}): "
+                            "several velocity levels are needed to separate Coulomb and viscous friction")
+        return steady
+
+    # ----------------------------------------------------------------- stage 1
+
+    def _start(self, v: np.ndarray, y: np.ndarray, load: np.ndarray | None) -> tuple[dict, float, float]:
+        """Grid over (vs, delta) with a linear solve per point. Returns (params, e_max, sse_gain)."""
+        speed = np.abs(v)
+        s = np.sign(v)
+        ya = y * s                                    # friction magnitude along the motion
+        step = max(1, len(v) // _GRID_ROWS)
+        speed, ya = speed[::step], ya[::step]
+        load = None if load is None else load[::step]
+        logv = np.log(speed)
+        base_cols = [np.ones_like(speed), speed] + ([load] if load is not None else [])
+        coef0, sse0 = _linear_fit(np.array(base_cols), ya)
+        best = None
+        vlo, vhi = float(speed.min()), float(speed.max())
+        for vs in np.geomspace(vlo / 3, vhi, 25):
+            lv = logv - math.log(vs)
+            for delta in _DELTAS:
+                e = np.exp(-np.exp(delta * lv))
+                cols = [1 - e, e, speed]
+                if load is not None:
+                    cols += [load * (1 - e), load * e]
+                coef, sse = _linear_fit(np.array(cols), ya)
+                if coef[0] <= 0 or coef[1] <= 0:
+                    continue
+                if best is None or sse < best[0]:
+                    best = (sse, vs, delta, coef, float(e.max()))
+        if best is None:
+            fc = max(float(coef0[0]), 1e-3 * float(np.abs(ya).mean()) + 1e-12)
+            p = {"fc": fc, "fs": fc, "vs": vlo, "delta": 1.0, "fv": max(float(coef0[1]), 0.0),
+                 "kc": max(float(coef0[2]), 0.0) if load is not None else 0.0}
+            p["ks"] = p["kc"]
+            return p, 0.0, 0.0
+        sse, vs, delta, coef, e_max = best
+        p = {"fc": float(coef[0]), "fs": float(coef[1]), "vs": float(vs), "delta": float(delta),
+             "fv": max(float(coef[2]), 0.0)}
+        if load is not None:
+            p["kc"], p["ks"] = max(float(coef[3]), 0.0), max(float(coef[4]), 0.0)
+        else:
+            p["kc"] = p["ks"] = 0.0
+        gain = 1.0 - sse / sse0 if sse0 > 0 else 0.0
+        return p, e_max, gain
+
+    def _fit_static(self, v, y, tau_g, units) -> tuple[dict, dict]:
+        load = None if tau_g is None else np.abs(tau_g)
+        if load is not None:
+            lo, hi = np.percentile(load, [5, 95])
+            if hi - lo <= 1e-6 * (1.0 + hi):
+                load = None
+                self.notes_.append("|tau_g| does not vary over the steady-state samples: kc = ks = 0")
+        elif tau_g is None:
+            self.notes_.append("no tau_g in the log: load slopes kc = ks = 0")
+        start, e_max, gain = self._start(v, y, load)
+        # Fs, vs, delta need several speed levels and a visible rise of the curve at the slow ones.
+        levels = speed_levels(np.abs(v))
+        stribeck = levels >= MIN_STRIBECK_LEVELS and e_max > 0.1 and gain > 1e-3
+        if not stribeck:
+            why = (f"only {levels} steady speed levels (need {MIN_STRIBECK_LEVELS})" if levels < MIN_STRIBECK_LEVELS
+                   else f"no visible rise at the slowest steady speed ({np.abs(v).min():.3g} {units['qd']})")
+            self.notes_.append(f"Stribeck effect not identifiable ({why}): Fs = Fc")
+            start["fs"], start["ks"] = start["fc"], start["kc"]
+            start["vs"], start["delta"] = float(np.abs(v).min()), 1.0
+        layout = _Layout(stribeck=stribeck, load=load is not None)
+        fixed = {k: start[k] for k in ("fc", "fs", "vs", "delta", "fv", "kc", "ks")}
+        fixed.update(sigma0=1.0, sigma1=0.0)
+        tg = None if load is None else tau_g
+
+        def residual(x):
+            m = LuGreModel(**layout.decode(x, fixed))
+            return m.steady_state(v, tg) - y
+
+        x0 = layout.encode(start)
+        lb, ub = layout.bounds()
+        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9) if np.isfinite(lb).any() else x0
+        res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "static parameters")
+        params = layout.decode(res.x, fixed)
+        return params, {"nfev": int(res.nfev), "cost": float(res.cost), "stribeck": stribeck,
+                        "load": layout.load}
+
+    # ----------------------------------------------------------------- stage 2
+
+    def _fit_dynamic(self, sig: dict, y: np.ndarray, static: dict) -> tuple[dict, dict]:
+        """sigma0, sigma1 on the whole log, as x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
+        g_typ = static["fc"] + static["kc"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
+
+        def model(x):
+            s0 = math.exp(x[0])
+            return LuGreModel(**dict(static, sigma0=s0, sigma1=s0 * math.exp(x[1])))
+
+        grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
+                for tau1 in (1e-5, 1e-3, 1e-1)]
+        costs = [_sumsq(model(x).predict(sig)[0] - y) for x in grid]
+        x0 = np.array(grid[int(np.nanargmin(costs))])
+        # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7, 0.1] s
+        lb = np.array([math.log(g_typ), math.log(1e-7)])
+        ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
+        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
+        res = _least_squares(lambda x: model(x).predict(sig)[0] - y, x0, (lb, ub), self.max_nfev,
+                             "bristle parameters")
+        m = model(res.x)
+        return dict(static, sigma0=m.sigma0, sigma1=m.sigma1), {"nfev": int(res.nfev) + len(grid),
+                                                                "cost": float(res.cost)}
+
+    def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout) -> tuple[dict, dict]:
+        fixed = dict(params)
+        n_static = len(layout.names)
+
+        def decode(x):
+            p = layout.decode(x[:n_static], fixed)
+            p["sigma0"] = math.exp(x[n_static])
+            p["sigma1"] = p["sigma0"] * math.exp(x[n_static + 1])
+            return p
+
+        def residual(x):
+            return LuGreModel(**decode(x)).predict(sig)[0] - y
+
+        lb, ub = layout.bounds()
+        s0 = math.log(params["sigma0"])
+        tau1 = math.log(max(params["sigma1"] / params["sigma0"], 1e-7))
+        x0 = np.concatenate([layout.encode(params), [s0, tau1]])
+        lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
+        ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
+        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
+        res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement")
+        return decode(res.x), {"nfev": int(res.nfev), "cost": float(res.cost)}
+
+    # --------------------------------------------------------------------- fit
+
+    def fit(self, signals: dict[str, np.ndarray], units: dict | None = None, axis: str = "rotary") -> "LuGreIdentifier":
+        """Fit on a log's signals (canonical units, see ``fricli.logs``)."""
+        units = units or logs.CANONICAL[axis]
+        self.notes_: list[str] = []
+        sig = {k: signals[k] for k in ("t", "qd", "tau_g") if k in signals}
+        y = logs.friction_target(signals)
+        steady = self._check(signals, units)
+        v = signals["qd"]
+        tau_g = sig.get("tau_g")
+        static, info1 = self._fit_static(v[steady], y[steady], None if tau_g is None else tau_g[steady], units)
+        params, info2 = self._fit_dynamic(sig, y, static)
+        stages = {"static": info1, "dynamic": info2}
+        if self.refine:
+            layout = _Layout(stribeck=info1["stribeck"], load=info1["load"])
+            params, stages["joint"] = self._fit_joint(sig, y, params, layout)
+        try:
+            model = LuGreModel(**params, axis=axis)
+        except ValueError as exc:
+            raise FitError(f"identification gave unusable parameters ({exc})") from None
+        pred = model.predict(sig)[0]
+        if not np.isfinite(pred).all():
+            raise FitError("identification gave a model with non-finite predictions")
+        self.model_ = model
+        self.steady_ = steady
+        fit = metrics.errors(y, pred)
+        fit["steady"] = metrics.errors(y[steady], pred[steady])
+        fit["steady_rows"] = int(steady.sum())
+        fit["stages"] = stages
+        fit["notes"] = list(self.notes_)
+        self.fit_ = fit
+        return self
+
+
+def _sumsq(r: np.ndarray) -> float:
+    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
+    return float(np.einsum("i,i->", r, r))
+
+
+def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares coefficients (k,) for regressors stored as rows (k, n) and y (n,), and the
+    sum of squared residuals. Normal equations on unit-norm rows (k is small)."""
+    gram = rows @ rows.T
+    scale = np.sqrt(np.diag(gram)).copy()
+    scale[scale == 0] = 1.0
+    gram = gram / np.outer(scale, scale)
+    rhs = (rows @ y) / scale
+    try:
+        coef = np.linalg.solve(gram, rhs)
+    except np.linalg.LinAlgError:
+        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+    coef = coef / scale
+    r = coef @ rows - y
+    return coef, _sumsq(r)
+
+
+def _least_squares(fun, x0, bounds, max_nfev: int, what: str):
+    """``least_squares`` (trf, x_scale='jac'); failures become FitError."""
+    try:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+            res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac",
+                                         max_nfev=max_nfev)
+    except ValueError as exc:
+        raise FitError(f"fitting the {what} failed: {str(exc).splitlines()[0]}") from None
+    if res.status == 0:
+        raise FitError(f"fitting the {what} did not converge within {max_nfev} evaluations")
+    if res.status < 0 or not np.isfinite(res.x).all() or not np.isfinite(res.cost):
+        raise FitError(f"fitting the {what} failed ({res.message})")
+    return res
+
+
+def identify(log: logs.Log, **kwargs) -> LuGreIdentifier:
+    """Fit an extended LuGre model to ``log``; keyword arguments as ``LuGreIdentifier``."""
+    return LuGreIdentifier(**kwargs).fit(log.signals, units=log.units, axis=log.axis)

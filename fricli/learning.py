@@ -1,0 +1,115 @@
+"""Learning friction from logs: train a base network (``train_base``) and adapt any model to
+new dynamics by learning its residual (``adapt``). Both return the model and a summary of
+figures; the command line saves and prints them."""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from fricli import logs, metrics, models, training_data
+from fricli.errors import DataError
+from fricli.models.base import FrictionModel
+from fricli.models.neural import ARCHS
+from fricli.models.residual import ResidualFriction
+
+DEFAULT_HIDDEN = {"mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
+DEFAULT_MAX_SAMPLES = 3000
+REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
+
+
+def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
+    return {k: v[rows] for k, v in sig.items()}
+
+
+def _errors(y: np.ndarray, pred: np.ndarray, rows: np.ndarray) -> dict:
+    return metrics.errors(y[rows], pred[rows])
+
+
+def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | None = None, steps: int = 50_000,
+               lr: float = 0.01, batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
+               balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
+               on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
+    """Train a network (``arch`` mlp, selmic or nnacm) on the friction target of ``log``.
+
+    Returns (model, summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the
+    training rows, the validation rows and the whole log.
+    """
+    if arch not in ARCHS:
+        raise ValueError(f"unknown architecture {arch!r}")
+    sig = log.signals
+    target = logs.friction_target(sig)
+    rng = np.random.default_rng(seed)
+    sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance, rng=rng)
+    model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
+                        batch_size=batch_size, units=log.units)
+    model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
+              on_eval=on_eval)
+    pred = model.predict(sig)[0]
+    summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
+               "train": _errors(target, pred, sel.train), "log": metrics.errors(target, pred)}
+    if sel.val.size:
+        summary["val"] = _errors(target, pred, sel.val)
+    return model, summary
+
+
+def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:
+    """The log's signals over its first ``seconds`` (all of it for None)."""
+    sig = log.signals
+    if seconds is None:
+        return sig
+    t = sig["t"]
+    keep = int(np.searchsorted(t, t[0] + seconds, side="right"))
+    if keep < 2:
+        raise DataError(f"{log.name}: --max-seconds {seconds:g} leaves fewer than 2 rows")
+    return {k: v[:keep] for k, v in sig.items()}
+
+
+def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int = 200, batch_size: int = 64,
+          lr: float = 0.01, seed: int = 0, val_fraction: float = 0.2, max_seconds: float | None = None,
+          min_speed: float | None = None, on_eval: Callable | None = None) -> tuple[ResidualFriction, dict]:
+    """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
+
+    Rows slower than ``min_speed`` (default 2 % of the log's top speed) are left out: at rest
+    the friction holds whatever the controller applies, and sign(qd) flips with noise. The
+    network still gets sign(qd) = 0 at rest when predicting, between its two directions.
+    """
+    sig = first_seconds(log, max_seconds)
+    qd = sig["qd"]
+    top = float(np.max(np.abs(qd)))
+    if not top > 0:
+        raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
+    if min_speed is None:
+        min_speed = REST_SHARE * top
+    moving = np.abs(qd) >= min_speed
+    if not (qd[moving] > 0).any() or not (qd[moving] < 0).any():
+        direction = "positive" if (qd[moving] > 0).any() else "negative"
+        raise DataError(f"{log.name}: the log moves only in the {direction} direction; "
+                        "the residual network needs both (a movement out and back)")
+    target = logs.friction_target(sig)
+    rng = np.random.default_rng(seed)
+    sel = training_data.select(qd, val_fraction=val_fraction, balance=False, rng=rng, keep=moving)
+    model = ResidualFriction(base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr,
+                             min_speed=float(min_speed), units=log.units)
+    base_pred = base.predict(sig)[0]
+    model.fit(sig, target, sel.train, sel.val, rng=rng, on_eval=on_eval, base_pred=base_pred)
+    pred = base_pred + model.add.predict(sig)[0]
+    moving_rows = np.flatnonzero(moving)
+    summary = {**sel.summary(), "rows_used": int(len(qd)), "seconds_used": float(sig["t"][-1] - sig["t"][0]),
+               "min_speed": float(min_speed), "epochs": epochs, "batch_size": batch_size,
+               "steps": int(model.add.steps_), "best_step": int(model.add.best_step_),
+               "train": _errors(target, pred, sel.train),
+               "base_train": _errors(target, base_pred, sel.train),
+               "moving": _errors(target, pred, moving_rows), "base_moving": _errors(target, base_pred, moving_rows)}
+    if sel.val.size:
+        summary["val"] = _errors(target, pred, sel.val)
+        summary["base_val"] = _errors(target, base_pred, sel.val)
+    return model, summary
+
+
+def load_base(path: str, log: logs.Log) -> tuple[FrictionModel, dict]:
+    """A model file to adapt, checked against the log's units."""
+    model, meta = models.load(path)
+    models.check_log(meta, log, path)
+    return model, meta

@@ -1,0 +1,311 @@
+"""The extended LuGre friction model (kind ``lugre``).
+
+    Fc(tau_l) = Fc + kc*|tau_g|,  Fs(tau_l) = Fs + ks*|tau_g|                  [Nm]
+    g(v)      = Fc(tau_l) + (Fs(tau_l) - Fc(tau_l)) * exp(-|v/vs|^delta)       [Nm], > 0
+    dz/dt     = v - sigma0*|v|/g * z                                           [rad/s]
+    tau_f     = sigma0*z + sigma1*dz/dt + Fv*v                                 [Nm]
+
+In steady sliding (constant v) tau_f = sign(v)*g(v) + Fv*v. Optional effects, absent by
+default: direction asymmetry (``fc_neg``, ``fs_neg``, ``fv_neg`` used for v < 0) and
+temperature dependence (Fc, Fs scaled by 1 - alpha_c*(T - t_ref), Fv by exp(-alpha_v*(T - t_ref))).
+The bristle state is integrated exactly for v and g held over each sample interval
+(``fricli.physics``). A linear axis uses the same equations in m, m/s and N.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from scipy.linalg.blas import dtbsv
+
+from fricli import physics
+from fricli.errors import DataError
+from fricli.models import register
+from fricli.models.base import FrictionModel
+
+CHUNK = 1 << 16           # rows per internal block: keeps the temporaries in cache
+_G_MIN = 1e-12            # floor on the Stribeck curve g [Nm], so the bristle rate stays finite
+
+class _Buffers:
+    """Work arrays reused across the blocks of one ``predict`` call."""
+
+    def __init__(self, n: int):
+        self.work = [np.empty(n) for _ in range(5)]
+        self.band = np.empty((2, n), order="F")   # dtbsv band storage; row 0 unused (unit diagonal)
+        self.band[0] = 1.0
+
+
+STATIC = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")
+DYNAMIC = ("sigma0", "sigma1")
+OPTIONAL = ("fc_neg", "fs_neg", "fv_neg", "t_ref", "alpha_c", "alpha_v")
+
+# (name, unit on a rotary axis, unit on a linear axis, meaning)
+PARAM_INFO = {
+    "fc": ("Nm", "N", "Coulomb friction"),
+    "fs": ("Nm", "N", "static (stiction) friction"),
+    "vs": ("rad/s", "m/s", "Stribeck velocity"),
+    "delta": ("-", "-", "Stribeck exponent"),
+    "fv": ("Nm s/rad", "N s/m", "viscous friction"),
+    "kc": ("Nm/Nm", "N/N", "load slope of Coulomb friction (per |tau_g|)"),
+    "ks": ("Nm/Nm", "N/N", "load slope of static friction (per |tau_g|)"),
+    "sigma0": ("Nm/rad", "N/m", "bristle stiffness"),
+    "sigma1": ("Nm s/rad", "N s/m", "bristle (micro-)damping"),
+    "fc_neg": ("Nm", "N", "Coulomb friction for negative velocity"),
+    "fs_neg": ("Nm", "N", "static friction for negative velocity"),
+    "fv_neg": ("Nm s/rad", "N s/m", "viscous friction for negative velocity"),
+    "t_ref": ("degC", "degC", "reference temperature"),
+    "alpha_c": ("1/K", "1/K", "temperature coefficient of Coulomb/static friction"),
+    "alpha_v": ("1/K", "1/K", "temperature coefficient of viscous friction (exponential)"),
+}
+
+
+def unit_of(name: str, axis: str = "rotary") -> str:
+    rot, lin, _ = PARAM_INFO[name]
+    return lin if axis == "linear" else rot
+
+
+@register
+class LuGreModel(FrictionModel):
+    """Extended LuGre model with load dependence; parameters in canonical units (see module doc).
+
+    ``predict`` carries the state (z [rad], t_last [s]) from one batch of rows to the next.
+    """
+
+    kind = "lugre"
+
+    def __init__(self, fc: float, fs: float, vs: float, delta: float, fv: float, kc: float = 0.0,
+                 ks: float = 0.0, sigma0: float = 1e4, sigma1: float = 0.0, *, fc_neg: float | None = None,
+                 fs_neg: float | None = None, fv_neg: float | None = None, t_ref: float | None = None,
+                 alpha_c: float = 0.0, alpha_v: float = 0.0, axis: str = "rotary"):
+        self.fc, self.fs, self.vs, self.delta, self.fv = float(fc), float(fs), float(vs), float(delta), float(fv)
+        self.kc, self.ks, self.sigma0, self.sigma1 = float(kc), float(ks), float(sigma0), float(sigma1)
+        self.fc_neg = None if fc_neg is None else float(fc_neg)
+        self.fs_neg = None if fs_neg is None else float(fs_neg)
+        self.fv_neg = None if fv_neg is None else float(fv_neg)
+        self.t_ref = None if t_ref is None else float(t_ref)
+        self.alpha_c, self.alpha_v = float(alpha_c), float(alpha_v)
+        if axis not in ("rotary", "linear"):
+            raise ValueError(f"axis must be rotary or linear, not {axis!r}")
+        self.axis = axis
+        values = [getattr(self, k) for k in STATIC + DYNAMIC + ("alpha_c", "alpha_v")]
+        values += [getattr(self, k) for k in OPTIONAL if getattr(self, k) is not None]
+        if not all(math.isfinite(x) for x in values):
+            raise ValueError("non-finite parameter")
+        if self.vs <= 0 or self.delta <= 0 or self.sigma0 <= 0:
+            raise ValueError("vs, delta and sigma0 must be positive")
+
+    # ------------------------------------------------------------------ options
+
+    @property
+    def asymmetric(self) -> bool:
+        return self.fc_neg is not None or self.fs_neg is not None or self.fv_neg is not None
+
+    @property
+    def thermal(self) -> bool:
+        return self.t_ref is not None and (self.alpha_c != 0.0 or self.alpha_v != 0.0)
+
+    @property
+    def loaded(self) -> bool:
+        return self.kc != 0.0 or self.ks != 0.0
+
+    def negative_levels(self) -> tuple[float, float, float]:
+        """(Fc, Fs, Fv) used for v < 0; Fs keeps the positive side's Stribeck bump Fs - Fc."""
+        fc_n = self.fc if self.fc_neg is None else self.fc_neg
+        fs_n = self.fs_neg if self.fs_neg is not None else self.fs + (fc_n - self.fc)
+        fv_n = self.fv if self.fv_neg is None else self.fv_neg
+        return fc_n, fs_n, fv_n
+
+    # --------------------------------------------------------------- equations
+
+    def _levels(self, v: np.ndarray, tau_g: np.ndarray | None, temp: np.ndarray | None):
+        """Fc(tau_l), Fs(tau_l) [Nm] and Fv, each (n,) or scalar, for velocities v (n,)."""
+        if self.asymmetric:
+            fc_n, fs_n, fv_n = self.negative_levels()
+            neg = v < 0
+            fc = np.where(neg, fc_n, self.fc)
+            fs = np.where(neg, fs_n, self.fs)
+            fv = np.where(neg, fv_n, self.fv)
+        else:
+            fc, fs, fv = self.fc, self.fs, self.fv
+        if self.loaded and tau_g is not None:
+            load = np.abs(tau_g)
+            fc = fc + self.kc * load
+            fs = fs + self.ks * load
+        if self.thermal:
+            dT = temp - self.t_ref
+            scale = 1.0 - self.alpha_c * dT
+            fc = fc * scale
+            fs = fs * scale
+            if self.alpha_v != 0.0:
+                fv = fv * np.exp(-self.alpha_v * dT)
+        return fc, fs, fv
+
+    def _inputs(self, signals: dict[str, np.ndarray]):
+        v = signals["qd"]
+        tau_g = signals.get("tau_g") if self.loaded else None
+        temp = None
+        if self.thermal:
+            temp = signals.get("temp")
+            if temp is None:
+                raise DataError("the model depends on temperature but the log has no 'temp' column")
+        return v, tau_g, temp
+
+    def stribeck_curve(self, v: np.ndarray, tau_g: np.ndarray | None = None,
+                       temp: np.ndarray | None = None) -> np.ndarray:
+        """g(v, tau_l) (n,) [Nm], the magnitude of sliding friction without the viscous part."""
+        v = np.asarray(v, dtype=np.float64)
+        fc, fs, _ = self._levels(v, tau_g, temp)
+        return np.maximum(physics.stribeck(v, fc, fs, self.vs, self.delta), _G_MIN)
+
+    def steady_state(self, v: np.ndarray, tau_g: np.ndarray | None = None,
+                     temp: np.ndarray | None = None) -> np.ndarray:
+        """Friction (n,) [Nm] in steady sliding at constant velocity v (n,): sign(v)*g + Fv*v."""
+        v = np.asarray(v, dtype=np.float64)
+        fc, fs, fv = self._levels(v, tau_g, temp)
+        g = np.maximum(physics.stribeck(v, fc, fs, self.vs, self.delta), _G_MIN)
+        return np.sign(v) * g + fv * v
+
+    def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
+        """Friction tau_f (n,) [Nm] for signals t [s], qd [rad/s] (and tau_g, temp when used).
+
+        ``state`` is (z [rad], t_last [s]) from the previous batch, or None to start in the
+        steady state of the first sample. Returns (tau_f, state after the last sample).
+        """
+        t = np.asarray(signals["t"], dtype=np.float64)
+        v, tau_g, temp = self._inputs(signals)
+        v = np.asarray(v, dtype=np.float64)
+        n = len(t)
+        out = np.empty(n)
+        if n == 0:
+            return out, state
+        z, t_last = (None, None) if state is None else state
+        buf = _Buffers(min(n, CHUNK))
+        for i in range(0, n, CHUNK):
+            sl = slice(i, i + CHUNK)
+            ts = t[sl]
+            dt = physics.intervals(ts, t_last)
+            z = self._chunk(v[sl], None if tau_g is None else tau_g[sl], None if temp is None else temp[sl],
+                            dt, z, out[sl], buf)
+            t_last = float(ts[-1])
+        return out, (z, t_last)
+
+    def _chunk(self, v, tau_g, temp, dt, z0, out, buf) -> float:
+        """One block of ``predict``, in place into ``out``; returns the last bristle state.
+
+        Same equations as ``physics.lugre_friction`` (exact zero-order-hold bristle update,
+        solved as a bidiagonal system with BLAS dtbsv), with reused buffers.
+        """
+        n = len(v)
+        w1, w2, w3, w4, w5 = (w[:n] for w in buf.work)
+        band = buf.band[:, :n]
+        absv = np.abs(v, out=w1)
+        with np.errstate(divide="ignore"):
+            np.log(absv, out=w2)                      # |v| = 0 gives -inf, hence E = 1
+        w2 -= math.log(self.vs)
+        w2 *= self.delta
+        np.exp(w2, out=w2)
+        np.negative(w2, out=w2)
+        shape = np.exp(w2, out=w2)                    # E = exp(-|v/vs|^delta)
+        if self.asymmetric or self.thermal:
+            fc, fs, fv = self._levels(v, tau_g, temp)
+            g = np.multiply(np.subtract(fs, fc), shape, out=w3)
+            g += fc
+        elif self.loaded and tau_g is not None:
+            fv = self.fv
+            load = np.abs(tau_g, out=w3)
+            np.multiply(load, self.ks - self.kc, out=w4)
+            w4 += self.fs - self.fc
+            w4 *= shape                               # (Fs(tau_l) - Fc(tau_l)) E
+            load *= self.kc
+            load += self.fc
+            load += w4
+            g = load
+        else:
+            fv = self.fv
+            shape *= self.fs - self.fc
+            shape += self.fc
+            g = shape
+        np.maximum(g, _G_MIN, out=g)
+        rate = np.divide(absv, g, out=w1)
+        rate *= self.sigma0                           # sigma0 |v| / g  [1/s]
+        x = np.multiply(rate, dt, out=w4)
+        np.minimum(x, 700.0, out=x)
+        np.negative(x, out=x)
+        a = np.exp(x, out=x)
+        zss = np.sign(v, out=w5)
+        zss *= g
+        zss *= 1.0 / self.sigma0                      # steady-state deflection
+        b = out
+        np.subtract(1.0, a, out=b)
+        b *= zss
+        if z0 is None:
+            z0 = float(zss[0])
+        b[0] += a[0] * z0
+        np.negative(a[1:], out=band[1, :-1])
+        z = dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
+        if not np.shares_memory(z, out):
+            out[:] = z
+        z_last = float(out[-1])
+        # tau = sigma0 z + sigma1 (v - rate z) + Fv v = (sigma0 - sigma1 rate) z + sigma1 v + Fv v
+        rate *= -self.sigma1
+        rate += self.sigma0
+        rate *= out
+        np.multiply(v, self.sigma1, out=out)
+        out += rate
+        if np.ndim(fv):
+            np.multiply(fv, v, out=w2)
+            out += w2
+        else:
+            out += fv * v
+        return z_last
+
+    def required_inputs(self) -> set[str]:
+        need = {"t", "qd"}
+        if self.loaded:
+            need.add("tau_g")
+        if self.thermal:
+            need.add("temp")
+        return need
+
+    # ------------------------------------------------------------ persistence
+
+    def get_params(self) -> dict:
+        out = {k: getattr(self, k) for k in STATIC + DYNAMIC + OPTIONAL}
+        out["axis"] = self.axis
+        return out
+
+    def parameters(self) -> dict[str, float]:
+        """The physical parameters that are set (optional ones only when present)."""
+        out = {k: getattr(self, k) for k in STATIC + DYNAMIC}
+        if self.asymmetric:
+            out.update(zip(("fc_neg", "fs_neg", "fv_neg"), self.negative_levels()))
+        if self.thermal:
+            out.update(t_ref=self.t_ref, alpha_c=self.alpha_c, alpha_v=self.alpha_v)
+        return out
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "LuGreModel":
+        known = set(STATIC + DYNAMIC + OPTIONAL + ("axis",))
+        unknown = set(params) - known
+        if unknown:
+            raise ValueError(f"unknown parameters {sorted(unknown)}")
+        args = {k: params[k] for k in STATIC + DYNAMIC}
+        args.update({k: params.get(k) for k in ("fc_neg", "fs_neg", "fv_neg", "t_ref")})
+        args.update(alpha_c=params.get("alpha_c") or 0.0, alpha_v=params.get("alpha_v") or 0.0,
+                    axis=params.get("axis", "rotary"))
+        return cls(**args)
+
+    def replace(self, **changes) -> "LuGreModel":
+        """A copy with some parameters changed."""
+        params = self.get_params()
+        params.update(changes)
+        return type(self).from_parts(params, {}, {})
+
+    def describe(self) -> str:
+        lines = [f"extended LuGre model ({self.axis} axis)"]
+        for name, value in self.parameters().items():
+            _, _, meaning = PARAM_INFO[name]
+            lines.append(f"  {name:<8} {value:>12.6g} {unit_of(name, self.axis):<9} {meaning}")
+        return "\n".join(lines)

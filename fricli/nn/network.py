@@ -1,0 +1,166 @@
+"""Dense feed-forward networks in numpy, laid out for speed.
+
+Data are stored features x samples (one column per sample). Every layer folds its bias into
+the matrix product: its input buffer carries a constant row of ones, and its weight matrix
+W_l of shape (units_out, units_in + 1) holds the bias in its last column.
+
+    a_0 = [x; 1]
+    h_l = W_l a_{l-1},   a_l = [f_l(h_l); 1]                 hidden layers l = 1..L
+    y   = W_out [a_L; s]                                     linear output
+
+``s`` are optional "skip" inputs that reach the output layer directly (e.g. the NNACM
+direction terms). All weight matrices are views into one flat parameter vector ``theta``,
+so an optimiser updates them all with a handful of vector operations, and the gradient
+has the same layout. All buffers for a given number of samples live in a ``Workspace``,
+allocated once and reused with ``out=``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fricli.nn import activations as acts
+from fricli.nn.activations import Activation
+
+
+class Network:
+    """A dense network: ``n_in`` inputs, hidden layers [(units, Activation)], ``n_out`` linear
+    outputs and ``n_skip`` inputs that go straight to the output layer."""
+
+    def __init__(self, n_in: int, hidden: list[tuple[int, Activation]], n_out: int = 1, n_skip: int = 0,
+                 dtype=np.float32):
+        self.n_in, self.n_out, self.n_skip = int(n_in), int(n_out), int(n_skip)
+        self.hidden = [(int(n), act) for n, act in hidden]
+        self.dtype = np.dtype(dtype)
+        sizes = [self.n_in] + [n for n, _ in self.hidden]
+        self.shapes = [(sizes[i + 1], sizes[i] + 1) for i in range(len(self.hidden))]
+        self.shapes.append((self.n_out, sizes[-1] + 1 + self.n_skip))
+        self.n_params = sum(r * c for r, c in self.shapes)
+        self.theta = np.zeros(self.n_params, dtype=self.dtype)
+        self.weights = self.views(self.theta)
+
+    # ------------------------------------------------------------------ parameters
+
+    def views(self, flat: np.ndarray) -> list[np.ndarray]:
+        """Weight-shaped views into a flat vector laid out like ``theta`` (e.g. a gradient)."""
+        out, start = [], 0
+        for r, c in self.shapes:
+            out.append(flat[start:start + r * c].reshape(r, c))
+            start += r * c
+        return out
+
+    def init(self, rng: np.random.Generator) -> "Network":
+        """Weights and biases uniform in +-1/sqrt(fan_in) (the common default for dense layers)."""
+        for w, (r, c) in zip(self.weights, self.shapes):
+            bound = 1.0 / np.sqrt(c - 1) if c > 1 else 1.0
+            w[...] = rng.uniform(-bound, bound, size=(r, c))
+        return self
+
+    def spec(self) -> dict:
+        return {"n_in": self.n_in, "n_out": self.n_out, "n_skip": self.n_skip,
+                "hidden": [[n, act.spec()] for n, act in self.hidden]}
+
+    @classmethod
+    def from_spec(cls, spec: dict, weights: list[np.ndarray] | None = None) -> "Network":
+        net = cls(spec["n_in"], [(n, acts.from_spec(a)) for n, a in spec["hidden"]],
+                  n_out=spec.get("n_out", 1), n_skip=spec.get("n_skip", 0))
+        if weights is not None:
+            net.set_weights(weights)
+        return net
+
+    def set_weights(self, weights: list[np.ndarray]) -> None:
+        if len(weights) != len(self.shapes):
+            raise ValueError(f"expected {len(self.shapes)} weight matrices, got {len(weights)}")
+        for i, (w, shape) in enumerate(zip(weights, self.shapes)):
+            w = np.asarray(w)
+            if w.shape != shape:
+                raise ValueError(f"weight matrix {i} has shape {w.shape}, expected {shape}")
+            if not np.isfinite(w).all():
+                raise ValueError(f"weight matrix {i} holds non-finite values")
+            self.weights[i][...] = w
+
+    # ------------------------------------------------------------------ computing
+
+    def workspace(self, n: int) -> "Workspace":
+        return Workspace(self, n)
+
+    def forward(self, ws: "Workspace") -> np.ndarray:
+        """Outputs (n_out, n) for the inputs already in ``ws.x`` (and ``ws.s``)."""
+        for (_, act), w, a, h, d, a_next in zip(self.hidden, self.weights, ws.a, ws.h, ws.d, ws.a[1:]):
+            np.matmul(w, a, out=h)
+            act.forward(h, a_next[:h.shape[0]], d)
+        np.matmul(self.weights[-1], ws.a[-1], out=ws.y)
+        return ws.y
+
+    def backward(self, ws: "Workspace", dy: np.ndarray, grad: np.ndarray) -> None:
+        """Write d(loss)/d(theta) into ``grad`` (flat, like theta), given dy = d(loss)/dy
+        (n_out, n) after ``forward`` on the same workspace. ``dy`` may be ``ws.y``."""
+        gw = self.views(grad)
+        upstream = dy
+        for i in range(len(self.weights) - 1, -1, -1):
+            np.matmul(upstream, ws.a[i].T, out=gw[i])
+            if i == 0:
+                break
+            units = self.hidden[i - 1][0]
+            g = ws.g[i - 1]
+            if upstream.shape[0] == 1:           # one output: an outer product, cheaper as a broadcast
+                np.multiply(self.weights[i][0, :units, None], upstream, out=g)
+            else:
+                np.matmul(self.weights[i][:, :units].T, upstream, out=g)
+            np.multiply(g, ws.d[i - 1], out=g)
+            upstream = g
+
+    def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
+        """Outputs (n_out, n) for inputs ``x`` (n_in + n_skip, n), in chunks of ``chunk`` columns."""
+        n = x.shape[1]
+        out = np.empty((self.n_out, n), dtype=self.dtype)
+        ws = None
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            if ws is None or ws.n != stop - start:
+                ws = self.workspace(stop - start)
+            ws.set_inputs(x[:, start:stop])
+            out[:, start:stop] = self.forward(ws)
+        return out
+
+
+class Workspace:
+    """Every buffer a forward and backward pass over ``n`` samples needs.
+
+    a[l]  (units_l + 1 [+ n_skip], n)  layer inputs, with the row of ones (skip rows last)
+    h[l]  (units, n)                   pre-activations of hidden layer l
+    d[l]  (units, n)                   activation derivatives of hidden layer l
+    g[l]  (units, n)                   back-propagated gradients of hidden layer l
+    y     (n_out, n)                   outputs
+    x, s  views of a[0] and of the skip rows, where inputs are written
+    """
+
+    def __init__(self, net: Network, n: int):
+        self.n = int(n)
+        dt = net.dtype
+        rows = [net.n_in] + [units for units, _ in net.hidden]
+        self.a = []
+        for i, r in enumerate(rows):
+            extra = net.n_skip if i == len(rows) - 1 else 0
+            a = np.empty((r + 1 + extra, n), dtype=dt)
+            a[r] = 1
+            self.a.append(a)
+        self.h = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
+        self.d = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
+        self.g = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
+        self.y = np.empty((net.n_out, n), dtype=dt)
+        self.x = self.a[0][:net.n_in]
+        self.s = self.a[-1][rows[-1] + 1:]
+        self.n_in = net.n_in
+
+    def set_inputs(self, x: np.ndarray) -> None:
+        """Copy inputs (n_in + n_skip, n) into place."""
+        self.x[...] = x[:self.n_in]
+        if self.s.shape[0]:
+            self.s[...] = x[self.n_in:]
+
+    def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
+        """Gather the columns ``idx`` (length n) of ``x`` (n_in + n_skip, N) into place."""
+        np.take(x[:self.n_in], idx, axis=1, out=self.x, mode="clip")
+        if self.s.shape[0]:
+            np.take(x[self.n_in:], idx, axis=1, out=self.s, mode="clip")

@@ -1,0 +1,170 @@
+"""Which rows of a log a network trains and validates on.
+
+Velocity balance. A base log holds constant-velocity sweeps, each level once per direction;
+slow levels take longer and so hold far more samples, and a loss over all rows would favour
+them. ``velocity_groups`` finds the velocity levels: it histograms the signed velocity on a
+fine logarithmic grid (150 bins per direction between 1e-3 and 1 times the top speed, plus a
+bin for |qd| below that) and calls the velocities discrete when the densest bins (each with at
+least 0.2 % of the rows) hold at least 75 % of the rows and are at most half of the occupied
+bins; a level is then a run of adjacent dense bins, and rows in no level (accelerations
+between levels) are left out. Otherwise the velocities are continuous and the groups are 32
+equal-width bins of signed velocity. ``balanced`` then draws the same number of rows from
+every group (all rows of a group that holds fewer).
+
+Validation by segments. Neighbouring rows are nearly identical, so a random-row validation
+set would only measure interpolation between training rows. ``split_segments`` cuts every run
+of consecutive rows in one velocity group (for continuous velocities: the whole log) into ten
+contiguous pieces and holds out round(10 * val_fraction) pieces of each, chosen at random, so
+every level keeps training rows and the validation rows come in whole stretches of motion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fricli.errors import DataError
+
+FINE_BINS = 150          # per direction, logarithmic
+LOW = 1e-3               # lowest binned speed, relative to the top speed
+DENSE = 0.002            # a dense bin holds at least this share of the rows
+DISCRETE_SHARE = 0.75    # dense bins must hold this share of the rows ...
+DENSE_BINS_SHARE = 0.5   # ... and be at most this share of the occupied bins
+CONTINUOUS_BINS = 32
+PIECES = 10              # validation pieces per run
+MIN_RUN = 20             # shorter runs (rows) all go to training
+
+
+@dataclasses.dataclass
+class Selection:
+    """Rows (sorted indices into the log) for training and validation."""
+
+    train: np.ndarray
+    val: np.ndarray
+    mode: str          # "levels" (discrete velocities), "bins" (continuous) or "all" (no balancing)
+    groups: int        # velocity levels or bins found
+
+    def summary(self) -> dict:
+        return {"train_rows": int(self.train.size), "val_rows": int(self.val.size),
+                "velocity_groups": self.mode, "groups": int(self.groups)}
+
+
+def velocity_groups(qd: np.ndarray) -> tuple[np.ndarray, str]:
+    """(labels (n,) int, mode): a velocity level or bin per row, -1 for rows in none.
+
+    mode is "levels" when the velocities are discrete, else "bins".
+    """
+    qd = np.asarray(qd, dtype=np.float64)
+    n = qd.size
+    vmax = float(np.max(np.abs(qd))) if n else 0.0
+    if not vmax > 0:
+        raise DataError("the log holds no motion (qd is zero everywhere)")
+    speed = np.abs(qd)
+    lo = LOW * vmax
+    pos = np.zeros(n, dtype=np.int64)  # 0: below lo; 1..FINE_BINS: log bins
+    moving = speed >= lo
+    rel = np.log(speed[moving] / lo) / np.log(1.0 / LOW)
+    pos[moving] = 1 + np.minimum((rel * FINE_BINS).astype(np.int64), FINE_BINS - 1)
+    fine = np.where(qd < 0, -pos, pos) + FINE_BINS          # 0 .. 2 FINE_BINS, FINE_BINS = rest
+    counts = np.bincount(fine, minlength=2 * FINE_BINS + 1)
+    dense = counts >= max(DENSE * n, 5)
+    occupied = int((counts > 0).sum())
+    if counts[dense].sum() >= DISCRETE_SHARE * n and dense.sum() <= DENSE_BINS_SHARE * occupied:
+        level_of_bin = np.full(counts.size, -1, dtype=np.int64)
+        level, prev = -1, False
+        for b in range(counts.size):
+            # adjacent dense bins form one level, except across the rest bin
+            if dense[b]:
+                if not prev or b == FINE_BINS or b == FINE_BINS + 1:
+                    level += 1
+                level_of_bin[b] = level
+            prev = bool(dense[b])
+        return level_of_bin[fine], "levels"
+    edges = np.linspace(-vmax, vmax, CONTINUOUS_BINS + 1)
+    labels = np.clip(np.searchsorted(edges, qd, side="right") - 1, 0, CONTINUOUS_BINS - 1)
+    return labels.astype(np.int64), "bins"
+
+
+def runs(labels: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every maximal run of equal labels, labels >= 0 only."""
+    if labels.size == 0:
+        return []
+    change = np.flatnonzero(np.diff(labels)) + 1
+    starts = np.concatenate(([0], change))
+    stops = np.concatenate((change, [labels.size]))
+    return [(int(a), int(b)) for a, b in zip(starts, stops) if labels[a] >= 0]
+
+
+def split_segments(labels: np.ndarray, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """Boolean mask (n,) of validation rows: whole contiguous pieces of every run of equal
+    labels >= 0 (see the module doc)."""
+    n = labels.size
+    val = np.zeros(n, dtype=bool)
+    held = int(round(PIECES * val_fraction))
+    if held <= 0:
+        return val
+    held = min(held, PIECES - 1)
+    for start, stop in runs(labels):
+        if stop - start < MIN_RUN:
+            continue
+        cuts = np.linspace(start, stop, PIECES + 1).astype(np.int64)
+        for piece in rng.choice(PIECES, size=held, replace=False):
+            val[cuts[piece]:cuts[piece + 1]] = True
+    return val
+
+
+def balanced(rows: np.ndarray, labels: np.ndarray, n_target: int, rng: np.random.Generator) -> np.ndarray:
+    """At most ``n_target`` of ``rows``, the same number from every label group (labels >= 0)."""
+    rows = rows[labels[rows] >= 0]
+    if rows.size <= n_target:
+        return np.sort(rows)
+    groups = np.unique(labels[rows])
+    by_group = [rows[labels[rows] == g] for g in groups]
+    sizes = np.array([r.size for r in by_group])
+    # the largest per-group cap that keeps the total within n_target (small groups give all)
+    lo, hi = 0, int(sizes.max())
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if np.minimum(sizes, mid).sum() <= n_target:
+            lo = mid
+        else:
+            hi = mid - 1
+    cap = max(lo, 1)
+    picked = [r if r.size <= cap else rng.choice(r, size=cap, replace=False) for r in by_group]
+    return np.sort(np.concatenate(picked))
+
+
+def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None = 3000, balance: bool = True,
+           rng: np.random.Generator, keep: np.ndarray | None = None) -> Selection:
+    """Training and validation rows for a log with velocity ``qd`` (n,).
+
+    ``max_samples`` bounds training plus validation rows after balancing (None: no bound);
+    ``keep`` (bool (n,)) restricts the rows that may be used at all.
+    """
+    if not 0 <= val_fraction < 1:
+        raise ValueError("val_fraction must be in [0, 1)")
+    qd = np.asarray(qd, dtype=np.float64)
+    n = qd.size
+    usable = np.ones(n, dtype=bool) if keep is None else np.asarray(keep, dtype=bool)
+    if balance:
+        labels, mode = velocity_groups(qd[usable] if keep is not None else qd)
+        if keep is not None:
+            full = np.full(n, -1, dtype=np.int64)
+            full[usable] = labels
+            labels = full
+    else:
+        labels, mode = np.where(usable, 0, -1).astype(np.int64), "all"
+    # runs: constant-velocity stretches for discrete levels, else stretches of usable rows
+    run_labels = labels if mode == "levels" else np.where(usable, 0, -1)
+    val_mask = split_segments(run_labels, val_fraction, rng)
+    rows = np.flatnonzero(usable & (labels >= 0))
+    train_rows, val_rows = rows[~val_mask[rows]], rows[val_mask[rows]]
+    groups = int(np.unique(labels[labels >= 0]).size)
+    if balance and max_samples is not None:
+        n_val = int(round(max_samples * val_fraction)) if val_rows.size else 0
+        train_rows = balanced(train_rows, labels, max_samples - n_val, rng)
+        val_rows = balanced(val_rows, labels, n_val, rng)
+    if train_rows.size == 0:
+        raise DataError("no rows left to train on")
+    return Selection(train=train_rows, val=val_rows, mode=mode, groups=groups)
