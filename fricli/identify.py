@@ -1,20 +1,24 @@
 """Identify the extended LuGre model from a log (``fricli identify``).
 
-Two stages, both with ``scipy.optimize.least_squares``:
+Two stages, both with ``scipy.optimize.least_squares`` (trf, bounds, ``x_scale='jac'``):
 
 1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
    friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
    grid of (vs, delta) the curve is linear in (Fc, Fs, kc, ks, Fv), so each grid point is one
    linear least-squares solve; the best point starts a bounded nonlinear fit (log-parameters
-   for Fc, Fs, vs, delta; Fv, kc, ks >= 0).
-2. Bristle parameters sigma0, sigma1 by simulating the bristle state over the whole log (a coarse
-   grid of log-spaced values, then a bounded fit in log-parameters). With ``refine`` all
-   parameters are then fitted jointly on the whole log.
+   for Fc, Fs, vs, delta; Fv, kc, ks >= 0). Parameters the data cannot determine are fixed and
+   reported in ``notes_``: kc = ks = 0 without a varying tau_g, Fs = Fc with fewer than
+   ``MIN_STRIBECK_LEVELS`` steady speed levels.
+2. Bristle parameters sigma0, sigma1 by simulating the bristle state over the whole log: a
+   coarse grid, then a bounded fit in x = (log sigma0, log sigma1/sigma0) with the micro-damping
+   time constant sigma1/sigma0 at most ``TAU1_MAX``. With ``refine`` all parameters are then
+   fitted jointly on the whole log.
 
-Steady-state samples: the velocity has stayed within ``rel_tol``*|v| (plus a small absolute
-tolerance from the velocity noise) for ``hold`` seconds before the sample and ``hold``/4 after
-it, without a sign change, and |v| is clearly above standstill. This keeps samples away from
-reversals and accelerations, where bristle dynamics and inertia errors would bias the curve.
+Steady-state samples (``steady_state_mask``): the velocity has kept its sign and stayed within
+``rel_tol``*|v| (plus a small absolute tolerance from the velocity noise) from a hold time before
+the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
+at that speed, whichever is longer. This keeps samples away from reversals and accelerations,
+where bristle dynamics and inertia errors would bias the static curve.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from fricli.models.lugre import LuGreModel
 
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
-TAU1_MAX = 0.1            # upper bound on sigma1/sigma0 [s]
+TAU1_MAX = 0.01           # upper bound on sigma1/sigma0 [s]
 _DELTAS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0)
 _GRID_ROWS = 20_000
 
@@ -269,16 +273,21 @@ class LuGreIdentifier:
             return LuGreModel(**dict(static, sigma0=s0, sigma1=s0 * math.exp(x[1])))
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
-                for tau1 in (1e-5, 1e-3, 1e-1)]
+                for tau1 in (1e-6, 1e-4, TAU1_MAX)]
         costs = [_sumsq(model(x).predict(sig)[0] - y) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
-        # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7, 0.1] s
+        # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
         res = _least_squares(lambda x: model(x).predict(sig)[0] - y, x0, (lb, ub), self.max_nfev,
                              "bristle parameters")
         m = model(res.x)
+        names = ("bristle deflection g/sigma0", "micro-damping time constant sigma1/sigma0")
+        for i, what in enumerate(names):
+            for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
+                if abs(res.x[i] - bound) < 1e-3:
+                    self.notes_.append(f"{what} at its {side} bound: the log does not determine it")
         return dict(static, sigma0=m.sigma0, sigma1=m.sigma1), {"nfev": int(res.nfev) + len(grid),
                                                                 "cost": float(res.cost)}
 

@@ -33,22 +33,30 @@ def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | No
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` mlp, selmic or nnacm) on the friction target of ``log``.
 
-    Returns (model, summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the
-    training rows, the validation rows and the whole log.
+    Rows at rest (|qd| under 0.1 % of the top speed) are left out: the friction there is held
+    by the bristles and depends on the motion before, not on (tau_g, qd). Returns (model,
+    summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the training rows,
+    the validation rows, the moving rows and the whole log.
     """
     if arch not in ARCHS:
         raise ValueError(f"unknown architecture {arch!r}")
     sig = log.signals
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
-    sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance, rng=rng)
+    speed = np.abs(sig["qd"])
+    moving = speed > training_data.LOW * float(speed.max())
+    if not moving.any():
+        raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
+    sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
+                               rng=rng, keep=moving)
     model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
                         batch_size=batch_size, units=log.units)
     model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
               on_eval=on_eval)
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
-               "train": _errors(target, pred, sel.train), "log": metrics.errors(target, pred)}
+               "train": _errors(target, pred, sel.train), "moving": _errors(target, pred, np.flatnonzero(moving)),
+               "log": metrics.errors(target, pred)}
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
     return model, summary

@@ -353,9 +353,11 @@ def with_column(table: pa.Table, name: str, values: np.ndarray, unit: str | None
 
 
 def write_table(table: pa.Table, path: str) -> None:
-    """Write Parquet atomically (``-`` for stdout). Same table, same bytes."""
+    """Write Parquet atomically (``-`` for stdout): zstd, float columns byte-stream-split
+    (about 40 % smaller for smooth signals). Same table, same bytes."""
+    floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
     with atomic_open(path) as fh:
-        pq.write_table(table, fh, compression="zstd")
+        pq.write_table(table, fh, compression="zstd", use_dictionary=False, use_byte_stream_split=floats)
 
 
 def table_from_arrays(columns: dict[str, np.ndarray], units: dict[str, str]) -> pa.Table:

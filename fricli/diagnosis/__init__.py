@@ -3,7 +3,7 @@
     effects.py    the library of candidate effects (regressor groups, physical parameters)
     terms.py      the regressor terms, reproducible on any log (also used by the augmented model)
     selection.py  blocked cross-validation over time, significance, forward selection
-    diagnose.py   the driver: residual -> ranked effects -> augmented model
+    driver.py     the driver: residual -> ranked effects -> augmented model
 """
 
-from fricli.diagnosis.diagnose import Diagnosis, EffectResult, diagnose  # noqa: F401
+from fricli.diagnosis.driver import Diagnosis, EffectResult, diagnose  # noqa: F401

@@ -267,7 +267,8 @@ class Acceleration(Effect):
 
 class Load(Effect):
     name = "load"
-    description = "terms in |tau_g| and tau_g*sign(qd) (quadrant dependence)"
+    description = ("terms in |tau_l| and tau_l*sign(qd), tau_l = tau_g - tau_ext the torque through the "
+                   "gear (quadrant dependence)")
 
     def applicable(self, ctx):
         if "tau_g" not in ctx.signals or np.ptp(ctx.signals["tau_g"]) <= 0:
@@ -275,12 +276,11 @@ class Load(Effect):
         return None
 
     def terms(self, ctx, residual):
-        return [T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN),
-                T.term("tau_g*moving", T.sig_("tau_g"), T.MOVING)]
+        return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN), T.term("tau_l*moving", T.GEAR, T.MOVING)]
 
     def params(self, coef, ctx):
         u = f"{ctx.tau_unit}/{ctx.tau_unit}"
-        return {"kc": _par(coef["|tau_g|*sign"], u), "kq": _par(coef["tau_g*moving"], u)}
+        return {"kc": _par(coef["|tau_l|*sign"], u), "kq": _par(coef["tau_l*moving"], u)}
 
 
 class Velocity(Effect):
@@ -318,7 +318,7 @@ class Position(Effect):
     name = "position"
     description = "periodic in q (gear ripple)"
     harmonics = 3
-    max_points = 20000
+    max_bins = 1 << 20
     oversample = 4
 
     def applicable(self, ctx):
@@ -328,21 +328,38 @@ class Position(Effect):
         return None
 
     def frequency(self, ctx, residual) -> float:
-        """Spatial angular frequency w [rad per q unit] with the largest periodogram power."""
+        """Spatial angular frequency w [rad per q unit] with the largest periodogram power.
+
+        The residual is averaged in bins of q about half a typical sample step wide; an FFT of
+        the binned series (empty bins zero) locates the peak, and a Lomb-Scargle periodogram of
+        the non-empty bins (unevenly spaced) refines it around that peak.
+        """
         q = ctx.signals["q"]
-        step = max(1, len(q) // self.max_points)
-        qs, rs = q[::step], residual[::step]
-        span = float(np.ptp(qs))
-        dq = np.abs(np.diff(qs))
+        moving = ctx.moving()
+        dq = np.abs(np.diff(q))[moving[1:]]
         dq = dq[dq > 0]
-        # finest resolvable period: a few samples per period at a typical moving step
-        fine = float(np.median(dq)) if len(dq) else span / 10
-        w_min, w_max = 2 * 2 * np.pi / span, np.pi / max(fine, span / 1e5)
-        if w_max <= w_min:
-            return w_min
-        grid = np.arange(w_min, w_max, 2 * np.pi / span / self.oversample)
-        power = sps.lombscargle(qs, rs - rs.mean(), grid)
-        return float(grid[int(np.argmax(power))])
+        span = float(np.ptp(q))
+        h = max(float(np.median(dq)) / 2 if len(dq) else span / 1000, span / self.max_bins)
+        nb = int(span / h) + 1
+        idx = np.minimum(((q - q.min()) / h).astype(np.int64), nb - 1)
+        count = np.bincount(idx, minlength=nb)
+        total = np.bincount(idx, weights=residual - residual.mean(), minlength=nb)
+        full = count > 0
+        mean = np.zeros(nb)
+        mean[full] = total[full] / count[full]
+        mean[full] -= mean[full].mean()
+        nfft = 1 << int(np.ceil(np.log2(nb * self.oversample)))
+        power = np.abs(np.fft.rfft(mean, nfft)) ** 2
+        w = 2 * np.pi * np.fft.rfftfreq(nfft, h)
+        keep = w >= 2 * 2 * np.pi / span            # at least two periods in the range
+        if not keep.any():
+            return float(2 * 2 * np.pi / span)
+        k = int(np.flatnonzero(keep)[np.argmax(power[keep])])
+        dw = w[1] - w[0]
+        grid = np.linspace(max(w[k] - dw, w[keep][0]), w[k] + dw, 41)
+        centers = q.min() + (np.flatnonzero(full) + 0.5) * h
+        fine = sps.lombscargle(centers, mean[full], grid)
+        return float(grid[int(np.argmax(fine))])
 
     def terms(self, ctx, residual):
         w = self.frequency(ctx, residual)

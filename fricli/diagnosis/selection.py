@@ -1,14 +1,17 @@
 """Held-out scores, significance and forward selection of candidate effects.
 
-The log is cut into K contiguous blocks over time (blocked cross-validation: a block is
-predicted by a fit on the other K-1 blocks, so slow trends and autocorrelated noise cannot
-leak from neighbouring rows). For any set of regressor columns the held-out sum of squared
-residuals per block comes from per-block Gram matrices of the standardised columns and the
-residual, so scoring a candidate costs K small solves, not a pass over the data.
+The log is cut into K contiguous folds over time (blocked cross-validation: a fold is
+predicted by a fit on the other K-1 folds, so slow trends and autocorrelated noise cannot
+leak from neighbouring rows). Each fold is cut again into short contiguous blocks; for any set
+of regressor columns the held-out sum of squared residuals per block comes from per-block
+Gram matrices of the standardised columns and the residual, so scoring a candidate costs K
+small solves, not a pass over the data.
 
-A candidate is *significant* when its held-out gain is positive in a one-sided t-test over
-the K per-block relative gains (level ``alpha``). It is *chosen* when it is significant, removes
-at least ``min_gain`` of the remaining held-out squared residual, beats its declared rivals
+Significance compares two fits' held-out squared errors block by block (a Diebold-Mariano
+test with the variance from block means, so autocorrelation inside a block does not inflate
+it): the richer fit is *significant* when its mean improvement per block is positive in a
+one-sided t-test at level ``alpha``. A candidate is *chosen* when it is significant, removes at
+least ``min_gain`` of the remaining held-out squared residual, beats its declared rivals
 (combinations of simpler effects it overlaps) by the same two criteria, and no candidate with
 fewer new terms does nearly as well (the richer one must beat it by the same criteria too).
 """
@@ -23,22 +26,40 @@ from scipy import stats
 RIDGE = 1e-10       # relative to n: keeps exactly collinear sets solvable, far below any signal
 
 
+BLOCKS_PER_FOLD = 10
+MIN_BLOCK_ROWS = 20
+
+
 def fold_bounds(n: int, k: int) -> np.ndarray:
     """Start/stop indices (k+1,) of k contiguous blocks of nearly equal size."""
     return np.linspace(0, n, k + 1).round().astype(int)
+
+
+def block_bounds(n: int, folds: int) -> tuple[np.ndarray, np.ndarray]:
+    """(block bounds (B+1,), fold of each block (B,)): each fold cut into contiguous blocks."""
+    per = max(1, min(BLOCKS_PER_FOLD, n // (folds * MIN_BLOCK_ROWS)))
+    edges = fold_bounds(n, folds)
+    bounds, fold = [0], []
+    for f, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        inner = np.linspace(a, b, per + 1).round().astype(int)[1:]
+        bounds.extend(int(x) for x in inner)
+        fold.extend([f] * per)
+    return np.array(bounds), np.array(fold)
 
 
 class Design:
     """Named regressor columns over a log, with per-block Gram matrices for held-out scores.
 
     columns are added by term name; ``sse(names)`` gives the held-out sum of squared residuals
-    per block (K,) for the least-squares fit of the residual on those columns.
+    per block (B,) for the least-squares fit of the residual on those columns, each block
+    predicted by the fit on the folds it is not part of.
     """
 
-    def __init__(self, residual: np.ndarray, bounds: np.ndarray):
+    def __init__(self, residual: np.ndarray, folds: int):
         self.r = np.asarray(residual, dtype=np.float64)
-        self.bounds = bounds
-        self.k = len(bounds) - 1
+        self.folds = folds
+        self.bounds, self.fold_of = block_bounds(len(self.r), folds)
+        self.k = len(self.bounds) - 1
         self.names: list[str] = []
         self.cols: list[np.ndarray] = []
         self.scale: list[float] = []
@@ -88,45 +109,49 @@ class Design:
         except np.linalg.LinAlgError:
             return np.linalg.lstsq(A, b, rcond=None)[0]
 
+    def _fold_betas(self, idx: list[int]) -> list[np.ndarray]:
+        """Coefficients (standardised) fitted without each fold, one per fold."""
+        G = self.gram()
+        m = G.shape[1] - 1
+        total = G.sum(axis=0)
+        sizes = np.diff(self.bounds)
+        out = []
+        for f in range(self.folds):
+            mine = self.fold_of == f
+            Gf = G[mine].sum(axis=0)
+            A = total[np.ix_(idx, idx)] - Gf[np.ix_(idx, idx)]
+            b = total[idx, m] - Gf[idx, m]
+            out.append(self._solve(A, b, int(sizes[~mine].sum())))
+        return out
+
     def sse(self, names) -> np.ndarray:
-        """Held-out SSE per block (K,), in units of the residual's mean square."""
+        """Held-out SSE per block (B,), in units of the residual's mean square."""
         idx = self.live(names)
         key = frozenset(idx)
         if key in self._cache:
             return self._cache[key]
         G = self.gram()
         m = G.shape[1] - 1
-        rr = G[:, m, m]
-        if not idx:
-            out = rr.copy()
-        else:
-            total = G.sum(axis=0)
-            sizes = np.diff(self.bounds)
-            out = np.empty(self.k)
-            for f in range(self.k):
-                A = total[np.ix_(idx, idx)] - G[f][np.ix_(idx, idx)]
-                b = total[idx, m] - G[f][idx, m]
-                beta = self._solve(A, b, int(sizes.sum() - sizes[f]))
-                Gf = G[f][np.ix_(idx, idx)]
-                out[f] = rr[f] - 2.0 * beta @ G[f][idx, m] + beta @ Gf @ beta
+        out = G[:, m, m].copy()
+        if idx:
+            Gi = G[:, idx][:, :, idx]
+            gi = G[:, idx, m]
+            for f, beta in enumerate(self._fold_betas(idx)):
+                mine = self.fold_of == f
+                out[mine] += -2.0 * gi[mine] @ beta + np.einsum("bij,i,j->b", Gi[mine], beta, beta)
             out = np.maximum(out, 0.0)
         self._cache[key] = out
         return out
 
     def heldout_prediction(self, names) -> np.ndarray:
-        """The residual predicted on each block by a fit on the other blocks (n,)."""
+        """The residual predicted on each fold by a fit on the other folds (n,)."""
         idx = self.live(names)
         pred = np.zeros_like(self.r)
         if not idx:
             return pred
-        G = self.gram()
-        m = G.shape[1] - 1
-        total = G.sum(axis=0)
-        sizes = np.diff(self.bounds)
-        for f, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
-            A = total[np.ix_(idx, idx)] - G[f][np.ix_(idx, idx)]
-            rhs = total[idx, m] - G[f][idx, m]
-            beta = self._solve(A, rhs, int(sizes.sum() - sizes[f]))
+        edges = fold_bounds(len(self.r), self.folds)
+        for f, beta in enumerate(self._fold_betas(idx)):
+            a, b = edges[f], edges[f + 1]
             X = np.column_stack([self.cols[i][a:b] / self.scale[i] for i in idx])
             pred[a:b] = X @ beta * self.rscale
         return pred
@@ -158,7 +183,7 @@ class Comparison:
     """Held-out comparison of a richer fit (new) against a reference fit (old)."""
 
     gain: float            # 1 - sum(sse_new) / sum(sse_old): share of the old held-out SSE removed
-    t: float               # t statistic of the per-block relative gains
+    t: float               # t statistic of the per-block improvements
     significant: bool
 
     def clear(self, min_gain: float) -> bool:
@@ -166,15 +191,15 @@ class Comparison:
 
 
 def compare(sse_new: np.ndarray, sse_old: np.ndarray, alpha: float) -> Comparison:
+    """Is the fit with held-out block SSEs ``sse_new`` (B,) better than ``sse_old`` (B,)?"""
     old = float(sse_old.sum())
     if old <= 0:
         return Comparison(0.0, 0.0, False)
-    gain = 1.0 - float(sse_new.sum()) / old
-    with np.errstate(divide="ignore", invalid="ignore"):
-        per = np.where(sse_old > 0, 1.0 - sse_new / sse_old, 0.0)
-    k = len(per)
-    sd = float(np.std(per, ddof=1)) if k > 1 else 0.0
-    mean = float(per.mean())
+    d = sse_old - sse_new
+    gain = float(d.sum()) / old
+    k = len(d)
+    sd = float(np.std(d, ddof=1)) if k > 1 else 0.0
+    mean = float(d.mean())
     if sd > 0:
         t = mean / (sd / np.sqrt(k))
     else:

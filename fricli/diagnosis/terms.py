@@ -10,11 +10,16 @@ any later log from the constants it carries. Factors:
     {"f": "signal", "name": S}                     signal S (e.g. qd, qdd)
     {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column)
     {"f": "abs", "name": S}                        |S|
-    {"f": "sign"}                                  sign(qd)
-    {"f": "moving"}                                |sign(qd)|
-    {"f": "pos"}                                   1 where qd > 0, else 0
+    {"f": "gear"}, {"f": "absgear"}                tau_g - tau_ext (the torque through the gear), |...|
+    {"f": "sign"}                                  direction of motion, held at rest
+    {"f": "moving"}                                |direction| (0 only before the first motion)
+    {"f": "pos"}                                   1 where the direction is positive, else 0
     {"f": "sat", "scale": s}                       sign(qd) * (1 - exp(-|qd| / s))
     {"f": "sin" | "cos", "name": S, "w": w}        sin(w S), cos(w S)
+
+The direction is sign(qd), held through samples at rest at the sign of the last motion: a
+joint at rest holds the friction of the direction it last moved in (the bristles stay
+deflected). It carries over from one batch of rows to the next as the terms' state.
 """
 
 from __future__ import annotations
@@ -28,6 +33,8 @@ def factor_inputs(factor: dict) -> set[str]:
     f = factor["f"]
     if f in ("one", "p"):
         return set()
+    if f in ("gear", "absgear"):
+        return {"tau_g"}
     if f in ("sign", "moving", "pos", "sat"):
         return {"qd"}
     return {factor["name"]}
@@ -50,51 +57,92 @@ def _signal(sig: dict, name: str) -> np.ndarray:
     raise DataError(f"the log has no column {name!r}, which the model's term needs")
 
 
-def factor_value(factor: dict, sig: dict, p: np.ndarray | None) -> np.ndarray | float:
-    f = factor["f"]
-    if f == "one":
-        return 1.0
-    if f == "p":
-        if p is None:
-            raise ValueError("term needs the base prediction")
-        return p
-    if f == "signal":
-        return _signal(sig, factor["name"])
-    if f == "dev":
-        return _signal(sig, factor["name"]) - float(factor["center"])
-    if f == "abs":
-        return np.abs(_signal(sig, factor["name"]))
-    if f == "sign":
-        return np.sign(sig["qd"])
-    if f == "moving":
-        return (sig["qd"] != 0).astype(np.float64)
-    if f == "pos":
-        return (sig["qd"] > 0).astype(np.float64)
-    if f == "sat":
-        v = sig["qd"]
-        return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
-    if f == "sin":
-        return np.sin(float(factor["w"]) * _signal(sig, factor["name"]))
-    if f == "cos":
-        return np.cos(float(factor["w"]) * _signal(sig, factor["name"]))
-    raise ValueError(f"unknown term factor {f!r}")
+def held_sign(qd: np.ndarray, s0: float = 0.0) -> np.ndarray:
+    """sign(qd) (n,), held at the last nonzero value through zeros; s0 before the first motion."""
+    s = np.sign(qd)
+    idx = np.where(s != 0, np.arange(len(s)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, s[np.maximum(idx, 0)], s0)
+
+
+class Columns:
+    """Evaluates terms on one batch of signals (n,) with the base prediction p (n,).
+
+    ``state`` is the direction held from the previous batch (None: no motion seen yet).
+    """
+
+    def __init__(self, sig: dict, p: np.ndarray | None = None, state: float | None = None):
+        self.sig, self.p = sig, p
+        self._dir = None
+        self._s0 = 0.0 if state is None else float(state)
+
+    @property
+    def direction(self) -> np.ndarray:
+        if self._dir is None:
+            self._dir = held_sign(self.sig["qd"], self._s0)
+        return self._dir
+
+    @property
+    def state(self) -> float:
+        d = self.direction
+        return float(d[-1]) if len(d) else self._s0
+
+    def factor(self, factor: dict) -> np.ndarray | float:
+        f = factor["f"]
+        sig = self.sig
+        if f == "one":
+            return 1.0
+        if f == "p":
+            if self.p is None:
+                raise ValueError("term needs the base prediction")
+            return self.p
+        if f == "signal":
+            return _signal(sig, factor["name"])
+        if f == "dev":
+            return _signal(sig, factor["name"]) - float(factor["center"])
+        if f == "abs":
+            return np.abs(_signal(sig, factor["name"]))
+        if f in ("gear", "absgear"):
+            gear = _signal(sig, "tau_g") - _signal(sig, "tau_ext")
+            return np.abs(gear) if f == "absgear" else gear
+        if f == "sign":
+            return self.direction
+        if f == "moving":
+            return np.abs(self.direction)
+        if f == "pos":
+            return (self.direction > 0).astype(np.float64)
+        if f == "sat":
+            v = sig["qd"]
+            return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
+        if f == "sin":
+            return np.sin(float(factor["w"]) * _signal(sig, factor["name"]))
+        if f == "cos":
+            return np.cos(float(factor["w"]) * _signal(sig, factor["name"]))
+        raise ValueError(f"unknown term factor {f!r}")
+
+    def value(self, term: dict) -> np.ndarray:
+        """The term's column (n,)."""
+        out = np.ones(len(self.sig["t"]))
+        for factor in term["factors"]:
+            out = out * self.factor(factor)
+        return out
+
+    def matrix(self, terms: list[dict]) -> np.ndarray:
+        """Columns of all terms, shape (n, len(terms))."""
+        n = len(self.sig["t"])
+        if not terms:
+            return np.zeros((n, 0))
+        return np.column_stack([self.value(term) for term in terms])
 
 
 def value(term: dict, sig: dict, p: np.ndarray | None = None) -> np.ndarray:
-    """The term's column (n,)."""
-    n = len(sig["t"])
-    out = np.ones(n)
-    for factor in term["factors"]:
-        out = out * factor_value(factor, sig, p)
-    return out
+    """The term's column (n,) over a whole log."""
+    return Columns(sig, p).value(term)
 
 
 def matrix(terms: list[dict], sig: dict, p: np.ndarray | None = None) -> np.ndarray:
-    """Columns of all terms, shape (n, len(terms))."""
-    n = len(sig["t"])
-    if not terms:
-        return np.zeros((n, 0))
-    return np.column_stack([value(term, sig, p) for term in terms])
+    """Columns of all terms over a whole log, shape (n, len(terms))."""
+    return Columns(sig, p).matrix(terms)
 
 
 def check(term: dict) -> None:
@@ -111,7 +159,7 @@ def check(term: dict) -> None:
 
 
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "sign": (), "moving": (), "pos": (), "sat": ("scale",), "sin": ("name", "w"), "cos": ("name", "w")}
+          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "sat": ("scale",), "sin": ("name", "w"), "cos": ("name", "w")}
 
 
 def term(name: str, *factors: dict) -> dict:
@@ -124,6 +172,8 @@ P = {"f": "p"}
 SIGN = {"f": "sign"}
 MOVING = {"f": "moving"}
 POS = {"f": "pos"}
+GEAR = {"f": "gear"}
+ABSGEAR = {"f": "absgear"}
 
 
 def sig_(name: str) -> dict:

@@ -26,7 +26,7 @@ RIPPLE_SECOND = 0.35       # amplitude of the second harmonic, relative to the f
 VELOCITY_REF = 0.3         # velocity where the changed viscous curve meets the linear one [rad/s]
 HUMIDITY_REF = 45.0        # [%]
 HUMIDITY_SWING = 12.0      # [%]
-WARM_START = 25.0          # temperature at the start of a log with the temperature effect [degC]
+WARM_START = 20.0          # temperature at the start of a log with the temperature effect [degC]
 
 
 @dataclasses.dataclass
@@ -92,7 +92,7 @@ class Ripple(Effect):
     help = "position-periodic torque (gear ripple) of this amplitude, with a second harmonic"
 
     def default(self, j):
-        return 0.8 if j.number == 2 else 0.4
+        return 1.0 if j.number == 2 else 0.6
 
     def apply(self, scene, strength, rng):
         ph = rng.uniform(0, 2 * np.pi, 2)
@@ -146,7 +146,7 @@ class Temperature(Effect):
     help = f"the joint warms from {WARM_START:g} degC by this much over the log (first-order warming)"
 
     def default(self, j):
-        return 20.0
+        return 25.0
 
     def apply(self, scene, strength, rng):
         tau = max(scene.duration, 1e-9) / 2.0
@@ -162,7 +162,7 @@ class Inertia(Effect):
     help = "the logged tau_dyn uses J*(1-f) instead of the true inertia J"
 
     def default(self, j):
-        return 0.4
+        return 0.5
 
     def check(self, strength):
         if strength >= 1:
@@ -222,7 +222,7 @@ class Velocity(Effect):
     help = f"viscous term ~ |v|^p instead of linear (equal at {VELOCITY_REF:g} rad/s)"
 
     def default(self, j):
-        return 0.6
+        return 0.5
 
     def check(self, strength):
         if strength <= 0:
@@ -238,7 +238,7 @@ class Column(Effect):
     help = "an extra column 'humidity' [%]; Coulomb/static levels scale by 1 + k*(h - 45 %)"
 
     def default(self, j):
-        return 0.012
+        return 0.015
 
     def apply(self, scene, strength, rng):
         ph = rng.uniform(0, 2 * np.pi)

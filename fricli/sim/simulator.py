@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pyarrow as pa
 
-from fricli import physics
+from fricli import logs, physics
 from fricli.logs import table_from_arrays
 from fricli.sim import effects as fx
 from fricli.sim import joints, trajectories
@@ -199,6 +199,11 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         "effects": applied, "configuration": conf.as_dict(),
     }
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True)})
+
+
+def write(table: pa.Table, path: str) -> None:
+    """Write a simulated log atomically (``-`` for stdout); see ``fricli.logs.write_table``."""
+    logs.write_table(table, path)
 
 
 def metadata(table: pa.Table) -> dict | None:

@@ -99,16 +99,18 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
             skipped[effect.name] = reason
         else:
             usable.append(effect)
-    design = selection.Design(r, selection.fold_bounds(n, folds))
+    design = selection.Design(r, folds)
     registry: dict[str, dict] = {}
     cache: dict[str, list[str]] = {}
+
+    columns = T.Columns(sig, p)
 
     def add_terms(term_list: list[dict]) -> list[str]:
         names = []
         for term in term_list:
             if term["name"] not in registry:
                 registry[term["name"]] = term
-                design.add(term["name"], T.value(term, sig, p))
+                design.add(term["name"], columns.value(term))
             names.append(term["name"])
         return names
 
@@ -139,8 +141,7 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     for name, sc in sel.final.items():
         effect = by_name[name]
         names = sc.terms
-        fit = design.fit(selection._union(sel.terms, names))
-        params = effect.params({t: fit[t] for t in names}, ctx)
+        params = effect.params(_marginal_fit(design, sel.terms, names), ctx)
         others.append(EffectResult(name, sc.significant, sc.gain, params, False, effect.summary(params),
                                    [registry[t] for t in names]))
     others.sort(key=lambda e: -e.gain)
@@ -149,3 +150,12 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     return Diagnosis(effects=results + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
                      terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit)
+
+
+def _marginal_fit(design: selection.Design, chosen: list[str], names: list[str]) -> dict[str, float]:
+    """Coefficients of ``names`` fitted to what the chosen terms leave of the residual."""
+    left = design.r - design.fitted(chosen)
+    sub = selection.Design(left, design.folds)
+    for name in names:
+        sub.add(name, design.cols[design.names.index(name)])
+    return sub.fit(names)

@@ -1,0 +1,74 @@
+"""fricli identify: fit the extended LuGre model to a log."""
+
+from __future__ import annotations
+
+import os
+
+import click
+
+from fricli import logs, models
+from fricli.cli import cli
+from fricli.cli.options import common, emit_json, json_flag, log_reading, output_option, reading_kwargs, say
+from fricli.errors import OutputError
+from fricli.identify import LuGreIdentifier
+from fricli.models.lugre import PARAM_INFO, unit_of
+
+
+def _figures(errs: dict, unit: str) -> str:
+    return f"MAE {errs['mae']:.4g} {unit}, RMSE {errs['rmse']:.4g} {unit}, max {errs['max']:.4g} {unit}"
+
+
+@cli.command("identify")
+@click.argument("log")
+@output_option(help="Model file to write (.npz).")
+@log_reading
+@click.option("--hold", type=click.FloatRange(min=0, min_open=True), default=0.2, show_default=True,
+              help="Steady state: the velocity must have been constant for at least this long [s].")
+@click.option("--travel", type=click.FloatRange(min=0), default=0.002, show_default=True,
+              help="Steady state: ... and over at least this distance [rad or m] (longer holds at slow speeds).")
+@click.option("--refine", is_flag=True, help="Finally fit all parameters jointly on the whole log.")
+@json_flag
+@common
+def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
+                 refine: bool, as_json: bool, quiet: bool) -> None:
+    """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
+
+    Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
+    steady-state samples, then the bristle parameters sigma0, sigma1 by simulating the whole
+    log (see docs/lugre.md). Parameters and fit errors go to stderr, or as JSON to stdout with
+    --json. On failure the previous model file is left untouched.
+
+    \b
+    Example:
+      fricli identify sample_data/joint2_base.parquet -o lugre.npz
+      fricli identify emps.parquet -o emps.npz --cutoff 100 --json
+    """
+    if output == "-":
+        raise click.UsageError("identify writes a model file: give -o FILE.npz, not -")
+    folder = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(folder):
+        raise OutputError(f"cannot write {output}: folder {folder} does not exist")
+    data = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
+    idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine).fit(data.signals, units=data.units,
+                                                                       axis=data.axis)
+    model, fit = idf.model_, idf.fit_
+    options = {"hold": hold, "travel": travel, "refine": refine}
+    models.save_for_log(output, model, data, rows_used=len(data), fit=fit, identify=options)
+
+    unit = data.units["tau"]
+    params = model.parameters()
+    if not quiet:
+        where = f"joint {data.joint}, " if data.joint is not None else ""
+        say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
+            f"{fit['steady_rows']:,} steady-state)")
+        for name, value in params.items():
+            say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
+        say(f"fit error, all rows:          {_figures(fit, unit)}")
+        say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
+        for note in fit["notes"]:
+            say(f"note: {note}")
+        say(f"wrote {output}")
+    if as_json:
+        emit_json({"model": output, "log": data.name, "joint": data.joint, "axis": data.axis,
+                   "units": data.units, "parameters": params,
+                   "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit})

@@ -1,0 +1,92 @@
+"""fricli predict and fricli estimate-ext."""
+
+from __future__ import annotations
+
+import click
+
+from fricli import models, predicting
+from fricli.cli import cli
+from fricli.cli.options import (common, emit_json, json_flag, log_reading, output_option, progress_enabled,
+                                say, warn)
+
+
+def _figures(errs: dict, unit: str) -> str:
+    return f"MAE {errs['mae']:.4g} {unit}, RMSE {errs['rmse']:.4g} {unit}, max {errs['max']:.4g} {unit}"
+
+
+def batch_option(f):
+    return click.option("--batch-rows", type=click.IntRange(min=1), default=predicting.DEFAULT_BATCH_ROWS,
+                        show_default=True, help="Rows per record batch (the model state is carried across).")(f)
+
+
+def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
+         external: bool, lowpass=None):
+    if as_json and output == "-":
+        raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
+    model, meta = models.load(model_path)
+    result = predicting.run(model, meta, log, output, external=external, lowpass_hz=lowpass, joint=joint, kt=kt,
+                            cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn, batch_rows=batch_rows,
+                            progress=progress_enabled(quiet), model_name=model_path)
+    if not quiet:
+        where = f" of joint {result.joint}" if result.joint is not None else ""
+        dest = "stdout" if output == "-" else output
+        say(f"{result.rows:,} rows{where} -> {dest}" + (f" (read whole: {result.read_whole})" if result.read_whole else ""))
+        say(f"friction error against the target: {_figures(result.friction, result.unit)}")
+        if result.external is not None:
+            say(f"external torque error against tau_ext: {_figures(result.external, result.unit)}")
+    if as_json:
+        out = result.as_json()
+        out.update(model=model_path, log=log, output=output)
+        if lowpass:
+            out["lowpass_hz"] = lowpass
+        emit_json(out)
+
+
+@cli.command("predict")
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("log")
+@output_option(help="Output log (Parquet; - for stdout).")
+@log_reading
+@batch_option
+@json_flag
+@common
+def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+    """Predict friction with MODEL on LOG (- for stdin): writes the log with tau_f_pred added.
+
+    Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
+    against the target tau_m + tau_ext - tau_g - tau_dyn goes to stderr (and to stdout as
+    JSON with --json, when the output is a file). A log with several joints is read for the
+    model's joint (or --joint). Large logs are processed in record batches with the model
+    state carried across; a log without qd/qdd is read whole (docs/lugre.md).
+
+    \b
+    Example:
+      fricli predict lugre.npz sample_data/joint2_extended_asym.parquet -o pred.parquet
+      fricli simulate --scenario base --joint 2 --seed 2 -o - | fricli predict lugre.npz - -o - > pred.parquet
+    """
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False)
+
+
+@cli.command("estimate-ext")
+@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("log")
+@output_option(help="Output log (Parquet; - for stdout).")
+@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Zero-phase Butterworth low-pass of tau_ext_pred at this cut-off [Hz] (reads the log whole).")
+@log_reading
+@batch_option
+@json_flag
+@common
+def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+    """Estimate the external torque on LOG with MODEL's friction: adds tau_f_pred and
+    tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m.
+
+    When the log has the sensor column tau_ext, the error of tau_ext_pred against it (MAE,
+    RMSE, max) goes to stderr (and to stdout as JSON with --json, when the output is a file).
+
+    \b
+    Example:
+      fricli estimate-ext adapted.npz sample_data/joint2_extended_asym.parquet --lowpass 2 -o ext.parquet
+    """
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=True,
+         lowpass=lowpass)

@@ -1,0 +1,262 @@
+"""Batched prediction and external-torque estimation for any model kind.
+
+``run`` reads a log in record batches (``pq.ParquetFile.iter_batches``), checks each batch
+against the log contract (``t`` strictly increasing across batch boundaries too), predicts with
+the model's state carried from one batch to the next (e.g. the LuGre bristle state), and streams
+the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All columns and
+their field and schema metadata are carried through.
+
+The log is read whole instead, as one batch, when a batch-wise reading would change the result:
+when ``qd`` or ``qdd`` must be derived from ``q`` (the zero-phase filter needs the whole series)
+and when the external-torque estimate is low-passed (zero-phase, forwards and backwards).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from typing import Callable, Iterator
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
+import pyarrow.parquet as pq
+
+from fricli import logs, models
+from fricli.atomic import atomic_open
+from fricli.errors import LogError
+from fricli.models.base import FrictionModel
+
+DEFAULT_BATCH_ROWS = 262_144
+
+
+class ErrorSums:
+    """MAE, RMSE and max of y_pred - y accumulated over batches (same figures as
+    ``fricli.metrics.errors`` on the concatenated arrays)."""
+
+    def __init__(self):
+        self.n = 0
+        self.abs_sum = 0.0
+        self.sq_sum = 0.0
+        self.max = 0.0
+
+    def add(self, y: np.ndarray, y_pred: np.ndarray) -> None:
+        e = np.asarray(y_pred, dtype=np.float64) - np.asarray(y, dtype=np.float64)
+        if e.size == 0:
+            return
+        self.n += e.size
+        self.abs_sum += float(np.sum(np.abs(e)))
+        self.sq_sum += float(np.einsum("i,i->", e, e))
+        self.max = max(self.max, float(np.max(np.abs(e))))
+
+    def result(self) -> dict:
+        if self.n == 0:
+            return {"mae": float("nan"), "rmse": float("nan"), "max": float("nan"), "n": 0}
+        return {"mae": self.abs_sum / self.n, "rmse": math.sqrt(self.sq_sum / self.n), "max": self.max,
+                "n": self.n}
+
+
+@dataclasses.dataclass
+class Result:
+    rows: int                      # rows written
+    joint: object                  # the joint predicted for (None: the log has no joint column)
+    unit: str                      # unit of the torque columns (Nm or N)
+    friction: dict                 # errors of tau_f_pred against the friction target
+    external: dict | None          # errors of tau_ext_pred against the sensor column tau_ext
+    batches: int
+    read_whole: str | None         # why the log was read whole, or None
+    dropped: int                   # rows dropped by --drop-invalid
+
+    def as_json(self) -> dict:
+        out = dataclasses.asdict(self)
+        if out["external"] is None:
+            del out["external"]
+        return out
+
+
+def open_log(path: str) -> tuple[pq.ParquetFile, str]:
+    """A ParquetFile for ``path`` (``-``: stdin, read into memory first) and its display name."""
+    if path == "-":
+        return logs.parquet_file(logs.read_bytes("-"), "stdin"), "stdin"
+    try:
+        return pq.ParquetFile(path), path
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise LogError(f"{path}: is a folder, not a log") from None
+    except PermissionError:
+        raise LogError(f"{path}: cannot read (permission denied)") from None
+    except Exception:
+        raise LogError(f"{path}: not a Parquet file") from None
+
+
+def choose_joint(pf: pq.ParquetFile, name: str, requested, model_joint,
+                 warn: Callable[[str], None] | None) -> tuple[object, int]:
+    """(joint, number of joints in the log): --joint, else the only joint in the log, else the
+    model's joint."""
+    if "joint" not in pf.schema_arrow.names:
+        return requested, 0
+    try:
+        column = pf.read(columns=["joint"]).column("joint")
+    except Exception as exc:
+        raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
+    joints = pc.unique(column).to_pylist()
+    if not joints:
+        return requested, 0
+    choice = requested
+    if choice is None:
+        if len(joints) == 1:
+            choice = joints[0]
+            if model_joint is not None and str(model_joint) != str(choice) and warn:
+                warn(f"warning: the model was fitted on joint {model_joint}; the log holds joint {choice}")
+        elif model_joint is not None:
+            choice = model_joint
+        else:
+            listed = ", ".join(str(j) for j in joints)
+            raise LogError(f"{name}: the log holds joints {listed}: choose one with --joint")
+    match = [j for j in joints if str(j) == str(choice)]
+    if not match:
+        listed = ", ".join(str(j) for j in joints)
+        raise LogError(f"{name}: no joint {choice} in the log (it holds {listed})")
+    return match[0], len(joints)
+
+
+def whole_reason(schema: pa.Schema, lowpass_hz: float | None) -> str | None:
+    names = set(schema.names)
+    if lowpass_hz:
+        return "the low-pass filter is zero-phase"
+    missing = [c for c in ("qd", "qdd") if c not in names]
+    if missing:
+        return f"{' and '.join(missing)} derived with a zero-phase filter"
+    return None
+
+
+def _batches(pf: pq.ParquetFile, name: str, batch_rows: int, whole: bool) -> Iterator[tuple[int, pa.Table]]:
+    """(row offset, table) pieces of the file, keeping field and schema metadata."""
+    schema = pf.schema_arrow
+    try:
+        if whole:
+            yield 0, pf.read()
+            return
+        offset = 0
+        for batch in pf.iter_batches(batch_size=batch_rows):
+            table = pa.Table.from_batches([batch])
+            if table.schema.metadata != schema.metadata:
+                table = table.replace_schema_metadata(schema.metadata)
+            yield offset, table
+            offset += batch.num_rows
+    except LogError:
+        raise
+    except Exception as exc:
+        raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
+
+
+def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, external: bool = False,
+        lowpass_hz: float | None = None, joint=None, kt: float | None = None,
+        cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
+        warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
+        progress: bool = False, model_name: str = "model") -> Result:
+    """Predict friction on the log at ``log_path`` and write it with ``tau_f_pred`` added to
+    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external``. Returns the figures."""
+    from tqdm import tqdm
+
+    pf, name = open_log(log_path)
+    joint, n_joints = choose_joint(pf, name, joint, meta.get("joint"), warn)
+    multi = n_joints > 1
+    reason = whole_reason(pf.schema_arrow, lowpass_hz if external else None)
+    warnings: list[str] = []
+    fric, ext_err = ErrorSums(), ErrorSums()
+    state = None
+    t_last = None
+    rows = batches = dropped = 0
+    unit = None
+    has_ext = False
+    total = pf.metadata.num_rows
+    with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
+                                            leave=False) as bar:
+        writer = None
+        try:
+            for offset, table in _batches(pf, name, batch_rows, reason is not None):
+                bar.update(table.num_rows)
+                if multi:
+                    table = table.filter(pc.equal(table.column("joint"), pa.scalar(joint, table.schema.field("joint").type)))
+                if table.num_rows == 0:
+                    continue
+                # the rows are this joint's already: set the joint column aside (cheaper to check)
+                jpos = table.schema.get_field_index("joint")
+                jfield = table.schema.field(jpos) if jpos >= 0 else None
+                if jfield is not None:
+                    table = table.remove_column(jpos)
+                try:
+                    log = logs.from_table(table, name=name, joint=joint, kt=kt, cutoff_hz=cutoff_hz,
+                                          drop_invalid=drop_invalid, warn=warnings.append)
+                except LogError as exc:
+                    if reason is None and (offset or table.num_rows < total):
+                        raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
+                    raise
+                if batches == 0:
+                    models.check_log(meta, log, model_name)
+                    unit = log.units["tau"]
+                sig = log.signals
+                t = sig["t"]
+                if t_last is not None and not t[0] > t_last:
+                    what = "duplicate timestamps" if t[0] == t_last else "'t' is not increasing"
+                    raise LogError(f"{name}: {what} (at row {offset} between two batches, t = {t[0]:g} s)")
+                t_last = float(t[-1])
+                dropped += table.num_rows - len(t)
+                tau_f, state = model.predict(sig, state)
+                out = log.table
+                if jfield is not None:
+                    out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(joint, jfield.type), out.num_rows))
+                out = logs.with_column(out, "tau_f_pred", tau_f, unit)
+                fric.add(logs.friction_target(sig), tau_f)
+                if external:
+                    est = logs.external_torque(sig, tau_f)
+                    if lowpass_hz:
+                        est = lowpass_external(est, t, lowpass_hz, warn)
+                    out = logs.with_column(out, "tau_ext_pred", est, unit)
+                    if "tau_ext" in sig:
+                        has_ext = True
+                        ext_err.add(sig["tau_ext"], est)
+                if writer is None:
+                    writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
+                writer.write_table(out)
+                rows += out.num_rows
+                batches += 1
+            if writer is None:
+                raise LogError(f"{name}: the log is empty")
+        finally:
+            if writer is not None:
+                writer.close()
+    if warnings and warn:
+        if dropped:
+            warn(f"warning: dropped {dropped} rows with NaN or infinite values")
+        else:
+            for message in dict.fromkeys(warnings):
+                warn(message)
+    return Result(rows=rows, joint=joint, unit=unit or "Nm", friction=fric.result(),
+                  external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,
+                  dropped=dropped)
+
+
+def lowpass_external(est: np.ndarray, t: np.ndarray, cutoff_hz: float, warn=None) -> np.ndarray:
+    """Zero-phase Butterworth low-pass (4th order) of tau_ext_pred (n,) at ``cutoff_hz``."""
+    fs = 1.0 / float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    if warn and (len(t) < 16 or cutoff_hz >= 0.5 * fs):
+        warn(f"warning: --lowpass {cutoff_hz:g} Hz not applied (at or above the Nyquist frequency "
+             f"{0.5 * fs:g} Hz, or too few rows)")
+    return logs.lowpass(est, t, cutoff_hz)
+
+
+def predict_signals(model: FrictionModel, signals: dict[str, np.ndarray], batch_rows: int | None = None) -> np.ndarray:
+    """tau_f_pred (n,) for in-memory signals, optionally in batches with the state carried."""
+    n = len(signals["t"])
+    if not batch_rows or batch_rows >= n:
+        return model.predict(signals)[0]
+    out = np.empty(n)
+    state = None
+    for i in range(0, n, batch_rows):
+        part = {k: v[i:i + batch_rows] for k, v in signals.items()}
+        out[i:i + batch_rows], state = model.predict(part, state)
+    return out

@@ -1,0 +1,398 @@
+"""The LuGre model kind and `fricli identify`."""
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from conftest import SAMPLE, shared_data
+from fricli import errors, logs, models, physics
+from fricli.cli import cli
+from fricli.errors import DataError, FitError, ModelFileError
+from fricli.identify import LuGreIdentifier, speed_levels, steady_state_mask
+from fricli.models import lugre
+from fricli.models.lugre import LuGreModel
+
+TRUE = dict(fc=7.0, fs=9.0, vs=0.04, delta=1.2, fv=12.0, kc=0.04, ks=0.05, sigma0=2e4, sigma1=20.0)
+STATIC = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")
+
+
+def sweep_signals(seed=0, levels=None, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, both=True,
+                  q_start=-1.2):
+    """A constant-velocity sweep log made with fricli.physics (not with the model under test):
+    each level once in each direction, smooth ramps, gravity amplitude*sin(q), friction integrated
+    at sub*rate and sampled at rate, Gaussian noise on tau_m."""
+    rng = np.random.default_rng(seed)
+    levels = np.geomspace(0.005, 0.7, 10) if levels is None else levels
+    fs_int = rate * sub
+    pieces = []
+    for i, lvl in enumerate(levels):
+        hold = float(np.clip(1.2 / lvl, 1.5, 4.0))
+        ramp = 0.5 * (1 - np.cos(np.pi * np.arange(int(0.2 * fs_int)) / (0.2 * fs_int)))
+        seg = np.concatenate([ramp, np.ones(int(hold * fs_int)), ramp[::-1], np.zeros(int(0.3 * fs_int))])
+        for sgn in ((1.0, -1.0) if both else (1.0,)):
+            pieces.append(sgn * lvl * seg)
+    v = np.concatenate(pieces)
+    t = np.arange(len(v)) / fs_int
+    # slow levels travel little: shift the position every 7 s so they meet other gravity loads
+    q = q_start + np.cumsum(v) / fs_int + (0.4 * np.floor(t / 7.0)) % 2.4
+    qdd = np.gradient(v, t)
+    tau_g = amp * np.sin(q)
+    fc = p["fc"] + p["kc"] * np.abs(tau_g)
+    fs = p["fs"] + p["ks"] * np.abs(tau_g)
+    g = physics.stribeck(v, fc, fs, p["vs"], p["delta"])
+    tau_f, _ = physics.lugre_friction(v, g, p["fv"], p["sigma0"], p["sigma1"], physics.intervals(t))
+    k = slice(None, None, sub)
+    sig = {"t": t[k], "q": q[k], "qd": v[k], "qdd": qdd[k], "tau_g": tau_g[k], "tau_dyn": 2.0 * qdd[k],
+           "tau_f_true": tau_f[k]}
+    sig["tau_m"] = sig["tau_g"] + sig["tau_dyn"] + sig["tau_f_true"] + rng.normal(0, noise, len(sig["t"]))
+    return sig
+
+
+UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm",
+         "tau_dyn": "Nm", "tau_f_true": "Nm"}
+
+
+def write_log(sig, path, units=UNITS):
+    pq.write_table(logs.table_from_arrays(sig, {k: u for k, u in units.items() if k in sig}), path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def sweep():
+    return sweep_signals(seed=3)
+
+
+@pytest.fixture(scope="module")
+def fitted(sweep):
+    return LuGreIdentifier().fit(sweep)
+
+
+# ---------------------------------------------------------------------------- the model
+
+
+def reference(model, sig):
+    """The friction straight from fricli.physics."""
+    v = sig["qd"]
+    fc, fs, fv = model._levels(v, sig.get("tau_g") if model.loaded else None,
+                               sig.get("temp") if model.thermal else None)
+    g = physics.stribeck(v, fc, fs, model.vs, model.delta)
+    return physics.lugre_friction(v, g, fv, model.sigma0, model.sigma1, physics.intervals(sig["t"]))[0]
+
+
+def random_signals(n=5000, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(0.002, 0.02, n))
+    v = np.repeat(rng.uniform(-0.7, 0.7, n // 50 + 1), 50)[:n]
+    v[100:160] = 0.0
+    return {"t": t, "qd": v, "tau_g": 40 * np.sin(np.cumsum(v) * 0.01 + 1), "temp": 30 + 8 * np.sin(t / 9)}
+
+
+@pytest.mark.parametrize("extra", [{}, {"fc_neg": 5.0, "fv_neg": 15.0}, {"fs_neg": 12.0},
+                                   {"t_ref": 30.0, "alpha_c": 0.01, "alpha_v": 0.02}])
+@pytest.mark.parametrize("kc", [0.0, 0.04])
+def test_predict_matches_physics(extra, kc):
+    model = LuGreModel(**dict(TRUE, kc=kc, ks=1.2 * kc), **extra)
+    sig = random_signals()
+    np.testing.assert_allclose(model.predict(sig)[0], reference(model, sig), rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("cuts", [[1], [2500], [1, 2, 3, 4999], [17, 1000, 1001, 4000]])
+def test_batches_give_the_same_prediction(cuts):
+    model = LuGreModel(**TRUE, fc_neg=6.0, t_ref=30.0, alpha_c=0.01)
+    sig = random_signals()
+    whole = model.predict(sig)[0]
+    parts, state = [], None
+    for a, b in zip([0] + cuts, cuts + [len(sig["t"])]):
+        y, state = model.predict({k: x[a:b] for k, x in sig.items()}, state)
+        parts.append(y)
+    np.testing.assert_allclose(np.concatenate(parts), whole, rtol=1e-12, atol=1e-12)
+
+
+def test_internal_blocks_do_not_change_the_prediction(monkeypatch):
+    model = LuGreModel(**TRUE)
+    sig = random_signals(3000)
+    whole = model.predict(sig)[0]
+    monkeypatch.setattr(lugre, "CHUNK", 7)
+    np.testing.assert_allclose(model.predict(sig)[0], whole, rtol=1e-12, atol=1e-12)
+
+
+def test_constant_velocity_reaches_the_static_curve():
+    model = LuGreModel(**TRUE)
+    for v in (-0.5, -0.01, 0.003, 0.2):
+        t = np.arange(4000) * 1e-3
+        sig = {"t": t, "qd": np.full_like(t, v), "tau_g": np.full_like(t, 20.0)}
+        y = model.predict(sig, state=(0.0, -1e-3))[0]
+        expected = np.sign(v) * (7 + 0.04 * 20 + (9 - 7 + 0.01 * 20) * np.exp(-abs(v / 0.04) ** 1.2)) + 12 * v
+        assert y[-1] == pytest.approx(expected, rel=1e-9)
+        assert model.steady_state(np.array([v]), np.array([20.0]))[0] == pytest.approx(expected, rel=1e-12)
+
+
+def test_stiff_bristles_stay_stable():
+    # explicit Euler would diverge here (sigma0*|v|/g*dt = 1e4)
+    model = LuGreModel(**dict(TRUE, sigma0=1e8))
+    sig = random_signals(2000)
+    y = model.predict(sig)[0]
+    assert np.isfinite(y).all() and np.abs(y).max() < 9 + 0.05 * 40 + 12 * 0.7 + 1
+
+
+def test_optional_effects():
+    v = np.array([-0.3, 0.3])
+    asym = LuGreModel(**TRUE, fc_neg=5.0, fv_neg=20.0)
+    sym = LuGreModel(**TRUE)
+    a, s = asym.steady_state(v), sym.steady_state(v)
+    assert a[1] == pytest.approx(s[1])
+    assert a[0] == pytest.approx(s[0] + 2.0 - 8 * 0.3)          # Coulomb 2 Nm lower, viscous 8 higher
+    warm = LuGreModel(**TRUE, t_ref=30.0, alpha_c=0.01, alpha_v=0.02)
+    colder = warm.steady_state(v, temp=np.array([20.0, 20.0]))
+    at_ref = warm.steady_state(v, temp=np.array([30.0, 30.0]))
+    np.testing.assert_allclose(at_ref, s)
+    assert (np.abs(colder) > np.abs(at_ref)).all()
+    with pytest.raises(DataError, match="temp"):
+        warm.predict({"t": np.arange(3.0), "qd": np.ones(3)})
+    assert warm.required_inputs() == {"t", "qd", "tau_g", "temp"}
+    assert LuGreModel(**dict(TRUE, kc=0, ks=0)).required_inputs() == {"t", "qd"}
+
+
+def test_save_load_round_trip(tmp_path):
+    model = LuGreModel(**TRUE, fc_neg=6.5, t_ref=35.0, alpha_c=0.008, axis="linear")
+    path = str(tmp_path / "m.npz")
+    models.save(path, model, joint=2, axis="linear", units={}, provenance={})
+    loaded, meta = models.load(path)
+    assert isinstance(loaded, LuGreModel) and meta["kind"] == "lugre"
+    assert loaded.get_params() == model.get_params()
+    assert "N/m" in loaded.describe() and "fc_neg" in loaded.describe()
+    sig = random_signals(500)
+    np.testing.assert_array_equal(loaded.predict(sig)[0], model.predict(sig)[0])
+
+
+def test_damaged_parameters_refused():
+    spec = {"kind": "lugre", "params": dict(TRUE, vs=-1.0)}
+    with pytest.raises(ModelFileError, match="damaged lugre"):
+        models.from_parts(spec, {})
+    with pytest.raises(ModelFileError, match="damaged lugre"):
+        models.from_parts({"kind": "lugre", "params": dict(TRUE, bogus=1)}, {})
+
+
+# ---------------------------------------------------------------------------- identify
+
+
+def test_steady_state_selection(sweep):
+    mask = steady_state_mask(sweep["t"], sweep["qd"])
+    v, qdd = sweep["qd"], sweep["qdd"]
+    assert mask.sum() > 0.5 * len(v)
+    assert (np.abs(qdd[mask]) < 1e-9).all()
+    assert (v[mask] != 0).all()
+    # right after a ramp the bristles have not settled: those rows are left out
+    start = np.flatnonzero(np.diff((np.abs(qdd) < 1e-9) & (np.abs(v) > 0)).astype(int) == 1)[0] + 1
+    assert not mask[start:start + 5].any()
+    assert speed_levels(np.abs(v[mask])) == 10
+
+
+def test_identify_recovers_the_parameters(sweep, fitted):
+    p = fitted.model_.parameters()
+    for name in STATIC:
+        assert p[name] == pytest.approx(TRUE[name], rel=0.10), name
+    noise = np.mean(np.abs(logs.friction_target(sweep) - sweep["tau_f_true"]))
+    assert fitted.fit_["mae"] < 1.2 * noise
+    assert not any("Stribeck" in note or "tau_g" in note for note in fitted.fit_["notes"])
+
+
+def test_identify_generalises_to_another_seed(fitted):
+    other = sweep_signals(seed=4)
+    y = logs.friction_target(other)
+    noise = np.mean(np.abs(y - other["tau_f_true"]))
+    assert np.mean(np.abs(fitted.model_.predict(other)[0] - y)) < 1.2 * noise
+
+
+def test_identify_joint_refinement(sweep, fitted):
+    refined = LuGreIdentifier(refine=True).fit(sweep)
+    assert "joint" in refined.fit_["stages"]
+    assert refined.fit_["rmse"] <= fitted.fit_["rmse"] * (1 + 1e-9)
+    for name in STATIC:
+        assert refined.model_.parameters()[name] == pytest.approx(TRUE[name], rel=0.10), name
+
+
+def test_identify_without_gravity_and_on_a_linear_axis():
+    sig = sweep_signals(seed=5, amp=0.0, p=dict(TRUE, kc=0.0, ks=0.0))
+    del sig["tau_g"]
+    idf = LuGreIdentifier().fit(sig, axis="linear")
+    m = idf.model_
+    assert m.kc == 0 and m.ks == 0 and m.axis == "linear"
+    assert any("tau_g" in note for note in idf.notes_)
+    assert m.fc == pytest.approx(7.0, rel=0.05) and m.fv == pytest.approx(12.0, rel=0.05)
+
+
+def test_few_speed_levels_give_a_coulomb_viscous_fit():
+    sig = sweep_signals(seed=6, levels=[0.1, 0.3, 0.6], p=dict(TRUE, fs=7.0))
+    idf = LuGreIdentifier().fit(sig)
+    m = idf.model_
+    assert m.fs == m.fc and any("Stribeck" in note for note in idf.notes_)
+    assert m.fc == pytest.approx(7.0, rel=0.1) and m.fv == pytest.approx(12.0, rel=0.1)
+
+
+@pytest.mark.parametrize("case,needle", [
+    ("positive-only", "no samples with negative velocity"),
+    ("sine", "too few steady-state samples"),
+    ("still", "does not move"),
+    ("one-speed", "only one speed"),
+])
+def test_unfittable_data_refused(case, needle):
+    if case == "positive-only":
+        sig = sweep_signals(levels=[0.05, 0.2, 0.5], both=False)
+    elif case == "one-speed":
+        sig = sweep_signals(levels=[0.2])
+    else:
+        t = np.arange(3000) * 0.01
+        qd = np.zeros_like(t) if case == "still" else 0.5 * np.cos(6 * t)
+        sig = {"t": t, "qd": qd, "tau_m": np.sign(qd) * 7 + 12 * qd}
+    with pytest.raises(DataError, match=needle):
+        LuGreIdentifier().fit(sig)
+
+
+# ---------------------------------------------------------------------------- the command
+
+
+@pytest.fixture(scope="module")
+def sweep_file(tmp_path_factory, sweep):
+    return write_log(sweep, tmp_path_factory.mktemp("logs") / "sweep.parquet")
+
+
+def test_identify_command(tmp_path, sweep_file):
+    out = tmp_path / "lugre.npz"
+    res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert res.stdout == ""
+    for needle in ("fc", "Nm s/rad", "sigma0", "MAE", "steady-state"):
+        assert needle in res.stderr
+    model, meta = models.load(str(out))
+    assert meta["kind"] == "lugre" and meta["units"]["tau"] == "Nm"
+    assert meta["fit"]["mae"] > 0 and meta["provenance"]["identify"]["hold"] == 0.2
+    first = out.read_bytes()
+    res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out), "--json", "-q"])
+    assert res.exit_code == 0 and res.stderr == ""
+    assert out.read_bytes() == first                      # same log, same bytes
+    data = json.loads(res.stdout)
+    assert data["parameters"]["fc"] == pytest.approx(model.fc)
+    assert data["parameter_units"]["sigma0"] == "Nm/rad"
+    assert data["fit"]["mae"] == pytest.approx(meta["fit"]["mae"])
+
+
+def test_identify_reads_stdin(tmp_path, sweep_file):
+    out = tmp_path / "m.npz"
+    with open(sweep_file, "rb") as fh:
+        res = CliRunner().invoke(cli, ["identify", "-", "-o", str(out), "-q"], input=fh.read())
+    assert res.exit_code == 0, res.output
+    assert models.load(str(out))[1]["provenance"]["log_name"] == "stdin"
+
+
+def test_identify_data_error_exit_code(tmp_path):
+    sig = sweep_signals(levels=[0.05, 0.2, 0.5], both=False)
+    path = write_log(sig, tmp_path / "pos.parquet")
+    res = CliRunner().invoke(cli, ["identify", path, "-o", str(tmp_path / "m.npz")])
+    assert res.exit_code == errors.DATA
+    assert res.stderr.startswith("fricli: error: no samples with negative velocity")
+    assert "Traceback" not in res.output and not (tmp_path / "m.npz").exists()
+
+
+def test_failed_fit_keeps_the_previous_model(tmp_path, sweep_file, monkeypatch):
+    out = tmp_path / "lugre.npz"
+    out.write_bytes(b"previous model")
+
+    class Failed:
+        status, x, cost, nfev, message = 0, np.zeros(1), 0.0, 1, "max evaluations"
+
+    monkeypatch.setattr("fricli.identify.optimize.least_squares", lambda *a, **k: Failed())
+    res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out)])
+    assert res.exit_code == errors.FIT
+    assert "did not converge" in res.stderr
+    assert out.read_bytes() == b"previous model"
+    assert list(tmp_path.iterdir()) == [out]
+
+
+def test_non_finite_fit_is_a_fit_error(sweep, monkeypatch):
+    def broken(fun, x0, **kwargs):
+        raise ValueError("Residuals are not finite in the initial point.")
+
+    monkeypatch.setattr("fricli.identify.optimize.least_squares", broken)
+    with pytest.raises(FitError, match="not finite"):
+        LuGreIdentifier().fit(sweep)
+
+
+def test_identify_output_folder_missing(tmp_path, sweep_file):
+    res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(tmp_path / "no" / "m.npz")])
+    assert res.exit_code == errors.OUTPUT and "does not exist" in res.stderr
+
+
+def test_linear_model_refuses_rotary_log(tmp_path, sweep):
+    lin_units = dict(UNITS, q="m", qd="m/s", qdd="m/s^2", tau_m="N", tau_g="N", tau_dyn="N", tau_f_true="N")
+    lin = write_log(sweep, tmp_path / "lin.parquet", lin_units)
+    rot = write_log(sweep, tmp_path / "rot.parquet")
+    out = tmp_path / "lin.npz"
+    res = CliRunner().invoke(cli, ["identify", lin, "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "N s/m" in res.stderr and models.load(str(out))[1]["axis"] == "linear"
+    res = CliRunner().invoke(cli, ["predict", str(out), rot, "-o", str(tmp_path / "p.parquet")])
+    assert res.exit_code == errors.MODEL and "fitted in m, N" in res.stderr
+
+
+# ------------------------------------------------------------ simulator and real data
+
+
+def _sim():
+    return pytest.importorskip("fricli.sim")
+
+
+def test_acceptance_on_simulated_base_logs(tmp_path):
+    """identify on a simulated base log: static parameters within 10 %, friction MAE within
+    1.2x the noise MAE; predict reports the same on a second seed."""
+    sim = _sim()
+    p1, p2, out = tmp_path / "b1.parquet", tmp_path / "b2.parquet", tmp_path / "m.npz"
+    pq.write_table(sim.simulate("base", 2, seed=11), p1)
+    pq.write_table(sim.simulate("base", 2, seed=12), p2)
+    res = CliRunner().invoke(cli, ["identify", str(p1), "-o", str(out), "--json", "-q"])
+    assert res.exit_code == 0, res.output
+    fit = json.loads(res.stdout)
+    true = sim.true_params(2, "base")
+    for name in STATIC:
+        assert fit["parameters"][name] == pytest.approx(true[name], rel=0.10), name
+    for path, mae in ((p1, fit["fit"]["mae"]), (p2, None)):
+        log = logs.load_log(str(path))
+        noise = np.mean(np.abs(logs.friction_target(log.signals) - log.signals["tau_f_true"]))
+        if mae is None:
+            res = CliRunner().invoke(cli, ["predict", str(out), str(path), "-o", str(tmp_path / "p.parquet"),
+                                           "--json", "-q"])
+            assert res.exit_code == 0, res.output
+            mae = json.loads(res.stdout)["friction"]["mae"]
+        assert mae < 1.2 * noise
+
+
+@pytest.mark.parametrize("joint", [2, 4])
+def test_sample_base_logs(tmp_path, joint):
+    path = SAMPLE / f"joint{joint}_base.parquet"
+    if not path.exists():
+        pytest.skip(f"{path} is absent")
+    sim = _sim()
+    log = logs.load_log(str(path))
+    idf = LuGreIdentifier().fit(log.signals, units=log.units)
+    true = sim.true_params(joint, "base")
+    for name in STATIC:
+        assert idf.model_.parameters()[name] == pytest.approx(true[name], rel=0.10), name
+    noise = np.mean(np.abs(logs.friction_target(log.signals) - log.signals["tau_f_true"]))
+    assert idf.fit_["mae"] < 1.2 * noise
+
+
+def test_emps_coulomb_viscous_fit(tmp_path):
+    """The EMPS benchmark (linear axis, q and tau_m only): a sensible Coulomb/viscous fit.
+    Published IDIM-LS (with inertia and offset): Fc = 20.4 N, Fv = 203.5 N s/m."""
+    path = shared_data("emps/emps.parquet")
+    out = tmp_path / "emps.npz"
+    res = CliRunner().invoke(cli, ["identify", str(path), "-o", str(out), "--json", "-q"])
+    assert res.exit_code == 0, res.output
+    fit = json.loads(res.stdout)
+    assert fit["axis"] == "linear" and fit["parameter_units"]["fv"] == "N s/m"
+    p = fit["parameters"]
+    assert 15 < p["fc"] < 26 and 170 < p["fv"] < 240
+    assert p["kc"] == 0 and p["fs"] == p["fc"]

@@ -1,0 +1,319 @@
+"""`fricli predict` and `fricli estimate-ext`: batches, pipelines, joints, errors, any model kind."""
+
+import io
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from conftest import ROOT, make_table
+from fricli import errors, logs, metrics, models, predicting
+from fricli.cli import cli
+from fricli.models import register
+from fricli.models.base import FrictionModel
+from fricli.models.lugre import LuGreModel
+
+PARAMS = dict(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, kc=0.03, ks=0.04, sigma0=1e4, sigma1=5.0)
+
+
+@register
+class CountingModel(FrictionModel):
+    """A stateful test kind: friction = c*qd + the number of rows seen before this batch."""
+
+    kind = "test-counting"
+
+    def __init__(self, c=2.0):
+        self.c = c
+
+    def predict(self, signals, state=None):
+        seen = 0 if state is None else state
+        n = len(signals["t"])
+        return self.c * signals["qd"] + seen, seen + n
+
+    def required_inputs(self):
+        return {"t", "qd"}
+
+    def get_params(self):
+        return {"c": self.c}
+
+    @classmethod
+    def from_parts(cls, params, arrays, children):
+        return cls(**params)
+
+
+def log_table(n=3000, seed=0, joint=None, with_ext=False):
+    """A rotary log with friction from the LuGre model plus noise (and an external torque)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 0.01
+    qd = 0.4 * np.sign(np.sin(0.3 * t)) * (0.3 + np.abs(np.sin(0.05 * t)))
+    q = np.cumsum(qd) * 0.01
+    tau_g = 30 * np.sin(q + 0.5)
+    qdd = np.gradient(qd, t)
+    tau_f = LuGreModel(**PARAMS).predict({"t": t, "qd": qd, "tau_g": tau_g})[0]
+    ext = 4 * np.sin(0.2 * t) if with_ext else np.zeros(n)
+    tau_m = tau_g + 0.5 * qdd + tau_f - ext + rng.normal(0, 0.2, n)
+    cols = {"t": t, "q": q, "qd": qd, "qdd": qdd, "tau_m": tau_m, "tau_g": tau_g, "tau_dyn": 0.5 * qdd,
+            "label": np.array(["x"] * n)}
+    if with_ext:
+        cols["tau_ext"] = ext + rng.normal(0, 0.05, n)
+    if joint is not None:
+        cols = {"joint": np.full(n, joint), **cols}
+    units = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_dyn": "Nm",
+             "tau_ext": "Nm"}
+    table = logs.table_from_arrays(cols, units)
+    return table.replace_schema_metadata({b"origin": b"test"})
+
+
+def write(table, path, **kwargs):
+    pq.write_table(table, path, **kwargs)
+    return str(path)
+
+
+@pytest.fixture
+def model_file(tmp_path):
+    path = str(tmp_path / "lugre.npz")
+    models.save(path, LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"],
+                provenance={})
+    return path
+
+
+def invoke(*args, **kwargs):
+    return CliRunner().invoke(cli, [str(a) for a in args], **kwargs)
+
+
+def read(path_or_bytes):
+    if isinstance(path_or_bytes, bytes):
+        return pq.read_table(io.BytesIO(path_or_bytes))
+    return pq.read_table(path_or_bytes)
+
+
+def test_predict_adds_tau_f_pred_and_carries_everything(tmp_path, model_file):
+    table = log_table()
+    src = write(table, tmp_path / "log.parquet")
+    out = tmp_path / "pred.parquet"
+    res = invoke("predict", model_file, src, "-o", out)
+    assert res.exit_code == 0, res.output
+    assert res.stdout == ""
+    assert "MAE" in res.stderr and "3,000 rows" in res.stderr
+    got = read(str(out))
+    assert got.column_names == table.column_names + ["tau_f_pred"]
+    assert got.drop_columns(["tau_f_pred"]).equals(table)
+    assert got.schema.metadata[b"origin"] == b"test"
+    assert got.schema.field("q").metadata == {b"unit": b"rad"}
+    assert got.schema.field("tau_f_pred").metadata == {b"unit": b"Nm"}
+    sig = logs.from_table(table, name="x").signals
+    np.testing.assert_allclose(got.column("tau_f_pred").to_numpy(), LuGreModel(**PARAMS).predict(sig)[0])
+
+
+def test_batches_do_not_change_the_result(tmp_path, model_file):
+    src = write(log_table(), tmp_path / "log.parquet", row_group_size=1000)
+    figures = []
+    columns = []
+    for rows in (7, 1000, 100_000):
+        out = tmp_path / f"p{rows}.parquet"
+        res = invoke("predict", model_file, src, "-o", out, "--batch-rows", rows, "--json", "-q")
+        assert res.exit_code == 0, res.output
+        data = json.loads(res.stdout)
+        assert data["batches"] == -(-3000 // rows)
+        figures.append(data["friction"])
+        columns.append(read(str(out)).column("tau_f_pred").to_numpy())
+    for other in columns[:-1]:
+        np.testing.assert_allclose(other, columns[-1], rtol=1e-12, atol=1e-12)
+    for other in figures[:-1]:
+        assert other["mae"] == pytest.approx(figures[-1]["mae"], rel=1e-9)
+        assert other["max"] == pytest.approx(figures[-1]["max"], rel=1e-9)
+
+
+def test_json_figures_match_metrics(tmp_path, model_file):
+    table = log_table()
+    src = write(table, tmp_path / "log.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--json", "--batch-rows", 500)
+    data = json.loads(res.stdout)
+    sig = logs.from_table(table, name="x").signals
+    expected = metrics.errors(logs.friction_target(sig), LuGreModel(**PARAMS).predict(sig)[0])
+    for key in ("mae", "rmse", "max"):
+        assert data["friction"][key] == pytest.approx(expected[key], rel=1e-9)
+    assert data["friction"]["n"] == expected["n"] == 3000
+    assert data["rows"] == 3000 and data["unit"] == "Nm" and "external" not in data
+
+
+def test_stdin_to_stdout(tmp_path, model_file):
+    buf = io.BytesIO()
+    pq.write_table(log_table(), buf)
+    res = invoke("predict", model_file, "-", "-o", "-", "--batch-rows", 256, input=buf.getvalue())
+    assert res.exit_code == 0, res.stderr
+    got = read(res.stdout_bytes)
+    assert got.num_rows == 3000 and "tau_f_pred" in got.column_names
+    assert "friction error" in res.stderr
+
+
+def test_json_needs_a_file_output(model_file, tmp_path):
+    res = invoke("predict", model_file, write(log_table(), tmp_path / "l.parquet"), "-o", "-", "--json")
+    assert res.exit_code == errors.USAGE and "--json" in res.stderr
+
+
+def test_state_is_carried_across_batches_for_any_kind(tmp_path):
+    path = str(tmp_path / "count.npz")
+    models.save(path, CountingModel(), joint=None, axis="rotary", units={}, provenance={})
+    src = write(log_table(n=100), tmp_path / "l.parquet")
+    res = invoke("predict", path, src, "-o", tmp_path / "p.parquet", "--batch-rows", 30, "-q")
+    assert res.exit_code == 0, res.output
+    got = read(str(tmp_path / "p.parquet"))
+    offset = got.column("tau_f_pred").to_numpy() - 2.0 * got.column("qd").to_numpy()
+    np.testing.assert_allclose(offset, np.repeat([0, 30, 60, 90], [30, 30, 30, 10]))
+
+
+def test_time_must_increase_across_batches(tmp_path, model_file):
+    table = log_table(n=100)
+    t = table.column("t").to_numpy().copy()
+    t[50:] -= 0.3                                  # row 50 steps back in time
+    table = table.set_column(table.schema.get_field_index("t"), table.schema.field("t"), pa.array(t))
+    src = write(table, tmp_path / "l.parquet")
+    out = tmp_path / "p.parquet"
+    out.write_bytes(b"old")
+    res = invoke("predict", model_file, src, "-o", out, "--batch-rows", 50)
+    assert res.exit_code == errors.INPUT
+    assert "not increasing" in res.stderr and "row 50" in res.stderr
+    assert out.read_bytes() == b"old"                # a failed run leaves the old output
+    res = invoke("predict", model_file, src, "-o", out, "--batch-rows", 40)
+    assert res.exit_code == errors.INPUT and "rows counted from row 40" in res.stderr
+
+
+def test_several_joints(tmp_path, model_file):
+    t2, t4 = log_table(n=400, joint=2), log_table(n=300, seed=1, joint=4)
+    both = pa.concat_tables([t4, t2])
+    src = write(both, tmp_path / "both.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--batch-rows", 128, "-q")
+    assert res.exit_code == 0, res.output
+    got = read(str(tmp_path / "p.parquet"))
+    assert got.num_rows == 400 and set(got.column("joint").to_pylist()) == {2}
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p4.parquet", "--joint", "4", "-q")
+    assert res.exit_code == 0 and read(str(tmp_path / "p4.parquet")).num_rows == 300
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p5.parquet", "--joint", "5")
+    assert res.exit_code == errors.INPUT and "no joint 5" in res.stderr
+
+
+def test_single_other_joint_is_used_with_a_warning(tmp_path, model_file):
+    src = write(log_table(n=200, joint=4), tmp_path / "j4.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet")
+    assert res.exit_code == 0 and "fitted on joint 2" in res.stderr
+
+
+def test_log_without_velocity_is_read_whole(tmp_path, model_file):
+    table = log_table().drop_columns(["qd", "qdd"])
+    src = write(table, tmp_path / "l.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--batch-rows", 100, "--json",
+                 "--cutoff", "20")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["batches"] == 1 and "derived" in data["read_whole"]
+    sig = logs.from_table(table, name="x", cutoff_hz=20).signals
+    np.testing.assert_allclose(read(str(tmp_path / "p.parquet")).column("tau_f_pred").to_numpy(),
+                               LuGreModel(**PARAMS).predict(sig)[0])
+
+
+def test_drop_invalid_in_batches(tmp_path, model_file):
+    table = log_table(n=300)
+    tau = table.column("tau_m").to_numpy().copy()
+    tau[[10, 150, 151]] = np.nan
+    table = table.set_column(table.schema.get_field_index("tau_m"), table.schema.field("tau_m"), pa.array(tau))
+    src = write(table, tmp_path / "l.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--batch-rows", 100)
+    assert res.exit_code == errors.INPUT and "--drop-invalid" in res.stderr
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--batch-rows", 100, "--drop-invalid")
+    assert res.exit_code == 0
+    assert res.stderr.count("dropped 3 rows") == 1
+    assert read(str(tmp_path / "p.parquet")).num_rows == 297
+
+
+def test_estimate_ext(tmp_path, model_file):
+    table = log_table(with_ext=True)
+    src = write(table, tmp_path / "l.parquet")
+    out = tmp_path / "e.parquet"
+    res = invoke("estimate-ext", model_file, src, "-o", out, "--json", "--batch-rows", 700)
+    assert res.exit_code == 0, res.output
+    assert "external torque error" in res.stderr
+    got = read(str(out))
+    col = {c: got.column(c).to_numpy() for c in ("tau_g", "tau_dyn", "tau_f_pred", "tau_m", "tau_ext_pred")}
+    np.testing.assert_allclose(col["tau_ext_pred"], col["tau_g"] + col["tau_dyn"] + col["tau_f_pred"] - col["tau_m"])
+    assert got.schema.field("tau_ext_pred").metadata == {b"unit": b"Nm"}
+    raw = json.loads(res.stdout)["external"]
+    assert raw["mae"] == pytest.approx(metrics.errors(got.column("tau_ext").to_numpy(), col["tau_ext_pred"])["mae"])
+    # the low-pass filter removes the measurement noise: the estimate gets closer to the sensor
+    res = invoke("estimate-ext", model_file, src, "-o", out, "--json", "--lowpass", "2")
+    assert res.exit_code == 0, res.output
+    filtered = json.loads(res.stdout)
+    assert filtered["external"]["mae"] < 0.7 * raw["mae"] and filtered["lowpass_hz"] == 2
+    np.testing.assert_allclose(read(str(out)).column("tau_ext_pred").to_numpy(),
+                               logs.lowpass(col["tau_ext_pred"], got.column("t").to_numpy(), 2.0))
+
+
+def test_lowpass_above_nyquist_warns(tmp_path, model_file):
+    src = write(log_table(n=200), tmp_path / "l.parquet")
+    res = invoke("estimate-ext", model_file, src, "-o", tmp_path / "e.parquet", "--lowpass", "80")
+    assert res.exit_code == 0 and "not applied" in res.stderr
+
+
+@pytest.mark.parametrize("case,code,needle", [
+    ("no-model", errors.MODEL, "no such file"),
+    ("no-log", errors.INPUT, "no such file"),
+    ("not-parquet", errors.INPUT, "not a Parquet file"),
+    ("empty-stdin", errors.INPUT, "empty input"),
+])
+def test_bad_inputs(tmp_path, model_file, case, code, needle):
+    src = write(log_table(n=50), tmp_path / "l.parquet")
+    args = ["predict", model_file, src, "-o", tmp_path / "p.parquet"]
+    kwargs = {}
+    if case == "no-model":
+        args[1] = tmp_path / "missing.npz"
+    elif case == "no-log":
+        args[2] = tmp_path / "missing.parquet"
+    elif case == "not-parquet":
+        (tmp_path / "x.parquet").write_text("hello")
+        args[2] = tmp_path / "x.parquet"
+    else:
+        args[2] = "-"
+        kwargs["input"] = b""
+    res = invoke(*args, **kwargs)
+    assert res.exit_code == code and needle in res.stderr
+    assert "Traceback" not in res.output
+
+
+def test_predict_signals_helper():
+    table = make_table(n=1000)
+    sig = logs.from_table(table, name="x").signals
+    model = LuGreModel(**PARAMS)
+    np.testing.assert_allclose(predicting.predict_signals(model, sig, batch_rows=33), model.predict(sig)[0],
+                               rtol=1e-12, atol=1e-12)
+
+
+def test_error_sums_match_metrics():
+    rng = np.random.default_rng(0)
+    y, p = rng.normal(size=1000), rng.normal(size=1000)
+    acc = predicting.ErrorSums()
+    for i in range(0, 1000, 300):
+        acc.add(y[i:i + 300], p[i:i + 300])
+    expected = metrics.errors(y, p)
+    for key in ("mae", "rmse", "max"):
+        assert acc.result()[key] == pytest.approx(expected[key], rel=1e-12)
+
+
+def test_shell_pipeline(tmp_path, model_file):
+    """cat LOG | fricli predict MODEL - -o - | python -c ... with real processes and pipes
+    (the simulate stage of the documented pipeline is replaced by cat to keep the test quick)."""
+    src = write(log_table(), tmp_path / "l.parquet")
+    py = sys.executable
+    check = ("import sys, io, pyarrow.parquet as pq; t = pq.read_table(io.BytesIO(sys.stdin.buffer.read())); "
+             "print(t.num_rows, 'tau_f_pred' in t.column_names)")
+    cmd = f"cat '{src}' | '{py}' -m fricli predict '{model_file}' - -o - | '{py}' -c \"{check}\""
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run(["bash", "-o", "pipefail", "-c", cmd], capture_output=True, text=True, env=env,
+                          cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["3000", "True"]
+    assert "friction error" in proc.stderr
