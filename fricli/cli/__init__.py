@@ -58,7 +58,7 @@ def cli() -> None:
 
 
 # Each module adds its commands to ``cli``.
-from fricli.cli import evaluate, inspect_cmd  # noqa: E402,F401
+from fricli.cli import demo, evaluate, inspect_cmd  # noqa: E402,F401
 from fricli.cli import neural  # noqa: E402,F401
 from fricli.cli import simulate  # noqa: E402,F401
 from fricli.cli import lugre, predict  # noqa: E402,F401
