@@ -21,7 +21,6 @@ import sys
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from scipy import signal as sps
 
 from fricli.atomic import atomic_open
 from fricli.errors import DataError, LogError
@@ -243,8 +242,10 @@ def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> n
     fs = 1.0 / float(np.median(np.diff(t)))
     if cutoff_hz >= 0.5 * fs:
         return x.copy()
-    sos = sps.butter(order, cutoff_hz, fs=fs, output="sos")
-    return sps.sosfiltfilt(sos, x)
+    from scipy import signal  # imported here: it costs about a second at start-up
+
+    sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
+    return signal.sosfiltfilt(sos, x)
 
 
 def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:

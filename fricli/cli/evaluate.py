@@ -6,7 +6,7 @@ import os
 
 import click
 
-from fricli import evaluation, logs, report
+from fricli import evaluation, logs
 from fricli.cli import cli
 from fricli.cli.options import common, emit_json, json_flag, log_reading, reading_kwargs, say
 
@@ -75,7 +75,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
-    from fricli import models
+    from fricli import models, report  # matplotlib loads only for this command
 
     _, meta = models.load(model)
     kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)

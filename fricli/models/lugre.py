@@ -8,8 +8,9 @@
 In steady sliding (constant v) tau_f = sign(v)*g(v) + Fv*v. Optional effects, absent by
 default: direction asymmetry (``fc_neg``, ``fs_neg``, ``fv_neg`` used for v < 0) and
 temperature dependence (Fc, Fs scaled by 1 - alpha_c*(T - t_ref), Fv by exp(-alpha_v*(T - t_ref))).
-The bristle state is integrated exactly for v and g held over each sample interval
-(``fricli.physics``). A linear axis uses the same equations in m, m/s and N.
+The bristle state is integrated exactly for v and g held over each sample interval (the update of
+``fricli.physics``, a linear recurrence solved with BLAS ``dtbsv``; see docs/lugre.md). A linear
+axis uses the same equations in m, m/s and N.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from fricli.models.base import FrictionModel
 
 CHUNK = 1 << 16           # rows per internal block: keeps the temporaries in cache
 _G_MIN = 1e-12            # floor on the Stribeck curve g [Nm], so the bristle rate stays finite
+
 
 class _Buffers:
     """Work arrays reused across the blocks of one ``predict`` call."""
