@@ -8,7 +8,7 @@ from typing import Callable
 
 import numpy as np
 
-from fricli import logs, metrics, models, training_data
+from fricli import logs, metrics, training_data
 from fricli.errors import DataError
 from fricli.models.base import FrictionModel
 from fricli.models.neural import ARCHS
@@ -80,8 +80,11 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
     """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
 
     Rows slower than ``min_speed`` (default 2 % of the log's top speed) are left out: at rest
-    the friction holds whatever the controller applies, and sign(qd) flips with noise. The
-    network still gets sign(qd) = 0 at rest when predicting, between its two directions.
+    the bristles hold a friction torque set by the motion before (the residual there says
+    nothing about (tau_g, direction)), and sign(qd) flips with noise. When the log moves at
+    discrete velocities (the paper's one velocity out and back), only the rows at those
+    velocities are used, not the accelerations between them. When predicting, rows at rest get
+    sign(qd) = 0, between the network's two directions.
     """
     sig = first_seconds(log, max_seconds)
     qd = sig["qd"]
@@ -97,7 +100,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
                         "the residual network needs both (a movement out and back)")
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
-    sel = training_data.select(qd, val_fraction=val_fraction, balance=False, rng=rng, keep=moving)
+    sel = training_data.select(qd, val_fraction=val_fraction, max_samples=None, rng=rng, keep=moving)
     model = ResidualFriction(base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr,
                              min_speed=float(min_speed), units=log.units)
     base_pred = base.predict(sig)[0]
@@ -115,9 +118,3 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
         summary["base_val"] = _errors(target, base_pred, sel.val)
     return model, summary
 
-
-def load_base(path: str, log: logs.Log) -> tuple[FrictionModel, dict]:
-    """A model file to adapt, checked against the log's units."""
-    model, meta = models.load(path)
-    models.check_log(meta, log, path)
-    return model, meta

@@ -4,12 +4,13 @@ Velocity balance. A base log holds constant-velocity sweeps, each level once per
 slow levels take longer and so hold far more samples, and a loss over all rows would favour
 them. ``velocity_groups`` finds the velocity levels: it histograms the signed velocity on a
 fine logarithmic grid (150 bins per direction between 1e-3 and 1 times the top speed, plus a
-bin for |qd| below that) and calls the velocities discrete when the densest bins (each with at
-least 0.2 % of the rows) hold at least 75 % of the rows and are at most half of the occupied
-bins; a level is then a run of adjacent dense bins, and rows in no level (accelerations
-between levels) are left out. Otherwise the velocities are continuous and the groups are 32
-equal-width bins of signed velocity. ``balanced`` then draws the same number of rows from
-every group (all rows of a group that holds fewer).
+bin for |qd| below that) and calls the velocities discrete when the dense bins (each with at
+least 0.2 % of the rows) hold at least 75 % of the rows and form narrow runs (at most four
+adjacent bins, about +-10 % in speed; wider runs are a continuum of velocities). A level is
+such a run, and rows in no level (accelerations between levels) are left out. Otherwise the
+velocities are continuous and the groups are 32 equal-width bins of signed velocity.
+``balanced`` then draws the same number of rows from every group (all rows of a group that
+holds fewer).
 
 Validation by segments. Neighbouring rows are nearly identical, so a random-row validation
 set would only measure interpolation between training rows. ``split_segments`` cuts every run
@@ -29,8 +30,9 @@ from fricli.errors import DataError
 FINE_BINS = 150          # per direction, logarithmic
 LOW = 1e-3               # lowest binned speed, relative to the top speed
 DENSE = 0.002            # a dense bin holds at least this share of the rows
-DISCRETE_SHARE = 0.75    # dense bins must hold this share of the rows ...
-DENSE_BINS_SHARE = 0.5   # ... and be at most this share of the occupied bins
+DISCRETE_SHARE = 0.75    # dense bins must hold this share of the rows
+MAX_LEVEL_BINS = 4       # a level spans at most this many adjacent fine bins (about +-10 % in speed) ...
+WIDE_SHARE = 0.1         # ... except for this share of the rows in levels
 CONTINUOUS_BINS = 32
 PIECES = 10              # validation pieces per run
 MIN_RUN = 20             # shorter runs (rows) all go to training
@@ -69,8 +71,7 @@ def velocity_groups(qd: np.ndarray) -> tuple[np.ndarray, str]:
     fine = np.where(qd < 0, -pos, pos) + FINE_BINS          # 0 .. 2 FINE_BINS, FINE_BINS = rest
     counts = np.bincount(fine, minlength=2 * FINE_BINS + 1)
     dense = counts >= max(DENSE * n, 5)
-    occupied = int((counts > 0).sum())
-    if counts[dense].sum() >= DISCRETE_SHARE * n and dense.sum() <= DENSE_BINS_SHARE * occupied:
+    if counts[dense].sum() >= DISCRETE_SHARE * n:
         level_of_bin = np.full(counts.size, -1, dtype=np.int64)
         level, prev = -1, False
         for b in range(counts.size):
@@ -80,7 +81,11 @@ def velocity_groups(qd: np.ndarray) -> tuple[np.ndarray, str]:
                     level += 1
                 level_of_bin[b] = level
             prev = bool(dense[b])
-        return level_of_bin[fine], "levels"
+        # levels are narrow: a wide run of dense bins is a continuum of velocities
+        width = np.bincount(level_of_bin[dense], minlength=level + 1)
+        rows = np.bincount(level_of_bin[dense], weights=counts[dense], minlength=level + 1)
+        if rows[width > MAX_LEVEL_BINS].sum() <= WIDE_SHARE * rows.sum():
+            return level_of_bin[fine], "levels"
     edges = np.linspace(-vmax, vmax, CONTINUOUS_BINS + 1)
     labels = np.clip(np.searchsorted(edges, qd, side="right") - 1, 0, CONTINUOUS_BINS - 1)
     return labels.astype(np.int64), "bins"

@@ -187,7 +187,7 @@ def test_column_effect_needs_the_column_and_is_found(rng):
     n = 6000
     h = 50 + 15 * np.sin(np.arange(n) / n * 2 * np.pi * 1.3)
     log = synthetic(rng, n=n, friction=lambda s: CoulombViscous().predict(s)[0] + 0.08 * (s["humidity"] - 50)
-                    * np.sign(s["qd"]), humidity=h)
+                    * T.held_sign(s["qd"]), humidity=h)
     d = diagnose(CoulombViscous(), log)
     assert d.added[0] == "column:humidity"
     assert d.effects[0].params["dFc/dhumidity"]["value"] == pytest.approx(0.08, rel=0.1)

@@ -37,18 +37,19 @@ def table(d: driver.Diagnosis) -> str:
         lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}; "
                      f"no candidate removes {100 * d.min_gain:g} % of the residual significantly)")
     lines.append("")
-    head = f"{'rank':>4}  {'effect':<18} {'gain':>7}  {'signif.':<7}  {'added':<5}  parameters"
+    head = f"{'rank':>4}  {'effect':<18} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  parameters"
     lines.append(head)
     order = {name: i + 1 for i, name in enumerate(d.added)}
     for rank, e in enumerate(d.effects, 1):
         added = str(order[e.name]) if e.name in order else "-"
         sig = "yes" if e.significant else "no"
-        lines.append(f"{rank:>4}  {e.name:<18} {100 * e.gain:>6.1f}%  {sig:<7}  {added:<5}  {e.summary}")
+        lines.append(f"{rank:>4}  {e.name:<18} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  {sig:<7}  "
+                     f"{added:<5}  {e.summary}")
     for name, reason in d.skipped.items():
         lines.append(f"   -  {name:<18} not tested: {reason}")
     lines.append("")
-    lines.append(f"gain: share of the model's squared residual an effect explains on held-out data "
-                 f"({d.folds} blocks over time); added effects: their share when added, in order")
+    lines.append(f"gain: share of the model's squared residual an effect explains on held-out data ({d.folds} "
+                 f"blocks over time); of rest: share of what the effects added before it left")
     return "\n".join(lines)
 
 
@@ -58,7 +59,7 @@ def table(d: driver.Diagnosis) -> str:
 @click.option("--fix", is_flag=True, help="Write the model augmented with the added effects (needs -o).")
 @click.option("-o", "--output", default=None, help="Augmented model file to write with --fix (.npz).")
 @click.option("--folds", type=click.IntRange(min=3, max=100), default=driver.DEFAULT_FOLDS, show_default=True,
-              help="Contiguous blocks over time for the held-out scores.")
+              help="Contiguous folds over time for the held-out scores.")
 @click.option("--min-gain", type=click.FloatRange(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
               show_default=True, help="Share of the remaining held-out squared residual an effect must remove.")
 @click.option("--alpha", type=click.FloatRange(min=0, max=0.5, min_open=True), default=driver.DEFAULT_ALPHA,
@@ -121,13 +122,15 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         fixed = augment(base, result, data, carry=not no_carry)
         fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
         fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-                   carried=fixed.carried)
+                   carried=fixed.carried, refitted=fixed.refitted)
         options = {"folds": folds, "min_gain": min_gain, "alpha": alpha, "effects": only, "max_effects": max_effects,
                    "carry": not no_carry, "base_model": os.path.basename(model)}
         models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, diagnose=options)
         if not quiet:
             if result.added:
                 carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
+                if fixed.refitted:
+                    carried += f"; refitted with them: {', '.join(fixed.refitted)}"
                 say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
                     f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
             else:

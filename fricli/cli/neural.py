@@ -55,6 +55,15 @@ def _mae(summary: dict, key: str) -> str:
     return f"{summary[key]['mae']:.3f}" if key in summary else "-"
 
 
+def _check_outputs(output: str, as_json: bool) -> None:
+    if output == "-" and as_json:
+        raise click.UsageError("-o - and --json both write to stdout: choose one")
+
+
+def _wrote(output: str) -> str:
+    return "wrote the model to stdout" if output == "-" else f"wrote {output}"
+
+
 @cli.command("train-base")
 @click.argument("log")
 @output_option()
@@ -94,6 +103,7 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
       fricli train-base sample_data/joint2_base.parquet --arch selmic -o selmic.npz
       fricli train-base base.parquet --steps 5000 --batch-size 256 --seed 3 -o quick.npz --json
     """
+    _check_outputs(output, as_json)
     the_log = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
     options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
                "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,
@@ -114,9 +124,9 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
         f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
         f"of {the_log.name} in {seconds:.1f} s; weights from step {summary['best_step']} of {summary['steps']}", quiet)
     tau = the_log.units["tau"]
-    say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}, "
-        f"whole log {_mae(summary, 'log')}", quiet)
-    say(f"wrote {output}", quiet)
+    say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
+        f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+    say(_wrote(output), quiet)
     if as_json:
         emit_json({"model": output, "kind": arch, "seconds": round(seconds, 3), **summary})
 
@@ -157,6 +167,7 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
       fricli adapt nn_base.npz sample_data/joint2_adapt.parquet -o adapted.npz
       fricli adapt lugre.npz sample_data/joint2_adapt.parquet --max-seconds 40 -o lugre_adapted.npz
     """
+    _check_outputs(output, as_json)
     kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
     base_model, base_meta = models.load(base)
     table, digest = logs.read_table(log)
@@ -184,6 +195,6 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         f"({summary['train_rows']} training rows, {summary['val_rows']} validation) in {seconds:.1f} s", quiet)
     say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
         f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}", quiet)
-    say(f"wrote {output}", quiet)
+    say(_wrote(output), quiet)
     if as_json:
         emit_json({"model": output, "kind": "residual", "base": base, "seconds": round(seconds, 3), **summary})

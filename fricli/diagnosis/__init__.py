@@ -3,7 +3,8 @@
     effects.py    the library of candidate effects (regressor groups, physical parameters)
     terms.py      the regressor terms, reproducible on any log (also used by the augmented model)
     selection.py  blocked cross-validation over time, significance, forward selection
-    driver.py     the driver: residual -> ranked effects -> augmented model
+    driver.py     the driver: residual -> ranked effects (``diagnose``)
+    fix.py        the result -> the augmented model (``augment``), carried by a LuGre base where natural
 """
 
 from fricli.diagnosis.driver import Diagnosis, EffectResult, diagnose  # noqa: F401

@@ -1,4 +1,5 @@
-"""The diagnosis driver: residual of a model on a log -> ranked effects -> augmented model."""
+"""The diagnosis driver: residual of a model on a log -> ranked effects (``fix.augment`` turns
+the result into the augmented model)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from fricli import logs
 from fricli.diagnosis import effects as E
 from fricli.diagnosis import selection
 from fricli.diagnosis import terms as T
-from fricli.errors import DataError, FitError
+from fricli.errors import DataError, ModelFileError
 
 DEFAULT_FOLDS = 10
 DEFAULT_MIN_GAIN = 0.1
@@ -27,6 +28,7 @@ class EffectResult:
     added: bool
     summary: str
     terms: list[dict]
+    step_gain: float = 0.0         # share of what was left of it when scored (when added, or at the end)
 
 
 @dataclasses.dataclass
@@ -46,6 +48,7 @@ class Diagnosis:
     alpha: float
     skipped: dict[str, str]        # effects that do not apply to this log, with the reason
     tau_unit: str
+    alone: dict[str, float] = dataclasses.field(default_factory=dict)   # each candidate's gain on its own
 
     def to_json(self) -> dict:
         """The ``--json`` schema."""
@@ -69,7 +72,7 @@ def residual(model, log: logs.Log) -> tuple[np.ndarray, np.ndarray]:
     sig = log.signals
     pred = np.asarray(model.predict(sig)[0], dtype=np.float64)
     if pred.shape != sig["t"].shape or not np.isfinite(pred).all():
-        raise FitError("the model's prediction on this log is not finite")
+        raise ModelFileError(f"the model's prediction on {log.name} is not finite")
     return pred, logs.friction_target(sig) - pred
 
 
@@ -78,15 +81,17 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
              max_effects: int | None = None) -> Diagnosis:
     """Test the residual of ``model`` on ``log`` against the candidate effects.
 
-    folds: blocks of the blocked cross-validation over time; min_gain: share of the remaining
-    held-out squared residual an effect must remove to be added; alpha: significance level.
+    folds: contiguous folds of the blocked cross-validation over time; min_gain: share of the
+    remaining held-out squared residual an effect must remove to be added; alpha: significance
+    level; only: effect names to test (``column`` = every column effect); max_effects: stop
+    after adding this many.
     """
     n = len(log)
     if folds < 3:
-        raise DataError("--folds must be at least 3")
+        raise ValueError("folds must be at least 3")
     if n < folds * MIN_ROWS_PER_FOLD:
         raise DataError(f"too few rows to diagnose ({n}; need at least {folds * MIN_ROWS_PER_FOLD} "
-                        f"for {folds} blocks)")
+                        f"for {folds} folds)")
     sig = log.signals
     p, r = residual(model, log)
     ctx = E.Context(sig, p, log.axis, column_units(log.table))
@@ -136,20 +141,21 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
         own = {t: coef[t] for t in names}
         params = effect.params(own, ctx)
         results.append(EffectResult(step.name, True, step.gain, params, True, effect.summary(params),
-                                    [registry[t] for t in names]))
+                                    [registry[t] for t in names], step.step_gain))
     others = []
     for name, sc in sel.final.items():
         effect = by_name[name]
         names = sc.terms
         params = effect.params(_marginal_fit(design, sel.terms, names), ctx)
         others.append(EffectResult(name, sc.significant, sc.gain, params, False, effect.summary(params),
-                                   [registry[t] for t in names]))
+                                   [registry[t] for t in names], sc.step_gain))
     others.sort(key=lambda e: -e.gain)
     mae_before = float(np.mean(np.abs(r)))
     mae_after = float(np.mean(np.abs(r - design.heldout_prediction(sel.terms)))) if sel.terms else mae_before
     return Diagnosis(effects=results + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
                      terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
-                     folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit)
+                     folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
+                     alone={name: sc.gain for name, sc in sel.first.items()})
 
 
 def _marginal_fit(design: selection.Design, chosen: list[str], names: list[str]) -> dict[str, float]:

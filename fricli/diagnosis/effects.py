@@ -81,7 +81,9 @@ def equivalent_levels(y: np.ndarray, qd: np.ndarray) -> dict[str, float]:
 
 
 def _par(value: float, unit: str) -> dict:
-    return {"value": float(value), "unit": unit}
+    """A parameter for the report; a value the log cannot determine is None (JSON null)."""
+    value = float(value)
+    return {"value": value if np.isfinite(value) else None, "unit": unit}
 
 
 # ---------------------------------------------------------------------------- effects
@@ -110,7 +112,9 @@ class Effect:
         return ", ".join(f"{k} {_fmt(v['value'])} {v['unit']}".rstrip() for k, v in params.items())
 
 
-def _fmt(x: float) -> str:
+def _fmt(x: float | None) -> str:
+    if x is None:
+        return "n/a"
     if x == 0 or not np.isfinite(x):
         return f"{x:g}"
     digits = max(0, 3 - int(np.floor(np.log10(abs(x)))))
@@ -149,9 +153,8 @@ class Level(Effect):
                 "Fv": _par((1.0 + bp) * lv["Fv"] + bv, ctx.fv_unit)}
 
     def summary(self, params):
-        s = params["scale"]["value"]
         return (f"Fc {_fmt(params['Fc']['value'])} {params['Fc']['unit']}, Fv {_fmt(params['Fv']['value'])} "
-                f"{params['Fv']['unit']} (model x{s:.3f})")
+                f"{params['Fv']['unit']} (model x{_fmt(params['scale']['value'])})")
 
 
 class Direction(Effect):
@@ -183,7 +186,6 @@ class _ScaledBy(Effect):
     signal = ""
     rivals = (("level",),)
     per = 1.0          # report slopes per this many units of the signal
-    per_unit = ""
 
     def center(self, ctx) -> float:
         return float(np.mean(ctx.signals[self.signal]))

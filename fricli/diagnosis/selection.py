@@ -23,10 +23,8 @@ import dataclasses
 import numpy as np
 from scipy import stats
 
-RIDGE = 1e-10       # relative to n: keeps exactly collinear sets solvable, far below any signal
-
-
-BLOCKS_PER_FOLD = 10
+RIDGE = 1e-10            # relative to n: keeps exactly collinear sets solvable, far below any signal
+BLOCKS_PER_FOLD = 10     # blocks per fold for the significance test
 MIN_BLOCK_ROWS = 20
 
 
@@ -234,6 +232,7 @@ class Selection:
     added: list[str]
     steps: list[Score]                       # the chosen candidate's score at each step
     final: dict[str, Score]                  # every candidate not added, scored against the final set
+    first: dict[str, Score]                  # every candidate scored alone on the model's residual
     terms: list[str]                         # term names of the chosen effects, in order
     sse0: float
     sse_final: float
@@ -271,6 +270,7 @@ def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float 
     chosen: list[str] = []
     chosen_terms: list[str] = []
     steps: list[Score] = []
+    first: dict[str, Score] = {}
     sse0 = float(design.sse([]).sum())
     while True:
         residual = design.r - design.fitted(chosen_terms)
@@ -279,10 +279,12 @@ def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float 
         sse_base = design.sse(chosen_terms)
         scores = {c.name: score(design, c, chosen_terms, sse_base, sse0, term_of, alpha, min_gain)
                   for c in cands if c.name not in chosen}
+        if not chosen:
+            first = dict(scores)
         limit = max_effects is not None and len(chosen) >= max_effects
         eligible = sorted((s for s in scores.values() if s.eligible), key=lambda s: -s.gain)
         if not eligible or limit:
-            return Selection(chosen, steps, scores, chosen_terms, sse0, float(sse_base.sum()))
+            return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
         best = eligible[0]
         for other in eligible[1:]:
             if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],

@@ -159,7 +159,8 @@ def check(term: dict) -> None:
 
 
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "sat": ("scale",), "sin": ("name", "w"), "cos": ("name", "w")}
+          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "sat": ("scale",),
+          "sin": ("name", "w"), "cos": ("name", "w")}
 
 
 def term(name: str, *factors: dict) -> dict:

@@ -197,7 +197,8 @@ class Trainer:
             if self.on_eval:
                 self.on_eval(step, total, train_loss, val_loss)
 
-        with single_threaded():
+        # overflow shows up as a non-finite loss, which stops training with a FitError
+        with single_threaded(), np.errstate(over="ignore", invalid="ignore"):
             if mini:
                 self._mini_batch(net, opt, x, t, batch, per_epoch, total, every, rng, record)
             else:

@@ -87,6 +87,9 @@ class Effect:
         raise NotImplementedError
 
 
+RIPPLE_PHASES = {2: (0.7, 2.1), 4: (1.9, 0.4)}  # [rad] of the fundamental and second harmonic
+
+
 class Ripple(Effect):
     name, unit = "ripple", "Nm"
     help = "position-periodic torque (gear ripple) of this amplitude, with a second harmonic"
@@ -95,7 +98,7 @@ class Ripple(Effect):
         return 1.0 if j.number == 2 else 0.6
 
     def apply(self, scene, strength, rng):
-        ph = rng.uniform(0, 2 * np.pi, 2)
+        ph = RIPPLE_PHASES[scene.joint.number]  # a gear's ripple is tied to its position, not to a run
         w = 2 * np.pi / RIPPLE_PERIOD
         scene.extra += strength * (np.sin(w * scene.q + ph[0]) + RIPPLE_SECOND * np.sin(2 * w * scene.q + ph[1]))
         return {"amplitude": strength, "period": RIPPLE_PERIOD, "second_harmonic": RIPPLE_SECOND,

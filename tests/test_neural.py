@@ -1,0 +1,335 @@
+"""Neural friction models, train-base and adapt, on synthetic logs (and the sample/real data when present)."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import SAMPLE, shared_data, write
+from fricli import learning, logs, metrics, models, training_data
+from fricli.cli import cli
+from fricli.logs import table_from_arrays
+from fricli.models.neural import MLPFriction, NNACMFriction, SelmicFriction, feature
+from fricli.models.residual import ResidualFriction
+
+UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_f_true": "Nm"}
+LEVELS = (0.02, 0.05, 0.1, 0.2, 0.4)
+
+
+def static_friction(v, g, shift=None):
+    """Load-dependent Stribeck + viscous friction; ``shift`` adds a (tau_g, direction) term."""
+    fc, fs = 5 + 0.04 * np.abs(g), 7 + 0.05 * np.abs(g)
+    f = np.sign(v) * (fc + (fs - fc) * np.exp(-np.abs(v / 0.04))) + 10 * v
+    if shift:
+        f = f + np.where(v > 0, 1.5 + 0.04 * g, -0.5 + 0.03 * g) * (v != 0)
+    return f
+
+
+def motion_log(levels, seed=0, rate=50.0, seconds=6.0, shift=False, rest=0.4, noise=0.2):
+    """Constant-velocity stretches at each level, out and back, with rests between."""
+    rng = np.random.default_rng(seed)
+    pieces = []
+    for v in levels:
+        for d in (1, -1):
+            pieces += [np.zeros(int(rest * rate)), np.full(int(seconds * rate), d * v)]
+    qd = np.concatenate(pieces + [np.zeros(int(rest * rate))])
+    t = np.arange(qd.size) / rate
+    q = np.cumsum(qd) / rate + rng.uniform(-1, 1)
+    g = 30 * np.sin(2 * q + 0.3)
+    f = static_friction(qd, g, shift)
+    tau_m = g + f + rng.normal(0, noise, qd.size)
+    cols = {"t": t, "q": q, "qd": qd, "qdd": np.zeros_like(t), "tau_m": tau_m, "tau_g": g, "tau_f_true": f}
+    return table_from_arrays(cols, UNITS)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("logs")
+    return {
+        "base": write(motion_log(LEVELS, seed=1), d / "base.parquet"),
+        "base2": write(motion_log(LEVELS, seed=2), d / "base2.parquet"),
+        "adapt": write(motion_log((0.1,), seed=3, seconds=20, shift=True), d / "adapt.parquet"),
+        "shifted": write(motion_log(LEVELS, seed=4, shift=True), d / "shifted.parquet"),
+        "dir": d,
+    }
+
+
+def run(*args):
+    result = CliRunner().invoke(cli, [str(a) for a in args])
+    return result
+
+
+def load(path):
+    return logs.load_log(str(path))
+
+
+def mae(model, path):
+    sig = load(path).signals
+    return metrics.errors(logs.friction_target(sig), model.predict(sig)[0])["mae"]
+
+
+# ---------------------------------------------------------------------------- row selection
+
+
+def test_velocity_levels_are_found_and_balanced(rng):
+    qd = np.concatenate([np.full(n, v) for v, n in ((0.01, 5000), (-0.01, 5000), (0.3, 200), (-0.3, 150), (0, 400))]
+                        + [np.linspace(0.3, -0.3, 30)])
+    labels, mode = training_data.velocity_groups(qd)
+    assert mode == "levels"
+    assert len(np.unique(labels[labels >= 0])) == 5
+    assert (labels[-30:] == -1).mean() > 0.8             # the ramp belongs to no level (but where it crosses one)
+    rows = training_data.balanced(np.arange(qd.size), labels, 600, rng)
+    counts = np.bincount(labels[rows])
+    assert counts.sum() <= 600
+    assert sorted(counts) == [120, 120, 120, 120, 120]
+
+
+def test_continuous_velocities_use_bins(rng):
+    qd = 0.5 * np.sin(np.linspace(0, 40, 20000))
+    labels, mode = training_data.velocity_groups(qd)
+    assert mode == "bins" and (labels >= 0).all() and labels.max() == training_data.CONTINUOUS_BINS - 1
+
+
+def test_validation_rows_are_whole_pieces_of_every_run(rng):
+    qd = np.concatenate([np.full(1000, v) for v in (0.05, -0.05, 0.2, -0.2)])
+    sel = training_data.select(qd, val_fraction=0.2, max_samples=None, rng=rng)
+    val = np.zeros(qd.size, bool)
+    val[sel.val] = True
+    assert val.sum() == 800
+    for start in range(0, 4000, 1000):                    # each run: two contiguous pieces of 100 rows
+        run_val = val[start:start + 1000]
+        assert run_val.sum() == 200
+        assert np.count_nonzero(np.diff(run_val.astype(int)) == 1) + run_val[0] <= 2
+    assert np.intersect1d(sel.train, sel.val).size == 0
+
+
+def test_no_motion_is_a_data_error(files, tmp_path):
+    table = table_from_arrays({"t": np.arange(100.0), "qd": np.zeros(100), "tau_m": np.ones(100)},
+                              {"t": "s", "qd": "rad/s", "tau_m": "Nm"})
+    result = run("train-base", write(table, tmp_path / "still.parquet"), "-o", tmp_path / "m.npz", "--steps", 5)
+    assert result.exit_code == 6
+    assert "no motion" in result.stderr and not (tmp_path / "m.npz").exists()
+
+
+# ---------------------------------------------------------------------------- models
+
+
+def test_features():
+    sig = {"t": np.arange(4.0), "qd": np.array([-0.2, 0.0, 0.1, 0.3])}
+    np.testing.assert_array_equal(feature(sig, "sign(qd)"), [-1, 0, 1, 1])
+    np.testing.assert_array_equal(feature(sig, "pos(qd)"), [0, 0.5, 1, 1])
+    np.testing.assert_array_equal(feature(sig, "neg(qd)"), [1, 0.5, 0, 0])
+    np.testing.assert_array_equal(feature(sig, "tau_g", 1, 3), [0, 0])   # absent gravity torque is zero
+
+
+@pytest.mark.parametrize("cls", [MLPFriction, SelmicFriction, NNACMFriction])
+def test_each_kind_learns_and_round_trips(cls, files, tmp_path):
+    log = load(files["base"])
+    model, summary = learning.train_base(log, arch=cls.kind, steps=1500, seed=0)
+    assert isinstance(model, cls)
+    target = logs.friction_target(log.signals)
+    assert summary["train"]["mae"] < 0.25 * np.mean(np.abs(target))
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, log, rows_used=summary["train_rows"], seed=0, fit=summary)
+    loaded, meta = models.load(path)
+    assert meta["kind"] == cls.kind and meta["inputs"] == ["qd", "tau_g"]
+    np.testing.assert_array_equal(loaded.predict(log.signals)[0], model.predict(log.signals)[0])
+    assert loaded.history_train_.size > 0 and loaded.history_val_.size > 0
+    assert cls.kind in loaded.describe()
+
+
+def test_nnacm_betas_are_the_direction_terms(files):
+    model, _ = learning.train_base(load(files["base"]), arch="nnacm", steps=300, seed=0)
+    b1, b2 = model.betas()
+    assert f"beta1 {b1:.4g} Nm, beta2 {b2:.4g} Nm" in model.describe()
+    sig = {"qd": np.array([0.1, 0.1, -0.1]), "tau_g": np.zeros(3)}
+    zero = model.predict(sig)[0]
+    w = model.net_.weights[-1]
+    w[0, -2:] = 0                                       # switch the direction terms off
+    np.testing.assert_allclose(zero - model.predict(sig)[0], [b1, b1, b2], rtol=1e-4, atol=1e-4)
+
+
+def test_selmic_layer_has_sigmoid_and_jump_units():
+    model = SelmicFriction()
+    net = model.new_network()
+    (units, act), = net.hidden
+    assert units == 30
+    assert [(n, type(a).__name__) for n, a in act.parts] == [(20, "Sigmoid"), (10, "Jump")]
+    assert list(act.parts[1][1].ks) == list(range(1, 11))
+
+
+def test_predict_is_chunked_and_threaded_consistently(files):
+    log = load(files["base"])
+    model, _ = learning.train_base(log, steps=100, seed=0)
+    rng = np.random.default_rng(0)
+    n = 200_000
+    sig = {"t": np.arange(n) * 1e-3, "qd": rng.uniform(-0.4, 0.4, n), "tau_g": rng.uniform(-30, 30, n)}
+    whole = model.predict(sig)[0]
+    part = model.predict({k: v[12345:23456] for k, v in sig.items()})[0]
+    np.testing.assert_allclose(part, whole[12345:23456], rtol=1e-6, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------- train-base CLI
+
+
+def test_train_base_cli(files, tmp_path):
+    out = tmp_path / "nn.npz"
+    result = run("train-base", files["base"], "-o", out, "--steps", 400, "--hidden", "12,12", "--seed", 1)
+    assert result.exit_code == 0, result.stderr
+    assert result.stdout == ""
+    assert "friction MAE [Nm]: training" in result.stderr and "validation" in result.stderr
+    model, meta = models.load(str(out))
+    assert meta["kind"] == "mlp" and meta["provenance"]["seed"] == 1
+    assert meta["provenance"]["options"]["hidden"] == [12, 12]
+    assert [n for n, _ in model.hidden] == [12, 12]
+    assert meta["fit"]["val"]["n"] > 0
+
+
+def test_train_base_json(files, tmp_path):
+    result = run("train-base", files["base"], "-o", tmp_path / "nn.npz", "--steps", 50, "--json", "-q",
+                 "--arch", "selmic", "--batch-size", 64)
+    assert result.exit_code == 0, result.stderr
+    assert result.stderr == ""
+    out = json.loads(result.stdout)
+    assert out["kind"] == "selmic" and out["steps"] == 50 and out["velocity_groups"] == "levels"
+    assert set(out["train"]) == {"mae", "rmse", "max", "n"}
+
+
+def test_same_seed_same_bytes(files, tmp_path):
+    paths = [tmp_path / f"{name}.npz" for name in ("a", "b", "c")]
+    for path, seed in zip(paths, (5, 5, 6)):
+        result = run("train-base", files["base"], "-o", path, "--steps", 120, "--seed", seed, "-q")
+        assert result.exit_code == 0, result.stderr
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    assert paths[0].read_bytes() != paths[2].read_bytes()
+
+
+def test_divergence_leaves_the_previous_model(files, tmp_path):
+    out = tmp_path / "nn.npz"
+    assert run("train-base", files["base"], "-o", out, "--steps", 20, "-q").exit_code == 0
+    before = out.read_bytes()
+    result = run("train-base", files["base"], "-o", out, "--steps", 300, "--lr", "1e30", "-q")
+    assert result.exit_code == 5
+    assert "not finite" in result.stderr and "Traceback" not in result.stderr
+    assert out.read_bytes() == before
+
+
+def test_bad_hidden_is_a_usage_error(files, tmp_path):
+    result = run("train-base", files["base"], "-o", tmp_path / "m.npz", "--hidden", "30,x")
+    assert result.exit_code == 2 and "layer sizes" in result.stderr
+
+
+# ---------------------------------------------------------------------------- adapt
+
+
+@pytest.fixture(scope="module")
+def base_model(files):
+    path = files["dir"] / "nn_base.npz"
+    assert run("train-base", files["base"], "-o", path, "--steps", 1500, "-q").exit_code == 0
+    return path
+
+
+def test_adapt_learns_the_residual(files, base_model, tmp_path):
+    out = tmp_path / "adapted.npz"
+    result = run("adapt", base_model, files["adapt"], "-o", out, "--epochs", 60)
+    assert result.exit_code == 0, result.stderr
+    assert "base" in result.stderr and "adapted" in result.stderr
+    adapted, meta = models.load(str(out))
+    base, _ = models.load(str(base_model))
+    assert meta["kind"] == "residual" and meta["model"]["children"]["base"]["kind"] == "mlp"
+    assert meta["provenance"]["base"]["kind"] == "mlp"
+    assert isinstance(adapted, ResidualFriction)
+    # the adapted model beats its base on new logs with the same shift, at every velocity level
+    assert mae(adapted, files["shifted"]) < 0.5 * mae(base, files["shifted"])
+    sig = load(files["shifted"]).signals
+    np.testing.assert_allclose(adapted.predict(sig)[0], base.predict(sig)[0] + adapted.add.predict(sig)[0])
+    assert adapted.add.inputs == ("tau_g", "sign(qd)")
+    assert adapted.add.history_train_.size == 60
+
+
+def test_adapt_a_lugre_base(files, tmp_path):
+    lugre = pytest.importorskip("fricli.models.lugre")
+    log = load(files["base"])
+    model = lugre.LuGreModel(fc=5, fs=7, vs=0.04, delta=1.0, fv=10, kc=0.04, ks=0.05, sigma0=1e4, sigma1=5)
+    path = tmp_path / "lugre.npz"
+    models.save_for_log(str(path), model, log, rows_used=len(log))
+    out = tmp_path / "adapted.npz"
+    result = run("adapt", path, files["adapt"], "-o", out, "--epochs", 60, "--json", "-q")
+    assert result.exit_code == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["moving"]["mae"] < 0.5 * summary["base_moving"]["mae"]
+    adapted, meta = models.load(str(out))
+    assert meta["model"]["children"]["base"]["kind"] == "lugre"
+    assert mae(adapted, files["shifted"]) < mae(model, files["shifted"])
+
+
+def test_adapt_an_adapted_model(files, base_model, tmp_path):
+    once, twice = tmp_path / "once.npz", tmp_path / "twice.npz"
+    assert run("adapt", base_model, files["adapt"], "-o", once, "--epochs", 5, "-q").exit_code == 0
+    assert run("adapt", once, files["adapt"], "-o", twice, "--epochs", 5, "-q").exit_code == 0
+    model, meta = models.load(str(twice))
+    assert meta["model"]["children"]["base"]["kind"] == "residual"
+    assert model.predict(load(files["adapt"]).signals)[0].shape == (len(load(files["adapt"])),)
+
+
+def test_adapt_max_seconds_uses_the_start_of_the_log(files, base_model, tmp_path):
+    result = run("adapt", base_model, files["adapt"], "-o", tmp_path / "a.npz", "--max-seconds", 30,
+                 "--epochs", 3, "--json", "-q")
+    assert result.exit_code == 0, result.stderr
+    summary = json.loads(result.stdout)
+    rate = 50.0
+    assert summary["rows_used"] == int(30 * rate) + 1
+    assert summary["seconds_used"] == pytest.approx(30.0)
+
+
+def test_adapt_needs_both_directions(files, base_model, tmp_path):
+    # the adapt log's first 20 s (after 0.4 s of rest) move in the positive direction only
+    result = run("adapt", base_model, files["adapt"], "-o", tmp_path / "a.npz", "--max-seconds", 15)
+    assert result.exit_code == 6
+    assert "only in the positive direction" in result.stderr
+
+
+def test_adapt_leaves_rest_out(files, base_model):
+    model, _ = models.load(str(base_model))
+    log = load(files["adapt"])
+    _, summary = learning.adapt(model, log, epochs=2)
+    moving = int(np.count_nonzero(np.abs(log.signals["qd"]) >= summary["min_speed"]))
+    assert summary["train_rows"] + summary["val_rows"] == moving < len(log)
+
+
+def test_adapt_refuses_a_log_in_other_units(files, base_model, tmp_path):
+    table = motion_log((0.1,), seconds=5)
+    units = dict(UNITS, q="m", qd="m/s", qdd="m/s^2", tau_m="N", tau_g="N", tau_f_true="N")
+    linear = table_from_arrays({name: table.column(name).to_numpy() for name in table.column_names}, units)
+    result = run("adapt", base_model, write(linear, tmp_path / "lin.parquet"), "-o", tmp_path / "a.npz")
+    assert result.exit_code == 4 and "fitted in rad" in result.stderr
+
+
+# ---------------------------------------------------------------------------- real and sample data
+
+
+def test_train_base_on_emps(tmp_path):
+    path = shared_data("emps/emps.parquet")
+    result = run("train-base", path, "-o", tmp_path / "emps.npz", "--steps", 300, "--json", "-q")
+    assert result.exit_code == 0, result.stderr
+    out = json.loads(result.stdout)
+    model, meta = models.load(str(tmp_path / "emps.npz"))
+    assert meta["axis"] == "linear" and meta["units"]["tau"] == "N"
+    assert out["velocity_groups"] in ("levels", "bins")
+    # far better than predicting no friction at all
+    sig = load(path).signals
+    target = logs.friction_target(sig)
+    assert out["log"]["mae"] < 0.5 * np.mean(np.abs(target))
+
+
+@pytest.mark.slow
+def test_sample_data_adapted_beats_base():
+    for name in ("joint2_base", "joint2_adapt", "joint2_extended_asym"):
+        if not (SAMPLE / f"{name}.parquet").exists():
+            pytest.skip("sample data absent")
+    base_log = load(SAMPLE / "joint2_base.parquet")
+    model, _ = learning.train_base(base_log, steps=5000, seed=0)
+    adapted, _ = learning.adapt(model, load(SAMPLE / "joint2_adapt.parquet"), seed=0)
+    ext = SAMPLE / "joint2_extended_asym.parquet"
+    assert mae(adapted, ext) < 0.5 * mae(model, ext)

@@ -1,0 +1,302 @@
+"""The numpy network core: activations, layers, Adam, training loops."""
+
+import numpy as np
+import pytest
+
+from fricli.errors import FitError
+from fricli.nn import activations as acts
+from fricli.nn.adam import Adam
+from fricli.nn.network import Network
+from fricli.nn.training import CHUNK_MIN, Standardizer, Trainer, _sse_and_grad, sse
+
+
+def finite_difference(f, x, eps=1e-6):
+    return (f(x + eps) - f(x - eps)) / (2 * eps)
+
+
+# ---------------------------------------------------------------------------- activations
+
+PAIRS = [
+    ("elu", acts.elu, acts.elu_grad),
+    ("sigmoid", acts.sigmoid, acts.sigmoid_grad),
+    ("identity", acts.identity, acts.identity_grad),
+] + [(f"jump{k}", lambda x, k=k: acts.jump(x, k), lambda x, k=k: acts.jump_grad(x, k)) for k in range(1, 11)]
+
+
+@pytest.mark.parametrize("name,f,grad", PAIRS, ids=[p[0] for p in PAIRS])
+def test_activation_gradient_matches_finite_differences(name, f, grad):
+    x = np.concatenate([np.linspace(-6, -0.01, 40), np.linspace(0.01, 6, 40)])  # away from the kink at 0
+    np.testing.assert_allclose(grad(x), finite_difference(f, x), rtol=1e-5, atol=1e-7)
+
+
+def test_elu_values_and_no_overflow():
+    x = np.array([-1e4, -50.0, -1.0, 0.0, 2.0, 1e4, 3e38], dtype=np.float32)
+    with np.errstate(over="raise", invalid="raise", divide="raise"):
+        y, d = acts.elu(x), acts.elu_grad(x)
+    np.testing.assert_allclose(y[:5], [-1.0, np.expm1(-50.0), np.expm1(-1.0), 0.0, 2.0], rtol=1e-6)
+    assert y[-1] == np.float32(3e38) and (d[4:] == 1).all()
+    h = x[None, :].copy()
+    a, dd = np.empty_like(h), np.empty_like(h)
+    with np.errstate(over="raise", invalid="raise", divide="raise"):
+        acts.ELU().forward(h, a, dd)
+    np.testing.assert_array_equal(a[0], y)
+    np.testing.assert_array_equal(dd[0], d)
+
+
+def test_sigmoid_saturates_without_warnings():
+    x = np.array([-1e4, 0.0, 1e4], dtype=np.float32)
+    with np.errstate(over="raise", invalid="raise", divide="raise"):
+        y = acts.sigmoid(x)
+    np.testing.assert_allclose(y, [0.0, 0.5, 1.0], atol=1e-12)
+
+
+def test_jump_is_zero_left_of_zero_and_one_far_right():
+    x = np.array([-3.0, -1e-9, 0.0, 50.0])
+    for k in (1, 4, 10):
+        np.testing.assert_allclose(acts.jump(x, k), [0, 0, 0, 1], atol=1e-12)
+        assert acts.jump_grad(x, k)[0] == 0
+    assert acts.jump_grad(np.array([0.0]), 1)[0] == 1.0  # right derivative at 0 for k = 1
+
+
+@pytest.mark.parametrize("spec", ["elu", "sigmoid", "identity", {"name": "jump", "k": [1, 2, 3, 7]},
+                                  {"name": "mixed", "parts": [[2, "sigmoid"], [2, {"name": "jump", "k": [1, 5]}]]}])
+def test_fused_forms_match_plain_pairs(spec, rng):
+    act = acts.from_spec(spec)
+    h = rng.normal(0, 2, (4, 50)).astype(np.float32)
+    a, d = np.empty_like(h), np.empty_like(h)
+    act.forward(h, a, d)
+    x = h.astype(np.float64)
+    name = spec if isinstance(spec, str) else spec["name"]
+    if name == "jump":
+        k = np.array(spec["k"])[:, None]
+        want, want_d = acts.jump(x, k), acts.jump_grad(x, k)
+    elif name == "mixed":
+        want = np.vstack([acts.sigmoid(x[:2]), acts.jump(x[2:], np.array([[1], [5]]))])
+        want_d = np.vstack([acts.sigmoid_grad(x[:2]), acts.jump_grad(x[2:], np.array([[1], [5]]))])
+    else:
+        want, want_d = getattr(acts, name)(x), getattr(acts, f"{name}_grad")(x)
+    np.testing.assert_allclose(a, want, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(d, want_d, rtol=1e-5, atol=1e-6)
+    assert acts.from_spec(act.spec()).spec() == act.spec()
+
+
+def test_unknown_activation_refused():
+    with pytest.raises(ValueError):
+        acts.from_spec("relu6")
+    with pytest.raises(ValueError):
+        acts.Jump([0, 1])
+
+
+# ---------------------------------------------------------------------------- network
+
+
+def networks():
+    yield "elu-2x", Network(2, [(5, acts.ELU()), (4, acts.ELU())], dtype=np.float64)
+    yield "selmic", Network(2, [(6, acts.Mixed([(3, acts.Sigmoid()), (3, acts.Jump([1, 2, 3]))]))], dtype=np.float64)
+    yield "skip", Network(2, [(5, acts.Sigmoid())], n_skip=2, dtype=np.float64)
+    yield "two-outputs", Network(3, [(4, acts.ELU())], n_out=2, dtype=np.float64)
+    yield "linear", Network(2, [], dtype=np.float64)
+
+
+@pytest.mark.parametrize("name,net", list(networks()), ids=[n for n, _ in networks()])
+def test_network_gradient_matches_finite_differences(name, net, rng):
+    net.init(rng)
+    n = 17
+    x = rng.normal(size=(net.n_in + net.n_skip, n))
+    if net.n_skip:
+        x[net.n_in:] = rng.integers(0, 2, size=(net.n_skip, n))
+    t = rng.normal(size=(net.n_out, n))
+    ws = net.workspace(n)
+    ws.set_inputs(x)
+    grad = np.empty_like(net.theta)
+    scale = 2.0 / (n * net.n_out)
+    _sse_and_grad(net, ws, t, grad, scale)
+
+    def loss(theta):
+        saved = net.theta.copy()
+        net.theta[:] = theta
+        value = sse(net, x, t) / (n * net.n_out)
+        net.theta[:] = saved
+        return value
+
+    eps = 1e-6
+    numeric = np.empty_like(grad)
+    for i in range(net.n_params):
+        e = np.zeros_like(net.theta)
+        e[i] = eps
+        numeric[i] = (loss(net.theta + e) - loss(net.theta - e)) / (2 * eps)
+    np.testing.assert_allclose(grad, numeric, rtol=1e-4, atol=1e-8)
+
+
+def test_bias_is_folded_into_the_last_column(rng):
+    net = Network(2, [(3, acts.Identity())]).init(rng)
+    x = rng.normal(size=(2, 5)).astype(np.float32)
+    w0, w1 = net.weights
+    want = w1[:, :3] @ (w0[:, :2] @ x + w0[:, 2:]) + w1[:, 3:]
+    np.testing.assert_allclose(net.predict(x), want, rtol=1e-5, atol=1e-6)
+
+
+def test_weights_are_views_of_theta(rng):
+    net = Network(2, [(4, acts.ELU())]).init(rng)
+    net.theta[:] = 0
+    assert all((w == 0).all() for w in net.weights)
+    assert net.n_params == 4 * 3 + 1 * 5
+
+
+def test_predict_in_chunks_matches_one_pass(rng):
+    net = Network(2, [(8, acts.ELU()), (8, acts.ELU())]).init(rng)
+    x = rng.normal(size=(2, 1000)).astype(np.float32)
+    np.testing.assert_allclose(net.predict(x, chunk=97), net.predict(x, chunk=1000), rtol=1e-6, atol=1e-6)
+
+
+def test_spec_round_trip(rng):
+    net = Network(2, [(6, acts.Mixed([(3, acts.Sigmoid()), (3, acts.Jump([1, 2, 3]))]))], n_skip=2).init(rng)
+    copy = Network.from_spec(net.spec(), [w.copy() for w in net.weights])
+    x = rng.normal(size=(4, 30)).astype(np.float32)
+    np.testing.assert_array_equal(copy.predict(x), net.predict(x))
+    with pytest.raises(ValueError, match="shape"):
+        copy.set_weights([np.zeros((2, 2))] * 2)
+    with pytest.raises(ValueError, match="non-finite"):
+        copy.set_weights([np.full(s, np.nan) for s in copy.shapes])
+
+
+# ---------------------------------------------------------------------------- Adam
+
+
+def test_adam_matches_the_reference_update(rng):
+    theta = rng.normal(size=7)
+    ref = theta.copy()
+    m, v = np.zeros(7), np.zeros(7)
+    lr, b1, b2, eps = 0.01, 0.9, 0.999, 1e-8
+    opt = Adam(7, lr=lr, beta1=b1, beta2=b2, eps=eps, dtype=np.float64)
+    for t in range(1, 6):
+        g = rng.normal(size=7)
+        opt.step(theta, g)
+        m = b1 * m + (1 - b1) * g
+        v = b2 * v + (1 - b2) * g * g
+        mhat, vhat = m / (1 - b1 ** t), v / (1 - b2 ** t)
+        ref = ref - lr * mhat / (np.sqrt(vhat) + eps)
+        np.testing.assert_allclose(theta, ref, rtol=1e-12, atol=1e-14)
+    assert opt.t == 5
+
+
+def test_adam_first_step_moves_every_parameter_by_lr():
+    theta = np.zeros(3, dtype=np.float32)
+    Adam(3, lr=0.01).step(theta, np.array([2.0, -1e-3, 5.0], dtype=np.float32))
+    np.testing.assert_allclose(theta, [-0.01, 0.01, -0.01], rtol=1e-4)
+
+
+def test_adam_state_round_trip(rng):
+    theta = rng.normal(size=5).astype(np.float32)
+    opt = Adam(5, lr=0.05)
+    grads = rng.normal(size=(6, 5)).astype(np.float32)
+    for g in grads[:3]:
+        opt.step(theta, g)
+    resumed_theta = theta.copy()
+    resumed = Adam.from_state(opt.state())
+    for g in grads[3:]:
+        opt.step(theta, g)
+        resumed.step(resumed_theta, g)
+    np.testing.assert_array_equal(theta, resumed_theta)
+    assert resumed.state()["t"] == 6
+
+
+def test_adam_refuses_bad_hyperparameters():
+    with pytest.raises(ValueError):
+        Adam(3, lr=0)
+    with pytest.raises(ValueError):
+        Adam(3, beta1=1.0)
+
+
+# ---------------------------------------------------------------------------- training
+
+
+def toy(rng, n):
+    x = rng.uniform(-2, 2, size=(2, n))
+    t = (np.sin(2 * x[0]) + 0.5 * x[1])[None, :]
+    return x.astype(np.float32), t.astype(np.float32)
+
+
+def small_net(rng):
+    return Network(2, [(16, acts.ELU()), (16, acts.ELU())]).init(rng)
+
+
+def test_full_batch_training_fits_a_smooth_function(rng):
+    x, t = toy(rng, 400)
+    net = small_net(rng)
+    before = sse(net, x, t) / 400
+    tr = Trainer(steps=1500, lr=0.01).fit(net, x, t, rng=rng)
+    after = sse(net, x, t) / 400
+    assert after < 0.02 * before
+    assert tr.history_train_.size == tr.steps_ // tr.eval_every_ and tr.history_val_.size == 0
+
+
+def test_best_weights_by_validation_loss_are_kept(rng):
+    x, t = toy(rng, 300)
+    xv, tv = toy(rng, 100)
+    net = small_net(rng)
+    tr = Trainer(steps=600, lr=0.05, eval_every=10).fit(net, x, t, xv, tv, rng=rng)
+    best = int(np.argmin(tr.history_val_))
+    assert tr.best_step_ == (best + 1) * 10
+    assert sse(net, xv, tv) / 100 == pytest.approx(tr.history_val_.min(), rel=1e-6)
+
+
+def test_mini_batch_epochs(rng):
+    x, t = toy(rng, 250)
+    net = small_net(rng)
+    tr = Trainer(epochs=7, batch_size=32, lr=0.01).fit(net, x, t, rng=rng)
+    assert tr.steps_ == 7 * (250 // 32)
+    assert tr.history_train_.size == 7            # one record per epoch
+    assert sse(net, x, t) / 250 < np.var(t)
+
+
+@pytest.mark.parametrize("batch_size", [0, 64])
+def test_training_is_deterministic(batch_size):
+    results = []
+    for _ in range(2):
+        rng = np.random.default_rng(7)
+        x, t = toy(rng, 300)
+        net = small_net(rng)
+        tr = Trainer(steps=200, batch_size=batch_size).fit(net, x, t, x[:, :50], t[:, :50], rng=rng)
+        results.append((net.theta.tobytes(), tr.history_train_.tobytes(), tr.history_val_.tobytes()))
+    assert results[0] == results[1]
+
+
+def test_two_thread_full_batch_matches_one_chunk(rng):
+    n = CHUNK_MIN + 100
+    x, t = toy(rng, n)
+    nets = [small_net(np.random.default_rng(3)) for _ in range(2)]
+    Trainer(steps=5).fit(nets[0], x, t, rng=rng)
+    # the same steps on one chunk: gradients over two halves added
+    net = nets[1]
+    opt = Adam(net.n_params, lr=0.01)
+    for _ in range(5):
+        grad = np.zeros_like(net.theta)
+        for part in (slice(0, n // 2), slice(n // 2, n)):
+            ws = net.workspace(x[:, part].shape[1])
+            ws.set_inputs(x[:, part])
+            g = np.empty_like(net.theta)
+            _sse_and_grad(net, ws, t[:, part], g, 2.0 / n)
+            grad += g
+        opt.step(net.theta, grad)
+    np.testing.assert_allclose(nets[0].theta, nets[1].theta, rtol=1e-4, atol=1e-5)
+
+
+def test_divergence_raises_fit_error(rng):
+    x, t = toy(rng, 200)
+    net = small_net(rng)
+    with pytest.raises(FitError, match="not finite"):
+        Trainer(steps=300, lr=1e30).fit(net, x, t * 1e30, rng=rng)
+
+
+def test_standardizer(rng):
+    x = np.vstack([rng.normal(5, 3, 1000), np.full(1000, 2.0), rng.integers(0, 2, 1000)])
+    s = Standardizer(keep=(2,)).fit(x)
+    z = s.transform(x)
+    assert z.dtype == np.float32
+    np.testing.assert_allclose(z[0].mean(), 0, atol=1e-5)
+    np.testing.assert_allclose(z[0].std(), 1, atol=1e-4)
+    assert s.scale_[1] == 1.0 and s.mean_[2] == 0.0 and s.scale_[2] == 1.0
+    np.testing.assert_allclose(s.inverse(z), x, atol=1e-5)
+    with pytest.raises(ValueError):
+        Standardizer.from_arrays(np.zeros(2), np.array([1.0, 0.0]))
