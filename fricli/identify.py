@@ -33,6 +33,7 @@ from scipy.ndimage import maximum_filter1d, minimum_filter1d
 from fricli import logs, metrics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
+from fricli.nn.blas import single_threaded
 
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
@@ -317,7 +318,15 @@ class LuGreIdentifier:
     # --------------------------------------------------------------------- fit
 
     def fit(self, signals: dict[str, np.ndarray], units: dict | None = None, axis: str = "rotary") -> "LuGreIdentifier":
-        """Fit on a log's signals (canonical units, see ``fricli.logs``)."""
+        """Fit on a log's signals (canonical units, see ``fricli.logs``).
+
+        numpy's BLAS runs on one thread meanwhile: its threaded reductions (over the log's rows)
+        round differently for each thread count, and the fit would not give the same bytes
+        under OMP_NUM_THREADS=1 and 2. It costs nothing measurable here."""
+        with single_threaded():
+            return self._fit(signals, units, axis)
+
+    def _fit(self, signals: dict[str, np.ndarray], units: dict | None, axis: str) -> "LuGreIdentifier":
         units = units or logs.CANONICAL[axis]
         self.notes_: list[str] = []
         sig = {k: signals[k] for k in ("t", "qd", "tau_g") if k in signals}

@@ -15,8 +15,9 @@ from fricli.models.neural import ARCHS
 from fricli.models.residual import ResidualFriction
 
 DEFAULT_HIDDEN = {"mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
-DEFAULT_MAX_SAMPLES = 3000
+DEFAULT_MAX_SAMPLES = 2500
 REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
+MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
 
 
 def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -25,6 +26,16 @@ def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray
 
 def _errors(y: np.ndarray, pred: np.ndarray, rows: np.ndarray) -> dict:
     return metrics.errors(y[rows], pred[rows])
+
+
+def check_motion(name: str, qd: np.ndarray, moving: np.ndarray, job: str) -> None:
+    """DataError saying what is missing unless the moving rows (bool (n,)) of velocity qd (n,)
+    hold at least MIN_ROWS_PER_DIRECTION samples in each direction."""
+    for direction, count in (("positive", int((qd[moving] > 0).sum())), ("negative", int((qd[moving] < 0).sum()))):
+        if count < MIN_ROWS_PER_DIRECTION:
+            what = "no samples" if count == 0 else f"only {count} samples"
+            raise DataError(f"{name}: {what} with {direction} velocity; {job} needs at least "
+                            f"{MIN_ROWS_PER_DIRECTION} moving samples in each direction (a movement out and back)")
 
 
 def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | None = None, steps: int = 50_000,
@@ -47,6 +58,7 @@ def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | No
     moving = speed > training_data.LOW * float(speed.max())
     if not moving.any():
         raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
+    check_motion(log.name, sig["qd"], moving, "train-base")
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
                                rng=rng, keep=moving)
     model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
@@ -98,6 +110,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
         direction = "positive" if (qd[moving] > 0).any() else "negative"
         raise DataError(f"{log.name}: the log moves only in the {direction} direction; "
                         "the residual network needs both (a movement out and back)")
+    check_motion(log.name, qd, moving, "adapt")
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
     sel = training_data.select(qd, val_fraction=val_fraction, max_samples=None, rng=rng, keep=moving)

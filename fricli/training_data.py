@@ -140,7 +140,7 @@ def balanced(rows: np.ndarray, labels: np.ndarray, n_target: int, rng: np.random
     return np.sort(np.concatenate(picked))
 
 
-def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None = 3000, balance: bool = True,
+def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None = 2500, balance: bool = True,
            rng: np.random.Generator, keep: np.ndarray | None = None) -> Selection:
     """Training and validation rows for a log with velocity ``qd`` (n,).
 

@@ -265,8 +265,10 @@ def test_training_is_deterministic(batch_size):
 def test_two_thread_full_batch_matches_one_chunk(rng):
     n = CHUNK_MIN + 100
     x, t = toy(rng, n)
-    nets = [small_net(np.random.default_rng(3)) for _ in range(2)]
+    nets = [small_net(np.random.default_rng(3)) for _ in range(3)]
     Trainer(steps=5).fit(nets[0], x, t, rng=rng)
+    Trainer(steps=5).fit(nets[2], x, t, rng=rng)
+    assert nets[0].theta.tobytes() == nets[2].theta.tobytes()      # the threads add up in a fixed order
     # the same steps on one chunk: gradients over two halves added
     net = nets[1]
     opt = Adam(net.n_params, lr=0.01)

@@ -8,7 +8,8 @@ import click
 
 from fricli import logs, metrics, models
 from fricli.cli import cli
-from fricli.cli.options import common, emit_json, json_flag, log_reading, reading_kwargs, say
+from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job, reading_kwargs,
+                                say)
 from fricli.diagnosis import driver
 from fricli.diagnosis import effects as E
 from fricli.errors import OutputError
@@ -70,10 +71,11 @@ def table(d: driver.Diagnosis) -> str:
 @click.option("--no-carry", is_flag=True,
               help="With --fix, keep every effect as an added term even when a LuGre base could carry it.")
 @log_reading
+@if_changed_option
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, joint, kt, cutoff,
-                 drop_invalid, as_json, quiet):
+                 drop_invalid, if_changed, as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -98,6 +100,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("-o is the augmented model written with --fix: add --fix")
     if output == "-":
         raise click.UsageError("--fix writes a model file: give -o FILE.npz, not -")
+    if if_changed and not fix:
+        raise click.UsageError("--if-changed applies to --fix (the model it writes)")
     if output:
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
@@ -110,6 +114,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
             kwargs["joint"] = meta["joint"]
     data = logs.from_table(table_, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
     models.check_log(meta, data, model)
+    # with --fix: hold the output's lock until the command ends; --if-changed may exit here (9)
+    job = click.get_current_context().with_resource(
+        model_job(output, data, if_changed=if_changed, quiet=quiet, inputs={"model": model})) if fix else None
     result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
                              max_effects=max_effects)
     if as_json:
@@ -125,7 +132,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
                    carried=fixed.carried, refitted=fixed.refitted)
         options = {"folds": folds, "min_gain": min_gain, "alpha": alpha, "effects": only, "max_effects": max_effects,
                    "carry": not no_carry, "base_model": os.path.basename(model)}
-        models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, diagnose=options)
+        models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, diagnose=options, job=job)
         if not quiet:
             if result.added:
                 carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""

@@ -8,7 +8,8 @@ import click
 
 from fricli import logs, models
 from fricli.cli import cli
-from fricli.cli.options import common, emit_json, json_flag, log_reading, output_option, reading_kwargs, say
+from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job, output_option,
+                                reading_kwargs, say)
 from fricli.errors import OutputError
 from fricli.identify import LuGreIdentifier
 from fricli.models.lugre import PARAM_INFO, unit_of
@@ -27,10 +28,11 @@ def _figures(errs: dict, unit: str) -> str:
 @click.option("--travel", type=click.FloatRange(min=0), default=0.002, show_default=True,
               help="Steady state: ... and over at least this distance [rad or m] (longer holds at slow speeds).")
 @click.option("--refine", is_flag=True, help="Finally fit all parameters jointly on the whole log.")
+@if_changed_option
 @json_flag
 @common
 def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 refine: bool, as_json: bool, quiet: bool) -> None:
+                 refine: bool, if_changed: bool, as_json: bool, quiet: bool) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -42,6 +44,7 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
     Example:
       fricli identify sample_data/joint2_base.parquet -o lugre.npz
       fricli identify emps.parquet -o emps.npz --cutoff 100 --json
+      fricli identify nightly.parquet -o lugre.npz --if-changed   # cron: exit 9 when up to date
     """
     if output == "-":
         raise click.UsageError("identify writes a model file: give -o FILE.npz, not -")
@@ -49,11 +52,12 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
     if not os.path.isdir(folder):
         raise OutputError(f"cannot write {output}: folder {folder} does not exist")
     data = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
-    idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine).fit(data.signals, units=data.units,
-                                                                       axis=data.axis)
-    model, fit = idf.model_, idf.fit_
-    options = {"hold": hold, "travel": travel, "refine": refine}
-    models.save_for_log(output, model, data, rows_used=len(data), fit=fit, identify=options)
+    with model_job(output, data, if_changed=if_changed, quiet=quiet) as job:
+        idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine).fit(data.signals, units=data.units,
+                                                                           axis=data.axis)
+        model, fit = idf.model_, idf.fit_
+        options = {"hold": hold, "travel": travel, "refine": refine}
+        models.save_for_log(output, model, data, rows_used=len(data), fit=fit, identify=options, job=job)
 
     unit = data.units["tau"]
     params = model.parameters()

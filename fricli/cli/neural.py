@@ -8,9 +8,8 @@ import click
 
 from fricli import learning, logs, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, json_flag, log_reading, output_option, progress_enabled,
-                                reading_kwargs, say)
-from fricli.jobs import output_lock
+from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job,
+                                output_option, progress_enabled, reading_kwargs, say)
 
 
 def _sizes(_ctx, _param, value: str | None):
@@ -86,10 +85,11 @@ def _wrote(output: str) -> str:
 @click.option("--max-samples", type=click.IntRange(min=10), default=learning.DEFAULT_MAX_SAMPLES, show_default=True,
               help="Rows kept after velocity balancing (training plus validation).")
 @log_reading
+@if_changed_option
 @json_flag
 @common
 def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fraction, no_balance, max_samples,
-               joint, kt, cutoff, drop_invalid, as_json, quiet):
+               joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Train a neural friction model on LOG (tau_f = NN(tau_g, qd)) and write it to MODEL.npz.
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
@@ -108,7 +108,7 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
     options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
                "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,
                "max_samples": max_samples}
-    with output_lock(output):
+    with model_job(output, the_log, if_changed=if_changed, quiet=quiet) as job:
         progress = _Progress(quiet, f"train-base {arch}")
         start = time.perf_counter()
         try:
@@ -119,7 +119,8 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
             progress.close()
         seconds = time.perf_counter() - start
         rows = summary["train_rows"] + summary["val_rows"]
-        models.save_for_log(output, model, the_log, rows_used=rows, seed=seed, fit=summary, options=options)
+        models.save_for_log(output, model, the_log, rows_used=rows, seed=seed, fit=summary, options=options,
+                            job=job)
     say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
         f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
         f"of {the_log.name} in {seconds:.1f} s; weights from step {summary['best_step']} of {summary['steps']}", quiet)
@@ -151,10 +152,11 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
 @click.option("--min-speed", type=click.FloatRange(min=0), default=None,
               help="Leave out rows slower than this [rad/s or m/s]; default 2 % of the log's top speed.")
 @log_reading
+@if_changed_option
 @json_flag
 @common
 def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fraction, max_seconds, min_speed,
-              joint, kt, cutoff, drop_invalid, as_json, quiet):
+              joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Adapt BASE (any fricli model) to LOG by learning its residual: tau_f = base + NN_add(tau_g, sign(qd)).
 
     NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
@@ -177,7 +179,7 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
     models.check_log(base_meta, the_log, base)
     options = {"hidden": hidden, "epochs": epochs, "batch_size": batch_size, "lr": lr, "val_fraction": val_fraction,
                "max_seconds": max_seconds, "min_speed": min_speed}
-    with output_lock(output):
+    with model_job(output, the_log, if_changed=if_changed, quiet=quiet, inputs={"base": base}) as job:
         progress = _Progress(quiet, "adapt")
         start = time.perf_counter()
         try:
@@ -188,7 +190,7 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
             progress.close()
         seconds = time.perf_counter() - start
         models.save_for_log(output, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary,
-                            options=options, base={"path": base, "kind": base_meta.get("kind"),
+                            options=options, job=job, base={"path": base, "kind": base_meta.get("kind"),
                                                    "provenance": base_meta.get("provenance", {})})
     tau = the_log.units["tau"]
     say(f"adapted {base_meta.get('kind')} model {base} on {summary['seconds_used']:.1f} s of {the_log.name} "

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
+from typing import Iterator
 
 import click
 
+from fricli import errors, jobs
 from fricli.logs import DEFAULT_CUTOFF_HZ
 
 
@@ -64,3 +67,36 @@ def progress_enabled(quiet: bool) -> bool:
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
     return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn}
+
+
+# Options that do not change the model a command writes (arguments are files: the log is
+# recorded by its sha256, input models through ``model_job(inputs=...)``).
+_NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix"}
+
+
+def if_changed_option(f):
+    """--if-changed, for commands that write a model (see ``model_job``)."""
+    return click.option("--if-changed", is_flag=True,
+                        help="Do nothing and exit with code 9 when the output model was made from the same log "
+                             "bytes (sha256) with the same options and input models (for cron jobs).")(f)
+
+
+@contextlib.contextmanager
+def model_job(output: str, log, *, if_changed: bool, quiet: bool,
+              inputs: dict[str, str] | None = None) -> Iterator[dict]:
+    """Hold the lock on OUTPUT for the block (LOCKED, exit 8, when another job holds it); with
+    --if-changed exit UNCHANGED (9) and touch nothing when OUTPUT is up to date.
+
+    Yields the job record (command, shaping options, input model hashes) to save in the
+    model's provenance as ``job=``. ``inputs``: name -> path of input model files."""
+    ctx = click.get_current_context()
+    arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
+    options = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING and k not in arguments}
+    job = jobs.job_record(ctx.command.name, options, inputs)
+    with jobs.output_lock(output):
+        if if_changed and jobs.up_to_date(output, log.sha256, job):
+            same = "options and input models" if inputs else "options"
+            say(f"{output} is up to date: made from the same log ({log.sha256[:12]}...) with the same {same}; "
+                "nothing to do", quiet)
+            ctx.exit(errors.UNCHANGED)
+        yield job

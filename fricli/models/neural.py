@@ -166,9 +166,8 @@ class NeuralFriction(FrictionModel):
                   "units": self.units}
         if self.net_ is not None:
             params["network"] = self.net_.spec()
-            params["fitted"] = {"steps": int(getattr(self, "steps_", 0)), "best_step": int(getattr(self, "best_step_", 0)),
-                                "eval_every": int(getattr(self, "eval_every_", 0)),
-                                "n_train": int(getattr(self, "n_train_", 0)), "n_val": int(getattr(self, "n_val_", 0))}
+            params["fitted"] = {key: int(getattr(self, f"{key}_", 0))
+                                for key in ("steps", "best_step", "eval_every", "n_train", "n_val")}
         return params
 
     def get_arrays(self) -> dict[str, np.ndarray]:
