@@ -13,8 +13,10 @@ from fricli import logs, metrics, models
 class Result:
     model: str
     log: str
-    friction: dict                 # errors of tau_f_pred against the friction target [Nm]
+    friction: dict                 # errors of tau_f_pred against the friction target [Nm], all rows
     external: dict | None          # errors of tau_ext_pred against tau_ext [Nm], if measured
+    friction_moving: dict          # the same over the rows in motion (metrics.in_motion)
+    external_moving: dict | None
 
 
 def external_estimate(signals: dict, tau_f_pred: np.ndarray, lowpass_hz: float | None) -> np.ndarray:
@@ -30,11 +32,15 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
     models.check_log(meta, log, model_name)
     sig = log.signals
     pred = model.predict(sig)[0]
-    friction = metrics.errors(logs.friction_target(sig), pred)
-    external = None
+    target = logs.friction_target(sig)
+    moving = metrics.in_motion(sig["qd"])
+    external = external_moving = None
     if "tau_ext" in sig:
-        external = metrics.errors(sig["tau_ext"], external_estimate(sig, pred, lowpass_hz))
-    return Result(model_name, log_name, friction, external)
+        est = external_estimate(sig, pred, lowpass_hz)
+        external = metrics.errors(sig["tau_ext"], est)
+        external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
+    return Result(model_name, log_name, metrics.errors(target, pred), external,
+                  metrics.errors(target[moving], pred[moving]), external_moving)
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
@@ -64,7 +70,8 @@ def to_json(results: list[Result], model_paths: dict, log_paths: dict, lowpass_h
 
 
 def markdown_table(results: list[Result], model_names: list[str], log_names: list[str]) -> str:
-    """Rows: models; columns: logs; cells: friction MAE (and external-torque MAE) in Nm."""
+    """Rows: models; columns: logs; cells: friction MAE (and external-torque MAE) in Nm, all
+    rows and, in brackets, rows in motion."""
     by = {(r.model, r.log): r for r in results}
     has_ext = {ln: any(by[(mn, ln)].external for mn in model_names) for ln in log_names}
     head = ["model"]
@@ -72,14 +79,15 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
         head.append(f"{ln} friction MAE")
         if has_ext[ln]:
             head.append(f"{ln} ext. torque MAE")
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = ["MAE over all rows (in brackets: rows in motion, |qd| > 2 % of the top speed)", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for mn in model_names:
         row = [mn]
         for ln in log_names:
             r = by[(mn, ln)]
-            row.append(f"{r.friction['mae']:.3f}")
+            row.append(f"{r.friction['mae']:.3f} ({r.friction_moving['mae']:.3f})")
             if has_ext[ln]:
-                row.append(f"{r.external['mae']:.3f}" if r.external else "–")
+                row.append(f"{r.external['mae']:.3f} ({r.external_moving['mae']:.3f})" if r.external else "–")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 

@@ -17,3 +17,18 @@ def errors(y: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
 def relative_error(y: np.ndarray, y_pred: np.ndarray) -> float:
     """100 * ||y - y_pred|| / ||y|| [%]."""
     return float(100.0 * np.linalg.norm(y - y_pred) / np.linalg.norm(y))
+
+
+REST_SHARE = 0.02
+
+
+def in_motion(qd: np.ndarray, share: float = REST_SHARE) -> np.ndarray:
+    """Rows moving faster than ``share`` of the top speed, (n,) bool.
+
+    At standstill the friction is statically indeterminate (stiction holds any torque up to the
+    breakaway level, set by the motion before), so friction figures are also given over the rows
+    in motion.
+    """
+    speed = np.abs(qd)
+    top = float(speed.max()) if speed.size else 0.0
+    return speed > share * top if top > 0 else np.zeros(speed.shape, dtype=bool)

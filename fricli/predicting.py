@@ -80,7 +80,9 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     if path == "-":
         return logs.parquet_file(logs.read_bytes("-"), "stdin"), "stdin"
     try:
-        return pq.ParquetFile(path), path
+        # pre_buffer (pyarrow's default) keeps every column chunk read so far until the file is
+        # closed: a 20-million-row log would end up in memory whole
+        return pq.ParquetFile(path, pre_buffer=False), path
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
     except IsADirectoryError:

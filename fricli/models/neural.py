@@ -10,6 +10,12 @@
             one hidden layer of 50 sigmoid units; beta1, beta2 are learned with the weights
             (the direction terms feed the linear output layer directly).
 
+Velocity input. With ``velocity_scale`` set, the network sees u = asinh(qd / v0) instead of qd:
+odd, linear for |qd| << v0 and logarithmic for |qd| >> v0, so slow velocity levels are spread
+apart instead of crowding around 0 and the jump of friction at zero velocity is a step of
+about 2 asinh(v_slow / v0) in u. v0 is given or ("auto") the VELOCITY_QUANTILE quantile of
+|qd| over the training rows, and is stored with the model.
+
 Inputs and the output are standardised with the mean and standard deviation of the training
 data; these are stored with the weights. Losses are mean squared errors on standardised data.
 """
@@ -31,6 +37,7 @@ from fricli.nn.training import PREDICT_CHUNK, Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
 _OPTIONAL_TORQUES = ("tau_g", "tau_dyn", "tau_ext")
+VELOCITY_QUANTILE = 0.05   # velocity_scale="auto": v0 = this quantile of |qd| over the training rows
 
 
 def feature(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
@@ -72,8 +79,14 @@ class NeuralFriction(FrictionModel):
 
     def __init__(self, *, inputs=("tau_g", "qd"), hidden=((30, "elu"), (30, "elu")), skip=(),
                  steps: int | None = 50_000, epochs: int | None = None, lr: float = 0.01,
-                 batch_size: int = 0, eval_every: int | None = None, units: dict | None = None):
+                 batch_size: int = 0, eval_every: int | None = None, units: dict | None = None,
+                 velocity_scale: float | str | None = None):
         self.inputs, self.skip = tuple(inputs), tuple(skip)
+        if not (velocity_scale is None or velocity_scale == "auto"
+                or (isinstance(velocity_scale, (int, float)) and velocity_scale > 0)):
+            raise ValueError(f"velocity_scale must be None, 'auto' or a positive speed, got {velocity_scale!r}")
+        self.velocity_scale = velocity_scale
+        self.v0_: float | None = None if velocity_scale in (None, "auto") else float(velocity_scale)
         for name in self.inputs + self.skip:
             if name not in FEATURES:
                 raise ValueError(f"unknown input {name!r}")
@@ -84,8 +97,26 @@ class NeuralFriction(FrictionModel):
 
     # ------------------------------------------------------------------ fitting
 
+    def _input(self, sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Network input ``name`` for rows start:stop before standardisation: asinh(qd / v0)
+        for qd when the model has a velocity scale."""
+        x = feature(sig, name, start, stop)
+        if name == "qd" and self.v0_ is not None:
+            return np.arcsinh(x / self.v0_)
+        return x
+
     def _features(self, sig: dict[str, np.ndarray]) -> np.ndarray:
-        return np.stack([feature(sig, name) for name in self.inputs + self.skip])
+        return np.stack([self._input(sig, name) for name in self.inputs + self.skip])
+
+    def _fit_velocity_scale(self, sig: dict[str, np.ndarray]) -> None:
+        if self.velocity_scale != "auto" or "qd" not in self.inputs:
+            return
+        speed = np.abs(feature(sig, "qd"))
+        speed = speed[speed > 0]
+        v0 = float(np.quantile(speed, VELOCITY_QUANTILE)) if speed.size else 0.0
+        if not v0 > 0:
+            raise DataError("no moving training samples to scale the velocity input with")
+        self.v0_ = v0
 
     def new_network(self) -> Network:
         hidden = [(n, acts.from_spec(a) if not isinstance(a, acts.Activation) else a) for n, a in self.hidden]
@@ -95,6 +126,7 @@ class NeuralFriction(FrictionModel):
             val_target: np.ndarray | None = None, *, rng: np.random.Generator,
             on_eval: Callable | None = None) -> "NeuralFriction":
         """Train on signals ``sig`` (rows already selected) against ``target`` (n,) [Nm]."""
+        self._fit_velocity_scale(sig)
         x = self._features(sig)
         y = np.asarray(target, dtype=np.float64)[None, :]
         if x.shape[1] == 0:
@@ -142,7 +174,7 @@ class NeuralFriction(FrictionModel):
                     ws = net.workspace(stop - start)
                 for i, name in enumerate(names):
                     dest = ws.x[i] if i < len(self.inputs) else ws.s[i - len(self.inputs)]
-                    np.subtract(feature(signals, name, start, stop), mean_x[i], out=dest, casting="same_kind")
+                    np.subtract(self._input(signals, name, start, stop), mean_x[i], out=dest, casting="same_kind")
                     dest *= dest.dtype.type(1.0 / scale_x[i])
                 y = net.forward(ws)[0]
                 np.multiply(y, y_scale, out=out[start:stop])
@@ -164,6 +196,9 @@ class NeuralFriction(FrictionModel):
                   "training": {"steps": self.steps, "epochs": self.epochs, "lr": self.lr,
                                "batch_size": self.batch_size, "eval_every": self.eval_every},
                   "units": self.units}
+        if self.velocity_scale is not None:
+            # only models with a transformed velocity carry the key (older files read as without)
+            params["velocity"] = {"transform": "asinh", "scale": self.velocity_scale, "v0": self.v0_}
         if self.net_ is not None:
             params["network"] = self.net_.spec()
             params["fitted"] = {key: int(getattr(self, f"{key}_", 0))
@@ -186,6 +221,12 @@ class NeuralFriction(FrictionModel):
         model = cls(inputs=params["inputs"], skip=params.get("skip", ()), hidden=[tuple(h) for h in params["hidden"]],
                     steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
                     batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"))
+        velocity = params.get("velocity")
+        if velocity is not None:
+            v0 = velocity.get("v0")
+            if velocity.get("transform") != "asinh" or not (v0 is None or isinstance(v0, (int, float)) and v0 > 0):
+                raise ValueError(f"unknown velocity transform {velocity!r}")
+            model.velocity_scale, model.v0_ = velocity.get("scale", "auto"), None if v0 is None else float(v0)
         spec = params["network"]
         n_layers = len(spec["hidden"]) + 1
         model.net_ = Network.from_spec(spec, [arrays[f"W{i}"] for i in range(n_layers)])
@@ -210,9 +251,15 @@ class NeuralFriction(FrictionModel):
         for n, a in self.hidden:
             spec = a if isinstance(a, (str, dict)) else a.spec()
             layers.append(f"{n} {_describe_activation(spec)}")
-        inputs = ", ".join(self.inputs)
+        inputs = ", ".join(self._input_label(name) for name in self.inputs)
         skip = f"; direct to the output: {', '.join(self.skip)}" if self.skip else ""
         return f"inputs ({inputs}){skip}; hidden layers: {' | '.join(layers) or 'none'}; linear output"
+
+    def _input_label(self, name: str) -> str:
+        if name != "qd" or self.velocity_scale is None:
+            return name
+        v0 = "v0" if self.v0_ is None else f"{self.v0_:.4g} {self.units.get('qd', 'rad/s')}"
+        return f"asinh(qd / {v0})"
 
     def describe(self) -> str:
         tau = self.units.get("tau", "Nm")
@@ -225,7 +272,7 @@ class NeuralFriction(FrictionModel):
         lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
                      f"({self.n_val_} for validation); weights kept from step {self.best_step_}")
         for i, name in enumerate(self.inputs + self.skip):
-            lines.append(f"  input {name}: mean {self.x_std_.mean_[i]:.4g}, scale {self.x_std_.scale_[i]:.4g}")
+            lines.append(f"  input {self._input_label(name)}: mean {self.x_std_.mean_[i]:.4g}, scale {self.x_std_.scale_[i]:.4g}")
         lines.append(f"  output: mean {self.y_std_.mean_[0]:.4g} {tau}, scale {self.y_std_.scale_[0]:.4g} {tau}")
         if self.history_val_.size:
             lines.append(f"  final losses (standardised MSE): train {self.history_train_[-1]:.4g}, "
