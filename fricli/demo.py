@@ -15,7 +15,7 @@ ROWS = (("LuGre", "lugre"), ("NN_base", "nn_base"), ("Selmic", "selmic"), ("NNAC
         ("NN_base + NN_add", "adapted"), ("LuGre + NN_add", "lugre_adapted"))
 SUBSETS = (("moving", "rows in motion (|qd| > 2 % of the top speed)"), ("all", "all rows, standstill included"))
 LOADS = (("asymmetric load", "extended_asym"), ("symmetric load", "extended_sym"), ("no load", "extended_none"))
-DEFAULT_STEPS = 20_000
+DEFAULT_STEPS = 50_000
 LOWPASS_HZ = 5.0
 
 

@@ -6,7 +6,6 @@ import os
 
 import click
 
-from fricli import demo
 from fricli.cli import cli
 from fricli.cli.options import common, say
 
@@ -17,7 +16,7 @@ from fricli.cli.options import common, say
 @click.option("--data", default="sample_data", show_default=True, type=click.Path(file_okay=False),
               help="Folder with the sample logs; missing logs are simulated (same seeds, same data).")
 @click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True)
-@click.option("--steps", type=click.IntRange(min=1), default=demo.DEFAULT_STEPS, show_default=True,
+@click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True,
               help="Adam steps for each base network (the paper used 50,000).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @common
@@ -33,6 +32,8 @@ def demo_cmd(output, data, joint, steps, seed, quiet):
       fricli demo -o demo-out
       fricli demo --joint 4 --steps 50000
     """
+    from fricli import demo  # loads matplotlib, scipy.optimize: only when run
+
     summary = demo.run(output, data=data, joint=int(joint), steps=steps, seed=seed,
                        say=lambda s: say(s, quiet))
     click.echo(demo.format_table(summary))

@@ -84,17 +84,25 @@ def _wrote(output: str) -> str:
               help="Train on every row instead of the same number of rows per velocity level.")
 @click.option("--max-samples", type=click.IntRange(min=10), default=learning.DEFAULT_MAX_SAMPLES, show_default=True,
               help="Rows kept after velocity balancing (training plus validation).")
+@click.option("--velocity-input", type=click.Choice(learning.VELOCITY_INPUTS), default="asinh", show_default=True,
+              help="asinh: the network sees asinh(qd / v0), which spreads the slow speeds apart; "
+                   "linear: qd itself (the paper's input).")
+@click.option("--velocity-scale", type=click.FloatRange(min=0, min_open=True), default=None, metavar="V0",
+              help="v0 of --velocity-input asinh [rad/s or m/s]; default the 5 % quantile of the training "
+                   "rows' speeds.")
 @log_reading
 @if_changed_option
 @json_flag
 @common
 def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fraction, no_balance, max_samples,
-               joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
+               velocity_input, velocity_scale, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Train a neural friction model on LOG (tau_f = NN(tau_g, qd)) and write it to MODEL.npz.
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
     level are held out for validation, and the weights with the lowest validation loss are kept.
+    The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
+    model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Training and validation MAE are printed at the end. The same seed gives the same file.
 
     \b
@@ -107,14 +115,17 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
     the_log = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
     options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
                "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,
-               "max_samples": max_samples}
+               "max_samples": max_samples, "velocity_input": velocity_input}
+    if velocity_scale is not None:
+        options["velocity_scale"] = velocity_scale
     with model_job(output, the_log, if_changed=if_changed, quiet=quiet) as job:
         progress = _Progress(quiet, f"train-base {arch}")
         start = time.perf_counter()
         try:
             model, summary = learning.train_base(
                 the_log, arch=arch, hidden=hidden, steps=steps, lr=lr, batch_size=batch_size, seed=seed,
-                val_fraction=val_fraction, balance=not no_balance, max_samples=max_samples, on_eval=progress)
+                val_fraction=val_fraction, balance=not no_balance, max_samples=max_samples,
+                velocity_input=velocity_input, velocity_scale=velocity_scale, on_eval=progress)
         finally:
             progress.close()
         seconds = time.perf_counter() - start
