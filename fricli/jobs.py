@@ -25,6 +25,8 @@ def output_lock(path: str) -> Iterator[None]:
         return
     folder, name = os.path.split(os.path.abspath(path))
     lock_path = os.path.join(folder, f".{name}.lock")
+    if not os.path.isdir(folder):
+        raise OutputError(f"cannot write {path}: folder {folder} does not exist")
     while True:
         try:
             fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)

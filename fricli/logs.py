@@ -16,7 +16,9 @@ import dataclasses
 import hashlib
 import io
 import os
+import shutil
 import sys
+import tempfile
 
 import numpy as np
 import pyarrow as pa
@@ -97,9 +99,28 @@ def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
     if not data:
         raise LogError(f"{name}: empty input, not a Parquet log")
     try:
-        return pq.ParquetFile(io.BytesIO(data))
+        return pq.ParquetFile(io.BytesIO(data), pre_buffer=False)  # pre_buffer would keep a second copy
     except Exception:  # pyarrow raises several types for corrupt input
         raise LogError(f"{name}: not a Parquet file") from None
+
+
+def stdin_parquet() -> pq.ParquetFile:
+    """stdin as a ParquetFile for reading in batches. Parquet needs random access (its footer
+    is at the end), so stdin is spooled to an anonymous temporary file (in $TMPDIR, gone when
+    closed or the process dies) rather than held in memory."""
+    try:
+        spool = tempfile.TemporaryFile(prefix="fricli-stdin-")
+        shutil.copyfileobj(sys.stdin.buffer, spool, 1 << 20)
+    except OSError as exc:
+        raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
+    if spool.tell() == 0:
+        raise LogError("stdin: empty input, not a Parquet log")
+    spool.seek(0)
+    try:
+        return pq.ParquetFile(spool, pre_buffer=False)
+    except Exception:
+        spool.close()
+        raise LogError("stdin: not a Parquet file") from None
 
 
 def read_table(path: str) -> tuple[pa.Table, str]:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import sys
 from typing import Callable, Iterator
 
@@ -76,9 +77,11 @@ class Result:
 
 
 def open_log(path: str) -> tuple[pq.ParquetFile, str]:
-    """A ParquetFile for ``path`` (``-``: stdin, read into memory first) and its display name."""
+    """A ParquetFile for ``path`` (``-``: stdin, spooled to a temporary file) and its display name."""
     if path == "-":
-        return logs.parquet_file(logs.read_bytes("-"), "stdin"), "stdin"
+        return logs.stdin_parquet(), "stdin"
+    if os.path.isdir(path):
+        raise LogError(f"{path}: is a folder, not a log")
     try:
         # pre_buffer (pyarrow's default) keeps every column chunk read so far until the file is
         # closed: a 20-million-row log would end up in memory whole
@@ -99,11 +102,14 @@ def choose_joint(pf: pq.ParquetFile, name: str, requested, model_joint,
     model's joint."""
     if "joint" not in pf.schema_arrow.names:
         return requested, 0
-    try:
-        column = pf.read(columns=["joint"]).column("joint")
+    found: dict = {}
+    try:  # row group by row group: the whole column of a large log is hundreds of MB
+        for group in range(pf.num_row_groups):
+            column = pf.read_row_group(group, columns=["joint"]).column("joint")
+            found.update(dict.fromkeys(pc.unique(column).to_pylist()))
     except Exception as exc:
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
-    joints = pc.unique(column).to_pylist()
+    joints = list(found)
     if not joints:
         return requested, 0
     choice = requested

@@ -141,6 +141,57 @@ def test_each_kind_learns_and_round_trips(cls, files, tmp_path):
     assert cls.kind in loaded.describe()
 
 
+def test_velocity_input_is_asinh_of_qd_over_v0(files, tmp_path):
+    log = load(files["base"])
+    model, summary = learning.train_base(log, steps=30, seed=0)
+    assert summary["velocity_input"] == "asinh" and model.velocity_scale == "auto"
+    sel = training_data.select(log.signals["qd"], rng=np.random.default_rng(0),
+                               keep=np.abs(log.signals["qd"]) > training_data.LOW * 0.4)
+    speeds = np.abs(log.signals["qd"][sel.train])
+    assert model.v0_ == summary["v0"] == pytest.approx(np.quantile(speeds, 0.05))
+    sig = log.signals
+    x = model._features(sig)
+    np.testing.assert_allclose(x[model.inputs.index("qd")], np.arcsinh(sig["qd"] / model.v0_))
+    assert f"asinh(qd / {model.v0_:.4g} rad/s)" in model.describe()
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, log, rows_used=1, seed=0, fit=summary)
+    loaded, meta = models.load(path)
+    assert meta["model"]["params"]["velocity"]["v0"] == model.v0_ and loaded.v0_ == model.v0_
+    np.testing.assert_array_equal(loaded.predict(sig)[0], model.predict(sig)[0])
+
+
+def test_velocity_input_options(files, tmp_path):
+    linear, scaled = tmp_path / "linear.npz", tmp_path / "scaled.npz"
+    assert run("train-base", files["base"], "-o", linear, "--steps", 20, "--velocity-input", "linear", "-q").exit_code == 0
+    assert run("train-base", files["base"], "-o", scaled, "--steps", 20, "--velocity-scale", 0.01, "-q").exit_code == 0
+    model, meta = models.load(str(linear))
+    assert "velocity" not in meta["model"]["params"] and model.v0_ is None
+    assert meta["provenance"]["options"]["velocity_input"] == "linear"
+    model, meta = models.load(str(scaled))
+    assert meta["model"]["params"]["velocity"] == {"transform": "asinh", "scale": 0.01, "v0": 0.01}
+    sig = load(files["base"]).signals
+    np.testing.assert_allclose(model._features(sig)[1], np.arcsinh(sig["qd"] / 0.01))
+    # the residual network has no velocity input and no transform
+    adapted, _ = learning.adapt(model, load(files["adapt"]), epochs=2, seed=0)
+    assert adapted.add.velocity_scale is None and "velocity" not in adapted.add.get_params()
+    with pytest.raises(ValueError):
+        MLPFriction(velocity_scale=-1.0)
+
+
+def test_asinh_velocity_input_resolves_slow_speeds():
+    # slow levels below the Stribeck velocity (0.04) crowd around 0 in standardised qd; the
+    # asinh input spreads them apart, so the network fits the jump at zero velocity better
+    levels = (0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.4)
+    log = logs.from_table(motion_log(levels, seed=5, seconds=3.0), name="slow")
+    sig = log.signals
+    slow = (sig["qd"] != 0) & (np.abs(sig["qd"]) < 0.04)
+    err = {}
+    for how in learning.VELOCITY_INPUTS:
+        model, _ = learning.train_base(log, steps=3000, seed=0, velocity_input=how)
+        err[how] = np.mean(np.abs(model.predict(sig)[0] - sig["tau_f_true"])[slow])
+    assert err["asinh"] < err["linear"], err
+
+
 def test_nnacm_betas_are_the_direction_terms(files):
     model, _ = learning.train_base(load(files["base"]), arch="nnacm", steps=300, seed=0)
     b1, b2 = model.betas()

@@ -110,23 +110,32 @@ def test_predict_adds_tau_f_pred_and_carries_everything(tmp_path, model_file):
     np.testing.assert_allclose(got.column("tau_f_pred").to_numpy(), LuGreModel(**PARAMS).predict(sig)[0])
 
 
-def test_batches_do_not_change_the_result(tmp_path, model_file):
-    src = write(log_table(), tmp_path / "log.parquet", row_group_size=1000)
+@pytest.mark.parametrize("command,added", [("predict", ["tau_f_pred"]),
+                                           ("estimate-ext", ["tau_f_pred", "tau_ext_pred"])])
+def test_batches_do_not_change_the_result(tmp_path, model_file, command, added):
+    table = log_table(with_ext=True)
+    src = write(table, tmp_path / "log.parquet", row_group_size=1000)
     figures = []
-    columns = []
+    tables = []
     for rows in (7, 1000, 100_000):
         out = tmp_path / f"p{rows}.parquet"
-        res = invoke("predict", model_file, src, "-o", out, "--batch-rows", rows, "--json", "-q")
+        res = invoke(command, model_file, src, "-o", out, "--batch-rows", rows, "--json", "-q")
         assert res.exit_code == 0, res.output
         data = json.loads(res.stdout)
         assert data["batches"] == -(-3000 // rows)
-        figures.append(data["friction"])
-        columns.append(read(str(out)).column("tau_f_pred").to_numpy())
-    for other in columns[:-1]:
-        np.testing.assert_allclose(other, columns[-1], rtol=1e-12, atol=1e-12)
+        figures.append(data)
+        tables.append(read(str(out)))
+    for got in tables:
+        assert got.num_rows == 3000 and got.column_names == table.column_names + added
+        assert got.drop_columns(added).equals(table)
+        for name in added:
+            np.testing.assert_allclose(got.column(name).to_numpy(), tables[-1].column(name).to_numpy(),
+                                       rtol=1e-12, atol=1e-12)
     for other in figures[:-1]:
-        assert other["mae"] == pytest.approx(figures[-1]["mae"], rel=1e-9)
-        assert other["max"] == pytest.approx(figures[-1]["max"], rel=1e-9)
+        for key in ["friction"] + (["external"] if command == "estimate-ext" else []):
+            assert other[key]["n"] == figures[-1][key]["n"] == 3000
+            assert other[key]["mae"] == pytest.approx(figures[-1][key]["mae"], rel=1e-9)
+            assert other[key]["max"] == pytest.approx(figures[-1][key]["max"], rel=1e-9)
 
 
 def test_json_figures_match_metrics(tmp_path, model_file):

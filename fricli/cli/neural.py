@@ -112,6 +112,10 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
       fricli train-base base.parquet --steps 5000 --batch-size 256 --seed 3 -o quick.npz --json
     """
     _check_outputs(output, as_json)
+    try:  # e.g. selmic needs one layer of more than 10 units (its jump units)
+        learning.ARCHS[arch](hidden_sizes=tuple(hidden or learning.DEFAULT_HIDDEN[arch]))
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--hidden") from None
     the_log = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
     options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
                "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,

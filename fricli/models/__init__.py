@@ -50,17 +50,20 @@ def to_parts(model: FrictionModel, prefix: str = "") -> tuple[dict, dict[str, np
 
 def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name: str = "model") -> FrictionModel:
     _load_kinds()
+    if not isinstance(spec, dict) or not isinstance(spec.get("children", {}), dict):
+        raise ModelFileError(f"{name}: damaged model file (the model spec is not a JSON object)")
     try:
         cls = KINDS[spec["kind"]]
-    except KeyError:
+    except (KeyError, TypeError):
         raise ModelFileError(f"{name}: unknown model kind {spec.get('kind')!r}") from None
     own = {k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix) and "/" not in k[len(prefix):]}
     children = {child: from_parts(child_spec, arrays, f"{prefix}{child}/", name)
                 for child, child_spec in spec.get("children", {}).items()}
     try:
         return cls.from_parts(spec.get("params", {}), own, children)
-    except (KeyError, ValueError, TypeError) as exc:
-        raise ModelFileError(f"{name}: damaged {spec['kind']} model ({exc})") from None
+    except Exception as exc:  # the file is untrusted: whatever its parts break is a damaged file
+        first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ModelFileError(f"{name}: damaged {spec['kind']} model ({first})") from None
 
 
 def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,

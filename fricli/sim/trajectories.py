@@ -27,7 +27,8 @@ V_MAX = 0.7          # highest velocity of the scenarios [rad/s]
 
 BASE_LEVELS = (0.005, 0.01, 0.02, 0.03, 0.05, 0.07, 0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7)
 BASE_STRETCH_S = 12.0     # longest constant-velocity stretch per direction and level [s]
-BASE_SPLIT_BELOW = 0.1    # levels below this are split over two positions [rad/s]
+BASE_SPLIT_BELOW = 0.1    # levels below this are split over several positions [rad/s]
+BASE_SLOW_PARTS = 6       # ... this many, spread over the position range
 ADAPT_VELOCITY = 0.2      # the one velocity of the adapt movement [rad/s]
 EXTENDED_DURATION = 120.0
 
@@ -131,29 +132,25 @@ def evaluate(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
 def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
     """Constant-velocity sweeps: every level of BASE_LEVELS once in each direction.
 
-    Fast levels sweep the whole position range; slow ones a stretch of BASE_STRETCH_S seconds
-    (levels below BASE_SPLIT_BELOW in two halves at different positions), placed by ``rng``
-    over the range so the slow data still meets many gravity loads.
+    Fast levels sweep the whole position range; slow ones a stretch of BASE_STRETCH_S seconds,
+    split for levels below BASE_SPLIT_BELOW into BASE_SLOW_PARTS pieces stratified over the
+    range (placed by ``rng`` within their strata), so slow data meets the whole span of gravity
+    loads, as sweeps over the whole range would.
     """
     lo, hi = j.q_min, j.q_max
     full = hi - lo
     plan = Plan(q=lo)
     plan.hold(1.0)
-    blocks = []   # (velocity, stretch length [rad])
+    placed = []   # (start position, velocity, stretch length [rad])
     for v in BASE_LEVELS:
         d = v * BASE_STRETCH_S + 2 * ramp_distance(0.0, v)
         if d >= full:
             continue
-        parts = 2 if v < BASE_SPLIT_BELOW else 1
-        blocks += [(v, d / parts)] * parts
-    # slow blocks first, visited in order of position, each block at a random place
-    slots = (np.arange(len(blocks)) + rng.uniform(0.15, 0.85, len(blocks))) / len(blocks)
-    order = rng.permutation(len(blocks))
-    placed = []
-    for slot, k in zip(slots, order):
-        v, d = blocks[k]
-        start = lo + 0.02 + slot * (full - 0.04 - d)
-        placed.append((start, v, d))
+        parts = BASE_SLOW_PARTS if v < BASE_SPLIT_BELOW else 1
+        # stratified over the range, so every slow level meets the whole span of gravity loads
+        slots = (np.arange(parts) + rng.uniform(0.15, 0.85, parts)) / parts
+        placed += [(lo + 0.02 + slot * (full - 0.04 - d / parts), v, d / parts) for slot in slots]
+    placed.sort()
     for start, v, d in placed:
         plan.move_to(start, 0.3)
         plan.hold(0.5)

@@ -1,0 +1,571 @@
+#!/usr/bin/env python
+"""fricli benchmarks: training, identification, simulation, prediction and diagnosis, in one run.
+
+    python benchmarks/run.py                   full sizes (several minutes on 2 cores)
+    python benchmarks/run.py --quick           tiny sizes, a few seconds (what the tests run)
+    python benchmarks/run.py --json            the figures as JSON on stdout
+    python benchmarks/run.py --plot docs/img/performance-scaling.png
+                                               also measure how cost grows with log length and
+                                               network size, and plot it
+
+Every figure is the median over ``--repeats`` runs. PyTorch is measured on the same data, the
+same network (2-30-30-1, ELU), the same optimiser (Adam, lr 0.01) and the same thread count
+when it can be imported; it is not a dependency of fricli, and its rows are skipped with a note
+otherwise. Whole commands are run as ``python -m fricli ...`` in a subprocess (file in, file
+out, including start-up); library figures time the computation on data already in memory.
+The table goes to stderr and, without --json, to stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if ROOT not in sys.path:
+    sys.path.insert(0, ROOT)
+
+import numpy as np  # noqa: E402
+
+from fricli import learning, logs, physics  # noqa: E402
+from fricli.models.lugre import LuGreModel  # noqa: E402
+from fricli.nn import activations as acts  # noqa: E402
+from fricli.nn.blas import _openblas, single_threaded  # noqa: E402
+from fricli.nn.network import Network  # noqa: E402
+from fricli.nn.training import Standardizer, Trainer  # noqa: E402
+
+SAMPLE = os.path.join(ROOT, "sample_data")
+BASE_LOG = os.path.join(SAMPLE, "joint2_base.parquet")
+ADAPT_LOG = os.path.join(SAMPLE, "joint2_adapt.parquet")
+EXT_LOG = os.path.join(SAMPLE, "joint2_extended_asym.parquet")
+KINDS = ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented")
+
+FULL = {"steps": 2000, "mini_steps": 3000, "train_base_steps": None, "identify_rows": 100_000,
+        "predict_rows": 10_000_000, "diagnose_rows": 100_000, "lugre_rows": 100_000, "loop_rows": 100_000,
+        "repeats": 3, "scale_n": (1_000, 2_000, 5_000, 10_000, 20_000, 50_000, 100_000),
+        "scale_rows": (10_000, 100_000, 1_000_000, 10_000_000), "scale_width": (10, 20, 30, 50, 100, 200)}
+QUICK = {"steps": 50, "mini_steps": 50, "train_base_steps": 100, "identify_rows": None,
+         "predict_rows": 20_000, "diagnose_rows": None, "lugre_rows": 20_000, "loop_rows": 2_000,
+         "repeats": 1, "scale_n": (500, 2_000), "scale_rows": (1_000, 20_000), "scale_width": (10, 30)}
+
+
+# ---------------------------------------------------------------------------- helpers
+
+
+def median_time(fn, repeats: int) -> float:
+    """Median wall time [s] of ``fn()`` over ``repeats`` calls."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return statistics.median(times)
+
+
+def run_cli(args: list[str], repeats: int) -> float:
+    """Median wall time [s] of ``python -m fricli ARGS`` (quiet), start-up included."""
+    cmd = [sys.executable, "-m", "fricli", *args, "--quiet"]
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+
+    def once():
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"{' '.join(args)} failed ({proc.returncode}): {proc.stderr.strip()}")
+    return median_time(once, repeats)
+
+
+def say(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------- data
+
+
+def training_arrays(log: logs.Log, seed: int = 0):
+    """Standardised float32 inputs (2, n) and targets (1, n) of the rows train-base trains on."""
+    sig = log.signals
+    target = logs.friction_target(sig)
+    rows = _train_rows(log, seed)
+    if rows is None:   # the selection's interface changed: as many rows, drawn at random
+        rows = np.random.default_rng(seed).choice(len(target), size=2000, replace=False)
+    x = np.stack([sig["tau_g"][rows], sig["qd"][rows]])
+    y = target[rows][None, :]
+    return Standardizer().fit(x).transform(x), Standardizer().fit(y).transform(y)
+
+
+def _train_rows(log: logs.Log, seed: int):
+    try:
+        from fricli import training_data
+        sig = log.signals
+        speed = np.abs(sig["qd"])
+        moving = speed > training_data.LOW * float(speed.max())
+        sel = training_data.select(sig["qd"], val_fraction=0.2, max_samples=learning.DEFAULT_MAX_SAMPLES,
+                                   balance=True, rng=np.random.default_rng(seed), keep=moving)
+        return sel.train
+    except Exception:
+        return None
+
+
+def resample(x: np.ndarray, t: np.ndarray, n: int, seed: int = 0):
+    """n columns drawn from (x, t) (with replacement when n exceeds their count)."""
+    idx = np.random.default_rng(seed).choice(x.shape[1], size=n, replace=n > x.shape[1])
+    return np.ascontiguousarray(x[:, idx]), np.ascontiguousarray(t[:, idx])
+
+
+def tiled_signals(log: logs.Log, n: int) -> dict[str, np.ndarray]:
+    """The log's signals repeated to n rows, with t continuing at the log's sample interval."""
+    sig = log.signals
+    dt = float(np.median(np.diff(sig["t"])))
+    out = {k: np.resize(np.asarray(v, dtype=np.float64), n) for k, v in sig.items() if k != "t"}
+    out["t"] = np.arange(n) * dt
+    return out
+
+
+def write_log(sig: dict[str, np.ndarray], units: dict[str, str], path: str) -> None:
+    cols = {k: sig[k] for k in ("t", "q", "qd", "qdd", "tau_m", "tau_g", "tau_dyn", "tau_ext", "temp") if k in sig}
+    table = logs.table_from_arrays(cols, {k: units[k] for k in cols if k in units})
+    logs.write_table(table, path)
+
+
+def simulate(path: str, args: list[str]) -> None:
+    cmd = [sys.executable, "-m", "fricli", "simulate", *args, "-o", path, "--quiet"]
+    env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    subprocess.run(cmd, cwd=ROOT, env=env, check=True, capture_output=True)
+
+
+# ---------------------------------------------------------------------------- training
+
+
+def mlp(width: int = 30) -> Network:
+    return Network(2, [(width, acts.ELU()), (width, acts.ELU())]).init(np.random.default_rng(0))
+
+
+def fricli_steps_per_s(x, t, steps: int, batch: int, repeats: int, width: int = 30) -> float:
+    """Adam steps per second of ``Trainer`` (full batch for batch 0), loss record only at the end."""
+    def once():
+        Trainer(steps=steps, batch_size=batch, eval_every=steps).fit(mlp(width), x, t,
+                                                                     rng=np.random.default_rng(0))
+    return steps / median_time(once, repeats)
+
+
+def torch_steps_per_s(x, t, steps: int, batch: int, repeats: int, threads: int, width: int = 30) -> float:
+    """The same network, loss and optimiser in PyTorch (float32), in a separate process: PyTorch's
+    OpenMP threads keep spinning after its work and would slow down what is measured next."""
+    with tempfile.TemporaryDirectory() as tmp:
+        np.save(os.path.join(tmp, "x.npy"), x)
+        np.save(os.path.join(tmp, "t.npy"), t)
+        cmd = [sys.executable, os.path.abspath(__file__), "--torch-worker", tmp, str(steps), str(batch), str(repeats),
+               str(threads), str(width)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise RuntimeError(f"the PyTorch measurement failed: {proc.stderr.strip()}")
+        return float(proc.stdout.split()[-1])
+
+
+def torch_steps(steps: int) -> int:
+    """Fewer steps for PyTorch (a rate needs no more), at least 5."""
+    return max(5, steps // 4)
+
+
+def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int, width: int) -> None:
+    """Print the PyTorch steps per second (median over repeats) of the usual training loop."""
+    import torch
+
+    torch.set_num_threads(threads)
+    X = torch.from_numpy(np.ascontiguousarray(np.load(os.path.join(folder, "x.npy")).T))
+    T = torch.from_numpy(np.ascontiguousarray(np.load(os.path.join(folder, "t.npy")).T))
+    n = X.shape[0]
+
+    def once():
+        torch.manual_seed(0)
+        nn = torch.nn
+        net = nn.Sequential(nn.Linear(2, width), nn.ELU(), nn.Linear(width, width), nn.ELU(), nn.Linear(width, 1))
+        opt = torch.optim.Adam(net.parameters(), lr=0.01)
+        loss_fn = nn.MSELoss()
+        gen = torch.Generator().manual_seed(0)
+        per_epoch = max(1, n // batch) if batch else 1
+        perm = torch.randperm(n, generator=gen)
+        for step in range(steps):
+            if batch:
+                j = step % per_epoch
+                if j == 0 and step:
+                    perm = torch.randperm(n, generator=gen)
+                idx = perm[j * batch:(j + 1) * batch]
+                xb, tb = X[idx], T[idx]
+            else:
+                xb, tb = X, T
+            opt.zero_grad(set_to_none=True)
+            loss = loss_fn(net(xb), tb)
+            loss.backward()
+            opt.step()
+    print(steps / median_time(once, repeats))
+
+
+def torch_version() -> str | None:
+    import importlib.metadata
+    import importlib.util
+
+    if importlib.util.find_spec("torch") is None:
+        return None
+    try:
+        return importlib.metadata.version("torch")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def matmul_flops(net: Network, n: int) -> float:
+    """Floating-point operations of the matrix products of one training step on n samples:
+    forward W a, weight gradients g a^T and back-propagation W^T g (not into the inputs)."""
+    fwd = sum(2.0 * r * c * n for r, c in net.shapes)
+    back = sum(2.0 * r * (c - 1) * n for r, c in net.shapes[1:])
+    return 2 * fwd + back
+
+
+def gflops(dtype, size: int, threads: int | None, repeats: int) -> float:
+    """GFLOP/s of a (size x size) @ (size x size) product, BLAS on ``threads`` (None: default)."""
+    a = np.random.default_rng(0).standard_normal((size, size)).astype(dtype)
+    b = a.copy()
+    c = np.empty_like(a)
+    np.matmul(a, b, out=c)
+
+    def once():
+        np.matmul(a, b, out=c)
+    if threads == 1:
+        with single_threaded():
+            secs = median_time(once, repeats)
+    else:
+        secs = median_time(once, repeats)
+    return 2.0 * size ** 3 / secs / 1e9
+
+
+def layer_gflops(n: int, repeats: int) -> float:
+    """GFLOP/s of the MLP's middle-layer product (30 x 31) @ (31 x n), float32, one BLAS thread."""
+    rng = np.random.default_rng(0)
+    w = rng.standard_normal((30, 31)).astype(np.float32)
+    a = rng.standard_normal((31, n)).astype(np.float32)
+    h = np.empty((30, n), dtype=np.float32)
+    reps = max(1, int(2e8 / (2 * 30 * 31 * n)))
+
+    def once():
+        for _ in range(reps):
+            np.matmul(w, a, out=h)
+    with single_threaded():
+        secs = median_time(once, repeats)
+    return 2.0 * 30 * 31 * n * reps / secs / 1e9
+
+
+# ---------------------------------------------------------------------------- LuGre
+
+
+def lugre_loop(v, g, fv, sigma0, sigma1, dt, z0):
+    """The per-sample Python loop a user would write for the same exact update (reference)."""
+    out = np.empty(len(v))
+    z = z0
+    for k in range(len(v)):
+        vk, gk = float(v[k]), float(g[k])
+        rate = sigma0 * abs(vk) / gk
+        a = math.exp(-min(rate * float(dt[k]), 700.0))
+        zss = math.copysign(gk / sigma0, vk) if vk != 0 else 0.0
+        z = zss + (z - zss) * a
+        out[k] = sigma0 * z + sigma1 * (vk - rate * z) + fv * vk
+    return out
+
+
+# ---------------------------------------------------------------------------- main
+
+
+def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
+    """One model file per kind, trained briefly (prediction cost does not depend on the fit)."""
+    from fricli import identify, models
+    from fricli.diagnosis import driver
+    from fricli.diagnosis.fix import augment
+
+    steps = 20 if quick else 200
+    lugre = identify.identify(base_log).model_
+    built = {"lugre": lugre}
+    for arch in ("mlp", "selmic", "nnacm"):
+        built[arch] = learning.train_base(base_log, arch=arch, steps=steps)[0]
+    adapt_log = logs.load_log(ADAPT_LOG)
+    built["residual"] = learning.adapt(lugre, adapt_log, epochs=2)[0]
+    ext = logs.load_log(EXT_LOG)
+    built["augmented"] = augment(lugre, driver.diagnose(lugre, ext), ext)
+    paths = {}
+    for kind, model in built.items():
+        paths[kind] = os.path.join(tmp, f"{kind}.npz")
+        log = adapt_log if kind == "residual" else ext if kind == "augmented" else base_log
+        models.save_for_log(paths[kind], model, log, rows_used=len(log))
+    return paths
+
+
+def main(argv=None) -> dict:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--torch-worker"]:
+        folder, *numbers = argv[1:]
+        torch_worker(folder, *(int(v) for v in numbers))
+        return {}
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="tiny sizes: checks that everything runs")
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON on stdout")
+    ap.add_argument("--repeats", type=int, default=None, help="repeats per figure (median); default 3, quick 1")
+    ap.add_argument("--threads", type=int, default=2, help="PyTorch threads (fricli uses at most 2)")
+    ap.add_argument("--plot", default=None, metavar="PNG", help="also measure scaling and plot it to PNG")
+    ap.add_argument("--skip-torch", action="store_true", help="do not measure PyTorch even if installed")
+    args = ap.parse_args(argv)
+    size = dict(QUICK if args.quick else FULL)
+    reps = args.repeats or size["repeats"]
+    torch = None if args.skip_torch else torch_version()
+    res: dict = {"machine": {"python": platform.python_version(), "numpy": np.__version__, "cpus": os.cpu_count(),
+                             "processor": platform.processor() or platform.machine(),
+                             "blas_threads": (_openblas()[0]() if _openblas() else None),
+                             "torch": torch, "torch_threads": args.threads,
+                             "quick": args.quick, "repeats": reps},
+                 "rows": []}
+    rows = res["rows"]
+
+    def add(group, name, value, unit, note=""):
+        rows.append({"group": group, "name": name, "value": value, "unit": unit, "note": note})
+        say(f"  {group:<9} {name:<52} {fmt(value):>12} {unit} {note}")
+
+    with tempfile.TemporaryDirectory() as tmp:
+        base_log = logs.load_log(BASE_LOG)
+
+        # ---- training
+        say("training")
+        x, t = training_arrays(base_log)
+        n = x.shape[1]
+        net = mlp()
+        full = fricli_steps_per_s(x, t, size["steps"], 0, reps)
+        mini = fricli_steps_per_s(x, t, size["mini_steps"], 256, reps)
+        add("train", f"full-batch steps/s, fricli (N = {n}, sample base log)", full, "steps/s")
+        add("train", f"mini-batch (256) steps/s, fricli (N = {n})", mini, "steps/s")
+        if torch is not None:
+            for threads in dict.fromkeys((args.threads, 1)):
+                tfull = torch_steps_per_s(x, t, torch_steps(size["steps"]), 0, reps, threads)
+                tmini = torch_steps_per_s(x, t, torch_steps(size["mini_steps"]), 256, reps, threads)
+                add("train", f"full-batch steps/s, PyTorch ({threads} thread{'s' * (threads > 1)})", tfull, "steps/s")
+                add("train", f"mini-batch (256) steps/s, PyTorch ({threads} thread{'s' * (threads > 1)})", tmini,
+                    "steps/s")
+                add("train", f"ratio fricli / PyTorch ({threads}), full batch", full / tfull, "x", "target >= 2")
+                add("train", f"ratio fricli / PyTorch ({threads}), mini-batch", mini / tmini, "x", "target >= 4")
+        else:
+            add("train", "PyTorch", None, "", "skipped: torch is not installed")
+        big_n = 100_000 if not args.quick else 5_000
+        xb, tb = resample(x, t, big_n)
+        big_steps = max(5, size["steps"] // 50)
+        full_big = fricli_steps_per_s(xb, tb, big_steps, 0, reps)
+        add("train", f"full-batch steps/s, fricli (N = {big_n})", full_big, "steps/s")
+        if torch is not None:
+            tbig = torch_steps_per_s(xb, tb, torch_steps(big_steps), 0, reps, args.threads)
+            add("train", f"full-batch steps/s, PyTorch (N = {big_n})", tbig, "steps/s")
+            add("train", f"ratio fricli / PyTorch, full batch N = {big_n}", full_big / tbig, "x")
+        tb_args = ["train-base", BASE_LOG, "-o", os.path.join(tmp, "nn.npz")]
+        if size["train_base_steps"]:
+            tb_args += ["--steps", str(size["train_base_steps"])]
+        steps_label = size["train_base_steps"] or 50_000
+        add("train", f"train-base command, {steps_label} steps (wall)", run_cli(tb_args, reps), "s", "target < 45")
+
+        # ---- the physical limit
+        say("limits")
+        peak32 = gflops(np.float32, 2048 if not args.quick else 256, None, reps)
+        peak32_1 = gflops(np.float32, 2048 if not args.quick else 256, 1, reps)
+        peak64 = gflops(np.float64, 2048 if not args.quick else 256, None, reps)
+        lay = layer_gflops(n, reps)
+        flops = matmul_flops(net, n)
+        achieved = flops * full / 1e9
+        add("limit", "peak float32 matmul 2048^2, BLAS default threads", peak32, "GFLOP/s")
+        add("limit", "peak float32 matmul 2048^2, one thread", peak32_1, "GFLOP/s")
+        add("limit", "peak float64 matmul 2048^2, BLAS default threads", peak64, "GFLOP/s")
+        add("limit", f"(30 x 31) @ (31 x {n}) float32, one thread", lay, "GFLOP/s")
+        add("limit", f"full-batch training, matrix-product GFLOP/s achieved (N = {n})", achieved, "GFLOP/s")
+        add("limit", "matrix-product time of 50,000 steps at that layer rate", flops * 50_000 / (lay * 1e9), "s",
+            "compute limit")
+        add("limit", f"full-batch N = {big_n}: matrix-product GFLOP/s achieved", matmul_flops(net, big_n) * full_big / 1e9,
+            "GFLOP/s")
+
+        # ---- LuGre simulation and identification
+        say("lugre")
+        params = dict(fc=10.0, fs=14.0, vs=0.05, delta=1.5, fv=20.0, sigma0=1e5, sigma1=30.0)
+        sig_l = tiled_signals(base_log, size["lugre_rows"])
+        v, dt = sig_l["qd"], physics.intervals(sig_l["t"])
+        g = physics.stribeck(v, params["fc"], params["fs"], params["vs"], params["delta"])
+        nl = len(v)
+        secs = median_time(lambda: physics.lugre_friction(v, g, params["fv"], params["sigma0"], params["sigma1"], dt),
+                           max(reps, 5))
+        add("lugre", f"physics.lugre_friction, {nl:,} samples", nl / secs, "samples/s")
+        ln = size["loop_rows"]
+        secs_loop = median_time(lambda: lugre_loop(v[:ln], g[:ln], params["fv"], params["sigma0"], params["sigma1"],
+                                                    dt[:ln], 0.0), reps)
+        add("lugre", f"same update as a Python loop, {ln:,} samples (reference)", ln / secs_loop, "samples/s")
+        ref, _ = physics.lugre_friction(v[:ln], g[:ln], params["fv"], params["sigma0"], params["sigma1"], dt[:ln], 0.0)
+        loop = lugre_loop(v[:ln], g[:ln], params["fv"], params["sigma0"], params["sigma1"], dt[:ln], 0.0)
+        res["lugre_loop_max_abs_diff"] = float(np.max(np.abs(ref - loop)))
+        model_l = LuGreModel(**params)
+        secs = median_time(lambda: model_l.predict(sig_l), max(reps, 5))
+        add("lugre", f"LuGreModel.predict (t, qd), {nl:,} samples", nl / secs, "samples/s")
+
+        from fricli import identify
+        if size["identify_rows"]:
+            id_path = os.path.join(tmp, "identify.parquet")
+            rate = size["identify_rows"] / 351.0
+            simulate(id_path, ["--scenario", "base", "--rate", f"{rate:.6g}", "--seed", "1"])
+        else:
+            id_path = BASE_LOG
+        id_log = logs.load_log(id_path)
+        add("lugre", f"identify (library), {len(id_log):,} rows",
+            median_time(lambda: identify.identify(id_log), reps), "s", "target < 5")
+        add("lugre", f"identify command (wall), {len(id_log):,} rows",
+            run_cli(["identify", id_path, "-o", os.path.join(tmp, "id.npz")], reps), "s")
+
+        # ---- prediction
+        say("predict")
+        from fricli import models
+        paths = build_models(tmp, base_log, args.quick)
+        np_rows = size["predict_rows"]
+        ext = logs.load_log(EXT_LOG)
+        big = tiled_signals(ext, np_rows)
+        big_path = os.path.join(tmp, "big.parquet")
+        write_log(big, ext.units, big_path)
+        for kind in KINDS:
+            model, _ = models.load(paths[kind])
+            secs = median_time(lambda: model.predict(big), reps)
+            add("predict", f"{kind}: model.predict in memory, {np_rows:,} rows", np_rows / secs, "samples/s",
+                "target >= 10 M" if kind == "lugre" else "target >= 5 M" if kind in ("mlp", "selmic", "nnacm") else "")
+        for kind in KINDS if not args.quick else KINDS[:2]:
+            secs = run_cli(["predict", paths[kind], big_path, "-o", os.path.join(tmp, "pred.parquet")], reps)
+            add("predict", f"{kind}: predict command file to file (wall), {np_rows:,} rows", np_rows / secs,
+                "samples/s")
+        del big
+
+        # ---- diagnosis
+        say("diagnose")
+        if size["diagnose_rows"]:
+            dg_path = os.path.join(tmp, "diagnose.parquet")
+            simulate(dg_path, ["--scenario", "extended", "--load", "asym", "--effect", "ripple", "--seed", "4",
+                               "--duration", f"{size['diagnose_rows'] / 100.0:g}"])
+        else:
+            dg_path = EXT_LOG
+        from fricli.diagnosis import driver
+        dg_log = logs.load_log(dg_path)
+        lugre, _ = models.load(paths["lugre"])
+        add("diagnose", f"diagnose (library), lugre model, {len(dg_log):,} rows",
+            median_time(lambda: driver.diagnose(lugre, dg_log), reps), "s")
+        add("diagnose", f"diagnose command (wall), lugre model, {len(dg_log):,} rows",
+            run_cli(["diagnose", paths["lugre"], dg_path], reps), "s")
+
+        if args.plot:
+            say("scaling")
+            res["scaling"] = scaling(x, t, size, reps, torch, args.threads, base_log, paths)
+            plot(res["scaling"], args.plot)
+            say(f"plot written to {args.plot}")
+
+    table = format_table(res)
+    say("")
+    say(table)
+    if args.json:
+        print(json.dumps(res, indent=1))
+    else:
+        print(table)
+    return res
+
+
+def scaling(x, t, size, reps, torch, threads, base_log, paths) -> dict:
+    """Cost against log length (training N, prediction rows) and network width."""
+    from fricli import models
+    out = {"train_n": [], "train_fricli_ms": [], "train_torch_ms": [], "rows": [], "lugre_us": [], "mlp_us": [],
+           "width": [], "width_fricli_ms": [], "width_torch_ms": []}
+    for n in size["scale_n"]:
+        xs, ts = resample(x, t, n)
+        steps = max(5, int(5e5 / n)) if len(size["scale_n"]) > 2 else 10
+        out["train_n"].append(n)
+        out["train_fricli_ms"].append(1e3 / fricli_steps_per_s(xs, ts, steps, 0, reps))
+        out["train_torch_ms"].append(1e3 / torch_steps_per_s(xs, ts, torch_steps(steps), 0, reps, threads)
+                                     if torch is not None else None)
+        say(f"  N = {n}: {out['train_fricli_ms'][-1]:.3f} ms/step")
+    ext = logs.load_log(EXT_LOG)
+    lugre, _ = models.load(paths["lugre"])
+    mlp_model, _ = models.load(paths["mlp"])
+    for rows in size["scale_rows"]:
+        sig = tiled_signals(ext, rows)
+        out["rows"].append(rows)
+        out["lugre_us"].append(1e6 * median_time(lambda: lugre.predict(sig), reps) / rows * 1e3)
+        out["mlp_us"].append(1e6 * median_time(lambda: mlp_model.predict(sig), reps) / rows * 1e3)
+        say(f"  rows = {rows}: lugre {out['lugre_us'][-1]:.3f}, mlp {out['mlp_us'][-1]:.3f} us per 1000 rows")
+    xs, ts = x, t
+    out["width_n"] = xs.shape[1]
+    for w in size["scale_width"]:
+        steps = max(10, int(1e8 / (w * w * xs.shape[1]))) if len(size["scale_width"]) > 2 else 10
+        out["width"].append(w)
+        out["width_fricli_ms"].append(1e3 / fricli_steps_per_s(xs, ts, steps, 0, reps, width=w))
+        out["width_torch_ms"].append(1e3 / torch_steps_per_s(xs, ts, torch_steps(steps), 0, reps, threads, width=w)
+                                     if torch is not None else None)
+        say(f"  width {w}: {out['width_fricli_ms'][-1]:.3f} ms/step")
+    return out
+
+
+def plot(sc: dict, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+    ax = axes[0]
+    ax.loglog(sc["train_n"], sc["train_fricli_ms"], "o-", label="fricli")
+    if any(v is not None for v in sc["train_torch_ms"]):
+        ax.loglog(sc["train_n"], sc["train_torch_ms"], "s--", label="PyTorch")
+    ax.set(xlabel="training samples N (full batch)", ylabel="ms per Adam step", title="training, 2-30-30-1")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    ax = axes[1]
+    ax.semilogx(sc["rows"], sc["lugre_us"], "o-", label="lugre")
+    ax.semilogx(sc["rows"], sc["mlp_us"], "s-", label="mlp")
+    ax.set(xlabel="log rows", ylabel="ms per million rows", title="prediction in memory")
+    ax.set_ylim(bottom=0)
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    ax = axes[2]
+    ax.loglog(sc["width"], sc["width_fricli_ms"], "o-", label="fricli")
+    if any(v is not None for v in sc["width_torch_ms"]):
+        ax.loglog(sc["width"], sc["width_torch_ms"], "s--", label="PyTorch")
+    ax.set(xlabel="hidden width w (2-w-w-1)", ylabel="ms per Adam step",
+           title=f"network size, full batch N = {sc['width_n']}")
+    ax.legend()
+    ax.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    from fricli.atomic import atomic_open
+    with atomic_open(path) as fh:
+        fig.savefig(fh, format="png", dpi=110)
+    plt.close(fig)
+
+
+def fmt(value) -> str:
+    if value is None:
+        return "-"
+    if abs(value) >= 1e6:
+        return f"{value / 1e6:,.2f} M"
+    if abs(value) >= 100:
+        return f"{value:,.0f}"
+    return f"{value:.3g}"
+
+
+def format_table(res: dict) -> str:
+    m = res["machine"]
+    head = (f"fricli benchmarks ({'quick' if m['quick'] else 'full'}; median of {m['repeats']}; "
+            f"{m['cpus']} CPUs, numpy {m['numpy']}, torch {m['torch'] or 'not installed'})")
+    lines = [head, "", "| group | measurement | value | unit | note |", "|---|---|---:|---|---|"]
+    for r in res["rows"]:
+        lines.append(f"| {r['group']} | {r['name']} | {fmt(r['value'])} | {r['unit']} | {r['note']} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,110 @@
+"""SIGKILL a model-writing job: the previous model stays intact, byte for byte.
+
+What holds (docs/reliability.md):
+- killed while it trains (most of a run), a job leaves no temporary file; it leaves its empty
+  lock file ``.NAME.lock``, whose lock the kernel released with the process, so the next job
+  is not refused and removes the file;
+- killed while it writes (between creating ``.NAME.XXXX.tmp`` and the ``os.replace``), a job
+  leaves that temporary file; the model file itself is the previous one, and the next write to
+  the same model removes the leftover.
+"""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from click.testing import CliRunner
+
+from conftest import ROOT, make_table, write
+from fricli import errors, models
+from fricli.cli import cli
+
+
+def fricli(*args, cwd, prelude=""):
+    code = prelude + "from fricli.cli import main\nimport sys\nsys.argv = ['fricli', *sys.argv[1:]]\nmain()\n"
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.Popen([sys.executable, "-c", code, *map(str, args)], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def wait_until(condition, proc, timeout=60.0):
+    end = time.monotonic() + timeout
+    while not condition():
+        if proc.poll() is not None:
+            raise AssertionError(f"the job ended early ({proc.returncode}): {proc.stderr.read().decode()}")
+        if time.monotonic() > end:
+            proc.kill()
+            raise AssertionError("the job did not get there in time")
+        time.sleep(0.02)
+
+
+def setup(tmp_path):
+    """A log and a previous model made from it; returns (log, model path, model bytes)."""
+    log = write(make_table(n=2000), tmp_path / "log.parquet")
+    model = tmp_path / "model.npz"
+    res = CliRunner().invoke(cli, ["train-base", log, "-o", str(model), "--steps", "5", "-q"])
+    assert res.exit_code == 0, res.stderr
+    return log, model, model.read_bytes()
+
+
+def names(folder):
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_sigkill_during_training_keeps_the_previous_model(tmp_path):
+    log, model, previous = setup(tmp_path)
+    lock = tmp_path / ".model.npz.lock"
+    proc = fricli("train-base", log, "-o", model, "--steps", 10**9, "--seed", "1", "-q", cwd=tmp_path)
+    wait_until(lock.exists, proc)  # the log is read and the job holds the lock: it trains now
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGKILL)
+    assert proc.wait(timeout=30) == -signal.SIGKILL
+    assert model.read_bytes() == previous
+    assert models.load(str(model))
+    assert names(tmp_path) == [".model.npz.lock", "log.parquet", "model.npz"]  # no temporary file
+    # the kernel released the lock with the process: the next job runs, and tidies up
+    res = CliRunner().invoke(cli, ["train-base", log, "-o", str(model), "--steps", "5", "--seed", "1", "-q"])
+    assert res.exit_code == 0, res.stderr
+    assert model.read_bytes() != previous
+    assert names(tmp_path) == ["log.parquet", "model.npz"]
+
+
+# Dies at the fsync before os.replace: the whole new model is in the temporary file by then.
+DIE_WHILE_WRITING = "import os, signal\nos.fsync = lambda fd: os.kill(os.getpid(), signal.SIGKILL)\n"
+
+
+def test_sigkill_while_writing_the_model_leaves_only_a_temporary_file(tmp_path):
+    log, model, previous = setup(tmp_path)
+    proc = fricli("train-base", log, "-o", model, "--steps", "5", "--seed", "2", "-q", cwd=tmp_path,
+                  prelude=DIE_WHILE_WRITING)
+    assert proc.wait(timeout=60) == -signal.SIGKILL, proc.stderr.read().decode()
+    assert model.read_bytes() == previous
+    assert models.load(str(model))
+    left = [n for n in names(tmp_path) if n not in ("log.parquet", "model.npz")]
+    temps = [n for n in left if n.startswith(".model.npz.") and n.endswith(".tmp")]
+    assert len(temps) == 1 and sorted(left) == sorted(temps + [".model.npz.lock"])
+    # the next write of the same model removes the leftover
+    res = CliRunner().invoke(cli, ["train-base", log, "-o", str(model), "--steps", "5", "--seed", "2", "-q"])
+    assert res.exit_code == 0, res.stderr
+    assert names(tmp_path) == ["log.parquet", "model.npz"]
+    assert model.read_bytes() != previous
+
+
+def test_a_killed_job_does_not_hold_the_lock(tmp_path):
+    """Two jobs at once: the second is refused (LOCKED) while the first runs, not after it died."""
+    log, model, previous = setup(tmp_path)
+    lock = tmp_path / ".model.npz.lock"
+    first = fricli("train-base", log, "-o", model, "--steps", 10**9, "-q", cwd=tmp_path)
+    wait_until(lock.exists, first)
+    second = fricli("train-base", log, "-o", model, "--steps", "5", "-q", cwd=tmp_path)
+    assert second.wait(timeout=60) == errors.LOCKED
+    assert second.stderr.read().decode().startswith("fricli: error: ")
+    first.send_signal(signal.SIGKILL)
+    first.wait(timeout=30)
+    assert model.read_bytes() == previous
+    third = fricli("train-base", log, "-o", model, "--steps", "5", "-q", cwd=tmp_path)
+    assert third.wait(timeout=60) == 0, third.stderr.read().decode()
+    assert names(tmp_path) == ["log.parquet", "model.npz"]
