@@ -184,7 +184,7 @@ def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int
     T = torch.from_numpy(np.ascontiguousarray(np.load(os.path.join(folder, "t.npy")).T))
     n = X.shape[0]
 
-    def once():
+    def once(steps=steps):
         torch.manual_seed(0)
         nn = torch.nn
         net = nn.Sequential(nn.Linear(2, width), nn.ELU(), nn.Linear(width, width), nn.ELU(), nn.Linear(width, 1))
@@ -206,6 +206,7 @@ def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int
             loss = loss_fn(net(xb), tb)
             loss.backward()
             opt.step()
+    once(min(steps, 20))   # warm-up: PyTorch's first steps set up its thread pool and kernels
     print(steps / median_time(once, repeats))
 
 
