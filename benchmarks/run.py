@@ -2,7 +2,7 @@
 """fricli benchmarks: training, identification, simulation, prediction and diagnosis, in one run.
 
     python benchmarks/run.py                   full sizes (several minutes on 2 cores)
-    python benchmarks/run.py --quick           tiny sizes, a few seconds (what the tests run)
+    python benchmarks/run.py --quick           tiny sizes, about 15 s (what the tests run)
     python benchmarks/run.py --json            the figures as JSON on stdout
     python benchmarks/run.py --plot docs/img/performance-scaling.png
                                                also measure how cost grows with log length and

@@ -16,6 +16,12 @@ LOCKED = 8           # another job holds the lock on the output
 UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
 
 
+def one_line(text: str) -> str:
+    """``text`` as one printable line: line breaks and terminal escapes that a message quotes from
+    a file (a joint name, a unit) are shown escaped."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class FricliError(Exception):
     """Base class: a clear, user-facing error with an exit code."""
 

@@ -71,8 +71,8 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
         if not rows.any():
             continue
         h = hold * 2 ** k
-        before = max(1, int(round(h / dt)))
-        after = max(1, int(round(h / 4 / dt)))
+        before = max(1, int(min(n, round(h / dt))))  # min: a window longer than the log is no window
+        after = max(1, int(min(n, round(h / 4 / dt))))
         size = before + after + 1
         origin = before - size // 2
         vmax = maximum_filter1d(qd, size=size, origin=origin, mode="nearest")

@@ -296,7 +296,7 @@ def joints_of(table: pa.Table) -> list:
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
     """Rows of one joint. ``joint=None`` means the only joint; several need a choice."""
     joints = joints_of(table)
-    if joints == [None]:
+    if joints == [None] or not joints:  # no joint column, or no rows (refused as empty later)
         return table, joint
     if joint is None:
         if len(joints) > 1:

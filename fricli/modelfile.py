@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 
 import numpy as np
 
 from fricli import __version__
 from fricli.atomic import atomic_write_bytes
-from fricli.errors import ModelFileError
+from fricli.errors import FitError, ModelFileError
 
 FORMAT = "fricli-model"
 FORMAT_VERSION = 1
@@ -28,7 +29,11 @@ _EPOCH = (1980, 1, 1, 0, 0, 0)
 def dumps(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
     """Serialise ``meta`` and ``arrays`` to npz bytes, deterministically."""
     buf = io.BytesIO()
-    entries = {"meta": np.array(json.dumps(meta, sort_keys=True, allow_nan=False))}
+    try:
+        text = json.dumps(meta, sort_keys=True, allow_nan=False)
+    except ValueError:
+        raise FitError(f"the model is not written: its {_non_finite(meta)} is not a finite number") from None
+    entries = {"meta": np.array(text)}
     entries.update(arrays)
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for name in sorted(entries):
@@ -41,6 +46,18 @@ def dumps(meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
             with zf.open(info, "w") as fh:
                 np.lib.format.write_array(fh, arr if arr.flags.c_contiguous else arr.copy(), allow_pickle=False)
     return buf.getvalue()
+
+
+def _non_finite(obj, path: str = "meta") -> str | None:
+    """Where the first NaN or infinite float in ``obj`` is, e.g. ``meta.fit.mae``."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return path
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj) if isinstance(obj, (list, tuple)) else ()
+    for key, value in items:
+        found = _non_finite(value, f"{path}.{key}")
+        if found:
+            return found
+    return None
 
 
 def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]]:

@@ -60,6 +60,8 @@ def test_sigkill_during_training_keeps_the_previous_model(tmp_path):
     proc = fricli("train-base", log, "-o", model, "--steps", 10**9, "--seed", "1", "-q", cwd=tmp_path)
     wait_until(lock.exists, proc)  # the log is read and the job holds the lock: it trains now
     time.sleep(0.3)
+    other = CliRunner().invoke(cli, ["train-base", log, "-o", str(model), "--steps", "5", "-q"])
+    assert other.exit_code == errors.LOCKED, other.stderr  # a second job is refused meanwhile
     proc.send_signal(signal.SIGKILL)
     assert proc.wait(timeout=30) == -signal.SIGKILL
     assert model.read_bytes() == previous
@@ -92,19 +94,3 @@ def test_sigkill_while_writing_the_model_leaves_only_a_temporary_file(tmp_path):
     assert names(tmp_path) == ["log.parquet", "model.npz"]
     assert model.read_bytes() != previous
 
-
-def test_a_killed_job_does_not_hold_the_lock(tmp_path):
-    """Two jobs at once: the second is refused (LOCKED) while the first runs, not after it died."""
-    log, model, previous = setup(tmp_path)
-    lock = tmp_path / ".model.npz.lock"
-    first = fricli("train-base", log, "-o", model, "--steps", 10**9, "-q", cwd=tmp_path)
-    wait_until(lock.exists, first)
-    second = fricli("train-base", log, "-o", model, "--steps", "5", "-q", cwd=tmp_path)
-    assert second.wait(timeout=60) == errors.LOCKED
-    assert second.stderr.read().decode().startswith("fricli: error: ")
-    first.send_signal(signal.SIGKILL)
-    first.wait(timeout=30)
-    assert model.read_bytes() == previous
-    third = fricli("train-base", log, "-o", model, "--steps", "5", "-q", cwd=tmp_path)
-    assert third.wait(timeout=60) == 0, third.stderr.read().decode()
-    assert names(tmp_path) == ["log.parquet", "model.npz"]

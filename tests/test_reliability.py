@@ -230,6 +230,14 @@ def test_joint_the_log_does_not_have(inputs, tmp_path, command):
     check_untouched(tmp_path, before)
 
 
+def test_file_contents_quoted_in_a_message_stay_on_one_line(tmp_path):
+    cols = good_columns()
+    cols["joint"] = np.where(np.arange(len(cols["t"])) < 2000, "left\narm", "\x1b[31mright")
+    log = write_log(tmp_path, "odd-joints", cols)
+    res = run("identify", log, "-o", tmp_path / "out.npz", "--joint", "7")
+    assert_clean_error(res, errors.INPUT, "no joint 7 in the log (it holds left\\narm, \\x1b[31mright)")
+
+
 @pytest.mark.parametrize("command", [c for c in LOG_COMMANDS if c not in ("identify", "train-base")])
 def test_units_that_disagree_with_the_model(inputs, tmp_path, command):
     previous_outputs(tmp_path)
@@ -260,6 +268,52 @@ def test_too_little_to_fit_says_what_is_missing(inputs, tmp_path, command, case)
     res = run(*command_args(command, inputs["logs"][case], inputs["model"], tmp_path))
     assert_clean_error(res, errors.DATA, TOO_LITTLE[command, case])
     check_untouched(tmp_path, before)
+
+
+def _extreme(name):
+    cols = good_columns()
+    if name == "huge-torque":
+        cols["tau_m"][:] = 1e308
+    elif name == "huge-velocity":
+        cols["qd"] *= 1e300
+        cols["q"] *= 1e300
+    elif name == "huge-gravity":
+        cols["tau_g"][:] = -1e200
+    elif name == "tiny-time-steps":
+        cols["t"] = cols["t"] * 1e-300
+    return cols
+
+
+@pytest.mark.parametrize("case", ["huge-torque", "huge-velocity", "huge-gravity", "tiny-time-steps"])
+@pytest.mark.parametrize("command", LOG_COMMANDS)
+def test_extreme_values_never_give_an_internal_error(inputs, tmp_path, command, case):
+    """Finite but absurd numbers: a result (figures that overflow are JSON null) or a clean error."""
+    log = write_log(tmp_path, case, _extreme(case))
+    args = command_args(command, log, inputs["model"], tmp_path) + ([] if command == "report" else ["--json"])
+    res = run(*args)
+    assert res.exit_code in (errors.OK, errors.DATA, errors.FIT), res.stderr
+    assert isinstance(res.exception, (SystemExit, type(None))), res.exception
+    assert "internal error" not in res.stderr and "Traceback" not in res.output
+    if res.exit_code:
+        assert res.stderr.splitlines()[-1].startswith("fricli: error: ")
+    elif command != "report":
+        json.loads(res.stdout)
+
+
+def test_figures_over_no_rows_are_null_in_json(inputs, tmp_path):
+    """evaluate on a log where the joint never moves: the in-motion figures are undefined."""
+    res = run("evaluate", "--model", inputs["model"], "--log", inputs["logs"]["standstill"], "--json")
+    assert res.exit_code == 0, res.stderr
+    assert "null" in res.stdout and "NaN" not in res.stdout
+    json.loads(res.stdout)
+
+
+def test_a_model_with_non_finite_meta_is_not_written(tmp_path):
+    out = tmp_path / "m.npz"
+    out.write_bytes(b"previous model")
+    with pytest.raises(errors.FitError, match="meta.fit.val.mae is not a finite number"):
+        modelfile.write(str(out), dict(modelfile.base_meta(), fit={"val": {"mae": float("nan")}}), {})
+    assert out.read_bytes() == b"previous model" and listing(tmp_path) == ["m.npz"]
 
 
 MODEL_CASES = {

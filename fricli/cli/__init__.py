@@ -20,7 +20,7 @@ class FricliGroup(click.Group):
         except errors.FricliError as exc:
             if ctx.meta.get("fricli.debug"):
                 raise
-            click.echo(f"fricli: error: {exc}", err=True)
+            click.echo(f"fricli: error: {errors.one_line(str(exc))}", err=True)
             ctx.exit(exc.exit_code)
         except KeyboardInterrupt:
             click.echo("fricli: interrupted", err=True)
@@ -36,7 +36,7 @@ class FricliGroup(click.Group):
         except Exception as exc:
             if ctx.meta.get("fricli.debug"):
                 raise
-            first = str(exc).splitlines()[0] if str(exc) else ""
+            first = errors.one_line(str(exc).splitlines()[0]) if str(exc) else ""
             click.echo(f"fricli: internal error: {type(exc).__name__}: {first} (run with --debug for details)", err=True)
             ctx.exit(errors.FAILURE)
 

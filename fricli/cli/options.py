@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import sys
 from typing import Iterator
 
@@ -57,8 +58,19 @@ def warn(message: str) -> None:
     click.echo(message, err=True)
 
 
+def _json_safe(obj):
+    """``obj`` with NaN and infinite floats as None (JSON null): e.g. the MAE over no rows."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
 def emit_json(obj) -> None:
-    sys.stdout.write(json.dumps(obj, indent=2, sort_keys=True, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(_json_safe(obj), indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
 def progress_enabled(quiet: bool) -> bool:

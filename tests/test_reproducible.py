@@ -1,0 +1,92 @@
+"""The same inputs and seed give byte-identical model files and identical Parquet tables, in
+separate processes and whatever the BLAS thread count (OMP_NUM_THREADS / OPENBLAS_NUM_THREADS
+1 and 2).
+
+Two processes run the same commands in two folders, one with one BLAS thread and one with two
+(numpy's OpenBLAS caps the count at the number of cores, so on a one-core machine both have
+one). Every file and every stdout they produce must be byte for byte the same. Why it holds:
+training pins numpy's BLAS to one thread and splits large full batches over two worker
+threads in a fixed way (fricli/nn/training.py); identify pins the BLAS to one thread too (its
+threaded reductions round differently per thread count); model files have fixed zip
+timestamps and sorted JSON; Parquet output carries no time stamps.
+"""
+
+import os
+import subprocess
+import sys
+
+import pyarrow.parquet as pq
+
+from conftest import ROOT, SAMPLE
+
+SCRIPT = r"""
+import contextlib, io, os, sys
+from fricli.cli import cli
+from fricli.nn import blas
+
+sample = sys.argv[1]
+funcs = blas._openblas()
+with open("threads.txt", "w") as fh:
+    fh.write(str(funcs[0]() if funcs else 1))
+runs = {
+    "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "--seed", "5", "-o", "sim.parquet"],
+    "identify": ["identify", f"{sample}/joint2_base.parquet", "-o", "lugre.npz", "--json"],
+    "train-base": ["train-base", f"{sample}/joint2_base.parquet", "-o", "nn.npz", "--steps", "150"],
+    # over 8192 rows in a full batch: the gradient is split over two threads
+    "train-base-threads": ["train-base", f"{sample}/joint2_base.parquet", "-o", "nn_all_rows.npz", "--steps", "15",
+                           "--no-balance"],
+    "train-base-minibatch": ["train-base", f"{sample}/joint2_base.parquet", "-o", "selmic.npz", "--arch", "selmic",
+                             "--steps", "100", "--batch-size", "64", "--seed", "3"],
+    "adapt": ["adapt", "nn.npz", f"{sample}/joint2_adapt.parquet", "-o", "adapted.npz", "--epochs", "10", "--json"],
+    "diagnose": ["diagnose", "lugre.npz", f"{sample}/joint2_extended_asym.parquet", "--fix", "-o", "fixed.npz",
+                 "--folds", "5", "--json"],
+    "predict": ["predict", "adapted.npz", f"{sample}/joint2_extended_asym.parquet", "-o", "pred.parquet",
+                "--batch-rows", "5000"],
+    "estimate-ext": ["estimate-ext", "fixed.npz", f"{sample}/joint2_extended_asym.parquet", "-o", "ext.parquet",
+                     "--lowpass", "2"],
+    "evaluate": ["evaluate", "--model", "lugre.npz", "--model", "adapted.npz", "--model", "fixed.npz",
+                 "--log", f"{sample}/joint2_extended_sym.parquet", "--json"],
+}
+for name, args in runs.items():
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        try:
+            cli.main(args + ["-q"], prog_name="fricli", standalone_mode=False)
+        except SystemExit as exc:
+            if exc.code:
+                raise
+    text = out.getvalue()
+    # seconds taken are the one thing that may differ between runs
+    text = "\n".join(line for line in text.splitlines() if '"seconds":' not in line)
+    with open(f"{name}.stdout", "w") as fh:
+        fh.write(text)
+"""
+
+
+def run_in(folder, threads):
+    folder.mkdir()
+    env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS=str(threads),
+               PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    return subprocess.Popen([sys.executable, "-c", SCRIPT, str(SAMPLE)], cwd=folder, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+
+
+def test_same_bytes_in_separate_processes_and_across_blas_thread_counts(tmp_path):
+    one, two = tmp_path / "threads1", tmp_path / "threads2"
+    procs = [run_in(one, 1), run_in(two, 2)]
+    for proc in procs:
+        _, err = proc.communicate(timeout=600)
+        assert proc.returncode == 0, err.decode()
+    assert (one / "threads.txt").read_text() == "1"
+    assert (two / "threads.txt").read_text() == str(min(2, os.cpu_count() or 1))
+    files = sorted(p.name for p in one.iterdir())
+    assert files == sorted(p.name for p in two.iterdir())
+    outputs = [f for f in files if f.endswith((".npz", ".parquet"))]
+    assert len(outputs) == 9
+    for name in files:
+        if name == "threads.txt":
+            continue
+        assert (one / name).read_bytes() == (two / name).read_bytes(), f"{name} differs"
+        if name.endswith(".parquet"):
+            assert pq.read_table(one / name).equals(pq.read_table(two / name))
+    assert '"fit"' in (one / "identify.stdout").read_text()  # stdout was captured, not lost

@@ -1,0 +1,112 @@
+"""Every command run as a real process, as cron or a shell runs it: the exit code is the
+documented one and the interpreter exits cleanly (pyarrow has been seen to abort at
+interpreter exit, turning a success into a failure code)."""
+
+import io
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from conftest import ROOT, SAMPLE
+from fricli import errors, logs, models
+from fricli.cli import cli
+from fricli.models.lugre import LuGreModel
+
+PARAMS = dict(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, kc=0.03, ks=0.04, sigma0=1e4, sigma1=5.0)
+
+CRASH_SIGNS = ("Traceback", "Aborted", "terminate called", "Fatal Python error", "core dumped", "Segmentation")
+
+
+def base_env():
+    return dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1",
+                PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+
+
+def fricli(args, cwd, stdin=None):
+    return subprocess.run([sys.executable, "-m", "fricli", *map(str, args)], cwd=cwd, env=base_env(),
+                          input=stdin, capture_output=True, timeout=300)
+
+
+def run_all(runs: dict, cwd) -> dict:
+    """Run the commands two at a time; name -> CompletedProcess."""
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        futures = {name: pool.submit(fricli, args, cwd) for name, args in runs.items()}
+        return {name: future.result() for name, future in futures.items()}
+
+
+def check(name, proc, code=0):
+    err = proc.stderr.decode(errors="replace")
+    assert proc.returncode == code, f"{name}: exit {proc.returncode}, expected {code}\n{err}"
+    for sign in CRASH_SIGNS:
+        assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
+
+
+COMMANDS = ["adapt", "demo", "diagnose", "estimate-ext", "evaluate", "identify", "inspect", "predict", "report",
+            "simulate", "train-base"]
+
+
+def test_every_command_is_smoke_tested():
+    assert sorted(cli.commands) == COMMANDS
+
+
+def test_every_command_in_a_process(tmp_path):
+    base, adapt, ext = SAMPLE / "joint2_base.parquet", SAMPLE / "joint2_adapt.parquet", \
+        SAMPLE / "joint2_extended_asym.parquet"
+    first = run_all({
+        "--version": ["--version"],
+        "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "-o", "sim.parquet", "-q"],
+        "identify": ["identify", base, "-o", "lugre.npz", "--json"],
+        "train-base": ["train-base", base, "-o", "nn.npz", "--steps", "20", "-q"],
+        "demo": ["demo", "--steps", "3", "-o", "demo", "-q"],
+        "bad model": ["predict", "missing.npz", ext, "-o", "x.parquet"],
+    }, tmp_path)
+    for name, proc in first.items():
+        check(name, proc, errors.MODEL if name == "bad model" else 0)
+    assert first["--version"].stdout.decode().startswith("fricli, version")
+    assert first["bad model"].stderr.decode().startswith("fricli: error: missing.npz: no such file")
+    second = run_all({
+        "adapt": ["adapt", "nn.npz", adapt, "-o", "adapted.npz", "--epochs", "2", "-q"],
+        "predict": ["predict", "lugre.npz", "sim.parquet", "-o", "pred.parquet", "-q"],
+        "estimate-ext": ["estimate-ext", "nn.npz", ext, "-o", "ext.parquet", "--lowpass", "2", "-q"],
+        "evaluate": ["evaluate", "--model", "lugre.npz", "--model", "nn.npz", "--log", ext, "--json"],
+        "report": ["report", "nn.npz", ext, "-o", "report", "-q"],
+        "diagnose": ["diagnose", "lugre.npz", ext, "--fix", "-o", "fixed.npz", "--folds", "5", "-q"],
+        "inspect": ["inspect", "lugre.npz"],
+        "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
+    }, tmp_path)
+    for name, proc in second.items():
+        check(name, proc, errors.UNCHANGED if name == "unchanged" else 0)
+    for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
+                 "report/index.html", "demo/table.md"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
+
+
+def test_stdin_to_stdout_in_processes(tmp_path):
+    """estimate-ext reading Parquet from stdin and writing it to stdout (predict's pipeline is in
+    test_predict.py), and an empty stdin refused."""
+    model = tmp_path / "lugre.npz"
+    models.save(str(model), LuGreModel(**PARAMS), joint=4, axis="rotary", units=logs.CANONICAL["rotary"],
+                provenance={})
+    log = (SAMPLE / "joint4_adapt.parquet").read_bytes()
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        ext = pool.submit(fricli, ["estimate-ext", model, "-", "-o", "-", "-q"], tmp_path, log)
+        empty = pool.submit(fricli, ["predict", model, "-", "-o", "-"], tmp_path, b"")
+        ext, empty = ext.result(), empty.result()
+    check("estimate-ext", ext)
+    table = pq.read_table(io.BytesIO(ext.stdout))
+    assert table.num_rows == pq.read_metadata(SAMPLE / "joint4_adapt.parquet").num_rows
+    assert {"tau_f_pred", "tau_ext_pred"} <= set(table.column_names)
+    check("empty stdin", empty, errors.INPUT)
+    assert empty.stdout == b"" and empty.stderr.decode().startswith("fricli: error: stdin: empty input")
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_has_an_example(command):
+    res = CliRunner().invoke(cli, [command, "-h"])
+    assert res.exit_code == 0 and "Example:" in res.stdout and res.stderr == ""
