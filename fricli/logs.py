@@ -104,6 +104,12 @@ def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
         raise LogError(f"{name}: not a Parquet file") from None
 
 
+# Reading a large log in record batches: pyarrow's default pre_buffer keeps every column chunk
+# read so far until the file is closed (a 20-million-row log would end up in memory whole), and
+# without a buffer size a whole column chunk is read at once (a log written as one row group).
+STREAMING = {"pre_buffer": False, "buffer_size": 1 << 20}
+
+
 def stdin_parquet() -> pq.ParquetFile:
     """stdin as a ParquetFile for reading in batches. Parquet needs random access (its footer
     is at the end), so stdin is spooled to an anonymous temporary file (in $TMPDIR, gone when
@@ -117,7 +123,7 @@ def stdin_parquet() -> pq.ParquetFile:
         raise LogError("stdin: empty input, not a Parquet log")
     spool.seek(0)
     try:
-        return pq.ParquetFile(spool, pre_buffer=False)
+        return pq.ParquetFile(spool, **STREAMING)
     except Exception:
         spool.close()
         raise LogError("stdin: not a Parquet file") from None

@@ -60,16 +60,46 @@ def _non_finite(obj, path: str = "meta") -> str | None:
     return None
 
 
+_PICKLED = "holds a pickled object; refused (model files never load pickles)"
+MAX_ARRAY_BYTES = 1 << 30   # fricli models hold kilobytes to a few megabytes
+
+
+def _check_entries(data: bytes, name: str) -> None:
+    """Refuse, before numpy allocates anything, an archive whose arrays claim more bytes than
+    their entries hold (or than any model needs) and arrays of Python objects."""
+    total = 0
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        for info in zf.infolist():
+            with zf.open(info) as fh:
+                version = np.lib.format.read_magic(fh)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+                elif version == (2, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+                else:
+                    raise ModelFileError(f"{name}: not a fricli model file (array format {version})")
+                if dtype.hasobject:
+                    raise ModelFileError(f"{name}: {_PICKLED}")
+                size = math.prod(shape) * dtype.itemsize
+                total += size
+                if size > info.file_size - fh.tell() or total > MAX_ARRAY_BYTES:
+                    raise ModelFileError(f"{name}: not a fricli model file (or truncated): "
+                                         f"{info.filename} claims more data than it holds")
+
+
 def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]]:
     """Parse npz bytes into (meta, arrays); refuses pickles and unknown versions."""
     if not data.startswith(b"PK\x03\x04"):
         raise ModelFileError(f"{name}: not a fricli model file (not an .npz archive)")
     try:
+        _check_entries(data, name)
         with np.load(io.BytesIO(data), allow_pickle=False) as npz:
             arrays = {key: npz[key] for key in npz.files}
+    except ModelFileError:
+        raise
     except ValueError as exc:
         if "pickle" in str(exc).lower():
-            raise ModelFileError(f"{name}: holds a pickled object; refused (model files never load pickles)") from None
+            raise ModelFileError(f"{name}: {_PICKLED}") from None
         raise ModelFileError(f"{name}: not a fricli model file (or truncated)") from None
     except Exception:  # zip, EOF and format errors from corrupt or truncated files
         raise ModelFileError(f"{name}: not a fricli model file (or truncated)") from None

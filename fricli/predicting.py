@@ -83,9 +83,7 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     if os.path.isdir(path):
         raise LogError(f"{path}: is a folder, not a log")
     try:
-        # pre_buffer (pyarrow's default) keeps every column chunk read so far until the file is
-        # closed: a 20-million-row log would end up in memory whole
-        return pq.ParquetFile(path, pre_buffer=False), path
+        return pq.ParquetFile(path, **logs.STREAMING), path
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
     except IsADirectoryError:

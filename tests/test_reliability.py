@@ -62,7 +62,7 @@ def _bad_logs(folder):
     variant("no-t", lambda c: c.pop("t"))
     variant("no-motion-columns", lambda c: [c.pop(k) for k in ("q", "qd", "qdd")])
     variant("string-column", lambda c: c.update(tau_m=np.array([f"{x:.3f}" for x in c["tau_m"]])))
-    variant("bool-time", lambda c: c.update(t=pa.array(["2024-01-01"] * len(c["t"]))))
+    variant("string-time", lambda c: c.update(t=pa.array(["2024-01-01"] * len(c["t"]))))
 
     def nan(c):
         c["tau_m"][[100, 200, 300]] = np.nan
@@ -199,7 +199,7 @@ LOG_CASES = {
     "no-t": (errors.INPUT, "missing required column 't'"),
     "no-motion-columns": (errors.INPUT, "needs at least one of the columns 'q', 'qd'"),
     "string-column": (errors.INPUT, "column 'tau_m' has type string, expected numbers"),
-    "bool-time": (errors.INPUT, "column 't' has type string, expected numbers"),
+    "string-time": (errors.INPUT, "column 't' has type string, expected numbers"),
     "nan-inf": (errors.INPUT, "4 rows hold NaN or infinite values (first at row 50, columns qd, tau_m)"),
     "nulls": (errors.INPUT, "column 'tau_g' has 1 missing values (first at row 7)"),
     "t-decreasing": (errors.INPUT, "'t' is not increasing (first at row 500"),
@@ -400,6 +400,9 @@ def test_usage_errors_keep_click_code_2(inputs):
     assert res.exit_code == errors.USAGE and "Missing argument" in res.stderr
     res = run("train-base", inputs["good"], "-o", "x.npz", "--steps", "0")
     assert res.exit_code == errors.USAGE
+    for hidden, needle in (("4", "needs more than 10 units"), ("20,20", "has one hidden layer")):
+        res = run("train-base", inputs["good"], "-o", "x.npz", "--arch", "selmic", "--hidden", hidden)
+        assert res.exit_code == errors.USAGE and needle in res.stderr and "internal error" not in res.stderr
 
 
 def test_debug_shows_the_exception(inputs):
@@ -438,21 +441,32 @@ def test_locked_output(inputs, tmp_path, command):
     assert sorted(set(listing(tmp_path)) - set(before)) == []
 
 
-def test_lock_survives_a_removed_lock_file(tmp_path):
-    """A job that opened the lock file just before its holder removed it must not think it
-    holds the lock while a third job locks the new file."""
+def test_lock_on_a_lock_file_removed_meanwhile_is_not_held(tmp_path, monkeypatch):
+    """Job B opens the lock file, job A (its holder) ends and removes it, job C locks a new one:
+    B's flock on the old, removed file succeeds, but B must not think it holds the lock."""
     out = str(tmp_path / "m.npz")
-    with jobs.output_lock(out):
-        with pytest.raises(errors.LockedError):
-            with jobs.output_lock(out):
-                pass
+    job_a = jobs.output_lock(out)
+    job_a.__enter__()
+    job_c = jobs.output_lock(out)
+    real_open = os.open
+    raced = []
+
+    def open_then_race(path, flags, mode=0o777):
+        fd = real_open(path, flags, mode)
+        if not raced:
+            raced.append(path)
+            job_a.__exit__(None, None, None)
+            job_c.__enter__()
+        return fd
+
+    monkeypatch.setattr(jobs.os, "open", open_then_race)
+    with pytest.raises(errors.LockedError):
+        with jobs.output_lock(out):  # job B
+            pass
+    monkeypatch.undo()
+    assert raced and (tmp_path / ".m.npz.lock").exists()
+    job_c.__exit__(None, None, None)
     assert listing(tmp_path) == []
-    with jobs.output_lock(out):
-        lock = tmp_path / ".m.npz.lock"
-        assert lock.exists()
-        lock.unlink()  # as if its holder had just finished
-        with jobs.output_lock(out):  # locks a fresh file: the first holder saw none
-            assert lock.exists()
 
 
 # ------------------------------------------------------------------------ --if-changed

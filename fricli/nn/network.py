@@ -23,6 +23,17 @@ from fricli.nn import activations as acts
 from fricli.nn.activations import Activation
 
 
+def _check_units(n: int, act: Activation) -> None:
+    """ValueError unless ``act`` fits a layer of ``n`` units (mixed parts, jump exponents):
+    a damaged model file would otherwise fail later, inside a matrix product."""
+    parts = act.parts if isinstance(act, acts.Mixed) else [(n, act)]
+    if sum(m for m, _ in parts) != n:
+        raise ValueError(f"a layer of {n} units has activations for {sum(m for m, _ in parts)}")
+    for m, part in parts:
+        if isinstance(part, acts.Jump) and part.ks.size not in (1, m):
+            raise ValueError(f"{m} jump units have {part.ks.size} exponents")
+
+
 class Network:
     """A dense network: ``n_in`` inputs, hidden layers [(units, Activation)], ``n_out`` linear
     outputs and ``n_skip`` inputs that go straight to the output layer."""
@@ -31,6 +42,8 @@ class Network:
                  dtype=np.float32):
         self.n_in, self.n_out, self.n_skip = int(n_in), int(n_out), int(n_skip)
         self.hidden = [(int(n), act) for n, act in hidden]
+        for n, act in self.hidden:
+            _check_units(n, act)
         self.dtype = np.dtype(dtype)
         sizes = [self.n_in] + [n for n, _ in self.hidden]
         self.shapes = [(sizes[i + 1], sizes[i] + 1) for i in range(len(self.hidden))]
