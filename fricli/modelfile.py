@@ -115,6 +115,9 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
     if version != FORMAT_VERSION:
         raise ModelFileError(f"{name}: model format version {version} is not supported "
                              f"(this fricli reads version {FORMAT_VERSION})")
+    for key, arr in arrays.items():
+        if arr.dtype.kind not in "biuf":  # model arrays are real numbers
+            raise ModelFileError(f"{name}: damaged model (array {key!r} has type {arr.dtype})")
     return meta, arrays
 
 

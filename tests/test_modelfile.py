@@ -74,3 +74,10 @@ def test_atomic_write_removes_stale_temp(tmp_path):
     (tmp_path / ".m.npz.abc123.tmp").write_bytes(b"left by a killed job")
     atomic_write_bytes(str(target), b"new")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.npz"]
+
+
+@pytest.mark.parametrize("bad", [np.array([1 + 2j]), np.array(["text"])])
+def test_arrays_of_other_types_refused(bad):
+    data = modelfile.dumps(META, {"w": bad})
+    with pytest.raises(ModelFileError, match="damaged model"):
+        modelfile.loads(data)
