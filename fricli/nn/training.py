@@ -197,12 +197,23 @@ class Trainer:
             if self.on_eval:
                 self.on_eval(step, total, train_loss, val_loss)
 
+        acc = [0.0, 0]  # training loss summed since the last record, steps
+
+        def step_done(step: int, loss: float, grad: np.ndarray) -> None:
+            self._check(loss, step)
+            opt.step(net.theta, grad)
+            acc[0] += loss
+            acc[1] += 1
+            if step % every == 0 or step == total:
+                record(step, acc[0] / acc[1])
+                acc[0], acc[1] = 0.0, 0
+
         # overflow shows up as a non-finite loss, which stops training with a FitError
         with single_threaded(), np.errstate(over="ignore", invalid="ignore"):
             if mini:
-                self._mini_batch(net, opt, x, t, batch, per_epoch, total, every, rng, record)
+                self._mini_batch(net, x, t, batch, per_epoch, total, rng, step_done)
             else:
-                self._full_batch(net, opt, x, t, total, every, record)
+                self._full_batch(net, x, t, total, step_done)
         np.copyto(net.theta, best)
         self.history_train_ = np.asarray(hist_train, dtype=np.float64)
         self.history_val_ = np.asarray(hist_val, dtype=np.float64)
@@ -214,7 +225,7 @@ class Trainer:
         if not math.isfinite(loss):
             raise FitError(f"training diverged at step {step}: the loss is not finite (try a smaller --lr)")
 
-    def _full_batch(self, net, opt, x, t, total, every, record) -> None:
+    def _full_batch(self, net, x, t, total, step_done) -> None:
         n, n_out = x.shape[1], t.shape[0]
         scale = 2.0 / (n * n_out)
         n_chunks = 2 if n >= CHUNK_MIN else 1
@@ -227,7 +238,6 @@ class Trainer:
 
         pool = ThreadPoolExecutor(max_workers=n_chunks) if n_chunks > 1 else None
         try:
-            acc, count = 0.0, 0
             for step in range(1, total + 1):
                 if pool is None:
                     loss = work(chunks[0])
@@ -235,26 +245,18 @@ class Trainer:
                     parts = list(pool.map(work, chunks))
                     loss = sum(parts)
                     np.add(chunks[0].grad, chunks[1].grad, out=grad)
-                loss /= n * n_out
-                self._check(loss, step)
-                opt.step(net.theta, grad)
-                acc += loss
-                count += 1
-                if step % every == 0 or step == total:
-                    record(step, acc / count)
-                    acc, count = 0.0, 0
+                step_done(step, loss / (n * n_out), grad)
         finally:
             if pool is not None:
                 pool.shutdown()
 
-    def _mini_batch(self, net, opt, x, t, batch, per_epoch, total, every, rng, record) -> None:
+    def _mini_batch(self, net, x, t, batch, per_epoch, total, rng, step_done) -> None:
         n, n_out = x.shape[1], t.shape[0]
         scale = 2.0 / (batch * n_out)
         ws = net.workspace(batch)
         tb = np.empty((n_out, batch), dtype=net.dtype)
         grad = np.empty_like(net.theta)
         perm = rng.permutation(n)
-        acc, count = 0.0, 0
         for step in range(1, total + 1):
             j = (step - 1) % per_epoch
             if j == 0 and step > 1:
@@ -262,11 +264,4 @@ class Trainer:
             idx = perm[j * batch:(j + 1) * batch]
             ws.take_inputs(x, idx)
             np.take(t, idx, axis=1, out=tb, mode="clip")
-            loss = _sse_and_grad(net, ws, tb, grad, scale) / (batch * n_out)
-            self._check(loss, step)
-            opt.step(net.theta, grad)
-            acc += loss
-            count += 1
-            if step % every == 0 or step == total:
-                record(step, acc / count)
-                acc, count = 0.0, 0
+            step_done(step, _sse_and_grad(net, ws, tb, grad, scale) / (batch * n_out), grad)
