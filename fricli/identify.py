@@ -27,7 +27,6 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy import optimize
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from fricli import logs, metrics
@@ -382,10 +381,11 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
 
 def _least_squares(fun, x0, bounds, max_nfev: int, what: str):
     """``least_squares`` (trf, x_scale='jac'); failures become FitError."""
+    from scipy.optimize import least_squares  # imported here: it costs a noticeable part of start-up
+
     try:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac",
-                                         max_nfev=max_nfev)
+            res = least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
     except ValueError as exc:
         raise FitError(f"fitting the {what} failed: {str(exc).splitlines()[0]}") from None
     if res.status == 0:

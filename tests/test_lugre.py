@@ -304,7 +304,7 @@ def test_failed_fit_keeps_the_previous_model(tmp_path, sweep_file, monkeypatch):
     class Failed:
         status, x, cost, nfev, message = 0, np.zeros(1), 0.0, 1, "max evaluations"
 
-    monkeypatch.setattr("fricli.identify.optimize.least_squares", lambda *a, **k: Failed())
+    monkeypatch.setattr("scipy.optimize.least_squares", lambda *a, **k: Failed())
     res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out)])
     assert res.exit_code == errors.FIT
     assert "did not converge" in res.stderr
@@ -316,7 +316,7 @@ def test_non_finite_fit_is_a_fit_error(sweep, monkeypatch):
     def broken(fun, x0, **kwargs):
         raise ValueError("Residuals are not finite in the initial point.")
 
-    monkeypatch.setattr("fricli.identify.optimize.least_squares", broken)
+    monkeypatch.setattr("scipy.optimize.least_squares", broken)
     with pytest.raises(FitError, match="not finite"):
         LuGreIdentifier().fit(sweep)
 

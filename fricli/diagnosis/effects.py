@@ -18,7 +18,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import signal as sps
 
 from fricli.diagnosis import terms as T
 from fricli.logs import KNOWN
@@ -360,7 +359,9 @@ class Position(Effect):
         dw = w[1] - w[0]
         grid = np.linspace(max(w[k] - dw, w[keep][0]), w[k] + dw, 41)
         centers = q.min() + (np.flatnonzero(full) + 0.5) * h
-        fine = sps.lombscargle(centers, mean[full], grid)
+        from scipy import signal  # imported here: it costs a noticeable part of start-up
+
+        fine = signal.lombscargle(centers, mean[full], grid)
         return float(grid[int(np.argmax(fine))])
 
     def terms(self, ctx, residual):

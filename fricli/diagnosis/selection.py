@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import stats
 
 RIDGE = 1e-10            # relative to n: keeps exactly collinear sets solvable, far below any signal
 BLOCKS_PER_FOLD = 10     # blocks per fold for the significance test
@@ -202,6 +201,8 @@ def compare(sse_new: np.ndarray, sse_old: np.ndarray, alpha: float) -> Compariso
         t = mean / (sd / np.sqrt(k))
     else:
         t = float("inf") if mean > 0 else 0.0
+    from scipy import stats  # imported here: it costs a noticeable part of start-up
+
     crit = float(stats.t.ppf(1.0 - alpha, max(k - 1, 1)))
     return Comparison(gain, float(t), bool(gain > 0 and t >= crit))
 
