@@ -9,6 +9,7 @@ from typing import Callable
 from fricli import evaluation, learning, logs, models, report
 from fricli.atomic import atomic_write_bytes
 from fricli.identify import LuGreIdentifier
+from fricli.predicting import external_estimate
 from fricli.sim.samples import sample_path
 
 ROWS = (("LuGre", "lugre"), ("NN_base", "nn_base"), ("Selmic", "selmic"), ("NNACM", "nnacm"),
@@ -66,7 +67,7 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int = DEFAU
     model, _ = loaded["adapted"]
     pred = model.predict(asym.signals)[0]
     table = logs.with_column(asym.table, "tau_f_pred", pred, asym.units["tau"])
-    table = logs.with_column(table, "tau_ext_pred", evaluation.external_estimate(asym.signals, pred, LOWPASS_HZ),
+    table = logs.with_column(table, "tau_ext_pred", external_estimate(asym.signals, pred, LOWPASS_HZ),
                              asym.units["tau"])
     logs.write_table(table, os.path.join(out, "extended_asym_estimate.parquet"))
     say("report: figures of NN_base + NN_add on the asymmetric-load log")

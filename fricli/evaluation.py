@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from fricli import logs, metrics, models
+from fricli.predicting import external_estimate
 
 
 @dataclasses.dataclass
@@ -17,14 +18,6 @@ class Result:
     external: dict | None          # errors of tau_ext_pred against tau_ext [Nm], if measured
     friction_moving: dict          # the same over the rows in motion (metrics.in_motion)
     external_moving: dict | None
-
-
-def external_estimate(signals: dict, tau_f_pred: np.ndarray, lowpass_hz: float | None) -> np.ndarray:
-    """tau_ext_pred (n,) [Nm], optionally low-passed with a zero-phase Butterworth filter."""
-    est = logs.external_torque(signals, tau_f_pred)
-    if lowpass_hz:
-        est = logs.lowpass(est, signals["t"], lowpass_hz)
-    return est
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,

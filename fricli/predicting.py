@@ -218,9 +218,7 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                 out = logs.with_column(out, "tau_f_pred", tau_f, unit)
                 fric.add(logs.friction_target(sig), tau_f)
                 if external:
-                    est = logs.external_torque(sig, tau_f)
-                    if lowpass_hz:
-                        est = lowpass_external(est, t, lowpass_hz, warn)
+                    est = external_estimate(sig, tau_f, lowpass_hz, warn)
                     out = logs.with_column(out, "tau_ext_pred", est, unit)
                     if "tau_ext" in sig:
                         has_ext = True
@@ -244,6 +242,15 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
     return Result(rows=rows, joint=joint, unit=unit or "Nm", friction=fric.result(),
                   external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,
                   dropped=dropped)
+
+
+def external_estimate(signals: dict[str, np.ndarray], tau_f_pred: np.ndarray, lowpass_hz: float | None = None,
+                      warn=None) -> np.ndarray:
+    """tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m (n,) [Nm], optionally low-passed."""
+    est = logs.external_torque(signals, tau_f_pred)
+    if lowpass_hz:
+        est = lowpass_external(est, signals["t"], lowpass_hz, warn)
+    return est
 
 
 def lowpass_external(est: np.ndarray, t: np.ndarray, cutoff_hz: float, warn=None) -> np.ndarray:

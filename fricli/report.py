@@ -15,7 +15,8 @@ import numpy as np  # noqa: E402
 from fricli import logs, metrics, models  # noqa: E402
 from fricli.atomic import atomic_write_bytes  # noqa: E402
 from fricli.errors import OutputError  # noqa: E402
-from fricli.evaluation import external_estimate, static_friction  # noqa: E402
+from fricli.evaluation import static_friction  # noqa: E402
+from fricli.predicting import external_estimate  # noqa: E402
 
 MEASURED = "#9aa7b5"
 MODEL = "#c0392b"
