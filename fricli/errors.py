@@ -14,6 +14,7 @@ DATA = 6             # a valid log that holds too little to do the job (no motio
 OUTPUT = 7           # an output that could not be written (disk full, permissions)
 LOCKED = 8           # another job holds the lock on the output
 UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
+DEPENDENCY = 10      # an optional dependency (an extra such as fricli[robot]) is not installed
 
 
 def one_line(text: str) -> str:
@@ -50,3 +51,7 @@ class OutputError(FricliError):
 
 class LockedError(FricliError):
     exit_code = LOCKED
+
+
+class MissingDependencyError(FricliError):
+    exit_code = DEPENDENCY

@@ -71,6 +71,17 @@ def canonical_unit(spelling: str) -> str:
     return s
 
 
+def column_unit(column: str, spelling: str) -> tuple[str | None, float]:
+    """(axis kind, factor to the canonical unit) of ``spelling`` for a known column: the kind is
+    ``rotary`` or ``linear`` for motion and torque columns, None for t, i_m and temp. LogError
+    when the unit is unknown or does not fit the column."""
+    dim, factor = _UNITS[canonical_unit(spelling)]
+    for axis, expected in _EXPECTED[column].items():
+        if dim == expected:
+            return (None if expected == _EXPECTED[column]["linear"] == _EXPECTED[column]["rotary"] else axis), factor
+    raise LogError(f"unit {spelling!r} does not fit column {column!r}")
+
+
 def field_unit(field: pa.Field) -> str | None:
     meta = field.metadata or {}
     raw = meta.get(b"unit")
