@@ -273,13 +273,16 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     return mask
 
 
+def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
+    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below Nyquist."""
+    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t)))
+
+
 def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
-    if len(x) < 16:
+    if not lowpass_applies(t, cutoff_hz):
         return x.copy()
     fs = 1.0 / float(np.median(np.diff(t)))
-    if cutoff_hz >= 0.5 * fs:
-        return x.copy()
     from scipy import signal  # imported here: it costs about a second at start-up
 
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")

@@ -72,12 +72,16 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
     for kind, d in result.meta["dropped"].items():
         warn(f"warning: {name}: dropped {d['count']} row{'s' if d['count'] != 1 else ''} with {d['what']} "
              f"(first at line {d['first_line']})")
+    if result.meta["unterminated_last_line"]:
+        say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
+            "complete and kept", quiet)
     write_table(result.table, output)
     robot = result.meta["robot"]
     extra = ""
     if robot:
         derived = robot["derived"]
-        how = (", derived " + " and ".join(derived["columns"]) + f" (low-pass {derived['cutoff_hz']:g} Hz)") if derived else ""
+        lowpass = f"low-pass {derived['cutoff_hz']:g} Hz" if derived and derived["filtered"] else "no low-pass"
+        how = f", derived {' and '.join(derived['columns'])} ({lowpass}, central differences)" if derived else ""
         extra = f", tau_g and tau_dyn from {urdf} (joints matched by {robot['match']}{how})"
     where = "stdout" if output == "-" else output
     say(f"imported {result.meta['rows']:,} rows x {len(mapping.joints)} joints from {name}{extra} -> {where}", quiet)

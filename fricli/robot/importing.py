@@ -74,7 +74,8 @@ def _robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], 
         "gravity": list(mapping.gravity),
         "rotor_inertia": {str(jm.name): jm.rotor_inertia for jm in mapping.joints},
         "payload": dataclasses.asdict(payload) if payload is not None else None,
-        "derived": {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {},
+        "derived": {"columns": derived, "cutoff_hz": cutoff_hz,
+                    "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {},
     }
 
 
@@ -109,6 +110,7 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
     meta = {
         "source": name, "source_sha256": hashlib.sha256(data).hexdigest(), "rows": n,
         "dropped": {k: {"count": d.count, "first_line": d.first_line, "what": KINDS[k]} for k, d in rec.defects.items()},
+        "unterminated_last_line": int(rec.unterminated) if rec.unterminated else None,
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
         "robot": robot,
     }

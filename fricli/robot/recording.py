@@ -45,6 +45,7 @@ class Recording:
     lines: np.ndarray
     defects: dict[str, Defect]
     n_fields: int
+    unterminated: int | None = None   # line number of a last line without line end, kept as complete
 
 
 def _refs(mapping: Mapping) -> list[int | str]:
@@ -160,7 +161,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
             defects[kind] = Defect(count, line)
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
-    last = None
+    last, unterminated = None, None
     body_lines = lines
     if not terminated and len(lines) > start:
         last, body_lines = lines[-1], lines[:-1]
@@ -190,6 +191,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         else:
             cols = {c: np.append(cols[c], row[k]) for k, c in enumerate(wanted)}
             numbers = np.append(numbers, len(lines))
+            unterminated = len(lines)
     if len(numbers) == 0:
         found = "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
         raise LogError(f"{name}: no usable rows" + (f" ({found})" if found else ""))
@@ -216,4 +218,4 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         numbers = numbers[keep]
     defects = dict(sorted(defects.items(), key=lambda kv: list(KINDS).index(kv[0])))
     return Recording(values={ref: cols[i] for ref, i in index.items()}, lines=numbers, defects=defects,
-                     n_fields=n_fields)
+                     n_fields=n_fields, unterminated=unterminated if unterminated in numbers else None)
