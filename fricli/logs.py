@@ -274,8 +274,9 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
 
 
 def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
-    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below Nyquist."""
-    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t)))
+    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below the Nyquist
+    frequency (by more than 1 ppm: a recorded sample rate carries rounding in its timestamps)."""
+    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t))) * (1 - 1e-6)
 
 
 def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Read a delimited text recording: the columns a mapping names, with every defect found.
 
 A clean file is parsed by pyarrow's CSV reader; a file with any bad row is read again row by
-row to find each one. Defects (docs/robot-import.md):
+row to find each one. Fields are split at the delimiter (no quoting: numbers need none). Defects (docs/robot-import.md):
 
     wrong field count, non-numeric or non-finite value  -> row dropped (reported)
     unterminated last line that does not parse          -> dropped as truncated (reported)
@@ -12,9 +12,9 @@ row to find each one. Defects (docs/robot-import.md):
 from __future__ import annotations
 
 import collections
-import csv
 import dataclasses
 import io
+import re
 
 import numpy as np
 
@@ -53,18 +53,24 @@ def _refs(mapping: Mapping) -> list[int | str]:
     return list(dict.fromkeys(refs))
 
 
-def _split_lines(data: bytes) -> tuple[list[bytes], bool]:
-    """Lines without their end, and whether the last line had one."""
-    lines = data.split(b"\n")
-    terminated = lines[-1] == b""
+def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Start and end offsets of every line (without its line end) and whether the last line
+    has a line end."""
+    arr = np.frombuffer(data, dtype=np.uint8)
+    breaks = np.flatnonzero(arr == 10)
+    terminated = data.endswith(b"\n")
+    starts = np.concatenate([[0], breaks + 1])
+    ends = np.concatenate([breaks, [len(data)]])
     if terminated:
-        lines.pop()
-    return [ln[:-1] if ln.endswith(b"\r") else ln for ln in lines], terminated
+        starts, ends = starts[:-1], ends[:-1]
+    if len(arr):
+        ends = ends - ((ends > starts) & (arr[np.maximum(ends - 1, 0)] == 13))   # CRLF
+    return starts, ends, terminated
 
 
-def _fields(line: bytes, delimiter: str) -> list[str]:
-    text = line.decode("utf-8", "replace")
-    return next(csv.reader([text], delimiter=delimiter), [])
+def _fields(line: bytes, delimiter: str) -> list[bytes]:
+    """Fields of one line: plain splitting (no quoting; numbers need none)."""
+    return line.split(delimiter.encode())
 
 
 def _indices(refs, header: list[str] | None, n_fields: int, name: str) -> dict[int | str, int]:
@@ -101,8 +107,8 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
     try:
         table = pcsv.read_csv(
             io.BytesIO(body),
-            read_options=pcsv.ReadOptions(column_names=names, use_threads=False),
-            parse_options=pcsv.ParseOptions(delimiter=delimiter, invalid_row_handler=invalid),
+            read_options=pcsv.ReadOptions(column_names=names, use_threads=True),
+            parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, invalid_row_handler=invalid),
             convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.float64() for i in wanted},
                                                 include_columns=[names[i] for i in wanted]))
     except (pa.ArrowInvalid, pa.ArrowNotImplementedError):
@@ -121,77 +127,107 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
     return cols, table.num_rows
 
 
-def _parse_row(fields: list[str], n_fields: int, wanted: list[int]) -> tuple[str | None, list[float]]:
+_NUMBER = r"^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$"
+
+
+def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defect):
+    """Lines ``start:stop``, reporting the wrong field counts and non-numbers; vectorised (numpy
+    for the field counts, pyarrow for the numbers), so a few bad rows cost little more."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pcsv
+
+    starts, ends = starts[start:stop], ends[start:stop]
+    numbers = np.arange(start, stop) + 1
+    filled = ends > starts
+    starts, ends, numbers = starts[filled], ends[filled], numbers[filled]
+    marks = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord(delimiter))
+    fields = np.searchsorted(marks, ends) - np.searchsorted(marks, starts) + 1
+    wrong = fields != n_fields
+    if wrong.any():
+        defect("field_count", int(numbers[wrong][0]), int(wrong.sum()))
+        starts, ends, numbers = starts[~wrong], ends[~wrong], numbers[~wrong]
+    if len(numbers) == 0:
+        return {c: np.empty(0) for c in wanted}, numbers
+    body = b"\n".join([data[a:b] for a, b in zip(starts.tolist(), ends.tolist())]) + b"\n"
+    names = [f"c{i}" for i in range(n_fields)]
+    table = pcsv.read_csv(
+        io.BytesIO(body), read_options=pcsv.ReadOptions(column_names=names),
+        parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, ignore_empty_lines=False),
+        convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.string() for i in wanted},
+                                            include_columns=[names[i] for i in wanted]))
+    assert table.num_rows == len(numbers)
+    texts = {i: pc.utf8_trim_whitespace(table.column(names[i])) for i in wanted}
+    ok = np.ones(len(numbers), dtype=bool)
+    for text in texts.values():
+        ok &= np.asarray(pc.match_substring_regex(text, _NUMBER).to_numpy(zero_copy_only=False), dtype=bool)
+    if not ok.all():
+        defect("non_numeric", int(numbers[~ok][0]), int((~ok).sum()))
+    keep = pa.array(ok)
+    cols = {i: pc.cast(pc.filter(text, keep), pa.float64()).to_numpy() for i, text in texts.items()}
+    return cols, numbers[ok]
+
+
+def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[str | None, list[float]]:
+    """One line (the unterminated last one) checked like ``_careful`` checks the others."""
     if len(fields) != n_fields:
         return "field_count", []
-    try:
-        row = [float(fields[i]) for i in wanted]
-    except ValueError:
+    texts = [fields[i].strip().decode("ascii", "replace") for i in wanted]
+    if not all(re.match(_NUMBER, text) for text in texts):
         return "non_numeric", []
-    if not all(np.isfinite(row)):
-        return "non_numeric", []
-    return None, row
+    return None, [float(text) for text in texts]
 
 
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
-    lines, terminated = _split_lines(data)
-    first = next((i for i, ln in enumerate(lines) if ln.strip()), None)
+    starts, ends, terminated = _line_bounds(data)
+    line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
+    n_lines = len(starts)
+    first = next((i for i in np.flatnonzero(ends > starts) if line(i).strip()), None)
     if first is None:
         raise LogError(f"{name}: the recording is empty")
     header = None
-    start = first
+    start = int(first)
     if mapping.header:
-        header = [f.strip() for f in _fields(lines[first], mapping.delimiter)]
+        header = [f.strip().decode("utf-8", "replace") for f in _fields(line(start), mapping.delimiter)]
         n_fields = len(header)
-        start = first + 1
+        start += 1
     else:
-        counts = collections.Counter(len(_fields(ln, mapping.delimiter)) for ln in lines[start:start + 200] if ln.strip())
+        sample = (line(i) for i in range(start, min(start + 200, n_lines)))
+        counts = collections.Counter(len(_fields(ln, mapping.delimiter)) for ln in sample if ln.strip())
         n_fields = counts.most_common(1)[0][0]
     index = _indices(_refs(mapping), header, n_fields, name)
     wanted = sorted(set(index.values()))
 
     defects: dict[str, Defect] = {}
 
-    def defect(kind: str, line: int, count: int = 1) -> None:
+    def defect(kind: str, line_number: int, count: int = 1) -> None:
         if kind in defects:
             defects[kind].count += count
         else:
-            defects[kind] = Defect(count, line)
+            defects[kind] = Defect(count, line_number)
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
-    last, unterminated = None, None
-    body_lines = lines
-    if not terminated and len(lines) > start:
-        last, body_lines = lines[-1], lines[:-1]
-    body = b"\n".join(body_lines[start:]) + b"\n"
-    numbers = np.array([i + 1 for i in range(start, len(body_lines)) if body_lines[i].strip()], dtype=np.int64)
-    fast = _fast(body, n_fields, index, mapping.delimiter) if len(numbers) else ({i: np.empty(0) for i in wanted}, 0)
+    n_body = n_lines - 1 if not terminated and n_lines > start else n_lines
+    numbers = np.flatnonzero(ends[start:n_body] > starts[start:n_body]) + start + 1   # 1-based, non-empty
+    fast = None
+    if len(numbers):
+        body_end = starts[n_body] if n_body < n_lines else len(data)
+        fast = _fast(data[starts[start]:body_end], n_fields, index, mapping.delimiter)
     if fast is not None and fast[1] == len(numbers):
         cols, _ = fast
-    else:  # slow path: row by row, to find every bad row
-        rows, kept = [], []
-        for i in range(start, len(body_lines)):
-            if not body_lines[i].strip():
-                continue
-            kind, row = _parse_row(_fields(body_lines[i], mapping.delimiter), n_fields, wanted)
-            if kind:
-                defect(kind, i + 1)
-            else:
-                rows.append(row)
-                kept.append(i + 1)
-        matrix = np.array(rows, dtype=np.float64).reshape(len(rows), len(wanted))
-        cols = {c: matrix[:, k] for k, c in enumerate(wanted)}
-        numbers = np.array(kept, dtype=np.int64)
-    if last is not None and last.strip():
-        kind, row = _parse_row(_fields(last, mapping.delimiter), n_fields, wanted)
+    else:  # slow path: find every bad row
+        cols, numbers = _careful(data, starts, ends, start, n_body, n_fields, wanted, mapping.delimiter, defect)
+    unterminated = None
+    if n_body < n_lines and line(n_lines - 1).strip():
+        kind, row = _parse_row(_fields(line(n_lines - 1), mapping.delimiter), n_fields, wanted)
         if kind:
-            defect("truncated", len(lines))
+            defect("truncated", n_lines)
         else:
             cols = {c: np.append(cols[c], row[k]) for k, c in enumerate(wanted)}
-            numbers = np.append(numbers, len(lines))
-            unterminated = len(lines)
+            numbers = np.append(numbers, n_lines)
+            unterminated = n_lines
     if len(numbers) == 0:
         found = "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
         raise LogError(f"{name}: no usable rows" + (f" ({found})" if found else ""))
