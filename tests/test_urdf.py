@@ -271,15 +271,25 @@ def test_mapping_options_parse_robot_section():
         parse_mapping(doc)
 
 
-def test_ur10e_import_with_urdf(tmp_path):
+def doc_example():
+    """The UR10e command and its output as docs/robot-import.md shows them."""
+    text = (ROOT / "docs" / "robot-import.md").read_text()
+    block = text.split("```console\n$ fricli ", 1)[1].split("```", 1)[0]
+    command, output = block.split("\n", 1)
+    return command.split(), output
+
+
+def test_ur10e_import_with_urdf_as_documented(tmp_path):
     pytest.importorskip("pinocchio")
     folder = shared_data("ur10e")
-    res = run("import", str(folder / "identification" / "ur-20_02_19_14harm50sec.csv"),
-              "--mapping", str(ROOT / "docs" / "ur10e-mapping.toml"), "--urdf", str(folder / "ur10e.urdf"),
-              "-o", "run.parquet", cwd=tmp_path)
+    args, expected = doc_example()
+    out = str(tmp_path / "run.parquet")
+    args[args.index("run.parquet")] = out
+    res = subprocess.run([sys.executable, "-m", "fricli", *args], cwd=ROOT, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert res.returncode == 0, res.stderr
-    assert "no line end" in res.stderr  # this file's last line is unterminated (and complete)
-    table = pq.read_table(tmp_path / "run.parquet")
+    assert res.stderr == expected.replace("-> run.parquet", f"-> {out}")
+    table = pq.read_table(out)
     assert sorted(set(table.column("joint").to_pylist())) == [1, 2, 3, 4, 5, 6]
     # the gravity model explains most of the shoulder-lift motor torque
     rows = np.asarray(table.column("joint")) == 2
@@ -287,3 +297,4 @@ def test_ur10e_import_with_urdf(tmp_path):
     assert np.corrcoef(tau_m, tau_g)[0, 1] > 0.9
     # joint 1's axis is vertical: no gravity torque
     assert np.abs(table.column("tau_g").to_numpy()[np.asarray(table.column("joint")) == 1]).max() < 1e-9
+    assert (folder / "ur10e.urdf").exists()

@@ -15,7 +15,7 @@ import json
 import numpy as np
 
 from fricli import logs
-from fricli.errors import LogError
+from fricli.errors import LogError, ModelFileError
 from fricli.robot.mapping import Mapping
 from fricli.robot.recording import KINDS, Recording, read_recording
 
@@ -55,7 +55,8 @@ def _robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], 
     derived: dict[str, list] = {}
     for jm, sig, k in zip(mapping.joints, per_joint, order):
         if model.kinds[k] != axis:
-            raise LogError(f"joint {jm.name} is {axis} in the log but {model.kinds[k]} in {model.name}")
+            raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
+                                 f"{jm.name} is {axis}")
         if "q" not in sig:
             raise LogError(f"joint {jm.name}: the robot model needs positions q; the mapping gives none")
         motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
