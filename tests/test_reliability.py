@@ -414,13 +414,14 @@ def test_debug_shows_the_exception(inputs):
 
 def test_exit_codes_are_distinct_and_documented():
     codes = {name: getattr(errors, name) for name in
-             ("OK", "FAILURE", "USAGE", "INPUT", "MODEL", "FIT", "DATA", "OUTPUT", "LOCKED", "UNCHANGED")}
+             ("OK", "FAILURE", "USAGE", "INPUT", "MODEL", "FIT", "DATA", "OUTPUT", "LOCKED", "UNCHANGED",
+              "DEPENDENCY")}
     assert len(set(codes.values())) == len(codes)
     doc = (open(os.path.join(os.path.dirname(__file__), os.pardir, "docs", "exit-codes.md")).read())
     for name, code in codes.items():
         assert f"| {code} | {name} |" in doc
     for cls in (errors.LogError, errors.ModelFileError, errors.FitError, errors.DataError, errors.OutputError,
-                errors.LockedError):
+                errors.LockedError, errors.MissingDependencyError):
         assert cls.exit_code not in (errors.OK, errors.USAGE)
 
 

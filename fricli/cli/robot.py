@@ -6,7 +6,6 @@ import click
 
 from fricli.cli import cli
 from fricli.cli.options import common, output_option, say, warn
-from fricli.logs import DEFAULT_CUTOFF_HZ
 
 
 @cli.command("import")
@@ -27,8 +26,9 @@ from fricli.logs import DEFAULT_CUTOFF_HZ
 @click.option("--payload-com", nargs=3, type=float, default=None, metavar="X Y Z",
               help="Payload centre of mass [m] in the payload frame (default 0 0 0).")
 @click.option("--payload-frame", default=None, help="URDF frame (link) that carries the payload.")
-@click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=DEFAULT_CUTOFF_HZ, show_default=True,
-              help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model.")
+@click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model (default: the log "
+                   "contract's, 50 Hz).")
 @click.option("--drop-backward", is_flag=True,
               help="Drop rows whose time goes back (reported) instead of refusing the recording.")
 @output_option(help="Output Parquet log (- for stdout).")
@@ -49,7 +49,7 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
       fricli import load.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf \\
           --payload-mass 2.805 --payload-com 0 0 0.05 --payload-frame tool0 -o load.parquet
     """
-    from fricli.logs import read_bytes, write_table
+    from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.importing import import_recording
 
@@ -67,7 +67,8 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
 
         model = load_model(urdf, mapping)
     name = "stdin" if recording == "-" else recording
-    result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff,
+    result = import_recording(read_bytes(recording), mapping, name, model=model,
+                              cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff,
                               drop_backward=drop_backward)
     for kind, d in result.meta["dropped"].items():
         warn(f"warning: {name}: dropped {d['count']} row{'s' if d['count'] != 1 else ''} with {d['what']} "
