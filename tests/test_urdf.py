@@ -298,3 +298,27 @@ def test_ur10e_import_with_urdf_as_documented(tmp_path):
     # joint 1's axis is vertical: no gravity torque
     assert np.abs(table.column("tau_g").to_numpy()[np.asarray(table.column("joint")) == 1]).max() < 1e-9
     assert (folder / "ur10e.urdf").exists()
+
+
+def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
+    pytest.importorskip("pinocchio")
+    t, q, qd, qdd = write_case(tmp_path, rng)
+    assert run("import", "rec.csv", "--mapping", "map.toml", "-o", "plain.parquet", cwd=tmp_path).returncode == 0
+    res = run("dynamics", "plain.parquet", "--urdf", "two_link.urdf", "--match", "name", "--urdf-joint", "a=shoulder",
+              "--urdf-joint", "b=elbow", "--gravity", "0", "-9.81", "0", "--rotor-inertia", "a=0.5",
+              "--rotor-inertia", "b=1.0", "-o", "dyn.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(tmp_path / "dyn.parquet")
+    n = len(t)
+    g_ref, dyn_ref = analytic(q, qd, qdd, (0, -9.81, 0), rotor=(0.5, 1.0))
+    for column, ref in (("tau_g", g_ref), ("tau_dyn", dyn_ref)):
+        values = table.column(column).to_numpy()
+        close(np.column_stack([values[:n], values[n:]]), ref)
+    assert json.loads(table.schema.metadata[b"fricli.dynamics"])["joints"] == {"a": "shoulder", "b": "elbow"}
+    # joints sampled at different times cannot share one robot model
+    shifted = table.set_column(0, table.schema.field("t"), [np.concatenate([t, t + 0.001])])
+    pq.write_table(shifted, tmp_path / "shifted.parquet")
+    res = run("dynamics", "shifted.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "x.parquet",
+              cwd=tmp_path)
+    assert res.returncode == errors.INPUT and "not sampled at the same times" in res.stderr
+    assert not (tmp_path / "x.parquet").exists()

@@ -45,9 +45,10 @@ def _signals(mapping: Mapping, rec: Recording, name: str) -> tuple[np.ndarray, l
     return t, per_joint, kinds.pop() if kinds else "rotary"
 
 
-def _robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], axis: str,
+def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], axis: str,
                  cutoff_hz: float) -> dict:
-    """Add tau_g and tau_dyn (and derived qd/qdd) to ``per_joint`` in place; the record of it."""
+    """Add tau_g and tau_dyn (and derived qd/qdd) to ``per_joint`` (one dict of signals of shape
+    (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it."""
     if mapping.match is None:
         raise LogError("choose how the log's joints match the URDF's: match = \"name\" or \"order\" under "
                        "[robot] in the mapping, or --match name|order")
@@ -58,7 +59,7 @@ def _robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], 
             raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
                                  f"{jm.name} is {axis}")
         if "q" not in sig:
-            raise LogError(f"joint {jm.name}: the robot model needs positions q; the mapping gives none")
+            raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
         motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
         for column in logs.derive_motion(motion, cutoff_hz).get("columns", []):
             derived.setdefault(column, []).append(jm.name)
@@ -89,7 +90,7 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
     ``fricli.robot.dynamics.RobotModel``) add tau_g and tau_dyn."""
     rec = read_recording(data, mapping, name, drop_backward=drop_backward)
     t, per_joint, axis = _signals(mapping, rec, name)
-    robot = _robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
+    robot = robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
     units = dict(logs.CANONICAL[axis])
     units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
              **{c: units["tau"] for c in logs.TORQUES}}
