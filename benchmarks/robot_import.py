@@ -4,8 +4,9 @@
     python benchmarks/robot_import.py --rows 20000 --bad 10
 
 Prints the median over --repeats runs of: parsing the CSV (clean file: pyarrow; with --bad
-malformed rows: the row-by-row path), the rigid-body terms with Pinocchio (when the UR10e URDF
-is at ../shared/data/ur10e/ and pinocchio imports), and the whole command.
+malformed rows: the search for bad rows), the rigid-body terms with Pinocchio for all samples
+(when the UR10e URDF is at ../shared/data/ur10e/ and pinocchio imports), the whole import in
+the library, and the whole command (start-up included), each with and without --urdf.
 """
 
 from __future__ import annotations
@@ -77,6 +78,9 @@ def main() -> None:
     except Exception as exc:  # no pinocchio: the URDF rows are skipped
         out["note"] = f"no URDF timing: {exc}"
     if model is not None:
+        rng = np.random.default_rng(1)
+        q, qd, qdd = (rng.normal(size=(args.rows, 6)) for _ in range(3))
+        out["robot_terms_s"] = median_time(lambda: model.terms(q, qd, qdd, np.ones(6)), args.repeats)
         out["import_library_with_urdf_s"] = median_time(
             lambda: import_recording(data, mapping, "bench.csv", model=model), args.repeats)
     with tempfile.TemporaryDirectory() as tmp:

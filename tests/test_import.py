@@ -144,6 +144,13 @@ def test_fast_and_slow_path_read_the_same_numbers():
     np.testing.assert_array_equal(fast.lines, slow.lines)
 
 
+def test_crlf_line_ends_read_like_lf():
+    lines = rows()
+    lf = parse(lines)
+    crlf = import_recording(("\r\n".join(lines) + "\r\n").encode(), mapping(), "rec.csv")
+    assert crlf.table.equals(lf.table.replace_schema_metadata(crlf.table.schema.metadata))
+
+
 def test_an_unterminated_complete_last_line_is_kept():
     result = parse(rows(), end="")
     assert result.recording.defects == {} and result.recording.unterminated == 40
@@ -165,6 +172,7 @@ def test_time_going_back_is_refused_unless_dropped():
     ("", "the recording is empty"),
     ("\n\n", "the recording is empty"),
     ("a,b,c,d,e,f,g,h\nx,y,z,w,v,u,s,r\n", "no usable rows (2 with non-numeric"),
+    ("1,2,3,4,5,6,7,8\r1,2,3,4,5,6,7,8\r", "carriage returns that are not part of a CRLF"),
 ])
 def test_nothing_usable_is_one_clear_error(content, message):
     with pytest.raises(errors.LogError, match=message.replace("(", r"\(")):

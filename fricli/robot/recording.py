@@ -156,7 +156,8 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
         parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, ignore_empty_lines=False),
         convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.string() for i in wanted},
                                             include_columns=[names[i] for i in wanted]))
-    assert table.num_rows == len(numbers)
+    if table.num_rows != len(numbers):  # not expected: every line is one row here
+        raise LogError("the recording's lines could not be told apart")
     texts = {i: pc.utf8_trim_whitespace(table.column(names[i])) for i in wanted}
     ok = np.ones(len(numbers), dtype=bool)
     for text in texts.values():
@@ -181,6 +182,9 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
+    if data.count(b"\r") != data.count(b"\r\n"):
+        raise LogError(f"{name}: holds carriage returns that are not part of a CRLF line end (old Mac line "
+                       "ends?): convert the file to LF or CRLF line ends")
     starts, ends, terminated = _line_bounds(data)
     line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
     n_lines = len(starts)
