@@ -13,11 +13,11 @@ def urdf_options(f):
     """--match, --rotor-inertia, --gravity, --payload-*, --cutoff: the robot model's options."""
     for option in reversed([
         click.option("--match", type=click.Choice(["name", "order"]), default=None,
-                     help="How log joints match URDF joints (overrides the mapping's robot.match)."),
+                     help="How log joints match URDF joints (import: overrides the mapping's robot.match)."),
         click.option("--rotor-inertia", "inertia_pairs", multiple=True, metavar="JOINT=VALUE",
                      help="Reflected rotor inertia [kg m^2] added to the joint's mass-matrix diagonal. Repeatable."),
         click.option("--gravity", nargs=3, type=float, default=None, metavar="X Y Z",
-                     help="Gravity in the URDF's base frame [m/s^2] (default: the mapping's, else 0 0 -9.81)."),
+                     help="Gravity in the URDF's base frame [m/s^2] (default 0 0 -9.81; import: the mapping's if given)."),
         click.option("--payload-mass", type=click.FloatRange(min=0), default=None, help="Known payload mass [kg]."),
         click.option("--payload-com", nargs=3, type=float, default=None, metavar="X Y Z",
                      help="Payload centre of mass [m] in the payload frame (default 0 0 0)."),
