@@ -107,7 +107,7 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
     try:
         table = pcsv.read_csv(
             io.BytesIO(body),
-            read_options=pcsv.ReadOptions(column_names=names, use_threads=True),
+            read_options=pcsv.ReadOptions(column_names=names, use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, invalid_row_handler=invalid),
             convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.float64() for i in wanted},
                                                 include_columns=[names[i] for i in wanted]))
