@@ -119,16 +119,16 @@ def model_job(output: str, log, *, if_changed: bool, quiet: bool,
 
 
 def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_changed: bool, quiet: bool,
-               source=None, input_name: str = "model") -> tuple[dict, bool]:
+               source=None, input_name: str = "model", read=None) -> tuple[dict, bool]:
     """Run ``fit_one(data, out_path, job, model_path)`` for every joint LOG's run covers (the
     joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the folder OUTPUT.
 
     ``source``: the input models (``joints.Source``) of a command that starts from a model, each
-    joint paired with its own. Returns ({joint: what fit_one returned} for the joints
+    joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns ({joint: what fit_one returned} for the joints
     fitted, whether OUTPUT is a folder); exits UNCHANGED (9) when --if-changed finds every output up to date."""
     from fricli import joints, logs, modelset
 
-    table, digest = logs.read_table(log)
+    table, digest = read or logs.read_table(log)
     name = "stdin" if log == "-" else log
     found = logs.joints_of(table)
     if source is None:
