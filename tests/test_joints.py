@@ -45,6 +45,14 @@ def write_log(path, joints, interleave=True):
     return str(path)
 
 
+def half_moving_log(path):
+    """Joints 2 and 4, joint 4 at rest throughout (nothing to identify)."""
+    cols = [dict(joint_columns(j, seed=j), joint=np.full(2000, j)) for j in (2, 4)]
+    for k in ("q", "qd", "qdd"):
+        cols[1][k] = np.zeros(2000)
+    pq.write_table(logs.table_from_arrays({k: np.concatenate([c[k] for c in cols]) for k in cols[0]}, UNITS), path)
+
+
 def save_lugre(path, joint):
     models.save(str(path), LuGreModel(**PARAMS[joint if joint is not None else 2]), joint=joint, axis="rotary",
                 units=logs.CANONICAL["rotary"], provenance={})
@@ -173,11 +181,7 @@ def test_identify_every_joint_into_a_folder(files, tmp_path):
 
 
 def test_one_joint_failing_leaves_the_others(files, tmp_path):
-    cols = [dict(joint_columns(j, seed=j), joint=np.full(2000, j)) for j in (2, 4)]
-    for k in ("q", "qd", "qdd"):
-        cols[1][k] = np.zeros(2000)          # joint 4 does not move
-    table = logs.table_from_arrays({k: np.concatenate([c[k] for c in cols]) for k in cols[0]}, UNITS)
-    pq.write_table(table, tmp_path / "half.parquet")
+    half_moving_log(tmp_path / "half.parquet")
     out = tmp_path / "arm"
     line = one_error_line(run("identify", tmp_path / "half.parquet", "-o", out, "-q"), errors.DATA)
     assert "joint 4: " in line and "(models of joints 2 written)" in line
@@ -270,3 +274,18 @@ def test_a_single_model_file_selects_its_own_joint(files, tmp_path):
 def test_model_file_names_by_joint():
     assert modelset.file_name(3) == "joint_3.npz"
     assert modelset.file_name("left/arm 1") == "joint_left_arm_1.npz"
+
+
+def test_the_messages_in_docs_joints_md(tmp_path, monkeypatch):
+    """The two messages docs/joints.md quotes are what the commands print."""
+    from conftest import ROOT
+
+    doc = (ROOT / "docs" / "joints.md").read_text()
+    monkeypatch.chdir(tmp_path)
+    write_log(tmp_path / "arm.parquet", [2, 4])
+    save_lugre(tmp_path / "m2.npz", 2)
+    line = one_error_line(run("predict", "m2.npz", "arm.parquet", "--joint", "4", "-o", "p.parquet"), errors.MODEL)
+    assert f"    {line}\n" in doc
+    half_moving_log(tmp_path / "half.parquet")
+    line = one_error_line(run("identify", "half.parquet", "-o", "arm", "-q"), errors.DATA)
+    assert f"    {line}\n" in doc
