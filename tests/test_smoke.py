@@ -69,7 +69,7 @@ def test_every_command_in_a_process(tmp_path):
         SAMPLE / "joint2_extended_asym.parquet"
     first = run_all({
         "--version": ["--version"],
-        "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "-o", "sim.parquet", "-q"],
+        "simulate": ["simulate", "--scenario", "adapt", "--joint", "2", "-o", "sim.parquet", "-q"],
         "identify": ["identify", base, "-o", "lugre.npz", "--json"],
         "train-base": ["train-base", base, "-o", "nn.npz", "--steps", "20", "-q"],
         "demo": ["demo", "--steps", "3", "-o", "demo", "-q"],
