@@ -69,8 +69,8 @@ def check(model_joint, log_joint, model_name: str, log_name: str) -> None:
 
 @dataclasses.dataclass
 class Source:
-    """Where models come from: one file (``joints`` = {its joint or None: path}) or a model set
-    folder (``folder`` set, one path per recorded joint)."""
+    """Where models come from: one file (``paths`` = {its joint or None: path}) or a model set
+    folder (``folder`` true, one path per recorded joint; see fricli.modelset)."""
 
     name: str
     paths: dict                    # joint (as recorded; None: no joint) -> model file

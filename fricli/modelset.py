@@ -16,7 +16,7 @@ from typing import Callable
 
 from fricli import modelfile
 from fricli.errors import FricliError, LogError, ModelFileError, OutputError
-from fricli.joints import Source, listed, same, several
+from fricli.joints import Source, listed, pair, same, select, several
 
 
 def file_name(joint) -> str:
@@ -81,6 +81,18 @@ def output_folder(output: str, covered: list, log_joints: list | None, log_name:
     except OSError as exc:
         raise OutputError(f"cannot create {output}: {exc.strerror}") from None
     return output
+
+
+def plan(log_joints: list | None, requested, output: str, log_name: str,
+         source: Source | None = None) -> tuple[dict, str | None]:
+    """({joint: input model file or None}, output folder or None) of a run that writes models:
+    the joints by the joint rule (paired with ``source``'s models when it starts from models),
+    and where their models go (``output_folder``)."""
+    if source is None:
+        pairs = {j: None for j in select(log_joints, requested, log_name)}
+    else:
+        pairs = dict(pair(source, log_joints, requested, log_name))
+    return pairs, output_folder(output, list(pairs), log_joints, log_name)
 
 
 class PartialFailure(FricliError):

@@ -1,10 +1,12 @@
 """Batched prediction and external-torque estimation for any model kind.
 
-``run`` reads a log in record batches (``pq.ParquetFile.iter_batches``), checks each batch
-against the log contract (``t`` strictly increasing across batch boundaries too), predicts with
-the model's state carried from one batch to the next (e.g. the LuGre bristle state), and streams
-the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All columns and
-their field and schema metadata are carried through.
+``run_models`` reads a log in record batches (``pq.ParquetFile.iter_batches``), checks each
+batch against the log contract (``t`` strictly increasing across batch boundaries too), predicts
+with the model's state carried from one batch to the next (e.g. the LuGre bristle state), and
+streams the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All
+columns and their field and schema metadata are carried through. On a log of several joints
+each joint covered gets its own model (the joint rule, fricli/joints.py), state and time check;
+the rows keep their order.
 
 The log is read whole instead, as one batch, when a batch-wise reading would change the result:
 when ``qd`` or ``qdd`` must be derived from ``q`` (the zero-phase filter needs the whole series)

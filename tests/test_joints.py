@@ -289,3 +289,19 @@ def test_the_messages_in_docs_joints_md(tmp_path, monkeypatch):
     half_moving_log(tmp_path / "half.parquet")
     line = one_error_line(run("identify", "half.parquet", "-o", "arm", "-q"), errors.DATA)
     assert f"    {line}\n" in doc
+
+
+def test_predict_a_folder_drops_invalid_rows_in_place(files, tmp_path):
+    table = pq.read_table(files["arm"])
+    tau = table.column("tau_m").to_numpy().copy()
+    tau[[11, 12, 3000]] = np.nan                   # rows of both joints, one batch boundary apart
+    table = table.set_column(table.schema.get_field_index("tau_m"), table.schema.field("tau_m"), pa.array(tau))
+    pq.write_table(table, tmp_path / "nan.parquet")
+    out = tmp_path / "p.parquet"
+    res = run("predict", files["set"], tmp_path / "nan.parquet", "-o", out, "--batch-rows", 12, "--drop-invalid")
+    assert res.exit_code == 0, res.stderr
+    assert res.stderr.count("dropped 3 rows") == 1
+    keep = np.isfinite(tau)
+    got = pq.read_table(out)
+    np.testing.assert_array_equal(got.column("t").to_numpy(), table.column("t").to_numpy()[keep])
+    np.testing.assert_array_equal(got.column("joint").to_numpy(), table.column("joint").to_numpy()[keep])

@@ -126,16 +126,11 @@ def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_chang
     ``source``: the input models (``joints.Source``) of a command that starts from a model, each
     joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns ({joint: what fit_one returned} for the joints
     fitted, whether OUTPUT is a folder); exits UNCHANGED (9) when --if-changed finds every output up to date."""
-    from fricli import joints, logs, modelset
+    from fricli import logs, modelset
 
     table, digest = read or logs.read_table(log)
     name = "stdin" if log == "-" else log
-    found = logs.joints_of(table)
-    if source is None:
-        pairs = {j: None for j in joints.select(found, joint, name)}
-    else:
-        pairs = dict(joints.pair(source, found, joint, name))
-    folder = modelset.output_folder(output, list(pairs), found, name)
+    pairs, folder = modelset.plan(logs.joints_of(table), joint, output, name, source)
     results: dict = {}
     reading = {k: v for k, v in reading.items() if k != "joint"}
 
