@@ -233,7 +233,7 @@ def test_train_base_cli(files, tmp_path):
     assert result.stdout == ""
     assert "friction MAE [Nm]: training" in result.stderr and "validation" in result.stderr
     model, meta = models.load(str(out))
-    assert meta["kind"] == "mlp" and meta["provenance"]["seed"] == 1
+    assert meta["kind"] == "mlp" and meta["provenance"]["job"]["options"]["seed"] == 1
     assert meta["provenance"]["job"]["options"]["hidden"] == [12, 12]
     assert [n for n, _ in model.hidden] == [12, 12]
     assert meta["fit"]["val"]["n"] > 0
