@@ -51,7 +51,8 @@ def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_
     cache: dict = {}
     for mname, source in sources.items():
         for lname, (table, digest) in tables.items():
-            for joint, path in joints.pair(source, logs.joints_of(table), requested, log_paths[lname]):
+            lpath = log_paths[lname]
+            for joint, path in joints.pair(source, logs.joints_of(table, lpath), requested, lpath):
                 key = (lname, str(joint))
                 if key not in cache:
                     cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint,

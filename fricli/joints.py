@@ -40,6 +40,16 @@ def mismatch(model_name: str, model_joint, log_name: str, log_joint) -> JointMis
                          f"of {log_name}; give the model of joint {log_joint} (or a model folder)")
 
 
+def named(values: list, name: str) -> list | None:
+    """The distinct values of a log's ``joint`` column as the log's joints: None when every value
+    is missing (a column of nulls names no joint, like no column); some missing is refused."""
+    if values and all(v is None for v in values):
+        return None
+    if any(v is None for v in values):
+        raise LogError(f"{name}: the 'joint' column has missing values: every row needs its joint")
+    return values
+
+
 def select(log_joints: list | None, requested, name: str) -> list:
     """Joints of the log a run covers: ``[None]`` for a log without a joint column, ``[J]`` for
     ``--joint J``, else every joint in the log's order. ``log_joints``: the log's joints, or None
@@ -49,6 +59,8 @@ def select(log_joints: list | None, requested, name: str) -> list:
             raise LogError(f"{name}: the log has no 'joint' column, so --joint {requested} can neither select "
                            "nor relabel its rows; leave --joint out")
         return [None]
+    if not log_joints:   # a joint column but no rows: refused as empty by the reader
+        return [requested]
     if requested is None:
         return list(log_joints)
     match = [j for j in log_joints if same(j, requested)]

@@ -294,17 +294,18 @@ def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
 
 
-def joints_of(table: pa.Table) -> list | None:
-    """The joints in the log's ``joint`` column in order of appearance; None without the column."""
+def joints_of(table: pa.Table, name: str = "log") -> list | None:
+    """The joints in the log's ``joint`` column in order of appearance; None without the column
+    (or with one of nulls only, ``joints.named``)."""
     if "joint" not in table.column_names:
         return None
-    return list(dict.fromkeys(table.column("joint").to_pylist()))
+    return joints.named(list(dict.fromkeys(table.column("joint").to_pylist())), name)
 
 
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
     """Rows of one joint by the joint rule (``fricli.joints``): ``joint=None`` means the only
     joint; several need a choice; ``--joint`` on a log without a joint column is refused."""
-    found = joints_of(table)
+    found = joints_of(table, name)
     if found is None:
         return table, joints.select(None, joint, name)[0]   # refuses --joint
     if not found:  # no rows: refused as empty later

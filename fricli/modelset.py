@@ -61,6 +61,9 @@ def output_folder(output: str, covered: list, log_joints: list | None, log_name:
 
     A folder when the run covers several joints or ``output`` is an existing folder. The folder
     is made when missing (its parent must exist)."""
+    names = [file_name(j) for j in covered]
+    if len(set(names)) < len(names):
+        raise LogError(f"{log_name}: joints {listed(covered)} do not give distinct file names")
     if os.path.isdir(output):
         if covered == [None]:
             raise OutputError(f"{output} is a folder, but {log_name} has no 'joint' column to name a model "
@@ -73,9 +76,6 @@ def output_folder(output: str, covered: list, log_joints: list | None, log_name:
     parent = os.path.dirname(os.path.abspath(output))
     if not os.path.isdir(parent):
         raise OutputError(f"cannot write {output}: folder {parent} does not exist")
-    names = [file_name(j) for j in covered]
-    if len(set(names)) < len(names):
-        raise LogError(f"{log_name}: joints {listed(covered)} do not give distinct file names")
     try:
         os.makedirs(output, exist_ok=True)
     except OSError as exc:

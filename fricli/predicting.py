@@ -116,7 +116,7 @@ def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
             found.update(dict.fromkeys(pc.unique(column).to_pylist()))
     except Exception as exc:
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
-    return list(found)
+    return joints.named(list(found), name)
 
 
 def whole_reason(schema: pa.Schema, lowpass_hz: float | None) -> str | None:

@@ -305,3 +305,18 @@ def test_predict_a_folder_drops_invalid_rows_in_place(files, tmp_path):
     got = pq.read_table(out)
     np.testing.assert_array_equal(got.column("t").to_numpy(), table.column("t").to_numpy()[keep])
     np.testing.assert_array_equal(got.column("joint").to_numpy(), table.column("joint").to_numpy()[keep])
+
+
+def test_missing_joint_values(files, tmp_path):
+    """A joint column of nulls names no joint (like no column); some nulls are refused."""
+    table = pq.read_table(files["plain"])
+    nulls = table.append_column("joint", pa.nulls(table.num_rows))
+    pq.write_table(nulls, tmp_path / "nulls.parquet")
+    res = run("predict", files["m2"], tmp_path / "nulls.parquet", "-o", tmp_path / "p.parquet", "-q")
+    assert res.exit_code == 0, res.stderr
+    some = table.append_column("joint", pa.array([2] * 100 + [None] * (table.num_rows - 100), pa.int64()))
+    pq.write_table(some, tmp_path / "some.parquet")
+    for args in (["predict", files["m2"], tmp_path / "some.parquet", "-o", tmp_path / "p.parquet"],
+                 ["identify", tmp_path / "some.parquet", "-o", tmp_path / "m.npz"]):
+        line = one_error_line(run(*args), errors.INPUT)
+        assert "the 'joint' column has missing values" in line

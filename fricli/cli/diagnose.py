@@ -114,7 +114,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     del reading["joint"]
     table_, digest = logs.read_table(log)
     name = "stdin" if log == "-" else log
-    pairs = dict(joints.pair(source, logs.joints_of(table_), joint, name))
+    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
     several = len(pairs) > 1
 
     def one(data, out, job, model_path):

@@ -86,7 +86,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
     runs = [(path, logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs))
-            for j, path in joints.pair(source, logs.joints_of(table), joint, name)]
+            for j, path in joints.pair(source, logs.joints_of(table, name), joint, name)]
     summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))

@@ -124,13 +124,14 @@ def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_chang
     joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the folder OUTPUT.
 
     ``source``: the input models (``joints.Source``) of a command that starts from a model, each
-    joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns ({joint: what fit_one returned} for the joints
-    fitted, whether OUTPUT is a folder); exits UNCHANGED (9) when --if-changed finds every output up to date."""
+    joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns
+    ({joint: what fit_one returned} for the joints fitted, whether OUTPUT is a folder); exits
+    UNCHANGED (9) when --if-changed finds every output up to date."""
     from fricli import logs, modelset
 
     table, digest = read or logs.read_table(log)
     name = "stdin" if log == "-" else log
-    pairs, folder = modelset.plan(logs.joints_of(table), joint, output, name, source)
+    pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
     results: dict = {}
     reading = {k: v for k, v in reading.items() if k != "joint"}
 
