@@ -168,6 +168,41 @@ def write_report(model_path: str, log: logs.Log, folder: str, *, lowpass_hz: flo
     return {"figures": figures, **summary}
 
 
+def write_reports(runs: list[tuple[str, logs.Log]], folder: str, *, lowpass_hz: float | None = 5.0,
+                  seed: int = 0) -> dict:
+    """One report per (model file, joint's log) in ``folder/joint_<name>/`` and an index.html
+    linking them with each joint's errors; a single run is written into ``folder`` itself."""
+    from fricli.modelset import file_name
+
+    if len(runs) == 1:
+        return {str(runs[0][1].joint): write_report(runs[0][0], runs[0][1], folder, lowpass_hz=lowpass_hz, seed=seed)}
+    out = {}
+    for model_path, log in runs:
+        sub = file_name(log.joint)[:-len(".npz")]
+        out[str(log.joint)] = dict(write_report(model_path, log, os.path.join(folder, sub), lowpass_hz=lowpass_hz,
+                                                seed=seed), folder=sub)
+    rows = []
+    for j, r in out.items():
+        ext = f"{r['external']['mae']:.3f}" if "external" in r else "–"
+        rows.append(f'<tr><td><a href="{html.escape(r["folder"])}/index.html">joint {html.escape(j)}</a></td>'
+                    f'<td>{html.escape(r["model"])}</td><td>{r["friction"]["mae"]:.3f}</td>'
+                    f'<td>{r["friction"]["rmse"]:.3f}</td><td>{ext}</td></tr>')
+    rows = "\n".join(rows)
+    u = runs[0][1].units
+    page = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>fricli report: {html.escape(os.path.basename(runs[0][1].name))}</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}
+table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;text-align:right}}</style></head>
+<body><h1>fricli report</h1><p>{html.escape(os.path.basename(runs[0][1].name))}: {len(out)} joints</p>
+<table><tr><th>joint</th><th>model</th><th>friction MAE [{u['tau']}]</th><th>friction RMSE [{u['tau']}]</th>
+<th>external torque MAE [{u['tau']}]</th></tr>
+{rows}</table>
+</body></html>
+"""
+    atomic_write_bytes(os.path.join(folder, "index.html"), page.encode())
+    return out
+
+
 def _html(summary: dict, figures: list[str], u: dict) -> str:
     rows = [f"<tr><td>friction</td><td>{summary['friction']['mae']:.3f}</td><td>{summary['friction']['rmse']:.3f}</td>"
             f"<td>{summary['friction']['max']:.3f}</td></tr>"]

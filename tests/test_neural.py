@@ -166,7 +166,7 @@ def test_velocity_input_options(files, tmp_path):
     assert run("train-base", files["base"], "-o", scaled, "--steps", 20, "--velocity-scale", 0.01, "-q").exit_code == 0
     model, meta = models.load(str(linear))
     assert "velocity" not in meta["model"]["params"] and model.v0_ is None
-    assert meta["provenance"]["options"]["velocity_input"] == "linear"
+    assert meta["provenance"]["job"]["options"]["velocity_input"] == "linear"
     model, meta = models.load(str(scaled))
     assert meta["model"]["params"]["velocity"] == {"transform": "asinh", "scale": 0.01, "v0": 0.01}
     sig = load(files["base"]).signals
@@ -233,8 +233,8 @@ def test_train_base_cli(files, tmp_path):
     assert result.stdout == ""
     assert "friction MAE [Nm]: training" in result.stderr and "validation" in result.stderr
     model, meta = models.load(str(out))
-    assert meta["kind"] == "mlp" and meta["provenance"]["seed"] == 1
-    assert meta["provenance"]["options"]["hidden"] == [12, 12]
+    assert meta["kind"] == "mlp" and meta["provenance"]["job"]["options"]["seed"] == 1
+    assert meta["provenance"]["job"]["options"]["hidden"] == [12, 12]
     assert [n for n, _ in model.hidden] == [12, 12]
     assert meta["fit"]["val"]["n"] > 0
 

@@ -73,7 +73,7 @@ def test_every_command_in_a_process(tmp_path):
     test_urdf.write_case(tmp_path, np.random.default_rng(0), n=100)
     first = run_all({
         "--version": ["--version"],
-        "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "-o", "sim.parquet", "-q"],
+        "simulate": ["simulate", "--scenario", "adapt", "--joint", "2", "-o", "sim.parquet", "-q"],
         "identify": ["identify", base, "-o", "lugre.npz", "--json"],
         "train-base": ["train-base", base, "-o", "nn.npz", "--steps", "20", "-q"],
         "demo": ["demo", "--steps", "3", "-o", "demo", "-q"],

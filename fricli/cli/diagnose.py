@@ -6,10 +6,10 @@ import os
 
 import click
 
-from fricli import logs, metrics, models
+from fricli import joints, logs, metrics, modelset, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job, reading_kwargs,
-                                say)
+from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
+                                reading_kwargs, say)
 from fricli.diagnosis import driver
 from fricli.diagnosis import effects as E
 from fricli.errors import OutputError
@@ -55,10 +55,11 @@ def table(d: driver.Diagnosis) -> str:
 
 
 @cli.command("diagnose")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.argument("log")
 @click.option("--fix", is_flag=True, help="Write the model augmented with the added effects (needs -o).")
-@click.option("-o", "--output", default=None, help="Augmented model file to write with --fix (.npz).")
+@click.option("-o", "--output", default=None,
+              help="Augmented model file to write with --fix (.npz), or a folder for one per joint.")
 @click.option("--folds", type=click.IntRange(min=3, max=100), default=driver.DEFAULT_FOLDS, show_default=True,
               help="Contiguous folds over time for the held-out scores.")
 @click.option("--min-gain", type=click.FloatRange(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
@@ -86,7 +87,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     still removes enough of the residual (docs/diagnose.md). The ranked effects, their physical
     parameters and the held-out MAE before and after go to stdout (a table, or JSON with
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
-    self-contained model file. Exit 0 whether or not something was found.
+    self-contained model file. Exit 0 whether or not something was found. MODEL may be a
+    model folder: every joint of the log is diagnosed with its own model (a result per joint)
+    and --fix -o DIR writes one fixed model per joint (docs/joints.md).
 
     \b
     Example:
@@ -106,39 +109,58 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
             raise OutputError(f"cannot write {output}: folder {folder} does not exist")
-    base, meta = models.load(model)
+    source = modelset.source(model)
+    reading = reading_kwargs(None, kt, cutoff, drop_invalid)
+    del reading["joint"]
     table_, digest = logs.read_table(log)
-    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
-    if kwargs["joint"] is None and "joint" in table_.column_names and meta.get("joint") is not None:
-        if len(logs.joints_of(table_)) > 1:
-            kwargs["joint"] = meta["joint"]
-    data = logs.from_table(table_, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
-    models.check_log(meta, data, model)
-    # with --fix: hold the output's lock until the command ends; --if-changed may exit here (9)
-    job = click.get_current_context().with_resource(
-        model_job(output, data, if_changed=if_changed, quiet=quiet, inputs={"model": model})) if fix else None
-    result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                             max_effects=max_effects)
-    if as_json:
-        emit_json(result.to_json())
-    else:
-        click.echo(table(result))
-    if fix:
-        from fricli.diagnosis.fix import augment
+    name = "stdin" if log == "-" else log
+    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
+    several = len(pairs) > 1
 
-        fixed = augment(base, result, data, carry=not no_carry)
-        fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-        fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-                   carried=fixed.carried, refitted=fixed.refitted)
-        options = {"folds": folds, "min_gain": min_gain, "alpha": alpha, "effects": only, "max_effects": max_effects,
-                   "carry": not no_carry, "base_model": os.path.basename(model)}
-        models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, diagnose=options, job=job)
-        if not quiet:
-            if result.added:
-                carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
-                if fixed.refitted:
-                    carried += f"; refitted with them: {', '.join(fixed.refitted)}"
-                say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
-                    f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
-            else:
-                say(f"wrote {output}: nothing added, same predictions as {model}")
+    def one(data, out, job, model_path):
+        base, meta = models.load(model_path)
+        models.check_log(meta, data, model_path)
+        result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
+                                 max_effects=max_effects)
+        if not as_json:
+            if several:
+                click.echo(f"joint {data.joint} ({model_path}):")
+            click.echo(table(result) + ("\n" if several else ""))
+        if fix:
+            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
+        return result.to_json()
+
+    if fix:
+        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
+                                         source=source, read=(table_, digest))
+    else:
+        results, folder_run = {}, several
+
+        def work(j):
+            data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
+            results[j] = one(data, None, None, pairs[j])
+
+        modelset.each_joint(list(pairs), work, what="results")
+    if as_json:
+        emit_results(results, folder_run)
+
+
+def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -> None:
+    from fricli.diagnosis.fix import augment
+
+    fixed = augment(base, result, data, carry=not no_carry)
+    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+               carried=fixed.carried, refitted=fixed.refitted)
+    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
+                        base={"path": model_path, "kind": base.kind})
+    if quiet:
+        return
+    if result.added:
+        carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
+        if fixed.refitted:
+            carried += f"; refitted with them: {', '.join(fixed.refitted)}"
+        say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
+            f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
+    else:
+        say(f"wrote {output}: nothing added, same predictions as {model_path}")

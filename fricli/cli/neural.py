@@ -6,9 +6,9 @@ import time
 
 import click
 
-from fricli import learning, logs, models
+from fricli import learning, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job,
+from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 output_option, progress_enabled, reading_kwargs, say)
 
 
@@ -65,7 +65,7 @@ def _wrote(output: str) -> str:
 
 @cli.command("train-base")
 @click.argument("log")
-@output_option()
+@output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
 @click.option("--arch", type=click.Choice(["mlp", "selmic", "nnacm"]), default="mlp", show_default=True,
               help="mlp: the paper's NN_base; selmic: Selmic & Lewis (sigmoid and jump units); "
                    "nnacm: Ciliz & Tomizuka (network plus learned Coulomb terms per direction).")
@@ -104,6 +104,7 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Training and validation MAE are printed at the end. The same seed gives the same file.
+    A log of several joints without --joint gives one model per joint in the folder -o DIR.
 
     \b
     Example:
@@ -116,14 +117,9 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
         learning.ARCHS[arch](hidden_sizes=tuple(hidden or learning.DEFAULT_HIDDEN[arch]))
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--hidden") from None
-    the_log = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
-    options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
-               "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,
-               "max_samples": max_samples, "velocity_input": velocity_input}
-    if velocity_scale is not None:
-        options["velocity_scale"] = velocity_scale
-    with model_job(output, the_log, if_changed=if_changed, quiet=quiet) as job:
-        progress = _Progress(quiet, f"train-base {arch}")
+
+    def fit_one(the_log, out, job, _model):
+        progress = _Progress(quiet, f"train-base {arch}" + (f" joint {the_log.joint}" if the_log.joint is not None else ""))
         start = time.perf_counter()
         try:
             model, summary = learning.train_base(
@@ -134,23 +130,28 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
             progress.close()
         seconds = time.perf_counter() - start
         rows = summary["train_rows"] + summary["val_rows"]
-        models.save_for_log(output, model, the_log, rows_used=rows, seed=seed, fit=summary, options=options,
-                            job=job)
-    say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
-        f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
-        f"of {the_log.name} in {seconds:.1f} s; weights from step {summary['best_step']} of {summary['steps']}", quiet)
-    tau = the_log.units["tau"]
-    say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
-        f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
-    say(_wrote(output), quiet)
+        models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
+        where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
+        say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
+            f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
+            f"of {the_log.name}{where} in {seconds:.1f} s; weights from step {summary['best_step']} of "
+            f"{summary['steps']}", quiet)
+        tau = the_log.units["tau"]
+        say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
+            f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+        say(_wrote(out), quiet)
+        return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}
+
+    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
+                                     if_changed=if_changed, quiet=quiet)
     if as_json:
-        emit_json({"model": output, "kind": arch, "seconds": round(seconds, 3), **summary})
+        emit_results(results, folder_run)
 
 
 @cli.command("adapt")
-@click.argument("base", type=click.Path(dir_okay=False))
+@click.argument("base", type=click.Path())
 @click.argument("log")
-@output_option()
+@output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
 @click.option("--hidden", type=click.IntRange(min=1), default=30, show_default=True,
               help="Units in NN_add's hidden layer (ELU).")
 @click.option("--epochs", type=click.IntRange(min=1), default=200, show_default=True,
@@ -177,7 +178,8 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
     NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model.
+    with every command that takes a model. BASE may be a model folder (one model per joint):
+    on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
 
     \b
     Example:
@@ -185,17 +187,12 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
       fricli adapt lugre.npz sample_data/joint2_adapt.parquet --max-seconds 40 -o lugre_adapted.npz
     """
     _check_outputs(output, as_json)
-    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
-    base_model, base_meta = models.load(base)
-    table, digest = logs.read_table(log)
-    if kwargs["joint"] is None and "joint" in table.column_names:
-        kwargs["joint"] = base_meta.get("joint")
-    the_log = logs.from_table(table, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
-    models.check_log(base_meta, the_log, base)
-    options = {"hidden": hidden, "epochs": epochs, "batch_size": batch_size, "lr": lr, "val_fraction": val_fraction,
-               "max_seconds": max_seconds, "min_speed": min_speed}
-    with model_job(output, the_log, if_changed=if_changed, quiet=quiet, inputs={"base": base}) as job:
-        progress = _Progress(quiet, "adapt")
+    from fricli import modelset
+
+    def fit_one(the_log, out, job, base_path):
+        base_model, base_meta = models.load(base_path)
+        models.check_log(base_meta, the_log, base_path)
+        progress = _Progress(quiet, "adapt" + (f" joint {the_log.joint}" if the_log.joint is not None else ""))
         start = time.perf_counter()
         try:
             model, summary = learning.adapt(
@@ -204,14 +201,22 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         finally:
             progress.close()
         seconds = time.perf_counter() - start
-        models.save_for_log(output, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary,
-                            options=options, job=job, base={"path": base, "kind": base_meta.get("kind"),
-                                                   "provenance": base_meta.get("provenance", {})})
-    tau = the_log.units["tau"]
-    say(f"adapted {base_meta.get('kind')} model {base} on {summary['seconds_used']:.1f} s of {the_log.name} "
-        f"({summary['train_rows']} training rows, {summary['val_rows']} validation) in {seconds:.1f} s", quiet)
-    say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
-        f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}", quiet)
-    say(_wrote(output), quiet)
+        models.save_for_log(out, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary, job=job,
+                            base={"path": base_path, "kind": base_meta.get("kind"),
+                                  "provenance": base_meta.get("provenance", {})})
+        tau = the_log.units["tau"]
+        where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
+        say(f"adapted {base_meta.get('kind')} model {base_path} on {summary['seconds_used']:.1f} s of "
+            f"{the_log.name}{where} ({summary['train_rows']} training rows, {summary['val_rows']} validation) "
+            f"in {seconds:.1f} s", quiet)
+        say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
+            f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}",
+            quiet)
+        say(_wrote(out), quiet)
+        return {"model": out, "kind": "residual", "base": base_path, "seconds": round(seconds, 3), **summary}
+
+    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
+                                     if_changed=if_changed, quiet=quiet, source=modelset.source(base),
+                                     input_name="base")
     if as_json:
-        emit_json({"model": output, "kind": "residual", "base": base, "seconds": round(seconds, 3), **summary})
+        emit_results(results, folder_run)

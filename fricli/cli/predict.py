@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fricli import models, predicting
+from fricli import modelset, predicting
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_json, json_flag, log_reading, output_option, progress_enabled,
                                 say, warn)
@@ -23,17 +23,21 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
          external: bool, lowpass=None):
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
-    model, meta = models.load(model_path)
-    result = predicting.run(model, meta, log, output, external=external, lowpass_hz=lowpass, joint=joint, kt=kt,
-                            cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn, batch_rows=batch_rows,
-                            progress=progress_enabled(quiet), model_name=model_path)
+    result = predicting.run_models(modelset.source(model_path), log, output, external=external, lowpass_hz=lowpass,
+                                   joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn,
+                                   batch_rows=batch_rows, progress=progress_enabled(quiet))
     if not quiet:
         where = f" of joint {result.joint}" if result.joint is not None else ""
+        if result.per_joint:
+            where = f" of joints {', '.join(result.per_joint)}"
         dest = "stdout" if output == "-" else output
         say(f"{result.rows:,} rows{where} -> {dest}" + (f" (read whole: {result.read_whole})" if result.read_whole else ""))
         say(f"friction error against the target: {_figures(result.friction, result.unit)}")
         if result.external is not None:
             say(f"external torque error against tau_ext: {_figures(result.external, result.unit)}")
+        for j, figures in (result.per_joint or {}).items():
+            say(f"  joint {j} ({figures['rows']:,} rows, {figures['model']}): friction {_figures(figures['friction'], result.unit)}"
+                + (f"; external {_figures(figures['external'], result.unit)}" if "external" in figures else ""))
     if as_json:
         out = result.as_json()
         out.update(model=model_path, log=log, output=output)
@@ -43,7 +47,7 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
 
 
 @cli.command("predict")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.argument("log")
 @output_option(help="Output log (Parquet; - for stdout).")
 @log_reading
@@ -55,8 +59,10 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
 
     Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
     against the target tau_m + tau_ext - tau_g - tau_dyn goes to stderr (and to stdout as
-    JSON with --json, when the output is a file). A log with several joints is read for the
-    model's joint (or --joint). Large logs are processed in record batches with the model
+    JSON with --json, when the output is a file). MODEL may be a model folder (one model per
+    joint): every joint of the log is predicted with its own model into one long-format log.
+    One model file on a log of several joints is used for its own joint (or --joint); a model
+    fitted on another joint is refused (docs/joints.md). Large logs are processed in record batches with the model
     state carried across; a log without qd/qdd is read whole (docs/lugre.md).
 
     \b
@@ -68,7 +74,7 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
 
 
 @cli.command("estimate-ext")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.argument("log")
 @output_option(help="Output log (Parquet; - for stdout).")
 @click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
@@ -83,6 +89,7 @@ def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invali
 
     When the log has the sensor column tau_ext, the error of tau_ext_pred against it (MAE,
     RMSE, max) goes to stderr (and to stdout as JSON with --json, when the output is a file).
+    MODEL may be a model folder: every joint of the log with its own model (docs/joints.md).
 
     \b
     Example:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fricli import logs
 from fricli.errors import DataError
 
 
@@ -52,8 +53,8 @@ def inputs(terms: list[dict]) -> set[str]:
 def _signal(sig: dict, name: str) -> np.ndarray:
     if name in sig:
         return sig[name]
-    if name in ("tau_g", "tau_dyn", "tau_ext"):
-        return np.zeros_like(sig["t"])
+    if name in logs.OPTIONAL_TORQUES:
+        return logs.column(sig, name)
     raise DataError(f"the log has no column {name!r}, which the model's term needs")
 
 

@@ -93,11 +93,15 @@ def check_log(meta: dict, log, model_name: str = "model") -> None:
 
 
 def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict:
-    """Where a model came from: enough to reproduce it (no wall-clock time)."""
+    """Where a model came from: enough to reproduce it (no wall-clock time). A command's options,
+    the seed among them, are recorded once, in ``job`` (``extra``); ``seed`` is kept here only for
+    a model written without one."""
     import os
 
     out = {"log_sha256": log.sha256, "log_name": os.path.basename(log.name), "log_rows": len(log),
-           "rows_used": int(rows_used), "seed": seed, "derived": log.derived}
+           "rows_used": int(rows_used), "derived": log.derived}
+    if "job" not in extra:
+        out["seed"] = seed
     out.update(extra)
     return out
 

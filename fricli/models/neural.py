@@ -27,6 +27,7 @@ from typing import Callable
 
 import numpy as np
 
+from fricli import logs
 from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
@@ -36,7 +37,6 @@ from fricli.nn.network import Network
 from fricli.nn.training import PREDICT_CHUNK, Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
-_OPTIONAL_TORQUES = ("tau_g", "tau_dyn", "tau_ext")
 VELOCITY_QUANTILE = 0.05   # velocity_scale="auto": v0 = this quantile of |qd| over the training rows
 
 
@@ -50,11 +50,7 @@ def feature(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | N
         if name == "neg(qd)":
             return 0.5 * (1.0 - s)
         return s
-    if name in sig:
-        return sig[name][start:stop]
-    if name in _OPTIONAL_TORQUES:
-        return np.zeros(len(range(_rows(sig))[start:stop]))
-    raise DataError(f"the log has no column {name!r}")
+    return logs.column(sig, name, start, stop)
 
 
 def _rows(sig: dict[str, np.ndarray]) -> int:
