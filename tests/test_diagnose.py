@@ -14,7 +14,7 @@ from fricli.cli import cli
 from fricli.diagnosis import diagnose
 from fricli.diagnosis import effects as E
 from fricli.diagnosis import selection
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.diagnosis.fix import augment
 from fricli.models.augmented import AugmentedModel
 from fricli.models.base import FrictionModel
@@ -384,7 +384,7 @@ def test_cli_fix_on_clean_log_writes_an_equivalent_model(files):
 @pytest.mark.parametrize("args, code, message", [
     (["--fix"], 2, "--fix needs -o"),
     (["-o", "x.npz"], 2, "add --fix"),
-    (["--effects", "gravity"], 2, "unknown effect"),
+    (["--effects", "sparkle"], 2, "unknown effect"),
 ])
 def test_cli_usage_errors(files, args, code, message):
     res = CliRunner().invoke(cli, ["diagnose", files["model"], files["clean"], *args])

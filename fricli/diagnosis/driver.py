@@ -10,7 +10,7 @@ import numpy as np
 from fricli import logs
 from fricli.diagnosis import effects as E
 from fricli.diagnosis import selection
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.errors import DataError, ModelFileError
 
 DEFAULT_FOLDS = 10

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from fricli import logs, metrics
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.diagnosis.driver import Diagnosis
 from fricli.models.augmented import AugmentedModel
 

@@ -266,34 +266,82 @@ def _union(a: list[str], b: list[str]) -> list[str]:
 
 def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float = 0.1,
             max_effects: int | None = None) -> Selection:
-    """Forward selection. ``candidates(chosen_terms, residual)`` returns the list of
-    ``Candidate`` for the current step (terms already added to ``design``)."""
+    """Forward selection with backward pruning. ``candidates(chosen_terms, residual)`` returns
+    the list of ``Candidate`` for the current step (terms already added to ``design``).
+
+    When no candidate qualifies any more, an effect added earlier that the others now make
+    unnecessary (the full set does not beat the set without it by the same criteria, e.g. a
+    trend in time taken before the temperature that explains it) is dropped and may not return;
+    the forward steps then go on."""
     chosen: list[str] = []
-    chosen_terms: list[str] = []
     steps: list[Score] = []
     first: dict[str, Score] = {}
+    dropped: set[str] = set()
+    added: dict[str, list[str]] = {}        # the chosen effects' terms as they were chosen
+    rivals_of: dict[str, tuple] = {}
     sse0 = float(design.sse([]).sum())
     while True:
+        chosen_terms = _terms_of(chosen, added)
         residual = design.r - design.fitted(chosen_terms)
         cands = candidates(chosen_terms, residual)
         term_of = {c.name: c.terms for c in cands}
+        term_of.update(added)
+        rivals_of.update({c.name: c.rivals for c in cands})
         sse_base = design.sse(chosen_terms)
         scores = {c.name: score(design, c, chosen_terms, sse_base, sse0, term_of, alpha, min_gain)
                   for c in cands if c.name not in chosen}
-        if not chosen:
+        if not first:
             first = dict(scores)
         limit = max_effects is not None and len(chosen) >= max_effects
-        eligible = sorted((s for s in scores.values() if s.eligible), key=lambda s: -s.gain)
-        if not eligible or limit:
-            return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
-        best = eligible[0]
-        for other in eligible[1:]:
-            if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],
-                                                       chosen_terms, alpha, min_gain):
-                best = other
-        chosen.append(best.name)
-        chosen_terms = _union(chosen_terms, term_of[best.name])
-        steps.append(best)
+        eligible = sorted((s for s in scores.values() if s.eligible and s.name not in dropped), key=lambda s: -s.gain)
+        if eligible and not limit:
+            best = eligible[0]
+            for other in eligible[1:]:
+                if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],
+                                                           chosen_terms, alpha, min_gain):
+                    best = other
+            chosen.append(best.name)
+            added[best.name] = term_of[best.name]
+            steps.append(best)
+            continue
+        spare = _spare(design, chosen, added, alpha, min_gain)
+        if spare is None:
+            break
+        dropped.add(spare)
+        chosen.remove(spare)
+        del added[spare]
+        steps = _rescore(design, chosen, added, rivals_of, sse0, alpha, min_gain)
+    return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
+
+
+def _terms_of(names: list[str], term_of: dict[str, list[str]]) -> list[str]:
+    out: list[str] = []
+    for name in names:
+        out = _union(out, term_of[name])
+    return out
+
+
+def _spare(design: Design, chosen: list[str], term_of, alpha: float, min_gain: float) -> str | None:
+    """The earliest chosen effect the others make unnecessary, or None."""
+    full = _terms_of(chosen, term_of)
+    for name in chosen:
+        rest = _terms_of([c for c in chosen if c != name], term_of)
+        if set(rest) >= set(full):
+            continue
+        if not compare(design.sse(full), design.sse(rest), alpha).clear(min_gain):
+            return name
+    return None
+
+
+def _rescore(design: Design, chosen: list[str], term_of, rivals_of, sse0: float, alpha: float,
+             min_gain: float) -> list[Score]:
+    """Each chosen effect's score against the ones chosen before it."""
+    out, base = [], []
+    for name in chosen:
+        cand = Candidate(name, term_of[name], rivals_of.get(name, ()))
+        out.append(score(design, cand, base, design.sse(base), sse0, term_of, alpha, min_gain))
+        base = _union(base, term_of[name])
+    return out
 
 
 def _beats(design: Design, richer: list[str], simpler: list[str], base: list[str], alpha: float,

@@ -3,7 +3,7 @@
     tau_f = p + sum_j coef[j] * term_j(signals, p),   p = base.predict(signals)
 
 The base is a child model of any kind, stored in the same file; the terms are the regressor
-terms of ``fricli.diagnosis.terms`` (JSON in the model's params, coefficients as the array
+terms of ``fricli.models.terms`` (JSON in the model's params, coefficients as the array
 ``coef``). Effects that a LuGre base can express as its own physical parameters (direction
 asymmetry, temperature dependence, a change of level) are carried by the base instead and
 listed under ``carried`` (base parameters refitted along with them under ``refitted``).
@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.models import register
 from fricli.models.base import FrictionModel
 

@@ -14,6 +14,8 @@ any later log from the constants it carries. Factors:
     {"f": "sign"}                                  direction of motion, held at rest
     {"f": "moving"}                                |direction| (0 only before the first motion)
     {"f": "pos"}                                   1 where the direction is positive, else 0
+    {"f": "quad"}                                  direction * sign(tau_g - tau_ext): +1 when the joint
+                                                   moves against the torque through the gear (drives it)
     {"f": "sat", "scale": s}                       sign(qd) * (1 - exp(-|qd| / s))
     {"f": "sin" | "cos", "name": S, "w": w}        sin(w S), cos(w S)
 
@@ -35,6 +37,8 @@ def factor_inputs(factor: dict) -> set[str]:
         return set()
     if f in ("gear", "absgear"):
         return {"tau_g"}
+    if f == "quad":
+        return {"qd", "tau_g"}
     if f in ("sign", "moving", "pos", "sat"):
         return {"qd"}
     return {factor["name"]}
@@ -111,6 +115,8 @@ class Columns:
             return np.abs(self.direction)
         if f == "pos":
             return (self.direction > 0).astype(np.float64)
+        if f == "quad":
+            return self.direction * np.sign(_signal(sig, "tau_g") - _signal(sig, "tau_ext"))
         if f == "sat":
             v = sig["qd"]
             return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
@@ -159,7 +165,7 @@ def check(term: dict) -> None:
 
 
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "sat": ("scale",),
+          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "quad": (), "sat": ("scale",),
           "sin": ("name", "w"), "cos": ("name", "w")}
 
 
@@ -173,6 +179,7 @@ P = {"f": "p"}
 SIGN = {"f": "sign"}
 MOVING = {"f": "moving"}
 POS = {"f": "pos"}
+QUAD = {"f": "quad"}
 GEAR = {"f": "gear"}
 ABSGEAR = {"f": "absgear"}
 
