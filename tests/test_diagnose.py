@@ -175,11 +175,17 @@ def test_clean_log_adds_nothing_and_json_schema(rng):
     assert d.added == []
     assert d.mae_after == d.mae_before
     out = d.to_json()
-    assert set(out) == {"mae_before", "mae_after", "effects", "added"}
+    assert set(out) == {"mae_before", "mae_after", "cut", "intervals", "effects", "added", "model_errors",
+                        "unexplained_share", "unexplained"}
     for e in out["effects"]:
-        assert set(e) == {"name", "significant", "gain", "params"}
+        assert set(e) == {"name", "significant", "gain", "params", "part"}
+        assert e["part"] in ("friction", "model")
         for par in e["params"].values():
             assert set(par) == {"value", "unit"}
+    lo, hi = out["intervals"]["mae_before"]
+    assert lo < out["mae_before"] < hi
+    assert set(out["unexplained"]) == {"share", "main", "time", "velocity", "position"}
+    assert 0 <= out["unexplained_share"] < 0.1
     json.dumps(out, allow_nan=False)
 
 
@@ -309,6 +315,60 @@ def test_simulated_clean_log_adds_nothing(lugre_base):
     _, log = _sim(2)
     d = diagnose(lugre_base, log)
     assert d.added == []
+    assert d.unexplained.share < 0.1
+
+
+HARD_CASES = {  # simulator effects -> the effects diagnose must add, in any order
+    ("gravity",): {"gravity"},
+    ("quadrant",): {"quadrant"},
+    ("temperature", "ripple"): {"temperature", "position"},
+}
+
+
+@pytest.mark.parametrize("effects", sorted(HARD_CASES))
+def test_harder_cases_are_named_and_fixed(lugre_base, effects):
+    _, log2 = _sim(2, *effects)
+    _, log3 = _sim(3, *effects)
+    d = diagnose(lugre_base, log2)
+    want = HARD_CASES[effects]
+    assert set(d.added) == want
+    assert {e.name for e in d.effects[:len(want)]} == want
+    lo, hi = d.intervals["cut"]
+    assert 0.4 < lo <= d.cut <= hi
+    fixed = augment(lugre_base, d, log2)
+    before, after = _mae(lugre_base, log3), _mae(fixed, log3)
+    assert after <= 0.6 * before, f"MAE {before:.3f} -> {after:.3f}"
+
+
+def test_gravity_error_is_a_model_error_kept_apart_from_friction(lugre_base):
+    from fricli import sim
+
+    t2, log2 = _sim(2, "gravity")
+    low = next(e for e in sim.metadata(t2)["effects"] if e["name"] == "gravity")["strength"]
+    d = diagnose(lugre_base, log2)
+    gravity = d.effects[0]
+    assert gravity.part == "model" and d.errors == ["gravity"]
+    assert gravity.params["error"]["value"] == pytest.approx(-100 * low, abs=0.5)
+    fixed = augment(lugre_base, d, log2)
+    assert fixed.errors == ["gravity"] and [t["name"] for t in fixed.error_terms] == ["tau_g"] and fixed.terms == []
+    friction, error, _ = fixed.predict_parts(log2.signals)
+    np.testing.assert_array_equal(friction, lugre_base.predict(log2.signals)[0])
+    np.testing.assert_allclose(error, (1 / (1 - low) - 1) * log2.signals["tau_g"], rtol=0.02)
+    np.testing.assert_array_equal(fixed.friction_only().predict(log2.signals)[0], friction)
+    text = fixed.describe()
+    assert "robot-model errors (not friction): gravity" in text
+    assert text.index("robot-model errors") > text.index("augmented model")
+
+
+def test_disturbance_is_unexplained_structure_not_an_effect(lugre_base):
+    _, log2 = _sim(2, "disturbance")
+    _, log3 = _sim(3, "disturbance")
+    d = diagnose(lugre_base, log2)
+    assert d.added == []
+    assert d.unexplained.share > 0.3 and d.unexplained.main == "time"
+    assert 2.0 <= d.unexplained.time.where["frequency_hz"] <= 3.0
+    fixed = augment(lugre_base, d, log2)
+    assert _mae(fixed, log3) <= _mae(lugre_base, log3)
 
 
 def test_simulated_inertia_is_reported_in_kg_m2(lugre_base):
