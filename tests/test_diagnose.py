@@ -72,6 +72,7 @@ def test_term_values_and_inputs():
     assert cols.value(T.term("x", T.P, T.POS)).tolist() == [5, 4, 0, 0]
     assert cols.value(T.term("x", T.sig_("qd"), T.dev("temp", 21.0))).tolist() == [-1, 0, -2, 0]
     assert cols.value(T.term("x", T.ABSGEAR, T.SIGN)).tolist() == [2, 1, -2, 0]
+    assert cols.value(T.term("x", T.HELDGEAR)).tolist() == [2, 2, 2, 2]      # held through rests
     assert T.inputs([T.term("x", T.P, T.dev("temp", 0)), T.term("y", T.GEAR)]) == {"temp", "tau_g"}
     with pytest.raises(ValueError):
         T.check({"name": "bad", "factors": [{"f": "nonsense"}]})
@@ -176,7 +177,7 @@ def test_clean_log_adds_nothing_and_json_schema(rng):
     assert d.mae_after == d.mae_before
     out = d.to_json()
     assert set(out) == {"mae_before", "mae_after", "cut", "intervals", "effects", "added", "model_errors",
-                        "unexplained_share", "unexplained"}
+                        "notes", "unexplained_share", "unexplained"}
     for e in out["effects"]:
         assert set(e) == {"name", "significant", "gain", "params", "part"}
         assert e["part"] in ("friction", "model")
@@ -218,8 +219,10 @@ def _lugre():
 
 def test_augmented_model_round_trip_and_batches(tmp_path, rng):
     log = synthetic(rng)
-    terms = [T.term("1", T.ONE), T.term("p*pos", T.P, T.POS), T.term("qdd", T.sig_("qdd"))]
-    aug = AugmentedModel(_lugre(), terms, [0.3, 0.2, 1.5], effects=["offset", "direction", "acceleration"])
+    terms = [T.term("p*pos", T.P, T.POS), T.term("tau_l held", T.HELDGEAR)]
+    errors = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd"))]
+    aug = AugmentedModel(_lugre(), terms, [0.2, 0.05], error_terms=errors, error_coef=[0.3, 1.5],
+                         effects=["offset", "direction", "acceleration", "quadrant"], errors=["offset", "acceleration"])
     path = tmp_path / "aug.npz"
     models.save_for_log(str(path), aug, log, rows_used=len(log))
     back, meta = models.load(str(path))
@@ -227,6 +230,8 @@ def test_augmented_model_round_trip_and_batches(tmp_path, rng):
     assert back.required_inputs() == {"t", "qd", "qdd", "tau_g"}
     whole = back.predict(log.signals)[0]
     np.testing.assert_array_equal(whole, aug.predict(log.signals)[0])
+    assert back.errors == ["offset", "acceleration"] and [t["name"] for t in back.error_terms] == ["1", "qdd"]
+    np.testing.assert_allclose(whole - back.friction_only().predict(log.signals)[0], 0.3 + 1.5 * log.signals["qdd"])
     # cut into batches at awkward places (inside rests too): the state carries across
     parts, state = [], None
     for a, b in [(0, 137), (137, 1400), (1400, 1401), (1401, 6000)]:

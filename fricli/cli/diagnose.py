@@ -43,6 +43,7 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
     for e in d.effects:
         if e.added and e.part == "model":
             lines.append(f"robot-model error, not friction: {e.name}: {e.summary}")
+    lines.extend(f"note: {n}" for n in d.notes)
     if d.unexplained is not None:
         lines.append(d.unexplained.line(u, v_unit, q_unit))
     lines.append("")

@@ -18,6 +18,8 @@ DEFAULT_MIN_GAIN = 0.1
 DEFAULT_ALPHA = 0.01
 MIN_ROWS_PER_FOLD = 20
 INTERVAL_LEVEL = 0.95
+#: effects that the same log may explain about equally, and what tells them apart
+TWINS = {("gravity", "quadrant"): "rests with a varying tau_g, or a measured payload (tau_ext)"}
 
 
 @dataclasses.dataclass
@@ -53,6 +55,7 @@ class Diagnosis:
     alone: dict[str, float] = dataclasses.field(default_factory=dict)   # each candidate's gain on its own
     intervals: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # mae_before, mae_after, cut
     unexplained: structure.Structure | None = None    # structure left in the held-out residual
+    notes: list[str] = dataclasses.field(default_factory=list)   # for people: what the log cannot decide
 
     @property
     def cut(self) -> float:
@@ -73,7 +76,7 @@ class Diagnosis:
                "intervals": {"level": INTERVAL_LEVEL, **self.intervals},
                "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params,
                             "part": e.part} for e in self.effects],
-               "added": list(self.added), "model_errors": self.errors}
+               "added": list(self.added), "model_errors": self.errors, "notes": list(self.notes)}
         if self.unexplained is not None:
             out["unexplained_share"] = self.unexplained.share
             out["unexplained"] = self.unexplained.to_json()
@@ -180,7 +183,24 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
                      alone={name: sc.gain for name, sc in sel.first.items()},
                      intervals=fold_intervals(r, left, folds),
-                     unexplained=structure.analyse(left, sig, alpha))
+                     unexplained=structure.analyse(left, sig, alpha),
+                     notes=_twin_notes(design, sel, cache, alpha, min_gain))
+
+
+def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float) -> list[str]:
+    """A note for each added effect whose twin (``TWINS``) would explain the log nearly as well."""
+    notes = []
+    for pair, evidence in TWINS.items():
+        for a, b in (pair, pair[::-1]):
+            if a not in sel.added or b in sel.added or a not in cache or b not in cache:
+                continue
+            others = [t for t in sel.terms if t not in cache[a]]
+            swapped = others + [t for t in cache[b] if t not in others]
+            cmp = selection.compare(design.sse(sel.terms), design.sse(swapped), alpha)
+            if not cmp.clear(min_gain):
+                notes.append(f"{a} or {b}: this log does not tell them apart clearly ({a} leaves "
+                             f"{100 * cmp.gain:.0f} % less held-out squared error); {evidence} would")
+    return notes
 
 
 def fold_intervals(before: np.ndarray, after: np.ndarray, folds: int) -> dict[str, list[float]]:

@@ -319,28 +319,28 @@ class Gravity(Effect):
 
 
 class Quadrant(Effect):
-    """The friction level differs between the quadrants of (qd, tau_l): higher when the joint
-    drives against the torque through the gear (sign(qd*tau_l) > 0), lower when back-driven."""
+    """Friction that differs between the quadrants of (qd, tau_l): the Coulomb level is
+    Fc + kq*tau_l*sign(qd), higher when the joint drives against the torque through the gear
+    (sign(qd*tau_l) > 0) than when that torque back-drives it. In the signed friction that is
+    kq*tau_l, held through rests at its value when the motion stopped (the bristles hold the
+    friction they had), which tells it apart from an error of the logged gravity torque."""
 
     name = "quadrant"
-    rivals = (("gravity",), ("offset",), ("gravity", "offset"))
-    description = "the friction level x(1+r) when the joint drives against tau_l, x(1-r) when back-driven"
+    rivals = (("offset",),)
+    description = "friction kq*|tau_l| higher when the joint drives against tau_l than when back-driven"
 
     def applicable(self, ctx):
         return _needs_tau_g(ctx)
 
     def terms(self, ctx, residual):
-        return [T.term("p*quad", T.P, T.QUAD), T.term("qd*quad", T.sig_("qd"), T.QUAD)]
+        return [T.term("tau_l held", T.HELDGEAR)]
 
     def params(self, coef, ctx):
-        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
-        r, bv = coef.get("p*quad", 0.0), coef.get("qd*quad", 0.0)
-        return {"r": _par(r, ""), "dFc": _par(r * lv["Fc"], ctx.tau_unit), "dFv": _par(r * lv["Fv"] + bv, ctx.fv_unit)}
+        return {"kq": _par(coef["tau_l held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def summary(self, params):
-        return (f"level x(1 +/- {_fmt(params['r']['value'])}) driving/back-driven: Fc +/- "
-                f"{_fmt(params['dFc']['value'])} {params['dFc']['unit']}, Fv +/- {_fmt(params['dFv']['value'])} "
-                f"{params['dFv']['unit']}")
+        kq = params["kq"]["value"]
+        return f"kq {_fmt(kq)} {params['kq']['unit']}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
 
 
 class Velocity(Effect):

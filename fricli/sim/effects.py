@@ -226,22 +226,16 @@ class Load(Effect):
 
 
 class Quadrant(Effect):
-    name, unit = "quadrant", "-"
-    help = ("Coulomb/static and viscous friction x(1+r) when the joint drives against the gear torque "
-            "(sign(v*tau_gear) > 0), x(1-r) when it is back-driven")
+    name, unit = "quadrant", "Nm/Nm"
+    help = ("quadrant dependence: Coulomb/static levels gain k*tau_gear*sign(v), more friction when the "
+            "joint drives against the gear torque than when it is back-driven")
 
     def default(self, j):
-        return 0.15
-
-    def check(self, strength):
-        if not -1 < strength < 1:
-            raise ValueError("quadrant must be between -1 and 1")
+        return 0.065 if j.number == 2 else 0.1
 
     def apply(self, scene, strength, rng):
-        factor = 1.0 + strength * np.sign(scene.v * (scene.tau_g - scene.tau_ext))
-        scene.dir_c *= factor
-        scene.dir_v *= factor
-        return {"r": strength}
+        scene.kq += strength
+        return {"kq": strength}
 
 
 class Gravity(Effect):
