@@ -156,7 +156,8 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
             out.append(selection.Candidate(effect.name, names, effect.rivals))
         return out
 
-    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects)
+    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects,
+                            twins=tuple(TWINS))
     coef = design.fit(sel.terms)
     by_name = {e.name: e for e in usable}
     results = []

@@ -265,14 +265,16 @@ def _union(a: list[str], b: list[str]) -> list[str]:
 
 
 def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float = 0.1,
-            max_effects: int | None = None) -> Selection:
+            max_effects: int | None = None, twins: tuple[tuple[str, str], ...] = ()) -> Selection:
     """Forward selection with backward pruning. ``candidates(chosen_terms, residual)`` returns
     the list of ``Candidate`` for the current step (terms already added to ``design``).
 
     When no candidate qualifies any more, an effect added earlier that the others now make
     unnecessary (the full set does not beat the set without it by the same criteria, e.g. a
     trend in time taken before the temperature that explains it) is dropped and may not return;
-    the forward steps then go on."""
+    the forward steps then go on. Last, an effect whose twin (``twins``: pairs of effects that
+    explain much the same, e.g. a gravity-model error and quadrant friction) is not chosen
+    is replaced by it when that leaves less held-out error, and the steps go on again."""
     chosen: list[str] = []
     steps: list[Score] = []
     first: dict[str, Score] = {}
@@ -305,11 +307,19 @@ def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float 
             steps.append(best)
             continue
         spare = _spare(design, chosen, added, alpha, min_gain)
-        if spare is None:
-            break
-        dropped.add(spare)
-        chosen.remove(spare)
-        del added[spare]
+        if spare is not None:
+            dropped.add(spare)
+            chosen.remove(spare)
+            del added[spare]
+        else:
+            swap = _better_twin(design, chosen, added, term_of, twins, dropped)
+            if swap is None:
+                break
+            old, new = swap
+            dropped.add(old)
+            chosen[chosen.index(old)] = new
+            del added[old]
+            added[new] = term_of[new]
         steps = _rescore(design, chosen, added, rivals_of, sse0, alpha, min_gain)
     return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
 
@@ -319,6 +329,18 @@ def _terms_of(names: list[str], term_of: dict[str, list[str]]) -> list[str]:
     for name in names:
         out = _union(out, term_of[name])
     return out
+
+
+def _better_twin(design: Design, chosen: list[str], added, term_of, twins, dropped) -> tuple[str, str] | None:
+    """(chosen effect, its twin) when the twin in its place leaves less held-out error, else None."""
+    full = _terms_of(chosen, added)
+    for pair in twins:
+        for a, b in (pair, pair[::-1]):
+            if a in chosen and b not in chosen and b not in dropped and b in term_of:
+                swapped = _union(_terms_of([c for c in chosen if c != a], added), term_of[b])
+                if design.sse(swapped).sum() < design.sse(full).sum():
+                    return a, b
+    return None
 
 
 def _spare(design: Design, chosen: list[str], term_of, alpha: float, min_gain: float) -> str | None:
@@ -335,12 +357,18 @@ def _spare(design: Design, chosen: list[str], term_of, alpha: float, min_gain: f
 
 def _rescore(design: Design, chosen: list[str], term_of, rivals_of, sse0: float, alpha: float,
              min_gain: float) -> list[Score]:
-    """Each chosen effect's score against the ones chosen before it."""
-    out, base = [], []
-    for name in chosen:
-        cand = Candidate(name, term_of[name], rivals_of.get(name, ()))
-        out.append(score(design, cand, base, design.sse(base), sse0, term_of, alpha, min_gain))
-        base = _union(base, term_of[name])
+    """Scores of the chosen effects, reordered greedily: each the one that removes the most of
+    what the ones before it leave (``chosen`` is reordered in place to match)."""
+    out, base, left = [], [], list(chosen)
+    while left:
+        sse_base = design.sse(base)
+        scores = [score(design, Candidate(n, term_of[n], rivals_of.get(n, ())), base, sse_base, sse0, term_of,
+                        alpha, min_gain) for n in left]
+        best = max(scores, key=lambda sc: sc.gain)
+        out.append(best)
+        left.remove(best.name)
+        base = _union(base, term_of[best.name])
+    chosen[:] = [sc.name for sc in out]
     return out
 
 
