@@ -365,6 +365,16 @@ def test_gravity_error_is_a_model_error_kept_apart_from_friction(lugre_base):
     assert text.index("robot-model errors") > text.index("augmented model")
 
 
+@pytest.mark.parametrize("effect", ["gravity", "quadrant"])
+def test_a_measured_payload_tells_gravity_from_quadrant(lugre_base, effect):
+    from fricli import sim
+
+    table = sim.simulate("extended", joint=2, seed=2, load="sym", effects=(effect,), duration=60.0,
+                         friction_state="base")
+    d = diagnose(lugre_base, logs.from_table(table, name="payload"))
+    assert d.added == [effect] and d.notes == []
+
+
 def test_disturbance_is_unexplained_structure_not_an_effect(lugre_base):
     _, log2 = _sim(2, "disturbance")
     _, log3 = _sim(3, "disturbance")
