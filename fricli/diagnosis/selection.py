@@ -75,7 +75,6 @@ class Design:
         self.names.append(name)
         self.cols.append(column)
         self.scale.append(rms)
-        self._gram = None
 
     def live(self, names) -> list[int]:
         """Column indices of ``names`` that are not identically zero."""
@@ -91,13 +90,29 @@ class Design:
         return z
 
     def gram(self) -> np.ndarray:
-        if self._gram is None:
-            blocks = []
-            for a, b in zip(self.bounds[:-1], self.bounds[1:]):
-                z = self._z(a, b)
-                blocks.append(z.T @ z)
-            self._gram = np.stack(blocks)
-        return self._gram
+        """Per-block Gram matrices (B, m+1, m+1) of the standardised columns and, last, the
+        residual; columns added since the last call only add their own rows and columns."""
+        m = len(self.cols)
+        old = self._gram
+        if old is not None and old.shape[1] == m + 1:
+            return old
+        m0 = 0 if old is None else old.shape[1] - 1
+        G = np.empty((self.k, m + 1, m + 1))
+        if m0:
+            G[:, :m0, :m0] = old[:, :m0, :m0]
+            G[:, :m0, m] = old[:, :m0, m0]
+            G[:, m, :m0] = old[:, m0, :m0]
+            G[:, m, m] = old[:, m0, m0]
+        for i, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
+            z = self._z(a, b)
+            if m0:
+                cross = z[:, m0:m].T @ z
+                G[i, m0:m, :] = cross
+                G[i, :, m0:m] = cross.T
+            else:
+                G[i] = z.T @ z
+        self._gram = G
+        return G
 
     def _solve(self, A: np.ndarray, b: np.ndarray, n_train: int) -> np.ndarray:
         A = A + RIDGE * max(n_train, 1) * np.eye(len(A))
