@@ -373,7 +373,18 @@ def test_a_measured_payload_tells_gravity_from_quadrant(lugre_base, effect):
     table = sim.simulate("extended", joint=2, seed=2, load="sym", effects=(effect,), duration=60.0,
                          friction_state="base")
     d = diagnose(lugre_base, logs.from_table(table, name="payload"))
-    assert d.added == [effect] and d.notes == []
+    # the payload also loads the gear, which the base model's load term does not see
+    assert d.added[0] == effect and set(d.added) <= {effect, "payload"} and d.notes == []
+
+
+def test_a_payload_the_model_does_not_see_in_its_load_term_is_found(lugre_base):
+    from fricli import sim
+
+    table = sim.simulate("extended", joint=2, seed=2, load="asym", duration=60.0, friction_state="base")
+    d = diagnose(lugre_base, logs.from_table(table, name="payload"))
+    assert d.added == ["payload"]
+    assert d.effects[0].params["kc"]["value"] == pytest.approx(sim.true_params(2)["kc"], rel=0.1)
+    assert d.unexplained.share < 0.1
 
 
 def test_disturbance_is_unexplained_structure_not_an_effect(lugre_base):

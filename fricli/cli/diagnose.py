@@ -38,8 +38,9 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
                      f"with {', '.join(d.added)}")
     else:
         lo, hi = d.intervals["mae_before"]
-        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}, {level} % interval "
-                     f"{lo:.4g} to {hi:.4g}; no candidate removes {100 * d.min_gain:g} % of the residual significantly)")
+        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}, {level} % "
+                     f"interval {lo:.4g} to {hi:.4g}; no candidate removes {100 * d.min_gain:g} % of the residual "
+                     f"significantly)")
     for e in d.effects:
         if e.added and e.part == "model":
             lines.append(f"robot-model error, not friction: {e.name}: {e.summary}")
@@ -47,7 +48,8 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
     if d.unexplained is not None:
         lines.append(d.unexplained.line(u, v_unit, q_unit))
     lines.append("")
-    head = f"{'rank':>4}  {'effect':<18} {'part':<8} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  parameters"
+    head = (f"{'rank':>4}  {'effect':<18} {'part':<8} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  "
+            f"parameters")
     lines.append(head)
     order = {name: i + 1 for i, name in enumerate(d.added)}
     for rank, e in enumerate(d.effects, 1):
@@ -91,13 +93,15 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     The residual (friction target minus the model's prediction) is tested against a library
     of candidate effects: position (gear ripple), temperature, drift (wear), direction
     (asymmetry), acceleration (inertia), gravity (the logged tau_g off by a factor), load
-    (friction growing with |tau_g|), quadrant (driving vs back-driven), velocity (curve shape),
-    level, offset and column:NAME for any other numeric column. Gravity, acceleration and offset
-    are errors of the robot model or the measurement, not friction, and are reported as such. Effects are scored on held-out
+    (friction growing with |tau_g|), payload (a measured tau_ext loading the gear), quadrant
+    (driving vs back-driven), velocity (curve shape), level, offset and column:NAME for any
+    other numeric column. Gravity, acceleration and offset are errors of the robot model or
+    the measurement, not friction, and are reported as such. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
-    still removes enough of the residual (docs/diagnose.md). The ranked effects, their physical
-    parameters, the held-out MAE before and after with an interval over the folds, and the
-    structure left that no candidate explains go to stdout (a table, or JSON with --json). With --fix -o OUT.npz the model plus the added effects is written as one
+    still removes enough of the residual (docs/diagnose.md). The ranked effects, their
+    physical parameters, the held-out MAE before and after with an interval over the folds,
+    and the structure left that no candidate explains go to stdout (a table, or JSON with
+    --json). With --fix -o OUT.npz the model plus the added effects is written as one
     self-contained model file. Exit 0 whether or not something was found.
 
     \b

@@ -291,6 +291,25 @@ class Load(Effect):
         return {"kc": _par(coef["|tau_l|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
 
+class Payload(Effect):
+    """A payload measured by tau_ext loads the gear: the friction's load dependence follows the
+    torque through the gear, |tau_g - tau_ext|, where the model sees only |tau_g|."""
+
+    name = "payload"
+    description = "friction growing with |tau_g - tau_ext| - |tau_g|: the measured payload loads the gear"
+
+    def applicable(self, ctx):
+        if "tau_ext" not in ctx.signals or np.ptp(ctx.signals["tau_ext"]) <= 0:
+            return "the log has no varying 'tau_ext'"
+        return _needs_tau_g(ctx)
+
+    def terms(self, ctx, residual):
+        return [T.term("(|tau_l|-|tau_g|)*sign", T.PAYLOADGEAR, T.SIGN)]
+
+    def params(self, coef, ctx):
+        return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+
 class Gravity(Effect):
     """The logged gravity torque is off by a factor: the residual holds k*tau_g, at rest as in
     motion, and the true gravity torque is (1 + k) times the logged one."""
@@ -477,7 +496,8 @@ class Column(Effect):
                 f"dtau/d{self.column}": _par(coef.get(f"d{self.column}", 0.0), f"{u}/{cu}")}
 
 
-BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Gravity, Load, Quadrant, Velocity, Level, Offset)
+BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Gravity, Load, Payload, Quadrant, Velocity, Level,
+           Offset)
 NAMES = tuple(cls.name for cls in BUILTIN)
 
 

@@ -8,11 +8,12 @@ gravity torque off by a factor, a missing inertia, a torque offset). They are ke
 (``error_terms``, ``error_coef``) because what consumes a friction model may need friction
 alone: ``friction_only()`` drops them, ``predict_parts`` returns both. The base is a child
 model of any kind, stored in the same file; the terms are the regressor terms of
-``fricli.models.terms`` (JSON in the model's params, coefficients as arrays). Effects that a LuGre base can express as its own physical parameters (direction
-asymmetry, temperature dependence, a change of level) are carried by the base instead and
-listed under ``carried`` (base parameters refitted along with them under ``refitted``).
-``predict`` carries the base's state and the held direction of motion from one batch of rows
-to the next.
+``fricli.models.terms`` (JSON in the model's params, coefficients as arrays). Effects that a
+LuGre base can express as its own physical parameters (direction asymmetry, temperature
+dependence, a change of level) are carried by the base instead and listed under ``carried``
+(base parameters refitted along with them under ``refitted``). ``predict`` carries the base's
+state and what the terms hold (direction of motion, gear torque) from one batch of rows to the
+next.
 """
 
 from __future__ import annotations
@@ -67,9 +68,10 @@ class AugmentedModel(FrictionModel):
 
     def friction_only(self) -> "AugmentedModel":
         """The same model without the robot-model error terms: friction alone."""
-        return AugmentedModel(self.base, self.terms, self.coef, effects=[e for e in self.effects if e not in self.errors],
-                              carried=self.carried, refitted=self.refitted,
-                              params={k: v for k, v in self.params.items() if k not in self.errors})
+        friction = [e for e in self.effects if e not in self.errors]
+        params = {k: v for k, v in self.params.items() if k not in self.errors}
+        return AugmentedModel(self.base, self.terms, self.coef, effects=friction, carried=self.carried,
+                              refitted=self.refitted, params=params)
 
     def required_inputs(self) -> set[str]:
         return set(self.base.required_inputs()) | T.inputs(self.terms) | T.inputs(self.error_terms)

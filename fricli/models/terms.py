@@ -11,6 +11,7 @@ any later log from the constants it carries. Factors:
     {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column)
     {"f": "abs", "name": S}                        |S|
     {"f": "gear"}, {"f": "absgear"}                tau_g - tau_ext (the torque through the gear), |...|
+    {"f": "payloadgear"}                           |tau_g - tau_ext| - |tau_g|: what a payload adds to the gear load
     {"f": "sign"}                                  direction of motion, held at rest
     {"f": "moving"}                                |direction| (0 only before the first motion)
     {"f": "pos"}                                   1 where the direction is positive, else 0
@@ -36,7 +37,7 @@ def factor_inputs(factor: dict) -> set[str]:
     f = factor["f"]
     if f in ("one", "p"):
         return set()
-    if f in ("gear", "absgear"):
+    if f in ("gear", "absgear", "payloadgear"):
         return {"tau_g"}
     if f == "heldgear":
         return {"qd", "tau_g"}
@@ -121,8 +122,10 @@ class Columns:
             return _signal(sig, factor["name"]) - float(factor["center"])
         if f == "abs":
             return np.abs(_signal(sig, factor["name"]))
-        if f in ("gear", "absgear"):
+        if f in ("gear", "absgear", "payloadgear"):
             gear = _signal(sig, "tau_g") - _signal(sig, "tau_ext")
+            if f == "payloadgear":
+                return np.abs(gear) - np.abs(_signal(sig, "tau_g"))
             return np.abs(gear) if f == "absgear" else gear
         if f == "sign":
             return self.direction
@@ -180,7 +183,8 @@ def check(term: dict) -> None:
 
 
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "heldgear": (), "sat": ("scale",),
+          "gear": (), "absgear": (), "payloadgear": (), "sign": (), "moving": (), "pos": (), "heldgear": (),
+          "sat": ("scale",),
           "sin": ("name", "w"), "cos": ("name", "w")}
 
 
@@ -197,6 +201,7 @@ POS = {"f": "pos"}
 HELDGEAR = {"f": "heldgear"}
 GEAR = {"f": "gear"}
 ABSGEAR = {"f": "absgear"}
+PAYLOADGEAR = {"f": "payloadgear"}
 
 
 def sig_(name: str) -> dict:
