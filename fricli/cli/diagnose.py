@@ -26,31 +26,43 @@ def _effect_names(ctx, param, value):
     return names
 
 
-def table(d: driver.Diagnosis) -> str:
+def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> str:
     """The readable report printed on stdout without --json."""
     u = d.tau_unit
     lines = []
+    level = round(100 * driver.INTERVAL_LEVEL)
     if d.added:
-        cut = 100.0 * (1.0 - d.mae_after / d.mae_before) if d.mae_before > 0 else 0.0
-        lines.append(f"held-out MAE {d.mae_before:.4g} {u} -> {d.mae_after:.4g} {u} ({cut:.0f} % lower) "
+        lo, hi = d.intervals["cut"]
+        lines.append(f"held-out MAE {d.mae_before:.4g} {u} -> {d.mae_after:.4g} {u} ({100 * d.cut:.0f} % lower; "
+                     f"{level} % interval {100 * lo:.0f} to {100 * hi:.0f} % over the {d.folds} folds) "
                      f"with {', '.join(d.added)}")
     else:
-        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}; "
-                     f"no candidate removes {100 * d.min_gain:g} % of the residual significantly)")
+        lo, hi = d.intervals["mae_before"]
+        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}, {level} % "
+                     f"interval {lo:.4g} to {hi:.4g}; no candidate removes {100 * d.min_gain:g} % of the residual "
+                     f"significantly)")
+    for e in d.effects:
+        if e.added and e.part == "model":
+            lines.append(f"robot-model error, not friction: {e.name}: {e.summary}")
+    lines.extend(f"note: {n}" for n in d.notes)
+    if d.unexplained is not None:
+        lines.append(d.unexplained.line(u, v_unit, q_unit))
     lines.append("")
-    head = f"{'rank':>4}  {'effect':<18} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  parameters"
+    head = (f"{'rank':>4}  {'effect':<18} {'part':<8} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  "
+            f"parameters")
     lines.append(head)
     order = {name: i + 1 for i, name in enumerate(d.added)}
     for rank, e in enumerate(d.effects, 1):
         added = str(order[e.name]) if e.name in order else "-"
         sig = "yes" if e.significant else "no"
-        lines.append(f"{rank:>4}  {e.name:<18} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  {sig:<7}  "
-                     f"{added:<5}  {e.summary}")
+        lines.append(f"{rank:>4}  {e.name:<18} {e.part:<8} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  "
+                     f"{sig:<7}  {added:<5}  {e.summary}")
     for name, reason in d.skipped.items():
         lines.append(f"   -  {name:<18} not tested: {reason}")
     lines.append("")
     lines.append(f"gain: share of the model's squared residual an effect explains on held-out data ({d.folds} "
-                 f"blocks over time); of rest: share of what the effects added before it left")
+                 f"blocks over time); of rest: share of what the effects added before it left; part: friction, "
+                 f"or model (an error of the robot model or the measurement)")
     return "\n".join(lines)
 
 
@@ -81,11 +93,15 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
     The residual (friction target minus the model's prediction) is tested against a library
     of candidate effects: position (gear ripple), temperature, drift (wear), direction
-    (asymmetry), acceleration (inertia), load (quadrant dependence), velocity (curve shape),
-    level, offset and column:NAME for any other numeric column. Effects are scored on held-out
+    (asymmetry), acceleration (inertia), gravity (the logged tau_g off by a factor), load
+    (friction growing with |tau_g|), payload (a measured tau_ext loading the gear), quadrant
+    (driving vs back-driven), velocity (curve shape), level, offset and column:NAME for any
+    other numeric column. Gravity, acceleration and offset are errors of the robot model or
+    the measurement, not friction, and are reported as such. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
-    still removes enough of the residual (docs/diagnose.md). The ranked effects, their physical
-    parameters and the held-out MAE before and after go to stdout (a table, or JSON with
+    still removes enough of the residual (docs/diagnose.md). The ranked effects, their
+    physical parameters, the held-out MAE before and after with an interval over the folds,
+    and the structure left that no candidate explains go to stdout (a table, or JSON with
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
     self-contained model file. Exit 0 whether or not something was found. MODEL may be a
     model folder: every joint of the log is diagnosed with its own model (a result per joint)
@@ -125,7 +141,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         if not as_json:
             if several:
                 click.echo(f"joint {data.joint} ({model_path}):")
-            click.echo(table(result) + ("\n" if several else ""))
+            click.echo(table(result, data.units["qd"], data.units["q"]) + ("\n" if several else ""))
         if fix:
             _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
         return result.to_json()
@@ -158,6 +174,8 @@ def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -
         return
     if result.added:
         carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
+        if fixed.errors:
+            carried += f"; robot-model error terms, kept apart from friction: {', '.join(fixed.errors)}"
         if fixed.refitted:
             carried += f"; refitted with them: {', '.join(fixed.refitted)}"
         say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "

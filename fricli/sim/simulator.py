@@ -174,13 +174,15 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
     rng_noise = _rng(seed, _STREAM_NOISE)
     noise_m = rng_noise.normal(0.0, j.noise_sd, n_out)
     noise_ext = rng_noise.normal(0.0, j.ext_noise_sd, n_out)
-    tau_m = (tau_dyn_true + scene.tau_g + tau_f - scene.tau_ext)[out] + noise_m + scene.tau_m_bias
+    tau_m = (tau_dyn_true + scene.tau_g + tau_f - scene.tau_ext + scene.tau_m_extra)[out]
+    tau_m = tau_m + noise_m + scene.tau_m_bias
     sensor = scene.tau_ext[out] + noise_ext if scene.loaded else np.zeros(n_out)
 
     columns = {
         "t": t[out], "joint": np.full(n_out, j.number, dtype=np.int64),
         "q": q[out], "qd": qd[out], "qdd": qdd[out],
-        "tau_m": tau_m, "tau_g": scene.tau_g[out], "tau_dyn": tau_dyn_logged[out], "tau_ext": sensor,
+        "tau_m": tau_m, "tau_g": scene.gravity_logged * scene.tau_g[out], "tau_dyn": tau_dyn_logged[out],
+        "tau_ext": sensor,
         "temp": scene.temp[out], "tau_f_true": tau_f[out],
     }
     units = dict(UNITS)
