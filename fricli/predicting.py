@@ -26,7 +26,7 @@ import pyarrow.parquet as pq
 
 from fricli import logs, models
 from fricli.atomic import atomic_open
-from fricli.errors import LogError
+from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
 
 DEFAULT_BATCH_ROWS = 262_144
@@ -68,11 +68,13 @@ class Result:
     batches: int
     read_whole: str | None         # why the log was read whole, or None
     dropped: int                   # rows dropped by --drop-invalid
+    extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
 
     def as_json(self) -> dict:
         out = dataclasses.asdict(self)
-        if out["external"] is None:
-            del out["external"]
+        for key in ("external", "extrapolation"):
+            if out[key] is None:
+                del out[key]
         return out
 
 
@@ -162,9 +164,11 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
         lowpass_hz: float | None = None, joint=None, kt: float | None = None,
         cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
         warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
-        progress: bool = False, model_name: str = "model") -> Result:
+        progress: bool = False, model_name: str = "model", flag_extrapolation: bool = False) -> Result:
     """Predict friction on the log at ``log_path`` and write it with ``tau_f_pred`` added to
-    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external``. Returns the figures."""
+    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
+    ``extrapolating`` (the row lies outside the model's training envelope) when
+    ``flag_extrapolation``. Returns the figures."""
     from tqdm import tqdm
 
     pf, name = open_log(log_path)
@@ -179,6 +183,11 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
     unit = None
     has_ext = False
     total = pf.metadata.num_rows
+    env = models.envelope(meta, model_name)
+    if flag_extrapolation and env is None:
+        raise ModelFileError(f"{model_name}: the model file records no training envelope (written by an older "
+                             "fricli): --flag-extrapolation needs one")
+    n_outside = 0
     with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
                                             leave=False) as bar:
         writer = None
@@ -217,12 +226,17 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                     out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(joint, jfield.type), out.num_rows))
                 out = logs.with_column(out, "tau_f_pred", tau_f, unit)
                 fric.add(logs.friction_target(sig), tau_f)
+                if env is not None:
+                    outside = env.outside(sig)
+                    n_outside += int(outside.sum())
                 if external:
                     est = external_estimate(sig, tau_f, lowpass_hz, warn)
                     out = logs.with_column(out, "tau_ext_pred", est, unit)
                     if "tau_ext" in sig:
                         has_ext = True
                         ext_err.add(sig["tau_ext"], est)
+                if flag_extrapolation:
+                    out = out.append_column(pa.field("extrapolating", pa.bool_()), pa.array(outside))
                 if writer is None:
                     writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
                 writer.write_table(out)
@@ -241,7 +255,9 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                 warn(message)
     return Result(rows=rows, joint=joint, unit=unit or "Nm", friction=fric.result(),
                   external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,
-                  dropped=dropped)
+                  dropped=dropped,
+                  extrapolation=None if env is None else {"rows": n_outside, "of": rows,
+                                                          "share": n_outside / rows if rows else 0.0})
 
 
 def external_estimate(signals: dict[str, np.ndarray], tau_f_pred: np.ndarray, lowpass_hz: float | None = None,

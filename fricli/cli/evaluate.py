@@ -39,7 +39,8 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     """Friction (and external-torque) MAE of every model on every log, as a table.
 
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
-    external-torque error is against the log's sensor column tau_ext, when it has one.
+    external-torque error is against the log's sensor column tau_ext, when it has one. The
+    share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
 
     \b
     Example:
@@ -54,6 +55,10 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+    for r in results:
+        if r.extrapolation is not None and not quiet:
+            say(f"{r.model} on {r.log}: {100 * r.extrapolation['share']:.1f} % of the rows outside the model's "
+                "training envelope")
 
 
 @cli.command("report")
