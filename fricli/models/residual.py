@@ -1,25 +1,24 @@
 """The adapted model: any base model plus a network that learned its residual (paper, L_add).
 
 NN_add(tau_g, sign(qd)) has one hidden layer of 30 ELU units and is trained with Adam (lr
-0.01) in mini-batches on the residual of the base over a short log of the new dynamics. The
-base is kept unchanged, so what it learned about the velocity dependence is kept too; NN_add
-only sees the gravity torque and the direction of motion, which one movement at one velocity
-covers. Two ways to combine them (``combine``):
+0.01) in mini-batches on target - base(log) over the moving rows of a short log of the new
+dynamics. The base is kept unchanged, so what it learned about the velocity dependence is kept
+too; NN_add only sees the gravity torque and the direction of motion, which one movement at one
+velocity covers. Two ways to combine them (``combine``):
 
-    magnitude  (default) NN_add corrects the friction magnitude along the motion, which stays
-               non-negative, so the adapted model never pushes the joint where its base does not:
-                   s = sign(qd),  c = tanh(qd / v_ps),  a = s base(log)
-                   m = T softplus((a + NN_add) / T)                        >= 0
-                   tau_f = (1 - |c|) base(log) + c m
-               NN_add is trained on s (target - base) over the moving rows; where a + NN_add is
-               well above T (any real friction level) m = a + NN_add, so there the model is the
-               paper's additive one seen along the motion. T = SOFTNESS * mean |target| of the
-               training rows; v_ps is the base's pre-sliding speed if it has one, else
-               PRESLIDING_SHARE of the slowest training speed. Above v_ps, c = s and tau_f = s m;
-               below it the base (e.g. the LuGre bristles) carries over towards rest. tau_f qd >= 0
-               wherever the base's is.
-    additive   the paper's form, tau_f = base(log) + NN_add (model files written before the
-               magnitude form load as this).
+    dissipative  (default) the paper's sum, held against the motion above a pre-sliding speed:
+                     p = base(log) + NN_add,   s = sign(qd)
+                     m = T softplus(s p / T)                                   >= 0
+                     w = (1 - (qd / v_ps)^2)^2 for |qd| < v_ps, else 0         (C1 switch)
+                     tau_f = w p + (1 - w) s m
+                 For |qd| >= v_ps, tau_f = s m: tau_f qd >= 0 for every input and any base.
+                 Where the sum already acts against the motion by more than a few T (any real
+                 friction level) m = s p, so tau_f is the paper's sum; at rest (w = 1) it is the
+                 sum too, with the base's state (e.g. the LuGre bristles). T = SOFTNESS * mean
+                 |target| of the training rows; v_ps is the base's pre-sliding speed if it has
+                 one, else PRESLIDING_SHARE of the slowest training speed.
+    additive     the paper's form, tau_f = base(log) + NN_add (model files written before the
+                 dissipative form load as this).
 
 Both parts are children in the model file ("base/...", "add/..."); the base may be of any kind,
 with its own state (e.g. the LuGre bristles), which ``predict`` carries across batches.
@@ -36,8 +35,8 @@ from fricli.models.base import FrictionModel
 from fricli.models.neural import MLPFriction
 
 ADD_INPUTS = ("tau_g", "sign(qd)")
-COMBINE = ("magnitude", "additive")
-SOFTNESS = 0.01          # T of the magnitude form, as a share of the mean |friction target|
+COMBINE = ("dissipative", "additive")
+SOFTNESS = 0.01          # T of the dissipative form, as a share of the mean |friction target|
 PRESLIDING_SHARE = 0.1   # v_ps for a base without its own: this share of the slowest training speed
 
 
@@ -59,7 +58,7 @@ class ResidualFriction(FrictionModel):
 
     def __init__(self, base: FrictionModel, *, hidden_sizes=(30,), epochs: int = 200, batch_size: int = 64,
                  lr: float = 0.01, min_speed: float | None = None, units: dict | None = None,
-                 add: FrictionModel | None = None, combine: str = "magnitude"):
+                 add: FrictionModel | None = None, combine: str = "dissipative"):
         self.base = base
         self.hidden_sizes, self.epochs, self.batch_size, self.lr = tuple(hidden_sizes), epochs, batch_size, lr
         self.min_speed, self.units = min_speed, dict(units or {})
@@ -77,8 +76,7 @@ class ResidualFriction(FrictionModel):
             base_pred = self.base.predict(sig)[0]
         target = np.asarray(target, dtype=np.float64)
         residual = target - base_pred
-        if self.combine == "magnitude":
-            residual = residual * np.sign(sig["qd"])
+        if self.combine == "dissipative":
             rows = np.concatenate([train_rows, val_rows]).astype(np.int64)
             self.width_ = SOFTNESS * max(float(np.mean(np.abs(target[rows]))), 1e-12)
             speed = np.abs(sig["qd"][rows])
@@ -98,13 +96,13 @@ class ResidualFriction(FrictionModel):
 
     def on_base(self, signals: dict[str, np.ndarray], tau: np.ndarray) -> np.ndarray:
         """tau_f (n,) [Nm] given the base's prediction ``tau`` (n,) over the same rows."""
-        add = self.add.predict(signals)[0]
+        p = tau + self.add.predict(signals)[0]
         if self.combine == "additive":
-            return tau + add
+            return p
         qd = signals["qd"]
-        c = np.tanh(qd / self.v_ps_)
-        m = soft_magnitude(np.sign(qd) * tau + add, self.width_)
-        return (1.0 - np.abs(c)) * tau + c * m
+        s = np.sign(qd)
+        w = np.square(1.0 - np.square(np.minimum(np.abs(qd) / self.v_ps_, 1.0)))
+        return w * p + (1.0 - w) * s * soft_magnitude(s * p, self.width_)
 
     def required_inputs(self) -> set[str]:
         return set(self.base.required_inputs()) | set(self.add.required_inputs())
@@ -139,9 +137,11 @@ class ResidualFriction(FrictionModel):
             lines = ["residual: base model + NN_add(tau_g, sign(qd)) learned on the base's residual"]
         else:
             unit = self.units.get("qd", "rad/s")
-            lines = ["residual: NN_add(tau_g, sign(qd)) corrects the base's friction magnitude along the motion",
-                     f"  tau_f = (1 - |c|) base + c T softplus((sign(qd) base + NN_add) / T), c = tanh(qd / v_ps); "
-                     f"T {self.width_:.4g} {self.units.get('tau', 'Nm')}, v_ps {self.v_ps_:.4g} {unit}"]
+            lines = ["residual: base model + NN_add(tau_g, sign(qd)) learned on the base's residual, "
+                     "held against the motion (dissipative)",
+                     f"  p = base + NN_add; tau_f = sign(qd) T softplus(sign(qd) p / T) for |qd| >= v_ps, "
+                     f"blending into p towards rest; T {self.width_:.4g} {self.units.get('tau', 'Nm')}, "
+                     f"v_ps {self.v_ps_:.4g} {unit}"]
         if self.min_speed is not None:
             unit = self.units.get("qd", "rad/s")
             lines.append(f"  NN_add trained on rows moving faster than {self.min_speed:.4g} {unit}")
