@@ -87,6 +87,8 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                "log": metrics.errors(target, pred)}
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
+    if getattr(model, "v_ps_", None) is not None:
+        summary["presliding_speed"] = model.v_ps_
     return model, summary
 
 

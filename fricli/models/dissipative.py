@@ -35,6 +35,7 @@ from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import VELOCITY_QUANTILE, _describe_activation
 from fricli.nn import activations as acts
+from fricli.nn.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
 from fricli.nn.training import Trainer
 
@@ -134,13 +135,15 @@ class DissipativeFriction(FrictionModel):
         """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
         x = self._rows(signals)
         x[2] = 1.0
-        return self.y_scale_ * self.net_.predict(x)[0].astype(np.float64)
+        with single_threaded():   # the same figures whatever the BLAS thread count
+            return self.y_scale_ * self.net_.predict(x)[0].astype(np.float64)
 
     def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
         """tau_f (n,) [Nm]; stateless."""
         if self.net_ is None:
             raise ValueError("the model is not fitted")
-        return self.y_scale_ * self.net_.predict(self._rows(signals))[0].astype(np.float64), None
+        with single_threaded():   # the same figures whatever the BLAS thread count
+            return self.y_scale_ * self.net_.predict(self._rows(signals))[0].astype(np.float64), None
 
     # ------------------------------------------------------------------ files
 
