@@ -102,9 +102,13 @@ def test_default_kind_is_dissipative_on_a_grid(base_log, trained):
 def test_dissipative_for_any_weights(base_log, trained, rng):
     model, _ = trained
     sig = grid(base_log.signals)
-    for _ in range(5):                                   # structure, not training: random, large weights
-        model.net_.theta[...] = rng.normal(0, 5, model.net_.theta.size)
-        assert_dissipative(model, sig, model.v_ps_)
+    kept = model.net_.theta.copy()
+    try:
+        for _ in range(5):                               # structure, not training: random, large weights
+            model.net_.theta[...] = rng.normal(0, 5, model.net_.theta.size)
+            assert_dissipative(model, sig, model.v_ps_)
+    finally:
+        model.net_.theta[...] = kept
 
 
 def test_adapt_on_top_stays_dissipative(base_log, tmp_path, rng):
@@ -154,6 +158,8 @@ def test_dissipative_round_trip_and_describe(base_log, trained, tmp_path):
     assert meta["kind"] == "dissipative" and meta["inputs"] == ["qd", "tau_g"]
     np.testing.assert_array_equal(loaded.predict(base_log.signals)[0], model.predict(base_log.signals)[0])
     assert f"pre-sliding speed v_ps {model.v_ps_:.4g} rad/s" in loaded.describe()
+    assert f"load slope k = y_scale softplus(b1) / g_scale = {model.load_slope():.4g} Nm/Nm" in loaded.describe()
+    assert not model.net_.theta[model.net_.frozen].any()    # the slope does not depend on the speed
     meta["model"]["params"]["scales"]["v_ps"] = -1.0
     from fricli import modelfile
 

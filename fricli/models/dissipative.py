@@ -2,21 +2,25 @@
 never pushes the joint, with the load dependence as its own factor.
 
     tau_f = y_scale * tanh(qd / v_ps) * m
-    m     = softplus(r0) + softplus(r1) * max(tau_g, 0) / g_scale + softplus(r2) * max(-tau_g, 0) / g_scale
-    (r0, r1, r2) = NN(u, sign(qd)),   u = (asinh(|qd| / v0) - u_mean) / u_scale
+    m     = softplus(r0) + softplus(b1) * |tau_g| / g_scale
+    r0    = NN(u, sign(qd)),   u = (asinh(|qd| / v0) - u_mean) / u_scale
 
-NN is a dense network (by default two hidden layers of 30 ELU units, three linear outputs).
+NN is a dense network (by default two hidden layers of 30 ELU units) with two linear outputs,
+r0 and b1; b1 is the bias of the second alone (its weights from the hidden layer stay 0), so
+the load slope k = y_scale softplus(b1) / g_scale [Nm/Nm] is one learned constant.
 The magnitude m is non-negative for every input and every weight, and tanh(qd / v_ps) has the
 sign of qd, so tau_f * qd >= 0 everywhere: friction acts against the motion by structure.
 Above the pre-sliding speed v_ps (recorded in the model) tanh(qd / v_ps) is close to sign(qd);
 below it the prediction fades to zero at rest, where the bristles hold a torque set by the
 motion before.
 
-The network sees the speed and the direction only; the gravity torque enters through two
-non-negative slopes, one per sign of tau_g (r1, r2 may vary with speed and direction, as the
-Coulomb and Stribeck levels of an extended LuGre model do). A velocity dependence learned at
-one load therefore carries over to every other load, where a network of (tau_g, qd) has to
-see every pair. Asymmetry between the directions comes through the sign(qd) input.
+The network sees the speed and the direction only; the gravity torque enters through one
+non-negative slope (the Coulomb and static levels of an extended LuGre model grow as fc +
+kc |tau_g| and fs + ks |tau_g|, with kc and ks close). A velocity dependence learned at one load
+therefore carries over to every other load, where a network of (tau_g, qd) has to see every
+pair; and the slope is learned from every speed at once, so a slow level seen at one load
+cannot trade it for a different velocity dependence. Asymmetry between the directions comes
+through the sign(qd) input.
 
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
 PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
@@ -44,7 +48,7 @@ PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
 
 @register
 class DissipativeFriction(FrictionModel):
-    """tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(r1) g+ + softplus(r2) g-).
+    """tau_f = y_scale tanh(qd / v_ps) (softplus(r0(|qd|, sign qd)) + softplus(b1) |tau_g| / g_scale).
 
     Hyperparameters are keyword arguments; ``fit`` trains; fitted attributes end in ``_``.
     """
@@ -66,7 +70,7 @@ class DissipativeFriction(FrictionModel):
 
     def new_network(self) -> HeadedNetwork:
         hidden = [(int(n), acts.from_spec(self.activation)) for n in self.hidden_sizes]
-        return HeadedNetwork(2, hidden, DissipativeHead())
+        return HeadedNetwork(2, hidden, DissipativeHead(), constant_outputs=(1,))
 
     def _rows(self, sig: dict[str, np.ndarray]) -> np.ndarray:
         """Network inputs and aux rows (4, n) float64: u, sign(qd), tanh(qd / v_ps), |tau_g| / g_scale."""
@@ -131,6 +135,11 @@ class DissipativeFriction(FrictionModel):
     def required_inputs(self) -> set[str]:
         return {"qd", "tau_g"}
 
+    def load_slope(self) -> float:
+        """k [Nm/Nm]: the growth of the friction magnitude per |tau_g|."""
+        b1 = float(self.net_.weights[-1][1, -1])
+        return self.y_scale_ * float(acts.softplus(np.array(b1))) / self.g_scale_
+
     def magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
         x = self._rows(signals)
@@ -190,6 +199,8 @@ class DissipativeFriction(FrictionModel):
         if params.get("network", {}).get("head") != net.head.name:
             raise ValueError("the network does not match the model")
         net.set_weights([arrays[f"W{i}"] for i in range(len(net.shapes))])
+        if net.theta[net.frozen].any():
+            raise ValueError("the load slope depends on the speed")
         model.net_ = net
         model.history_train_ = arrays.get("history_train", np.empty(0))
         model.history_val_ = arrays.get("history_val", np.empty(0))
@@ -205,15 +216,15 @@ class DissipativeFriction(FrictionModel):
         tau, v = self.units.get("tau", "Nm"), self.units.get("qd", "rad/s")
         act = _describe_activation(self.activation)
         lines = [f"{self.kind}: {self.label}",
-                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(r1) max(tau_g, 0) / g_scale "
-                 "+ softplus(r2) max(-tau_g, 0) / g_scale)",
-                 f"  (r0, r1, r2) = NN(asinh(|qd| / v0), sign(qd)); hidden layers: "
+                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)",
+                 f"  r0 = NN(asinh(|qd| / v0), sign(qd)); hidden layers: "
                  f"{' | '.join(f'{n} {act}' for n in self.hidden_sizes)}; linear output"]
         if self.net_ is None:
             return "\n".join(lines + ["  (not fitted)"])
         lines += [f"  {self.net_.n_params} parameters",
                   f"  v0 {self.v0_:.4g} {v}, pre-sliding speed v_ps {self.v_ps_:.4g} {v}, "
-                  f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}"]
+                  f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}",
+                  f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"]
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
         lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "

@@ -81,11 +81,23 @@ class HeadedWorkspace(Workspace):
 
 
 class HeadedNetwork(Network):
-    """A dense ``Network`` with ``head.n_raw`` linear outputs followed by ``head``; one output."""
+    """A dense ``Network`` with ``head.n_raw`` linear outputs followed by ``head``; one output.
 
-    def __init__(self, n_in: int, hidden, head, dtype=np.float32):
+    ``constant_outputs``: raw outputs that do not depend on the inputs, only on their bias (the
+    weights from the last hidden layer to them start at 0 and get no gradient)."""
+
+    def __init__(self, n_in: int, hidden, head, dtype=np.float32, constant_outputs=()):
         super().__init__(n_in, hidden, n_out=head.n_raw, n_skip=0, dtype=dtype)
         self.head = head
+        self.constant_outputs = tuple(int(k) for k in constant_outputs)
+        self.frozen = np.zeros(self.n_params, dtype=bool)
+        for k in self.constant_outputs:
+            self.views(self.frozen)[-1][k, :-1] = True
+
+    def init(self, rng: np.random.Generator) -> "HeadedNetwork":
+        super().init(rng)
+        self.theta[self.frozen] = 0
+        return self
 
     def workspace(self, n: int) -> HeadedWorkspace:
         return HeadedWorkspace(self, n)
@@ -99,6 +111,8 @@ class HeadedNetwork(Network):
     def backward(self, ws: HeadedWorkspace, dy: np.ndarray, grad: np.ndarray) -> None:
         np.multiply(ws.fac, dy, out=ws.draw)
         super().backward(ws, ws.draw, grad)
+        if self.constant_outputs:
+            grad[self.frozen] = 0
 
     def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
         """y (1, n) for inputs and aux rows ``x`` (n_in + n_aux, n)."""
@@ -114,4 +128,4 @@ class HeadedNetwork(Network):
         return out
 
     def spec(self) -> dict:
-        return {**super().spec(), "head": self.head.spec()}
+        return {**super().spec(), "head": self.head.spec(), "constant_outputs": list(self.constant_outputs)}
