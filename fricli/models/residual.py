@@ -33,6 +33,7 @@ import numpy as np
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import MLPFriction
+from fricli.nn.activations import softplus
 
 ADD_INPUTS = ("tau_g", "sign(qd)")
 COMBINE = ("dissipative", "additive")
@@ -42,8 +43,7 @@ PRESLIDING_SHARE = 0.1   # v_ps for a base without its own: this share of the sl
 
 def soft_magnitude(x: np.ndarray, width: float) -> np.ndarray:
     """width * softplus(x / width) (n,), >= 0, = x for x >> width."""
-    z = x / width
-    return width * (np.maximum(z, 0.0) + np.log1p(np.exp(-np.abs(z))))
+    return width * softplus(x / width)
 
 
 def indent(text: str, prefix: str = "  ") -> str:
