@@ -30,6 +30,7 @@ trainer of ``fricli.nn.training`` (the head is part of the network, ``fricli.nn.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -41,7 +42,7 @@ from fricli.models.neural import VELOCITY_QUANTILE, _describe_activation
 from fricli.nn import activations as acts
 from fricli.nn.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.training import Trainer
+from fricli.nn.training import PREDICT_CHUNK, Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
 
@@ -142,17 +143,40 @@ class DissipativeFriction(FrictionModel):
 
     def magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
-        x = self._rows(signals)
-        x[2] = 1.0
-        with single_threaded():   # the same figures whatever the BLAS thread count
-            return self.y_scale_ * self.net_.predict(x)[0].astype(np.float64)
+        return self._run(signals, sliding=True)
 
     def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
         """tau_f (n,) [Nm]; stateless."""
         if self.net_ is None:
             raise ValueError("the model is not fitted")
-        with single_threaded():   # the same figures whatever the BLAS thread count
-            return self.y_scale_ * self.net_.predict(self._rows(signals))[0].astype(np.float64), None
+        return self._run(signals, sliding=False), None
+
+    def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
+        """y_scale * head output (n,) in chunks of PREDICT_CHUNK rows on two threads (one BLAS
+        thread each, so the figures do not depend on the machine); ``sliding``: c = 1."""
+        n = len(signals["qd"]) if "qd" in signals else 0
+        out = np.empty(n, dtype=np.float64)
+        cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
+        pieces = list(zip(cuts[:-1], cuts[1:]))
+
+        def run(part: list[tuple[int, int]]) -> None:
+            ws = None
+            for start, stop in part:
+                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")})
+                if sliding:
+                    x[2] = 1.0
+                if ws is None or ws.n != stop - start:
+                    ws = self.net_.workspace(stop - start)
+                ws.set_inputs(x)
+                np.multiply(self.net_.forward(ws)[0], self.y_scale_, out=out[start:stop])
+
+        with single_threaded():
+            if len(pieces) < 4:
+                run(pieces)
+            else:
+                with ThreadPoolExecutor(max_workers=2) as pool:
+                    list(pool.map(run, [pieces[0::2], pieces[1::2]]))
+        return out
 
     # ------------------------------------------------------------------ files
 
