@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from fricli import logs, metrics, models
+from fricli.envelope import share_outside
 from fricli.predicting import external_estimate
 
 
@@ -19,6 +20,7 @@ class Result:
     friction_moving: dict          # the same over the rows in motion (metrics.in_motion)
     external_moving: dict | None
     joint: object = None           # the log's joint the row is for (None: no joint column)
+    extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
@@ -34,7 +36,8 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
         external = metrics.errors(sig["tau_ext"], est)
         external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
     return Result(model_name, log_name, metrics.errors(target, pred), external,
-                  metrics.errors(target[moving], pred[moving]), external_moving)
+                  metrics.errors(target[moving], pred[moving]), external_moving,
+                  extrapolation=share_outside(models.envelope(meta, model_name), sig))
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,

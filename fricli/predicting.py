@@ -28,7 +28,7 @@ import pyarrow.parquet as pq
 
 from fricli import joints, logs, models
 from fricli.atomic import atomic_open
-from fricli.errors import LogError
+from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
 
 DEFAULT_BATCH_ROWS = 262_144
@@ -77,10 +77,11 @@ class Result:
     read_whole: str | None         # why the log was read whole, or None
     dropped: int                   # rows dropped by --drop-invalid
     per_joint: dict | None = None  # several joints: {joint: {"rows", "model", "friction"[, "external"]}}
+    extrapolation: dict | None = None   # rows outside the training envelope (None: no model has one)
 
     def as_json(self) -> dict:
         out = dataclasses.asdict(self)
-        for key in ("external", "per_joint"):
+        for key in ("external", "per_joint", "extrapolation"):
             if out[key] is None:
                 del out[key]
         return out
@@ -157,8 +158,10 @@ class _Stream:
     model: FrictionModel
     meta: dict
     model_name: str
+    env: object = None             # the training envelope (fricli.envelope), None for older files
     state: object = None
     t_last: float | None = None
+    outside: int = 0
     rows: int = 0
     fric: ErrorSums = dataclasses.field(default_factory=ErrorSums)
     ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
@@ -178,10 +181,13 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                lowpass_hz: float | None = None, joint=None, kt: float | None = None,
                cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
                warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
-               progress: bool = False, load: Callable[[str], tuple] = models.load) -> Result:
+               progress: bool = False, load: Callable[[str], tuple] = models.load,
+               flag_extrapolation: bool = False) -> Result:
     """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
     file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` added to
-    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external``. Rows keep their order;
+    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
+    ``extrapolating`` (the row lies outside its model's training envelope) when ``flag_extrapolation``.
+    Rows keep their order;
     rows of joints the run does not cover are left out. Returns the figures."""
     from tqdm import tqdm
 
@@ -190,7 +196,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     streams = {}
     for j, path in joints.pair(source, found, joint, name):
         model, meta = load(path)
-        streams[j] = _Stream(j, model, meta, path)
+        streams[j] = _Stream(j, model, meta, path, env=models.envelope(meta, path))
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
     reason = whole_reason(pf.schema_arrow, lowpass_hz if external else None)
@@ -200,6 +206,11 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     unit = None
     has_ext = False
     total = pf.metadata.num_rows
+    for st in streams.values():
+        if flag_extrapolation and st.env is None:
+            raise ModelFileError(f"{st.model_name}: the model file records no training envelope (written by an "
+                                 "older fricli): --flag-extrapolation needs one")
+    any_env = any(st.env is not None for st in streams.values())
     with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
                                             leave=False) as bar:
         writer = None
@@ -217,7 +228,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                     if part.num_rows == 0:
                         continue
                     out, n_in = _predict_part(st, part, offset, name, total, reason, external, lowpass_hz, kt,
-                                              cutoff_hz, drop_invalid, warn, warnings)
+                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation)
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -243,6 +254,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
             for message in dict.fromkeys(warnings):
                 warn(message)
     per_joint = None
+    n_outside = sum(st.outside for st in streams.values())
     for st in streams.values():
         fric.merge(st.fric)
         ext_err.merge(st.ext)
@@ -253,11 +265,14 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     only = next(iter(streams)) if not several else None
     return Result(rows=rows, joint=only, unit=unit or "Nm", friction=fric.result(),
                   external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,
-                  dropped=dropped, per_joint=per_joint)
+                  dropped=dropped, per_joint=per_joint,
+                  extrapolation=None if not any_env else {"rows": n_outside, "of": rows,
+                                                          "share": n_outside / rows if rows else 0.0})
 
 
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, external: bool,
-                  lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list) -> tuple[pa.Table, int]:
+                  lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list,
+                  flag_extrapolation: bool = False) -> tuple[pa.Table, int]:
     """One joint's rows of one batch with tau_f_pred (and tau_ext_pred) added; the rows it had."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
     jpos = table.schema.get_field_index("joint")
@@ -293,6 +308,11 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         out = logs.with_column(out, "tau_ext_pred", est, unit)
         if "tau_ext" in sig:
             st.ext.add(sig["tau_ext"], est)
+    if st.env is not None:
+        outside = st.env.outside(sig)
+        st.outside += int(outside.sum())
+        if flag_extrapolation:
+            out = out.append_column(pa.field("extrapolating", pa.bool_()), pa.array(outside))
     if _ROW in out.column_names:   # keep it last, where the joints' pieces expect it
         col = out.column(_ROW)
         out = out.drop_columns([_ROW]).append_column(_ROW, col)

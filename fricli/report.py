@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 from fricli import logs, metrics, models  # noqa: E402
 from fricli.atomic import atomic_write_bytes  # noqa: E402
 from fricli.errors import OutputError  # noqa: E402
+from fricli.envelope import share_outside  # noqa: E402
 from fricli.evaluation import static_friction  # noqa: E402
 from fricli.predicting import external_estimate  # noqa: E402
 
@@ -77,7 +78,8 @@ def fig_velocity(model, sig, u, folder: str, rng) -> str:
     return _save(fig, folder, "friction_velocity.png")
 
 
-def fig_heatmap(model, sig, u, folder: str) -> str:
+def fig_heatmap(model, sig, u, folder: str, envelope=None) -> str:
+    """Friction over (qd, tau_g); the region outside the model's training envelope is greyed and hatched."""
     qd, g = sig["qd"], logs.column(sig, "tau_g")
     vmax = float(np.max(np.abs(qd))) or 1.0
     gmax = float(np.max(np.abs(g))) or 1.0
@@ -88,9 +90,17 @@ def fig_heatmap(model, sig, u, folder: str) -> str:
     fig, ax = plt.subplots(figsize=(6.5, 4.6))
     mesh = ax.pcolormesh(V, G, F, shading="auto", cmap="coolwarm")
     fig.colorbar(mesh, ax=ax, label=f"friction [{u['tau']}]")
+    title = "model over velocity and gravity torque"
+    if envelope is not None:
+        out = ~envelope.covered_grid("qd", v, "tau_g", gg)
+        if out.any():
+            ax.pcolormesh(V, G, np.ma.masked_where(~out, np.ones(out.shape)), shading="auto", cmap="Greys",
+                          vmin=0, vmax=2.5, alpha=0.6)
+            ax.contourf(V, G, out.astype(float), levels=[0.5, 1.5], colors="none", hatches=["//"])
+        title += f"\n(hatched: outside the training envelope, {100 * out.mean():.0f} % of the map)"
     ax.set_xlabel(f"velocity qd [{u['qd']}]")
     ax.set_ylabel(f"gravity torque tau_g [{u['tau']}]")
-    ax.set_title("model over velocity and gravity torque")
+    ax.set_title(title, fontsize=10)
     return _save(fig, folder, "heatmap.png")
 
 
@@ -151,17 +161,20 @@ def write_report(model_path: str, log: logs.Log, folder: str, *, lowpass_hz: flo
         raise OutputError(f"cannot create {folder}: {exc.strerror}") from None
     sig, u = log.signals, log.units
     pred = model.predict(sig)[0]
+    env = models.envelope(meta, model_path)
     rng = np.random.default_rng(seed)
     figures = [f for f in (
         fig_loss(model, folder),
         fig_velocity(model, sig, u, folder, rng),
-        fig_heatmap(model, sig, u, folder),
+        fig_heatmap(model, sig, u, folder, env),
         fig_time(sig, pred, u, folder),
         fig_quadrants(sig, u, folder),
         fig_external(sig, pred, u, folder, lowpass_hz),
     ) if f]
     summary = {"model": os.path.basename(model_path), "kind": meta.get("kind"), "log": os.path.basename(log.name),
                "friction": metrics.errors(logs.friction_target(sig), pred)}
+    if env is not None:
+        summary["extrapolation"] = share_outside(env, sig)
     if "tau_ext" in sig:
         summary["external"] = metrics.errors(sig["tau_ext"], external_estimate(sig, pred, lowpass_hz))
     atomic_write_bytes(os.path.join(folder, "index.html"), _html(summary, figures, u).encode())
@@ -212,6 +225,9 @@ def _html(summary: dict, figures: list[str], u: dict) -> str:
     imgs = "\n".join(f'<figure><img src="{html.escape(f)}" alt="{html.escape(f)}"><figcaption>{html.escape(f)}</figcaption></figure>'
                      for f in figures)
     title = html.escape(f"{summary['model']} ({summary['kind']}) on {summary['log']}")
+    out = summary.get("extrapolation")
+    extra = "" if out is None else (f"<p>{100 * out['share']:.1f} % of the rows ({out['rows']:,} of {out['of']:,}) lie "
+                                    "outside the model's training envelope.</p>")
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>fricli report: {title}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}img{{max-width:100%}}
@@ -219,6 +235,7 @@ table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;t
 <body><h1>fricli report</h1><p>{title}</p>
 <table><tr><th></th><th>MAE [{u['tau']}]</th><th>RMSE [{u['tau']}]</th><th>max [{u['tau']}]</th></tr>
 {''.join(rows)}</table>
+{extra}
 {imgs}
 </body></html>
 """

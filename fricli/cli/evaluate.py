@@ -42,6 +42,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     external-torque error is against the log's sensor column tau_ext, when it has one.
     A model folder (one model per joint) is evaluated on every joint of a log, one row per
     joint; a model fitted on another joint than the log's is refused (docs/joints.md).
+    The share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
 
     \b
     Example:
@@ -56,6 +57,10 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+    for r in results:
+        if r.extrapolation is not None and not quiet:
+            say(f"{r.model} on {r.log}: {100 * r.extrapolation['share']:.1f} % of the rows outside the model's "
+                "training envelope")
 
 
 @cli.command("report")

@@ -66,11 +66,15 @@ def _wrote(output: str) -> str:
 @cli.command("train-base")
 @click.argument("log")
 @output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
-@click.option("--arch", type=click.Choice(["mlp", "selmic", "nnacm"]), default="mlp", show_default=True,
-              help="mlp: the paper's NN_base; selmic: Selmic & Lewis (sigmoid and jump units); "
-                   "nnacm: Ciliz & Tomizuka (network plus learned Coulomb terms per direction).")
+@click.option("--arch", type=click.Choice(["dissipative", "mlp", "selmic", "nnacm"]), default="dissipative",
+              show_default=True,
+              help="dissipative: a non-negative magnitude of (speed, direction) and |tau_g| times a smooth "
+                   "sign of qd, never along the motion (docs/neural-models.md); mlp: the paper's NN_base "
+                   "NN(tau_g, qd); selmic: Selmic & Lewis (sigmoid and jump units); nnacm: Ciliz & Tomizuka "
+                   "(network plus learned Coulomb terms per direction).")
 @click.option("--hidden", callback=_sizes, default=None, metavar="N[,N...]",
-              help="Hidden layer sizes [default: mlp 30,30; selmic 30 (10 of them jump units); nnacm 50].")
+              help="Hidden layer sizes [default: dissipative and mlp 30,30; selmic 30 (10 of them jump units); "
+                   "nnacm 50].")
 @click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True, help="Adam steps.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,
               help="Adam learning rate.")
@@ -86,7 +90,7 @@ def _wrote(output: str) -> str:
               help="Rows kept after velocity balancing (training plus validation).")
 @click.option("--velocity-input", type=click.Choice(learning.VELOCITY_INPUTS), default="asinh", show_default=True,
               help="asinh: the network sees asinh(qd / v0), which spreads the slow speeds apart; "
-                   "linear: qd itself (the paper's input).")
+                   "linear: qd itself (the paper's input; not for --arch dissipative).")
 @click.option("--velocity-scale", type=click.FloatRange(min=0, min_open=True), default=None, metavar="V0",
               help="v0 of --velocity-input asinh [rad/s or m/s]; default the 5 % quantile of the training "
                    "rows' speeds.")
@@ -96,7 +100,11 @@ def _wrote(output: str) -> str:
 @common
 def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fraction, no_balance, max_samples,
                velocity_input, velocity_scale, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
-    """Train a neural friction model on LOG (tau_f = NN(tau_g, qd)) and write it to MODEL.npz.
+    """Train a neural friction model on LOG and write it to MODEL.npz.
+
+    The default network (--arch dissipative) predicts tau_f = tanh(qd / v_ps) * m with a
+    magnitude m >= 0 from the speed, the direction and |tau_g|, so it never predicts friction
+    along the motion; --arch mlp is the paper's NN_base, tau_f = NN(tau_g, qd).
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
@@ -109,7 +117,7 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
     \b
     Example:
       fricli train-base sample_data/joint2_base.parquet -o nn_base.npz
-      fricli train-base sample_data/joint2_base.parquet --arch selmic -o selmic.npz
+      fricli train-base sample_data/joint2_base.parquet --arch mlp -o paper_nn_base.npz
       fricli train-base base.parquet --steps 5000 --batch-size 256 --seed 3 -o quick.npz --json
     """
     _check_outputs(output, as_json)
@@ -117,6 +125,9 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
         learning.ARCHS[arch](hidden_sizes=tuple(hidden or learning.DEFAULT_HIDDEN[arch]))
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--hidden") from None
+    if arch == "dissipative" and velocity_input != "asinh":
+        raise click.BadParameter("the dissipative network always sees asinh(|qd| / v0); use --arch mlp",
+                                 param_hint="--velocity-input")
 
     def fit_one(the_log, out, job, _model):
         progress = _Progress(quiet, f"train-base {arch}" + (f" joint {the_log.joint}" if the_log.joint is not None else ""))
@@ -197,11 +208,13 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         try:
             model, summary = learning.adapt(
                 base_model, the_log, hidden=hidden, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                val_fraction=val_fraction, max_seconds=max_seconds, min_speed=min_speed, on_eval=progress)
+                val_fraction=val_fraction, max_seconds=max_seconds, min_speed=min_speed, on_eval=progress,
+                base_envelope=models.envelope(base_meta, base_path))
         finally:
             progress.close()
         seconds = time.perf_counter() - start
         models.save_for_log(out, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary, job=job,
+                            envelope=base_meta.get("envelope"),
                             base={"path": base_path, "kind": base_meta.get("kind"),
                                   "provenance": base_meta.get("provenance", {})})
         tau = the_log.units["tau"]
@@ -212,6 +225,10 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
             f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}",
             quiet)
+        outside = summary.get("outside_base_envelope")
+        if outside is not None:
+            say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
+                "outside the base model's training envelope", quiet)
         say(_wrote(out), quiet)
         return {"model": out, "kind": "residual", "base": base_path, "seconds": round(seconds, 3), **summary}
 

@@ -19,13 +19,28 @@ def batch_option(f):
                         show_default=True, help="Rows per record batch (the model state is carried across).")(f)
 
 
+def flag_option(f):
+    return click.option("--flag-extrapolation", is_flag=True,
+                        help="Add the boolean column 'extrapolating': the row lies outside the model's training "
+                             "envelope (docs/neural-models.md).")(f)
+
+
+def extrapolation_line(extrapolation: dict | None) -> str | None:
+    """The stderr line for the rows outside a model's training envelope (None without one)."""
+    if extrapolation is None:
+        return None
+    return (f"{100 * extrapolation['share']:.1f} % of the rows ({extrapolation['rows']:,} of {extrapolation['of']:,}) "
+            "lie outside the model's training envelope")
+
+
 def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
-         external: bool, lowpass=None):
+         external: bool, lowpass=None, flag_extrapolation=False):
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
     result = predicting.run_models(modelset.source(model_path), log, output, external=external, lowpass_hz=lowpass,
                                    joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn,
-                                   batch_rows=batch_rows, progress=progress_enabled(quiet))
+                                   batch_rows=batch_rows, progress=progress_enabled(quiet),
+                                   flag_extrapolation=flag_extrapolation)
     if not quiet:
         where = f" of joint {result.joint}" if result.joint is not None else ""
         if result.per_joint:
@@ -38,6 +53,8 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         for j, figures in (result.per_joint or {}).items():
             say(f"  joint {j} ({figures['rows']:,} rows, {figures['model']}): friction {_figures(figures['friction'], result.unit)}"
                 + (f"; external {_figures(figures['external'], result.unit)}" if "external" in figures else ""))
+        if result.extrapolation is not None:
+            say(extrapolation_line(result.extrapolation))
     if as_json:
         out = result.as_json()
         out.update(model=model_path, log=log, output=output)
@@ -52,9 +69,10 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
 @output_option(help="Output log (Parquet; - for stdout).")
 @log_reading
 @batch_option
+@flag_option
 @json_flag
 @common
-def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation, as_json, quiet):
     """Predict friction with MODEL on LOG (- for stdin): writes the log with tau_f_pred added.
 
     Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
@@ -63,14 +81,16 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
     joint): every joint of the log is predicted with its own model into one long-format log.
     One model file on a log of several joints is used for its own joint (or --joint); a model
     fitted on another joint is refused (docs/joints.md). Large logs are processed in record batches with the model
-    state carried across; a log without qd/qdd is read whole (docs/lugre.md).
+    state carried across; a log without qd/qdd is read whole (docs/lugre.md). The share of rows
+    outside the model's training envelope (where it extrapolates) goes to stderr and the JSON.
 
     \b
     Example:
       fricli predict lugre.npz sample_data/joint2_extended_asym.parquet -o pred.parquet
       fricli simulate --scenario base --joint 2 --seed 2 -o - | fricli predict lugre.npz - -o - > pred.parquet
     """
-    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False)
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False,
+         flag_extrapolation=flag_extrapolation)
 
 
 @cli.command("estimate-ext")
@@ -81,9 +101,11 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
               help="Zero-phase Butterworth low-pass of tau_ext_pred at this cut-off [Hz] (reads the log whole).")
 @log_reading
 @batch_option
+@flag_option
 @json_flag
 @common
-def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation,
+                     as_json, quiet):
     """Estimate the external torque on LOG with MODEL's friction: adds tau_f_pred and
     tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m.
 
@@ -96,4 +118,4 @@ def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invali
       fricli estimate-ext adapted.npz sample_data/joint2_extended_asym.parquet --lowpass 2 -o ext.parquet
     """
     _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=True,
-         lowpass=lowpass)
+         lowpass=lowpass, flag_extrapolation=flag_extrapolation)

@@ -36,9 +36,12 @@ def _effects(ctx, param, values):
 @click.option("--friction-state", type=click.Choice(["base", "shifted"]), default=None,
               help="Friction state: base (warm, an exact extended LuGre model) or shifted (cold, "
                    "quadrant and direction dependence). Default: base for --scenario base, else shifted.")
+@click.option("--thin", is_flag=True,
+              help="base scenario: each slow level (< 0.1 rad/s) one short stretch at a random position, "
+                   "so it meets one narrow band of gravity torques.")
 @click.option("-o", "--output", required=True, help="Output Parquet log (- for stdout).")
 @common
-def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, output, quiet):
+def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, thin, output, quiet):
     """Simulate a log of a harmonic-drive robot joint with known friction.
 
     The log holds t, joint, q, qd, qdd, tau_m (with noise), tau_g, tau_dyn, tau_ext, temp and
@@ -53,11 +56,13 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     """
     if duration is not None and scenario != "extended":
         raise click.UsageError("--duration applies to --scenario extended only")
+    if thin and scenario != "base":
+        raise click.UsageError("--thin applies to --scenario base only")
     table = simulator.simulate(scenario, int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
-                               duration=duration, friction_state=friction_state)
+                               duration=duration, friction_state=friction_state, thin=thin)
     simulator.write(table, output)
     t = table.column("t")
     names = ", ".join(name if s is None else f"{name}={s:g}" for name, s in effect_specs) or "no effects"
     where = "stdout" if output == "-" else output
-    say(f"simulated {scenario} joint {joint} (load {load}, {names}, seed {seed}): {table.num_rows} rows, "
+    say(f"simulated {'thin ' if thin else ''}{scenario} joint {joint} (load {load}, {names}, seed {seed}): {table.num_rows} rows, "
         f"{t[-1].as_py() - t[0].as_py():.1f} s at {rate:g} Hz -> {where}", quiet)

@@ -15,7 +15,7 @@ from fricli import modelfile
 from fricli.errors import ModelFileError
 from fricli.models.base import FrictionModel
 
-_KIND_MODULES = ("lugre", "neural", "residual", "augmented")
+_KIND_MODULES = ("lugre", "neural", "dissipative", "residual", "augmented")
 KINDS: dict[str, type[FrictionModel]] = {}
 
 
@@ -67,12 +67,15 @@ def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name
 
 
 def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,
-         fit: dict | None = None) -> dict:
-    """Write ``model`` with its meta; returns the meta."""
+         fit: dict | None = None, envelope: dict | None = None) -> dict:
+    """Write ``model`` with its meta (``envelope``: the training envelope, ``Envelope.to_meta``);
+    returns the meta."""
     spec, arrays = to_parts(model)
     meta = modelfile.base_meta()
     meta.update(kind=model.kind, model=spec, joint=joint, axis=axis, units=units,
                 inputs=sorted(model.required_inputs()), provenance=provenance, fit=fit or {})
+    if envelope is not None:
+        meta["envelope"] = envelope
     modelfile.write(path, meta, arrays)
     return meta
 
@@ -106,8 +109,24 @@ def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict
     return out
 
 
+def envelope(meta: dict, name: str = "model"):
+    """The training envelope (``fricli.envelope.Envelope``) recorded in a model file's meta, or
+    None for files without one."""
+    from fricli.envelope import Envelope
+
+    try:
+        return Envelope.from_meta(meta.get("envelope"))
+    except ValueError as exc:
+        raise ModelFileError(f"{name}: {exc}") from None
+
+
 def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: int | None = None,
-                 fit: dict | None = None, **extra) -> dict:
-    """``save`` with joint, units and provenance taken from the log the model was fitted on."""
+                 fit: dict | None = None, envelope: dict | None = None, **extra) -> dict:
+    """``save`` with joint, units and provenance taken from the log the model was fitted on; the
+    training envelope is the log's over the model's inputs unless ``envelope`` is given."""
+    from fricli.envelope import Envelope
+
+    if envelope is None:
+        envelope = Envelope.fit(log.signals, model.required_inputs()).to_meta()
     return save(path, model, joint=log.joint, axis=log.axis, units=log.units,
-                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit)
+                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit, envelope=envelope)

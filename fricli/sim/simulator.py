@@ -69,9 +69,9 @@ def _rates(rate: float) -> tuple[float, int]:
     return rate * k, k
 
 
-def _plan(scenario, j, rng, duration):
+def _plan(scenario, j, rng, duration, thin=False):
     if scenario == "base":
-        return trajectories.base_plan(j, rng)
+        return trajectories.base_plan(j, rng, thin=thin)
     if scenario == "adapt":
         return trajectories.adapt_plan(j, rng)
     return trajectories.extended_plan(j, rng, trajectories.EXTENDED_DURATION if duration is None else duration)
@@ -122,14 +122,16 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
 
 
 def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effects=(), seed: int = 0,
-             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None) -> pa.Table:
+             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None,
+             thin: bool = False) -> pa.Table:
     """A simulated log as a pyarrow table (columns and units of the log contract).
 
     scenario: base | extended | adapt; joint: 2 | 4; load: none | sym | asym (external payload
     measured by the sensor, not in tau_g); effects: ``NAME[=STRENGTH]`` strings (see
     ``fricli.sim.effects.EFFECTS``); rate: output rate [Hz]; duration [s]: extended only;
-    friction_state: base | shifted (default: base for the base scenario, else shifted).
-    The same arguments give the same table.
+    friction_state: base | shifted (default: base for the base scenario, else shifted); thin:
+    base only, each slow level one short stretch at a random position (see
+    ``trajectories.base_plan``). The same arguments give the same table.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r} (choose from {', '.join(SCENARIOS)})")
@@ -137,13 +139,15 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         raise ValueError(f"unknown load {load!r} (choose from {', '.join(LOADS)})")
     if duration is not None and scenario != "extended":
         raise ValueError("a duration can only be given for the extended scenario")
+    if thin and scenario != "base":
+        raise ValueError("thin applies to the base scenario only")
     j = joints.joint(joint)
     state = friction_state or default_state(scenario)
     state_p = joints.state_params(j, state)
     chosen = resolve_effects(effects)
     fs_int, k = _rates(float(rate))
 
-    plan = _plan(scenario, j, _rng(seed, _STREAM_PLAN), duration)
+    plan = _plan(scenario, j, _rng(seed, _STREAM_PLAN), duration, thin)
     n_out = int(math.floor(plan.t * rate + 1e-9)) + 1
     t = np.arange((n_out - 1) * k + 1) / fs_int
     q, qd, qdd = trajectories.evaluate(plan, t)
@@ -200,6 +204,8 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         "units": {name: joints.PARAM_UNITS[name] for name in parameters},
         "effects": applied, "configuration": conf.as_dict(),
     }
+    if thin:
+        meta["thin"] = True
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True)})
 
 

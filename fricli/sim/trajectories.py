@@ -129,13 +129,17 @@ def evaluate(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
 # ----------------------------------------------------------------- scenarios
 
 
-def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
+def base_plan(j: Joint, rng: np.random.Generator, thin: bool = False) -> Plan:
     """Constant-velocity sweeps: every level of BASE_LEVELS once in each direction.
 
     Fast levels sweep the whole position range; slow ones a stretch of BASE_STRETCH_S seconds,
     split for levels below BASE_SPLIT_BELOW into BASE_SLOW_PARTS pieces stratified over the
     range (placed by ``rng`` within their strata), so slow data meets the whole span of gravity
     loads, as sweeps over the whole range would.
+
+    ``thin``: every level below BASE_SPLIT_BELOW is one unsplit stretch at a random position
+    instead, so each slow level meets one narrow band of gravity loads (slow sweeps kept short
+    because they are expensive).
     """
     lo, hi = j.q_min, j.q_max
     full = hi - lo
@@ -145,6 +149,9 @@ def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
     for v in BASE_LEVELS:
         d = v * BASE_STRETCH_S + 2 * ramp_distance(0.0, v)
         if d >= full:
+            continue
+        if thin and v < BASE_SPLIT_BELOW:
+            placed.append((lo + 0.02 + float(rng.uniform()) * (full - 0.04 - d), v, d))
             continue
         parts = BASE_SLOW_PARTS if v < BASE_SPLIT_BELOW else 1
         # stratified over the range, so every slow level meets the whole span of gravity loads
