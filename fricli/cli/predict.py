@@ -19,11 +19,18 @@ def batch_option(f):
                         show_default=True, help="Rows per record batch (the model state is carried across).")(f)
 
 
+def precision_option(f):
+    return click.option("--precision", type=click.Choice(models.PRECISIONS), default="single", show_default=True,
+                        help="Arithmetic of the networks: single (float32, fastest) or double (float64, "
+                             "as the code of fricli export).")(f)
+
+
 def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
-         external: bool, lowpass=None):
+         external: bool, lowpass=None, precision="single"):
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
     model, meta = models.load(model_path)
+    models.set_precision(model, precision)
     result = predicting.run(model, meta, log, output, external=external, lowpass_hz=lowpass, joint=joint, kt=kt,
                             cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn, batch_rows=batch_rows,
                             progress=progress_enabled(quiet), model_name=model_path)
@@ -48,9 +55,10 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
 @output_option(help="Output log (Parquet; - for stdout).")
 @log_reading
 @batch_option
+@precision_option
 @json_flag
 @common
-def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, precision, as_json, quiet):
     """Predict friction with MODEL on LOG (- for stdin): writes the log with tau_f_pred added.
 
     Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
@@ -64,7 +72,8 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
       fricli predict lugre.npz sample_data/joint2_extended_asym.parquet -o pred.parquet
       fricli simulate --scenario base --joint 2 --seed 2 -o - | fricli predict lugre.npz - -o - > pred.parquet
     """
-    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False)
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False,
+         precision=precision)
 
 
 @cli.command("estimate-ext")
@@ -75,9 +84,11 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
               help="Zero-phase Butterworth low-pass of tau_ext_pred at this cut-off [Hz] (reads the log whole).")
 @log_reading
 @batch_option
+@precision_option
 @json_flag
 @common
-def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, as_json, quiet):
+def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, precision, as_json,
+                     quiet):
     """Estimate the external torque on LOG with MODEL's friction: adds tau_f_pred and
     tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m.
 
@@ -89,4 +100,4 @@ def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invali
       fricli estimate-ext adapted.npz sample_data/joint2_extended_asym.parquet --lowpass 2 -o ext.parquet
     """
     _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=True,
-         lowpass=lowpass)
+         lowpass=lowpass, precision=precision)
