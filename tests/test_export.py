@@ -241,3 +241,27 @@ def test_errors_are_one_line_with_the_documented_codes(sim_models, tmp_path):
     res = invoke("export", empty, "-o", tmp_path / "x.h")
     assert res.exit_code == 4 and "no .npz" in res.output
     assert not (tmp_path / "x.h").exists()
+
+
+@needs_cc
+def test_the_examples_in_the_deploy_doc_compile(sim_models, tmp_path):
+    import re
+    import subprocess
+
+    from conftest import ROOT
+
+    text = (ROOT / "docs" / "deploy.md").read_text()
+    blocks = re.findall(r"```(c|cpp)\n(.*?)```", text, flags=re.S)
+    assert [lang for lang, _ in blocks] == ["c", "cpp"]
+    assert invoke("export", sim_models["lugre-loaded"], "-o", tmp_path / "friction.h").exit_code == 0
+    for lang, code in blocks:
+        cxx = lang == "cpp"
+        compiler = check.compiler(cxx=cxx)
+        if compiler is None:
+            continue
+        src = tmp_path / f"example.{lang}"
+        src.write_text(code)
+        flags = ["-Wall", "-Wextra", "-pedantic", "-Werror", "-O2"] + ([] if cxx else ["-std=c99"])
+        proc = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
+                              capture_output=True, text=True)
+        assert proc.returncode == 0 and proc.stderr == "", proc.stderr

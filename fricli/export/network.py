@@ -10,6 +10,8 @@ activation name, mirroring ``fricli.nn.activations``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fricli.errors import ModelFileError
@@ -17,9 +19,42 @@ from fricli.export.c import array, num
 from fricli.nn import activations as acts
 
 
+EXP_TABLE = 32     # e^u = 2^(-m/32) e^r: table of 2^(-j/32) and of 2^-q
+
+
+def _exp_tables() -> list[str]:
+    """Tables for ``_exp_nonpositive``: 2^(-j/32), j < 32, and 2^-q for q up to 40 / ln2."""
+    top = int(40.0 / math.log(2.0)) + 2
+    return [f"    static const double EXP_T[{EXP_TABLE}] = {array([2.0 ** (-j / EXP_TABLE) for j in range(EXP_TABLE)], 4)};",
+            f"    static const double EXP_P[{top}] = {array([2.0 ** -q for q in range(top)], 4)};"]
+
+
 def _elu(act, unit: str) -> str:
-    # max(e^v - 1, v) as acts.ELU computes it; v > 0 gives v
-    return "if (!(v > 0.0)) { const double e = exp(v) - 1.0; v = e > v ? e : v; }"
+    """max(e^u - 1, v) with u = min(v, 0), as acts.ELU computes it, without a branch (the sign
+    of a unit's input is unpredictable) or a library call: u clamped at -40 (below, e^u - 1 rounds to -1 all the same), u = -(m/32) ln2 + r
+    with |r| <= ln2/64, e^u = 2^-(m/32) (tables) times the Taylor polynomial of e^r of degree 6:
+    relative error about 1e-16, and several units' exponentials overlap in the pipeline."""
+    return ("{ double u_ = v < 0.0 ? v : 0.0; u_ = u_ > -40.0 ? u_ : -40.0; const int m_ = (int)(-u_ * "
+            f"{num(EXP_TABLE / math.log(2.0))} + 0.5); const double r_ = (u_ + m_ * {num(_LN2_HI)}) + m_ * "
+            f"{num(_LN2_LO)}; const double e = EXP_P[m_ >> 5] * (EXP_T[m_ & 31] * {_taylor('r_')}) - 1.0; "
+            "v = e > v ? e : v; }")
+
+
+def _taylor(r: str, degree: int = 6) -> str:
+    poly = num(1.0 / math.factorial(degree))
+    for k in range(degree - 1, -1, -1):
+        poly = f"({poly} * {r} + {num(1.0 / math.factorial(k))})"
+    return poly
+
+
+def _split(x: float, zero_bits: int = 12) -> tuple[float, float]:
+    """x = hi + lo with the low ``zero_bits`` bits of hi's significand zero (m * hi is exact)."""
+    bits = np.array(x, dtype=np.float64).view(np.int64) & ~np.int64((1 << zero_bits) - 1)
+    hi = float(bits.view(np.float64))
+    return hi, x - hi
+
+
+_LN2_HI, _LN2_LO = _split(math.log(2.0) / EXP_TABLE)
 
 
 def _sigmoid(act, unit: str) -> str:
@@ -45,8 +80,15 @@ def _tanh(act, unit: str) -> str:
     return "v = tanh(v);"
 
 
+BLOCK = 10   # units whose sums a layer accumulates together (in registers)
+
 ACTIVATIONS = {"elu": _elu, "sigmoid": _sigmoid, "jump": _jump, "identity": _identity,
                "softplus": _softplus, "tanh": _tanh}
+
+
+def _uses(act, name: str) -> bool:
+    parts = act.parts if isinstance(act, acts.Mixed) else [(0, act)]
+    return any((p.spec() if isinstance(p.spec(), str) else p.spec()["name"]) == name for _, p in parts)
 
 
 def _parts(act, units: int) -> list[tuple[int, int, object]]:
@@ -64,10 +106,19 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
     units = w.shape[0]
     table = np.vstack([w[:, :fan_in].T, w[:, fan_in]])   # input-major, bias last
     lines = [f"    static const double W{i}[{(fan_in + 1) * units}] = {array(table, 6)};",
-             f"    double h{i}[{units}];",
-             f"    for (j = 0; j < {units}; ++j) h{i}[j] = W{i}[{fan_in * units} + j];",
-             f"    for (i = 0; i < {fan_in}; ++i)",
-             f"        for (j = 0; j < {units}; ++j) h{i}[j] += W{i}[i * {units} + j] * {src}[i];"]
+             f"    double h{i}[{units}];"]
+    for b in range(0, units, BLOCK):          # BLOCK units at a time, their sums in registers
+        m = min(BLOCK, units - b)
+        acc = [f"a{k}" for k in range(m)]
+        lines += ["    {",
+                  "        double " + ", ".join(f"{a} = W{i}[{fan_in * units + b + k}]" for k, a in enumerate(acc)) + ";",
+                  f"        for (i = 0; i < {fan_in}; ++i) {{",
+                  f"            const double xi = {src}[i];",
+                  f"            const double *w = W{i} + i * {units} + {b};",
+                  *[f"            {a} += w[{k}] * xi;" for k, a in enumerate(acc)],
+                  "        }",
+                  *[f"        h{i}[{b + k}] = {a};" for k, a in enumerate(acc)],
+                  "    }"]
     for start, n, part in _parts(act, units):
         name = part.spec() if isinstance(part.spec(), str) else part.spec()["name"]
         if name not in ACTIVATIONS:
@@ -91,6 +142,8 @@ def dense(net, name: str) -> str:
         raise ModelFileError(f"cannot export a network with {net.n_out} outputs")
     weights = [np.asarray(w, dtype=np.float64) for w in net.weights]
     lines = [f"static inline double {name}(const double *x) {{", "    int i, j;", "    double y;"]
+    if any(_uses(act, "elu") for _, act in net.hidden):
+        lines += _exp_tables()
     src, fan_in = "x", net.n_in
     for i, ((units, act), w) in enumerate(zip(net.hidden, weights)):
         lines += _layer(i, w, act, src, fan_in)
