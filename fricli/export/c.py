@@ -230,13 +230,13 @@ def header(entries: list[Entry], guard: str) -> str:
         top.append(" *")
     top[-1] = " */"
     sgn = f"{guard}_sgn"
-    out = top + [f"#ifndef {guard.upper()}_H", f"#define {guard.upper()}_H", "", "#include <math.h>", "",
+    out = top + [f"#ifndef FRICLI_{guard.upper()}_H", f"#define FRICLI_{guard.upper()}_H", "", "#include <math.h>", "",
                  "/* sign(v): -1, 0 or 1 */",
                  f"static inline double {sgn}(double v) {{ return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }}", ""]
     for entry in entries:
         out.append(f"/* ---------------------------------------------------------------- {entry.prefix} */")
         out.append(model_code(entry.model, entry.meta, entry.prefix, sgn))
-    out += [f"#endif /* {guard.upper()}_H */", ""]
+    out += [f"#endif /* FRICLI_{guard.upper()}_H */", ""]
     return "\n".join(out)
 
 
