@@ -47,8 +47,8 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "demo", "diagnose", "estimate-ext", "evaluate", "identify", "inspect", "predict", "report",
-            "simulate", "train-base"]
+COMMANDS = ["adapt", "demo", "diagnose", "estimate-ext", "evaluate", "export", "identify", "inspect", "predict",
+            "report", "simulate", "train-base"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():
@@ -87,12 +87,13 @@ def test_every_command_in_a_process(tmp_path):
         "report": ["report", "nn.npz", ext, "-o", "report", "-q"],
         "diagnose": ["diagnose", "lugre.npz", ext, "--fix", "-o", "fixed.npz", "--folds", "5", "-q"],
         "inspect": ["inspect", "lugre.npz"],
+        "export": ["export", "lugre.npz", "-o", "friction.h", "-q"],
         "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
     }, tmp_path)
     for name, proc in second.items():
         check(name, proc, errors.UNCHANGED if name == "unchanged" else 0)
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
-                 "report/index.html", "demo/table.md"):
+                 "report/index.html", "demo/table.md", "friction.h"):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
 
