@@ -265,3 +265,16 @@ def test_the_examples_in_the_deploy_doc_compile(sim_models, tmp_path):
         proc = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
                               capture_output=True, text=True)
         assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
+    model, _ = models.load(sim_models["residual-mlp"])
+    assert {model.base.precision, model.add.precision} == {"single"}
+    models.set_precision(model, "double")
+    assert {model.base.precision, model.add.precision} == {"double"}
+    with pytest.raises(ValueError):
+        models.set_precision(model, "half")
+    sig = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet")).signals
+    double = model.predict(sig)[0]
+    single = models.set_precision(model, "single").predict(sig)[0]
+    assert 0 < np.max(np.abs(double - single)) < 1e-3
