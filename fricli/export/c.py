@@ -138,8 +138,14 @@ def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     return fn(model, name, ctx)
 
 
+EMITTER_MODULES = ("lugre", "neural", "composite")   # modules under fricli.export that register emitters
+
+
 def _load_emitters() -> None:
-    from fricli.export import composite, lugre, neural  # noqa: F401  (they register themselves)
+    import importlib
+
+    for name in EMITTER_MODULES:
+        importlib.import_module(f"fricli.export.{name}")
 
 
 def step_signature(part: Part, state: str = "s") -> str:
