@@ -52,7 +52,8 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
 SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T.term("p*pos", T.P, T.POS),
              T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN),
              T.term("tau_l*moving", T.GEAR, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
-             T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}), T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
+             T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
+             T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
              T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd"))]
 EMPS_TERMS = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd")), T.term("p*pos", T.P, T.POS),
               T.term("sign", T.SIGN), T.term("sat1", {"f": "sat", "scale": 0.01}),

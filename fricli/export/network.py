@@ -23,20 +23,23 @@ EXP_TABLE = 32     # e^u = 2^(-m/32) e^r: table of 2^(-j/32) and of 2^-q
 
 
 def _exp_tables() -> list[str]:
-    """Tables for ``_exp_nonpositive``: 2^(-j/32), j < 32, and 2^-q for q up to 40 / ln2."""
+    """Tables for ``_elu``: 2^(-j/32) for j < 32, and 2^-q for q up to 40 / ln2."""
     top = int(40.0 / math.log(2.0)) + 2
-    return [f"    static const double EXP_T[{EXP_TABLE}] = {array([2.0 ** (-j / EXP_TABLE) for j in range(EXP_TABLE)], 4)};",
+    fractions = [2.0 ** (-j / EXP_TABLE) for j in range(EXP_TABLE)]
+    return [f"    static const double EXP_T[{EXP_TABLE}] = {array(fractions, 4)};",
             f"    static const double EXP_P[{top}] = {array([2.0 ** -q for q in range(top)], 4)};"]
 
 
 def _elu(act, unit: str) -> str:
-    """max(e^u - 1, v) with u = min(v, 0), as acts.ELU computes it, without a branch (the sign
-    of a unit's input is unpredictable) or a library call: u clamped at -40 (below, e^u - 1 rounds to -1 all the same), u = -(m/32) ln2 + r
-    with |r| <= ln2/64, e^u = 2^-(m/32) (tables) times the Taylor polynomial of e^r of degree 6:
-    relative error about 1e-16, and several units' exponentials overlap in the pipeline."""
-    return ("{ double u_ = v < 0.0 ? v : 0.0; u_ = u_ > -40.0 ? u_ : -40.0; const int m_ = (int)(-u_ * "
-            f"{num(EXP_TABLE / math.log(2.0))} + 0.5); const double r_ = (u_ + m_ * {num(_LN2_HI)}) + m_ * "
-            f"{num(_LN2_LO)}; const double e = EXP_P[m_ >> 5] * (EXP_T[m_ & 31] * {_taylor('r_')}) - 1.0; "
+    """max(e^u - 1, v) with u = min(v, 0), as acts.ELU computes it, without a branch (the sign of
+    a unit's input is unpredictable) or a library call: u clamped at -40 (below, e^u - 1 rounds
+    to -1 all the same), u = -(m/32) ln2 + r with |r| <= ln2/64, e^u = 2^-(m/32) (tables) times
+    the Taylor polynomial of e^r of degree 6: relative error about 1e-16."""
+    shift = EXP_TABLE.bit_length() - 1
+    return ("{ double u_ = v < 0.0 ? v : 0.0; u_ = u_ > -40.0 ? u_ : -40.0; "
+            f"const int m_ = (int)(-u_ * {num(EXP_TABLE / math.log(2.0))} + 0.5); "
+            f"const double r_ = (u_ + m_ * {num(_LN2_HI)}) + m_ * {num(_LN2_LO)}; "
+            f"const double e = EXP_P[m_ >> {shift}] * (EXP_T[m_ & {EXP_TABLE - 1}] * {_taylor('r_')}) - 1.0; "
             "v = e > v ? e : v; }")
 
 
@@ -111,7 +114,8 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
         m = min(BLOCK, units - b)
         acc = [f"a{k}" for k in range(m)]
         lines += ["    {",
-                  "        double " + ", ".join(f"{a} = W{i}[{fan_in * units + b + k}]" for k, a in enumerate(acc)) + ";",
+                  "        double " + ", ".join(f"{a} = W{i}[{fan_in * units + b + k}]"
+                                                 for k, a in enumerate(acc)) + ";",
                   f"        for (i = 0; i < {fan_in}; ++i) {{",
                   f"            const double xi = {src}[i];",
                   f"            const double *w = W{i} + i * {units} + {b};",
