@@ -148,10 +148,6 @@ def _load_emitters() -> None:
         importlib.import_module(f"fricli.export.{name}")
 
 
-def step_signature(part: Part, state: str = "s") -> str:
-    return f"{part.name}_state *{state}, " if part.stateful else ""
-
-
 def signals_of(model: FrictionModel) -> list[str]:
     """The signals the exported step function of ``model`` takes, in their order."""
     ctx = Context("x", "x_sgn")
@@ -171,6 +167,8 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
     ctx = Context(prefix, sgn)
     root = emit(model, f"{prefix}_m", ctx)
     signals = ctx.signals()
+    if not signals:
+        raise ModelFileError("cannot export a model that reads no signal")
     units = meta.get("units", {})
     tau = units.get("tau", "Nm")
     args = ", ".join(f"double {ctx.fields[s]}" for s in signals)
@@ -182,11 +180,11 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
             root.code.rstrip(), ""]
     if root.stateful:
         out += [f"typedef {root.name}_state {prefix}_state;", "",
-                f"/* Start a run: state before the first sample (call again after a pause in the samples). */",
+                "/* Start a run: state before the first sample (call again after a pause in the samples). */",
                 f"static inline void {prefix}_init({prefix}_state *s) {{ {root.init('s')} }}"]
     else:
         out += [f"typedef struct {{ int unused; }} {prefix}_state;  /* the model has no state */", "",
-                f"/* Start a run (the model has no state: kept so that every kind has the same calls). */",
+                "/* Start a run (the model has no state: kept so that every kind has the same calls). */",
                 f"static inline void {prefix}_init({prefix}_state *s) {{ s->unused = 0; }}"]
     body = [f"    {ctx.in_type} in_;", f"    const {ctx.in_type} *in = &in_;"]
     body += [f"    in_.{ctx.fields[s]} = {ctx.fields[s]};" for s in signals]
