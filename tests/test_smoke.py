@@ -50,8 +50,8 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "identify", "import", "inspect",
-            "predict", "report", "simulate", "train-base"]
+COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "identify", "import",
+            "inspect", "predict", "report", "simulate", "train-base"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():
@@ -92,6 +92,7 @@ def test_every_command_in_a_process(tmp_path):
         "report": ["report", "nn.npz", ext, "-o", "report", "-q"],
         "diagnose": ["diagnose", "lugre.npz", ext, "--fix", "-o", "fixed.npz", "--folds", "5", "-q"],
         "inspect": ["inspect", "lugre.npz"],
+        "export": ["export", "lugre.npz", "-o", "friction.h", "-q"],
         "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
         "dynamics": ["dynamics", "rec.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "dyn.parquet",
                      "-q"],
@@ -101,7 +102,7 @@ def test_every_command_in_a_process(tmp_path):
         code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
         check(name, proc, code)
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
-                 "report/index.html", "demo/table.md", "rec.parquet") + (("dyn.parquet",) if has_pinocchio else ()):
+                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet",) if has_pinocchio else ()):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
 

@@ -25,6 +25,12 @@ def flag_option(f):
                              "envelope (docs/neural-models.md).")(f)
 
 
+def precision_option(f):
+    return click.option("--precision", type=click.Choice(["single", "double"]), default="single", show_default=True,
+                        help="Arithmetic of the networks: single (float32, fastest) or double (float64, "
+                             "as the code of fricli export).")(f)
+
+
 def extrapolation_line(extrapolation: dict | None) -> str | None:
     """The stderr line for the rows outside a model's training envelope (None without one)."""
     if extrapolation is None:
@@ -34,13 +40,20 @@ def extrapolation_line(extrapolation: dict | None) -> str | None:
 
 
 def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
-         external: bool, lowpass=None, flag_extrapolation=False):
+         external: bool, lowpass=None, flag_extrapolation=False, precision="single"):
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
+
+    from fricli import models
+
+    def load(path):
+        model, meta = models.load(path)
+        return models.set_precision(model, precision), meta
+
     result = predicting.run_models(modelset.source(model_path), log, output, external=external, lowpass_hz=lowpass,
                                    joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn,
                                    batch_rows=batch_rows, progress=progress_enabled(quiet),
-                                   flag_extrapolation=flag_extrapolation)
+                                   flag_extrapolation=flag_extrapolation, load=load)
     if not quiet:
         where = f" of joint {result.joint}" if result.joint is not None else ""
         if result.per_joint:
@@ -70,9 +83,11 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
 @log_reading
 @batch_option
 @flag_option
+@precision_option
 @json_flag
 @common
-def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation, as_json, quiet):
+def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation, precision,
+                as_json, quiet):
     """Predict friction with MODEL on LOG (- for stdin): writes the log with tau_f_pred added.
 
     Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
@@ -90,7 +105,7 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
       fricli simulate --scenario base --joint 2 --seed 2 -o - | fricli predict lugre.npz - -o - > pred.parquet
     """
     _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False,
-         flag_extrapolation=flag_extrapolation)
+         flag_extrapolation=flag_extrapolation, precision=precision)
 
 
 @cli.command("estimate-ext")
@@ -102,10 +117,11 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
 @log_reading
 @batch_option
 @flag_option
+@precision_option
 @json_flag
 @common
 def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation,
-                     as_json, quiet):
+                     precision, as_json, quiet):
     """Estimate the external torque on LOG with MODEL's friction: adds tau_f_pred and
     tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m.
 
@@ -118,4 +134,4 @@ def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invali
       fricli estimate-ext adapted.npz sample_data/joint2_extended_asym.parquet --lowpass 2 -o ext.parquet
     """
     _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=True,
-         lowpass=lowpass, flag_extrapolation=flag_extrapolation)
+         lowpass=lowpass, flag_extrapolation=flag_extrapolation, precision=precision)

@@ -34,6 +34,21 @@ def _load_kinds() -> None:
                 raise
 
 
+PRECISIONS = ("single", "double")
+
+
+def set_precision(model: FrictionModel, precision: str) -> FrictionModel:
+    """Evaluate every network in the model tree in ``precision``: "single" (float32, the
+    default) or "double" (float64, the arithmetic of exported C code). Returns ``model``."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
+    if hasattr(model, "precision"):
+        model.precision = precision
+    for child in model.children().values():
+        set_precision(child, precision)
+    return model
+
+
 def to_parts(model: FrictionModel, prefix: str = "") -> tuple[dict, dict[str, np.ndarray]]:
     """(spec, arrays) of a model tree; arrays keyed by ``prefix + name``."""
     spec = {"kind": model.kind, "params": model.get_params()}

@@ -76,8 +76,9 @@ class NeuralFriction(FrictionModel):
     def __init__(self, *, inputs=("tau_g", "qd"), hidden=((30, "elu"), (30, "elu")), skip=(),
                  steps: int | None = 50_000, epochs: int | None = None, lr: float = 0.01,
                  batch_size: int = 0, eval_every: int | None = None, units: dict | None = None,
-                 velocity_scale: float | str | None = None):
+                 velocity_scale: float | str | None = None, precision: str = "single"):
         self.inputs, self.skip = tuple(inputs), tuple(skip)
+        self.precision = precision
         if not (velocity_scale is None or velocity_scale == "auto"
                 or (isinstance(velocity_scale, (int, float)) and velocity_scale > 0)):
             raise ValueError(f"velocity_scale must be None, 'auto' or a positive speed, got {velocity_scale!r}")
@@ -150,7 +151,8 @@ class NeuralFriction(FrictionModel):
         return {_source(name) for name in self.inputs + self.skip}
 
     def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
-        """tau_f (n,) [Nm] for the log's signals; stateless."""
+        """tau_f (n,) [Nm] for the log's signals; stateless. The network runs in float32
+        (``precision="single"``, the fast default) or float64 (``"double"``, as exported C code)."""
         if self.net_ is None:
             raise ValueError("the model is not fitted")
         names = self.inputs + self.skip
@@ -161,6 +163,10 @@ class NeuralFriction(FrictionModel):
         cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
         pieces = list(zip(cuts[:-1], cuts[1:]))
         net, mean_x, scale_x = self.net_, self.x_std_.mean_, self.x_std_.scale_
+        if self.precision == "double":
+            net = net.astype(np.float64)
+        elif self.precision != "single":
+            raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
         y_mean, y_scale = float(self.y_std_.mean_[0]), float(self.y_std_.scale_[0])
 
         def run(part: list[tuple[int, int]]) -> None:
