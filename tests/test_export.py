@@ -17,7 +17,7 @@ from conftest import SAMPLE, shared_data
 
 from fricli import logs, models
 from fricli.cli import cli
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.export import c, check, network
 from fricli.models.augmented import AugmentedModel
 from fricli.models.lugre import LuGreModel

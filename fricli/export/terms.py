@@ -1,4 +1,4 @@
-"""C code of the regressor terms of diagnosed effects (``fricli.diagnosis.terms``).
+"""C code of the regressor terms of diagnosed effects (``fricli.models.terms``).
 
 A term is a product of factors; ``FACTORS`` maps each factor kind to a function
 (factor, context) -> C expression. The held direction of motion is the variable ``dir``
