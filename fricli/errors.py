@@ -14,6 +14,9 @@ DATA = 6             # a valid log that holds too little to do the job (no motio
 OUTPUT = 7           # an output that could not be written (disk full, permissions)
 LOCKED = 8           # another job holds the lock on the output
 UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
+SOME_FAILED = 10     # fleet: some jobs failed, the others succeeded or were unchanged
+NOTHING_RAN = 11     # fleet: no job could run (unusable manifest, no logs, cluster unreachable, all failed)
+WEAR = 12            # trend: at least one joint is flagged for wear
 
 
 def one_line(text: str) -> str:
