@@ -67,6 +67,9 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
         with c:
             yield c
         return
+    import logging
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)  # its shutdown warnings are not ours to show
     n = workers or os.cpu_count() or 1
     with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                   host="127.0.0.1", env=_SINGLE_THREADED) as cluster, \

@@ -26,6 +26,7 @@ DAY_SD = 0.02              # day-to-day variation of the friction levels (relati
 SCALE_RANGE = (0.75, 1.25)  # per-joint scale of the preset friction
 WEAR_RATE_C = (0.015, 0.03)  # growth of Coulomb/static friction on a wearing joint [1/day]
 WEAR_RATE_V = (0.005, 0.015)  # growth of viscous friction [1/day]
+DEFAULT_RATE = 50.0        # output rate of the daily-check logs [Hz]
 _STREAM_FLEET = 1000
 
 
@@ -98,7 +99,7 @@ def manifest_text(robot_names: list[str], joint_numbers: list[int]) -> str:
 
 
 def simulate_fleet(folder: str, *, robots: int = 4, joints_per_robot: int = 6, days: int = 1, wearing: int = 0,
-                   seed: int = 0, rate: float = 50.0, start: dt.date = dt.date(2026, 1, 1),
+                   seed: int = 0, rate: float = DEFAULT_RATE, start: dt.date = dt.date(2026, 1, 1),
                    map_fn=map) -> list[FleetJoint]:
     """Write the fleet's logs, manifest and truth under ``folder``; returns its joints.
 
