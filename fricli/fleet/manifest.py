@@ -4,6 +4,7 @@
     history = "history"          # Parquet dataset the runs append to (relative to the manifest)
     models = "models"            # models/ROBOT/jointJ/STEM.npz
     pipeline = "identify"        # identify | train-base | adapt (default for every robot)
+    diagnose = false             # also record the effects each new model misses (slow)
 
     [defaults]                   # any robot key, for every robot
     logs = "{robot}/joint{joint}/*.parquet"
@@ -33,7 +34,7 @@ import tomllib
 from fricli.errors import FricliError, NOTHING_RAN
 
 PIPELINES = ("identify", "train-base", "adapt")
-_ROBOT_KEYS = {"name", "logs", "joints", "pipeline", "base", "options"}
+_ROBOT_KEYS = {"name", "logs", "joints", "pipeline", "base", "options", "diagnose"}
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 _DATE = re.compile(r"(\d{4})-(\d{2})-(\d{2})")
 
@@ -56,6 +57,7 @@ class Job:
     model: str             # output model file
     options: tuple         # sorted (name, value) pairs of the pipeline's options
     base: str | None = None
+    diagnose: bool = False  # also look for effects the new model misses (fricli diagnose)
 
     @property
     def key(self) -> str:
@@ -140,6 +142,9 @@ def load(path: str) -> Manifest:
         patterns = [patterns] if isinstance(patterns, str) else patterns
         if not isinstance(patterns, list) or not patterns or not all(isinstance(p, str) for p in patterns):
             raise ManifestError(f"{where}: logs must be a glob or a list of globs")
+        diagnose = robot.get("diagnose", fleet.get("diagnose", False))
+        if not isinstance(diagnose, bool):
+            raise ManifestError(f"{where}: diagnose must be true or false")
         options = _check_options(where, all_options.get(pipeline, {}))
         options.update(_check_options(where, robot.get("options", {})))
         for joint in joint_list:
@@ -152,5 +157,6 @@ def load(path: str) -> Manifest:
                 base = robot.get("base")
                 jobs.append(Job(robot=name, joint=jname, log=log, date=data_date(log), pipeline=pipeline,
                                 model=model, options=tuple(sorted(options.items())),
-                                base=os.path.join(root, _fill(base, name, jname)) if base else None))
+                                base=os.path.join(root, _fill(base, name, jname)) if base else None,
+                                diagnose=diagnose))
     return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs))

@@ -50,7 +50,8 @@ def _identify(data, opts: dict, job: dict, output: str) -> dict:
     idf.fit(data.signals, units=data.units, axis=data.axis)
     options = {k: opts[k] for k in ("hold", "travel", "refine")}
     models.save_for_log(output, idf.model_, data, rows_used=len(data), fit=idf.fit_, identify=options, job=job)
-    return {"kind": idf.model_.kind, "parameters": idf.model_.parameters(), "errors": _figures(idf.fit_)}
+    return {"kind": idf.model_.kind, "parameters": idf.model_.parameters(), "errors": _figures(idf.fit_),
+            "model": idf.model_}
 
 
 def _train_base(data, opts: dict, job: dict, output: str) -> dict:
@@ -69,7 +70,7 @@ def _train_base(data, opts: dict, job: dict, output: str) -> dict:
         options["velocity_scale"] = opts["velocity_scale"]
     models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
                         seed=opts["seed"], fit=summary, options=options, job=job)
-    return {"kind": arch, "parameters": {}, "errors": _figures(summary.get("log", {}))}
+    return {"kind": arch, "parameters": {}, "errors": _figures(summary.get("log", {})), "model": model}
 
 
 def _adapt(data, opts: dict, job: dict, output: str, base_model, base_meta: dict, base: str) -> dict:
@@ -79,16 +80,28 @@ def _adapt(data, opts: dict, job: dict, output: str, base_model, base_meta: dict
                         options={k: opts[k] for k in keys}, job=job,
                         base={"path": base, "kind": base_meta.get("kind"),
                               "provenance": base_meta.get("provenance", {})})
-    return {"kind": "residual", "parameters": {}, "errors": _figures(summary.get("moving", {}))}
+    return {"kind": "residual", "parameters": {}, "errors": _figures(summary.get("moving", {})), "model": model}
+
+
+def _diagnose(model, data) -> tuple[list, str]:
+    from fricli.diagnosis import driver
+
+    try:
+        return list(driver.diagnose(model, data).added), ""
+    except errors.FricliError as exc:
+        return [], errors.one_line(f"diagnose: {exc}")
 
 
 def run(job: Job, *, if_changed: bool = True) -> dict:
     """Run one job; never raises for a job's own failure.
 
     Returns {"status": ok | unchanged | failed, "reason": one line or "", "seconds",
-    "kind", "parameters", "errors", "sha256"}."""
+    "kind", "parameters", "errors", "sha256", "effects"}. With ``job.diagnose`` the effects the
+    new model misses are looked for (``fricli.diagnosis``); when that fails the job stays ok and
+    the reason says why."""
     start = time.perf_counter()
-    out = {"status": "failed", "reason": "", "kind": None, "parameters": {}, "errors": {}, "sha256": ""}
+    out = {"status": "failed", "reason": "", "kind": None, "parameters": {}, "errors": {}, "sha256": "",
+           "effects": []}
     try:
         opts = options_of(job)
         reading = {k: opts[k] for k in ("joint", "kt", "drop_invalid")}
@@ -111,6 +124,9 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
                 out.update(_adapt(data, opts, record, job.model, base_model, base_meta, job.base))
         if out["status"] != "unchanged":
             out["status"] = "ok"
+            model = out.pop("model")
+            if job.diagnose:
+                out["effects"], out["reason"] = _diagnose(model, data)
     except errors.FricliError as exc:
         out["reason"] = errors.one_line(str(exc))
     except MemoryError:
