@@ -2,8 +2,8 @@
 
 Every run that did work appends one file per robot, ``run-<UTC time>-<id>.parquet``, with one row
 per job that ran (ok or failed; unchanged jobs add nothing), written atomically (temporary file
-and rename). Read it with ``pyarrow.dataset.dataset(HISTORY, partitioning="hive")`` or
-``pandas.read_parquet(HISTORY)``; ``read`` below keeps robot names as strings.
+and rename). Any Parquet dataset reader understands it (hive partitioning, e.g.
+``pandas.read_parquet(HISTORY)``); ``read`` below keeps robot names as strings.
 """
 
 from __future__ import annotations
@@ -93,19 +93,29 @@ def append(history: str, rows: list[dict], run: str) -> list[str]:
 
 
 def read(history: str) -> pa.Table:
-    """The whole history as one table (robot as a string column); LogError when it cannot be read."""
-    import pyarrow.dataset as ds
+    """The whole history as one table (robot as a string column); LogError when it cannot be read.
+
+    Reads file by file with ``pq.ParquetFile`` (not pyarrow's threaded dataset reader)."""
+    import glob
+
+    import pyarrow.parquet as pq
 
     if not os.path.isdir(history):
         raise LogError(f"{history}: no such history folder")
-    partitioning = ds.partitioning(pa.schema([("robot", pa.string())]), flavor="hive")
-    try:
-        dataset = ds.dataset(history, format="parquet", partitioning=partitioning, schema=_full_schema(),
-                             exclude_invalid_files=False, ignore_prefixes=[".", "_"])
-        return dataset.to_table()
-    except (pa.ArrowInvalid, OSError) as exc:
-        raise LogError(f"{history}: cannot read the history ({str(exc).splitlines()[0]})") from None
-
-
-def _full_schema() -> pa.Schema:
-    return SCHEMA.append(pa.field("robot", pa.string()))
+    tables = []
+    for folder in sorted(glob.glob(os.path.join(glob.escape(history), "robot=*"))):
+        robot = os.path.basename(folder).removeprefix("robot=")
+        for path in sorted(glob.glob(os.path.join(glob.escape(folder), "*.parquet"))):
+            try:
+                table = pq.ParquetFile(path).read()
+            except (pa.ArrowInvalid, OSError) as exc:
+                raise LogError(f"{path}: cannot read this part of the history ({str(exc).splitlines()[0]})") from None
+            missing = [f.name for f in SCHEMA if f.name not in table.column_names]
+            if missing:
+                raise LogError(f"{path}: not a fricli history file (no column {missing[0]})")
+            table = table.select([f.name for f in SCHEMA]).cast(SCHEMA)
+            tables.append(table.append_column(pa.field("robot", pa.string()), pa.array([robot] * table.num_rows,
+                                                                                      pa.string())))
+    if not tables:
+        return SCHEMA.append(pa.field("robot", pa.string())).empty_table()
+    return pa.concat_tables(tables)

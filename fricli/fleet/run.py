@@ -71,9 +71,13 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
 
     logging.getLogger("distributed").setLevel(logging.ERROR)  # its shutdown warnings are not ours to show
     n = workers or os.cpu_count() or 1
-    with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  host="127.0.0.1", env=_SINGLE_THREADED) as cluster, \
-            distributed.Client(cluster) as c:
+    import warnings
+
+    with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
+        warnings.simplefilter("ignore", UserWarning)
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED)
+    with cluster, distributed.Client(cluster) as c:
         yield c
 
 
