@@ -104,29 +104,29 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
            "effects": []}
     try:
         opts = options_of(job)
-        reading = {k: opts[k] for k in ("joint", "kt", "drop_invalid")}
-        data = logs.load_log(job.log, cutoff_hz=opts["cutoff"], **reading)
-        out["sha256"] = data.sha256
+        table, digest = logs.read_table(job.log)
+        out["sha256"] = digest
         inputs = {"base": job.base} if job.pipeline == "adapt" else None
-        if job.pipeline == "adapt":
-            base_model, base_meta = models.load(job.base)
-            models.check_log(base_meta, data, job.base)
         os.makedirs(os.path.dirname(job.model), exist_ok=True)
-        record = jobs.job_record(job.pipeline, {k: v for k, v in opts.items()}, inputs)
+        record = jobs.job_record(job.pipeline, opts, inputs)
         with jobs.output_lock(job.model):
-            if if_changed and jobs.up_to_date(job.model, data.sha256, record):
+            if if_changed and jobs.up_to_date(job.model, digest, record):
                 out["status"] = "unchanged"
-            elif job.pipeline == "identify":
-                out.update(_identify(data, opts, record, job.model))
+                return out
+            data = logs.from_table(table, name=job.log, sha256=digest, cutoff_hz=opts["cutoff"],
+                                   **{k: opts[k] for k in ("joint", "kt", "drop_invalid")})
+            if job.pipeline == "identify":
+                made = _identify(data, opts, record, job.model)
             elif job.pipeline == "train-base":
-                out.update(_train_base(data, opts, record, job.model))
+                made = _train_base(data, opts, record, job.model)
             else:
-                out.update(_adapt(data, opts, record, job.model, base_model, base_meta, job.base))
-        if out["status"] != "unchanged":
-            out["status"] = "ok"
-            model = out.pop("model")
-            if job.diagnose:
-                out["effects"], out["reason"] = _diagnose(model, data)
+                base_model, base_meta = models.load(job.base)
+                models.check_log(base_meta, data, job.base)
+                made = _adapt(data, opts, record, job.model, base_model, base_meta, job.base)
+        model = made.pop("model")
+        out.update(made, status="ok")
+        if job.diagnose:
+            out["effects"], out["reason"] = _diagnose(model, data)
     except errors.FricliError as exc:
         out["reason"] = errors.one_line(str(exc))
     except MemoryError:
@@ -134,5 +134,6 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
     except Exception as exc:  # a bug or an unforeseen input: reported in one line, the other jobs go on
         first = str(exc).splitlines()[0] if str(exc) else ""
         out["reason"] = errors.one_line(f"internal error: {type(exc).__name__}: {first}")
-    out["seconds"] = time.perf_counter() - start
+    finally:
+        out["seconds"] = time.perf_counter() - start
     return out
