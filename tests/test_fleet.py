@@ -290,3 +290,21 @@ def test_job_with_diagnose_records_effects_in_process(fleet_dir, tmp_path):
     assert "model" not in result            # only plain data goes back to the client
     again = pipelines.run(job)
     assert again["status"] == "unchanged"
+
+
+def test_manifest_options_over_the_command_defaults(tmp_path):
+    from fricli.fleet import pipelines
+
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "2026-05-04.parquet").write_bytes(b"")
+    (tmp_path / "m.toml").write_text('[options.identify]\ncutoff = 20\nhold = 0.5\n\n'
+                                     '[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [2]\n'
+                                     '[[robot]]\nname = "r2"\nlogs = "logs/*.parquet"\noptions = { travle = 1.0 }\n')
+    first, second = manifest.load(str(tmp_path / "m.toml")).jobs
+    assert first.date == "2026-05-04" and first.joint == "2" and first.model.endswith("models/r1/joint2/2026-05-04.npz")
+    opts = pipelines.options_of(first)
+    assert opts == {"joint": "2", "kt": None, "cutoff": 20.0, "drop_invalid": False, "hold": 0.5, "travel": 0.002,
+                    "refine": False}
+    assert isinstance(opts["cutoff"], float)
+    result = pipelines.run(second)
+    assert result["status"] == "failed" and "unknown identify option 'travle'" in result["reason"]

@@ -34,6 +34,8 @@ def options_of(job: Job) -> dict:
         if name not in out or name == "joint":
             known = ", ".join(sorted(set(out) - {"joint"}))
             raise errors.FricliError(f"unknown {job.pipeline} option {name!r} (known: {known})")
+        if isinstance(out[name], float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)  # TOML's 50 is the command's 50.0: the same job record
         out[name] = value
     out["joint"] = job.joint or None
     return out
