@@ -15,6 +15,9 @@ OUTPUT = 7           # an output that could not be written (disk full, permissio
 LOCKED = 8           # another job holds the lock on the output
 UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
 DEPENDENCY = 10      # an optional dependency (an extra such as fricli[robot]) is not installed
+SOME_FAILED = 11     # fleet: some jobs failed, the others succeeded or were unchanged
+NOTHING_RAN = 12     # fleet: no job could run (unusable manifest, no logs, cluster unreachable, all failed)
+WEAR = 13            # trend: at least one joint is flagged for wear
 
 
 def one_line(text: str) -> str:

@@ -50,8 +50,8 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "identify", "import",
-            "inspect", "predict", "report", "simulate", "train-base"]
+COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
+            "import", "inspect", "predict", "report", "simulate", "train-base", "trend"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():

@@ -25,7 +25,7 @@ from fricli.logs import table_from_arrays
 from fricli.sim import effects as fx
 from fricli.sim import joints, trajectories
 
-SCENARIOS = ("base", "extended", "adapt")
+SCENARIOS = ("base", "extended", "adapt", "daily")
 LOADS = ("none", "sym", "asym")
 INTERNAL_RATE_MIN = 1000.0     # [Hz]
 COUPLING = 0.25                # coupling inertia to the other joints, relative to J
@@ -37,11 +37,11 @@ UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "
 
 
 def default_state(scenario: str) -> str:
-    """Friction state of a scenario: ``base`` (warm) for base, ``shifted`` for extended and adapt."""
-    return "base" if scenario == "base" else "shifted"
+    """Friction state of a scenario: ``base`` (warm) for base and daily, ``shifted`` for extended and adapt."""
+    return "base" if scenario in ("base", "daily") else "shifted"
 
 
-def true_params(joint: int, scenario: str = "base", friction_state: str | None = None) -> dict[str, float]:
+def true_params(joint: int | joints.Joint, scenario: str = "base", friction_state: str | None = None) -> dict[str, float]:
     """The true friction parameters of a scenario (names as in the LuGre model kind).
 
     fc, fs, vs, delta, fv, kc, ks, sigma0, sigma1 (extended LuGre, load tau_l = |tau_g - tau_ext|),
@@ -50,7 +50,7 @@ def true_params(joint: int, scenario: str = "base", friction_state: str | None =
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r} (choose from {', '.join(SCENARIOS)})")
-    j = joints.joint(joint)
+    j = joint if isinstance(joint, joints.Joint) else joints.joint(joint)
     out = j.lugre()
     out.update(t_ref=j.t_ref, alpha_c=j.alpha_c, alpha_v=j.alpha_v)
     out.update(joints.state_params(j, friction_state or default_state(scenario)))
@@ -74,6 +74,8 @@ def _plan(scenario, j, rng, duration, thin=False):
         return trajectories.base_plan(j, rng, thin=thin)
     if scenario == "adapt":
         return trajectories.adapt_plan(j, rng)
+    if scenario == "daily":
+        return trajectories.daily_plan(j, rng)
     return trajectories.extended_plan(j, rng, trajectories.EXTENDED_DURATION if duration is None else duration)
 
 
@@ -121,12 +123,17 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
     return list(out.items())
 
 
+<<<<<<< HEAD
 def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effects=(), seed: int = 0,
              rate: float = 100.0, duration: float | None = None, friction_state: str | None = None,
              thin: bool = False) -> pa.Table:
+=======
+def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str = "none", effects=(), seed: int = 0,
+             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None) -> pa.Table:
+>>>>>>> fleet
     """A simulated log as a pyarrow table (columns and units of the log contract).
 
-    scenario: base | extended | adapt; joint: 2 | 4; load: none | sym | asym (external payload
+    scenario: base | extended | adapt | daily; joint: 2 | 4 or a ``joints.Joint``; load: none | sym | asym (external payload
     measured by the sensor, not in tau_g); effects: ``NAME[=STRENGTH]`` strings (see
     ``fricli.sim.effects.EFFECTS``); rate: output rate [Hz]; duration [s]: extended only;
     friction_state: base | shifted (default: base for the base scenario, else shifted); thin:
@@ -139,9 +146,13 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         raise ValueError(f"unknown load {load!r} (choose from {', '.join(LOADS)})")
     if duration is not None and scenario != "extended":
         raise ValueError("a duration can only be given for the extended scenario")
+<<<<<<< HEAD
     if thin and scenario != "base":
         raise ValueError("thin applies to the base scenario only")
     j = joints.joint(joint)
+=======
+    j = joint if isinstance(joint, joints.Joint) else joints.joint(joint)
+>>>>>>> fleet
     state = friction_state or default_state(scenario)
     state_p = joints.state_params(j, state)
     chosen = resolve_effects(effects)
@@ -194,7 +205,7 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         columns[name] = values[out]
         units[name] = unit
     table = table_from_arrays(columns, units)
-    parameters = true_params(j.number, scenario, state)
+    parameters = true_params(j, scenario, state)
     for name in ("inertia", "gravity_amplitude", "load_amplitude", "noise_sd", "ext_noise_sd"):
         parameters[name] = getattr(j, name)
     meta = {
