@@ -123,14 +123,9 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
     return list(out.items())
 
 
-<<<<<<< HEAD
-def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effects=(), seed: int = 0,
+def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str = "none", effects=(), seed: int = 0,
              rate: float = 100.0, duration: float | None = None, friction_state: str | None = None,
              thin: bool = False) -> pa.Table:
-=======
-def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str = "none", effects=(), seed: int = 0,
-             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None) -> pa.Table:
->>>>>>> fleet
     """A simulated log as a pyarrow table (columns and units of the log contract).
 
     scenario: base | extended | adapt | daily; joint: 2 | 4 or a ``joints.Joint``; load: none | sym | asym (external payload
@@ -146,13 +141,9 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
         raise ValueError(f"unknown load {load!r} (choose from {', '.join(LOADS)})")
     if duration is not None and scenario != "extended":
         raise ValueError("a duration can only be given for the extended scenario")
-<<<<<<< HEAD
     if thin and scenario != "base":
         raise ValueError("thin applies to the base scenario only")
-    j = joints.joint(joint)
-=======
     j = joint if isinstance(joint, joints.Joint) else joints.joint(joint)
->>>>>>> fleet
     state = friction_state or default_state(scenario)
     state_p = joints.state_params(j, state)
     chosen = resolve_effects(effects)
