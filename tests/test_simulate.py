@@ -375,4 +375,13 @@ def test_sample_data_regenerates_identically(tmp_path):
         out = tmp_path / name
         res = runner.invoke(cli, args[:i] + ["-o", str(out)] + args[i + 2:] + ["-q"])
         assert res.exit_code == 0, res.stderr
-        assert pq.read_table(out).equals(pq.read_table(SAMPLE / name), check_metadata=True), name
+        new, stored = pq.read_table(out), pq.read_table(SAMPLE / name)
+        # the same schema and metadata (units, how the log was made); the same numbers up to the
+        # last bits that numpy and libm builds may round differently (seen: 3e-14 Nm in tau_m)
+        assert new.schema.equals(stored.schema, check_metadata=True), name
+        for column in new.column_names:
+            a, b = new.column(column).to_numpy(), stored.column(column).to_numpy()
+            if a.dtype.kind == "f":
+                np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12, err_msg=f"{name}: {column}")
+            else:
+                assert (a == b).all(), f"{name}: {column}"
