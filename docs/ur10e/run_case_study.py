@@ -44,10 +44,13 @@ TARGET_MEAN, TARGET_EACH, TARGET_EXT = 0.70, 0.85, 0.80
 COMMANDS: list[str] = []
 
 
-def fricli(*args: str, json_out: bool = False):
-    """Run one fricli command as a user would; returns its JSON output when asked."""
+def fricli(*args: str, json_out: bool = False, skip: bool = False):
+    """Run one fricli command as a user would; returns its JSON output when asked. ``skip``
+    only records it (its output is already there)."""
     shown = " ".join(a if " " not in a else repr(a) for a in args)
     COMMANDS.append(shown)
+    if skip:
+        return None
     print(f"$ fricli {shown}", file=sys.stderr, flush=True)
     done = subprocess.run([sys.executable, "-m", "fricli", *args], capture_output=True, text=True,
                           env=dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")))
@@ -63,14 +66,14 @@ def validation_runs(data: str) -> list[str]:
     return [n for n in names if not n.startswith(day)]
 
 
-def import_run(data: str, work: str, name: str, payload: bool = False) -> str:
+def import_run(data: str, work: str, name: str, payload: bool = False, keep: bool = False) -> str:
     out = os.path.join(work, name + ("-payload" if payload else "") + ".parquet")
     args = ["import", os.path.join(data, "identification", name + ".csv"), "--mapping", MAPPING,
             "--urdf", os.path.join(data, "ur10e.urdf"), "--cutoff", str(CUTOFF_HZ), "-o", out, "-q"]
     if payload:
         args += ["--payload-mass", str(PAYLOAD["mass"]), "--payload-com", *map(str, PAYLOAD["com"]),
                  "--payload-frame", PAYLOAD["frame"]]
-    fricli(*args)
+    fricli(*args, skip=keep and os.path.exists(out))
     return out
 
 
@@ -110,20 +113,36 @@ def friction_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float
             "above_floor": rms(np.concatenate(fast)), "above_floor_moving": rms(np.concatenate(fast_moving))}
 
 
-def predicted(model: str, path: str, joint: int, work: str, column: str = "tau_f_pred",
-              command: str = "predict") -> np.ndarray:
-    out = os.path.join(work, f"{command}-j{joint}-{os.path.basename(path)}")
-    fricli(command, model, path, "--joint", str(joint), "-o", out, "-q")
+def predicted(model: str, path: str, joint: int) -> np.ndarray:
+    """tau_f_pred of ``model`` on one joint of a log: what ``fricli predict`` writes (same code,
+    called in-process: the validation takes 6 x 11 predictions)."""
+    return predicting_model(model).predict(signals(path, joint))[0]
+
+
+_MODELS: dict = {}
+
+
+def predicting_model(path: str):
+    if path not in _MODELS:
+        from fricli import models
+
+        _MODELS[path] = models.load(path)[0]
+    return _MODELS[path]
+
+
+def estimated_external(model: str, path: str, joint: int, work: str) -> np.ndarray:
+    out = os.path.join(work, f"ext-j{joint}-{os.path.basename(path)}")
+    fricli("estimate-ext", model, path, "--joint", str(joint), "-o", out, "-q")
     table = logs.read_table(out)[0]
-    return np.asarray(table.column(column).to_numpy(), dtype=np.float64)
+    return np.asarray(table.column("tau_ext_pred").to_numpy(), dtype=np.float64)
 
 
-def study(data: str, work: str, joints, runs: int | None) -> dict:
+def study(data: str, work: str, joints, runs: int | None, keep: bool = False) -> dict:
     val_names = validation_runs(data)[:runs] if runs else validation_runs(data)
-    fit_log = import_run(data, work, FIT_RUN)
-    val_logs = [import_run(data, work, n) for n in val_names]
-    load_log = import_run(data, work, LOAD_RUN)
-    load_ref_log = import_run(data, work, LOAD_RUN, payload=True)
+    fit_log = import_run(data, work, FIT_RUN, keep=keep)
+    val_logs = [import_run(data, work, n, keep=keep) for n in val_names]
+    load_log = import_run(data, work, LOAD_RUN, keep=keep)
+    load_ref_log = import_run(data, work, LOAD_RUN, payload=True, keep=keep)
 
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {}}
     for j in joints:
@@ -139,15 +158,15 @@ def study(data: str, work: str, joints, runs: int | None) -> dict:
             "linear_coef": coef.tolist(),
             "linear": friction_errors(lambda p, s: linear_columns(s) @ coef, val_logs, j),
             "published": friction_errors(lambda p, s: linear_columns(s) @ published, val_logs, j),
-            "lugre": friction_errors(lambda p, s: predicted(lugre, p, j, work), val_logs, j),
-            "fixed": friction_errors(lambda p, s: predicted(fixed, p, j, work), val_logs, j),
+            "lugre": friction_errors(lambda p, s: predicted(lugre, p, j), val_logs, j),
+            "fixed": friction_errors(lambda p, s: predicted(fixed, p, j), val_logs, j),
             "diagnose": diag,
         }
         # external torque of the payload run, models fitted on its unloaded twin
         sig = signals(load_log, j)
         ref_sig = signals(load_ref_log, j)
         reference = -((ref_sig["tau_g"] + ref_sig["tau_dyn"]) - (sig["tau_g"] + sig["tau_dyn"]))
-        ext_fixed = predicted(fixed, load_log, j, work, "tau_ext_pred", "estimate-ext")
+        ext_fixed = estimated_external(fixed, load_log, j, work)
         ext_linear = logs.external_torque(sig, linear_columns(sig) @ coef)
         row["payload"] = {"reference_rms": rms(reference), "fixed": rms(ext_fixed - reference),
                           "linear": rms(ext_linear - reference),
@@ -196,26 +215,37 @@ def tables(res: dict) -> dict[str, str]:
         model_err = [_fmt_effect(e) for e in added if e.get("part") == "model"]
         fric = [_fmt_effect(e) for e in added if e.get("part") != "model"]
         unexplained = d.get("unexplained_share")
-        diag_rows.append(f"| {j} | {'; '.join(model_err) or '–'} | {'; '.join(fric) or '–'} | "
+        gravity = next((e for e in d["effects"] if e["name"] == "gravity"), None)
+        if gravity is None or gravity.get("params", {}).get("error", {}).get("value") is None:
+            grav = "not tested"
+        else:
+            grav = (f"{gravity['params']['error']['value']:+.1f} % "
+                    f"({'added' if 'gravity' in d['added'] else 'not added'}, gain {gravity['gain']:.0%})")
+        diag_rows.append(f"| {j} | {grav} | {'; '.join(model_err) or '–'} | {'; '.join(fric) or '–'} | "
                          f"{d['mae_before']:.3f} → {d['mae_after']:.3f} | "
                          f"{'' if unexplained is None else f'{unexplained:.0%}'} | "
                          f"{r['lugre']['all']:.3f} → {r['fixed']['all']:.3f} |")
     diagnose = "\n".join([
-        "| joint | robot-model errors found | friction effects added | held-out MAE on the fitting run [Nm] | "
+        "| joint | gravity-model error (logged vs true) | robot-model errors added | friction effects added | held-out MAE on the fitting run [Nm] | "
         "unexplained share left | RMS on other days, before → after [Nm] |",
-        "|---|---|---|---|---|---|", *diag_rows])
+        "|---|---|---|---|---|---|---|", *diag_rows])
 
     ext_rows = []
     for j, r in res["joints"].items():
         p = r["payload"]
         ext_rows.append(f"| {j} | {p['reference_rms']:.2f} | {p['fixed']:.3f} | {p['linear']:.3f} | "
-                        f"**{p['fixed'] / p['linear']:.2f}** | {1 + p['fixed_gain']:.0%} | {1 + p['linear_gain']:.0%} |")
+                        f"**{p['fixed'] / p['linear']:.2f}** | {_share(p, 'fixed_gain')} | {_share(p, 'linear_gain')} |")
     external = "\n".join([
         "| joint | payload torque (RMS) [Nm] | fricli error [Nm] | linear error [Nm] | ratio | "
         "share of the payload torque fricli sees | linear sees |",
         "|---|---|---|---|---|---|---|", *ext_rows])
     return {"friction": friction, "diagnose": diagnose, "external": external,
             "mean_all": mean_all, "mean_moving": mean_mov, "ratios": ratios}
+
+
+def _share(p: dict, key: str) -> str:
+    """Share of the payload torque an estimate follows; none where the payload exerts none."""
+    return f"{1 + p[key]:.0%}" if p["reference_rms"] > 0.05 else "– (no payload torque)"
 
 
 def figures(res: dict, img: str) -> list[str]:
@@ -264,6 +294,18 @@ def figures(res: dict, img: str) -> list[str]:
     return written
 
 
+def _to_list(x):
+    return np.asarray(x).tolist()
+
+
+def _from_json(saved: dict) -> tuple[dict, list[str]]:
+    res = saved["result"]
+    res["joints"] = {int(j): r for j, r in res["joints"].items()}
+    for r in res["joints"].values():
+        r["payload_series"] = {k: np.asarray(v) for k, v in r["payload_series"].items()}
+    return res, saved["commands"]
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA, help="folder of the UR10e recordings")
@@ -271,6 +313,9 @@ def main(argv=None) -> None:
     ap.add_argument("--out", default=ROOT, help="where docs/case-study-ur10e.md and docs/img/ go (default: this clone)")
     ap.add_argument("--joints", default="1,2,3,4,5,6", help="joints to study, e.g. 6")
     ap.add_argument("--runs", type=int, default=None, help="use only the first N validation runs")
+    ap.add_argument("--keep-imports", action="store_true", help="reuse the logs already imported into --work")
+    ap.add_argument("--reuse", action="store_true",
+                    help="rewrite the document from the figures of the last run in --work (no fricli commands)")
     args = ap.parse_args(argv)
     joints = [int(j) for j in args.joints.split(",")]
     docs, img = os.path.join(args.out, "docs"), os.path.join(args.out, "docs", "img")
@@ -278,11 +323,19 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or tmp
         os.makedirs(work, exist_ok=True)
-        res = study(args.data, work, joints, args.runs)
+        saved = os.path.join(work, "study.json")
+        if args.reuse:
+            with open(saved) as fh:
+                res, COMMANDS[:] = _from_json(json.load(fh))
+        else:
+            res = study(args.data, work, joints, args.runs, keep=args.keep_imports)
+            atomic_write_bytes(saved, json.dumps({"result": res, "commands": COMMANDS}, default=_to_list).encode())
     pictures = figures(res, img)
     import case_study_text  # docs/ur10e/case_study_text.py: the words around the figures
 
-    text = case_study_text.render(res, tables(res), COMMANDS, full=(args.runs is None and len(joints) == 6))
+    shown = [c.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA")
+             .replace(ROOT + os.sep, "") for c in COMMANDS]
+    text = case_study_text.render(res, tables(res), shown, full=(len(res["joints"]) == 6 and res["validation_runs"] == validation_runs(args.data)))
     atomic_write_bytes(os.path.join(docs, "case-study-ur10e.md"), text.encode())
     summary = {j: {k: r[k] for k in ("linear_coef", "linear", "published", "lugre", "fixed", "payload", "diagnose")}
                for j, r in res["joints"].items()}
