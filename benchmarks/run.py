@@ -444,6 +444,7 @@ def main(argv=None) -> dict:
             add("predict", f"{kind}: predict command file to file (wall), {np_rows:,} rows", np_rows / secs,
                 "samples/s")
         del big
+        export_rows(add, paths, ext, reps, args.quick)
 
         # ---- diagnosis
         say("diagnose")
@@ -475,6 +476,33 @@ def main(argv=None) -> dict:
     else:
         print(table)
     return res
+
+
+def export_rows(add, paths: dict[str, str], log: logs.Log, reps: int, quick: bool) -> None:
+    """Exported C (``fricli export``): ns per call of the step function, compiled with the system C
+    compiler at -O2 and timed in CPU time over the rows of ``log``, next to ns per sample of
+    ``model.predict`` in double precision (the same arithmetic) on the same rows."""
+    from fricli import models
+    from fricli.export import c, check
+
+    if check.compiler() is None:
+        add("export", "exported C step", None, "", "skipped: no C compiler")
+        return
+    targets = {"lugre": "target <= 50", "mlp": "target <= 300 (default neural model)"}
+    with tempfile.TemporaryDirectory() as tmp:
+        for kind in KINDS:
+            model, _ = models.load(paths[kind])
+            header, exe = os.path.join(tmp, f"{kind}.h"), os.path.join(tmp, kind)
+            with open(header, "w") as fh:
+                fh.write(c.export(paths[kind], "fr"))
+            check.build(header, "fr", exe)
+            x = check.signal_matrix(log.signals, c.signals_of(model))
+            ns = min(check.time_step(exe, x, 0.05 if quick else 0.5) for _ in range(reps))
+            add("export", f"{kind}: exported C step (-O2), {len(x):,} rows", ns, "ns/sample", targets.get(kind, ""))
+            models.set_precision(model, "double")
+            secs = median_time(lambda: model.predict(log.signals), reps)
+            add("export", f"{kind}: model.predict, double precision, {len(x):,} rows", 1e9 * secs / len(x),
+                "ns/sample")
 
 
 def scaling(x, t, size, reps, torch, threads, base_log, paths) -> dict:

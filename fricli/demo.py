@@ -38,16 +38,17 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int = DEFAU
     say(f"identify: extended LuGre on {os.path.basename(base_log.name)}")
     idf = LuGreIdentifier().fit(base_log.signals, units=base_log.units, axis=base_log.axis)
     models.save_for_log(paths["lugre"], idf.model_, base_log, rows_used=len(base_log), fit=idf.fit_)
-    for arch, key in (("mlp", "nn_base"), ("selmic", "selmic"), ("nnacm", "nnacm")):
+    for arch, key in ((learning.DEFAULT_ARCH, "nn_base"), ("selmic", "selmic"), ("nnacm", "nnacm")):
         say(f"train-base: {arch}, {steps:,} full-batch Adam steps")
         model, summary = learning.train_base(base_log, arch=arch, steps=steps, seed=seed)
         models.save_for_log(paths[key], model, base_log, rows_used=summary["train_rows"], seed=seed, fit=summary)
     say(f"adapt: NN_add on the residual of NN_base over {os.path.basename(adapt_log.name)} "
         f"({adapt_log.signals['t'][-1] - adapt_log.signals['t'][0]:.1f} s, no external load)")
     for base_key, key in (("nn_base", "adapted"), ("lugre", "lugre_adapted")):
-        base, _ = models.load(paths[base_key])
+        base, base_meta = models.load(paths[base_key])
         adapted, summary = learning.adapt(base, adapt_log, seed=seed)
-        models.save_for_log(paths[key], adapted, adapt_log, rows_used=summary["rows_used"], seed=seed, fit=summary)
+        models.save_for_log(paths[key], adapted, adapt_log, rows_used=summary["rows_used"], seed=seed, fit=summary,
+                            envelope=base_meta.get("envelope"))
 
     say("evaluate: friction and external torque on the extended logs")
     loaded = {key: models.load(path) for key, path in paths.items()}

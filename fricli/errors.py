@@ -14,6 +14,10 @@ DATA = 6             # a valid log that holds too little to do the job (no motio
 OUTPUT = 7           # an output that could not be written (disk full, permissions)
 LOCKED = 8           # another job holds the lock on the output
 UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
+DEPENDENCY = 10      # an optional dependency (an extra such as fricli[robot]) is not installed
+SOME_FAILED = 11     # fleet: some jobs failed, the others succeeded or were unchanged
+NOTHING_RAN = 12     # fleet: no job could run (unusable manifest, no logs, cluster unreachable, all failed)
+WEAR = 13            # trend: at least one joint is flagged for wear
 
 
 def one_line(text: str) -> str:
@@ -50,3 +54,7 @@ class OutputError(FricliError):
 
 class LockedError(FricliError):
     exit_code = LOCKED
+
+
+class MissingDependencyError(FricliError):
+    exit_code = DEPENDENCY

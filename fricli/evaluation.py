@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from fricli import logs, metrics, models
+from fricli.envelope import share_outside
 from fricli.predicting import external_estimate
 
 
@@ -18,6 +19,8 @@ class Result:
     external: dict | None          # errors of tau_ext_pred against tau_ext [Nm], if measured
     friction_moving: dict          # the same over the rows in motion (metrics.in_motion)
     external_moving: dict | None
+    joint: object = None           # the log's joint the row is for (None: no joint column)
+    extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
@@ -33,27 +36,37 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
         external = metrics.errors(sig["tau_ext"], est)
         external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
     return Result(model_name, log_name, metrics.errors(target, pred), external,
-                  metrics.errors(target[moving], pred[moving]), external_moving)
+                  metrics.errors(target[moving], pred[moving]), external_moving,
+                  extrapolation=share_outside(models.envelope(meta, model_name), sig))
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
              read_kwargs: dict | None = None) -> list[Result]:
-    """Every model on every log. A log with several joints is read for each model's joint."""
-    loaded = {name: models.load(path) for name, path in model_paths.items()}
+    """Every model on every log. A model is a file or a model set folder; which model applies to
+    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint."""
+    from fricli import joints, modelset
+
+    sources = {name: modelset.source(path) for name, path in model_paths.items()}
     tables = {name: logs.read_table(path) for name, path in log_paths.items()}
     read_kwargs = dict(read_kwargs or {})
-    joint_override = read_kwargs.pop("joint", None)
+    requested = read_kwargs.pop("joint", None)
     results = []
     cache: dict = {}
-    for mname, (model, meta) in loaded.items():
+    for mname, source in sources.items():
         for lname, (table, digest) in tables.items():
-            joint = joint_override if joint_override is not None else (
-                meta.get("joint") if "joint" in table.column_names else None)
-            key = (lname, str(joint))
-            if key not in cache:
-                cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint, **read_kwargs)
-            results.append(evaluate_one(model, meta, cache[key], lowpass_hz=lowpass_hz,
-                                        model_name=mname, log_name=lname))
+            lpath = log_paths[lname]
+            for joint, path in joints.pair(source, logs.joints_of(table, lpath), requested, lpath):
+                key = (lname, str(joint))
+                if key not in cache:
+                    cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint,
+                                                 **read_kwargs)
+                if path not in cache:
+                    cache[path] = models.load(path)
+                model, meta = cache[path]
+                result = evaluate_one(model, meta, cache[key], lowpass_hz=lowpass_hz, model_name=mname,
+                                      log_name=lname)
+                result.joint = joint
+                results.append(result)
     return results
 
 
@@ -63,10 +76,12 @@ def to_json(results: list[Result], model_paths: dict, log_paths: dict, lowpass_h
 
 
 def markdown_table(results: list[Result], model_names: list[str], log_names: list[str]) -> str:
-    """Rows: models; columns: logs; cells: friction MAE (and external-torque MAE) in Nm, all
-    rows and, in brackets, rows in motion."""
-    by = {(r.model, r.log): r for r in results}
-    has_ext = {ln: any(by[(mn, ln)].external for mn in model_names) for ln in log_names}
+    """Rows: models (a row per joint when the results cover several joints); columns: logs; cells:
+    friction MAE (and external-torque MAE) in Nm, all rows and, in brackets, rows in motion."""
+    by = {(r.model, str(r.joint), r.log): r for r in results}
+    rows = list(dict.fromkeys((r.model, r.joint) for r in results))
+    labelled = len({str(r.joint) for r in results}) > 1
+    has_ext = {ln: any(r.external for r in results if r.log == ln) for ln in log_names}
     head = ["model"]
     for ln in log_names:
         head.append(f"{ln} friction MAE")
@@ -74,13 +89,13 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
             head.append(f"{ln} ext. torque MAE")
     lines = ["MAE over all rows (in brackets: rows in motion, |qd| > 2 % of the top speed)", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    for mn in model_names:
-        row = [mn]
+    for mn, joint in rows:
+        row = [f"{mn} (joint {joint})" if labelled else mn]
         for ln in log_names:
-            r = by[(mn, ln)]
-            row.append(f"{r.friction['mae']:.3f} ({r.friction_moving['mae']:.3f})")
+            r = by.get((mn, str(joint), ln))
+            row.append(f"{r.friction['mae']:.3f} ({r.friction_moving['mae']:.3f})" if r else "–")
             if has_ext[ln]:
-                row.append(f"{r.external['mae']:.3f} ({r.external_moving['mae']:.3f})" if r.external else "–")
+                row.append(f"{r.external['mae']:.3f} ({r.external_moving['mae']:.3f})" if r and r.external else "–")
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 

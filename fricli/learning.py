@@ -9,12 +9,16 @@ from typing import Callable
 import numpy as np
 
 from fricli import logs, metrics, training_data
+from fricli.envelope import share_outside
 from fricli.errors import DataError
 from fricli.models.base import FrictionModel
-from fricli.models.neural import ARCHS
+from fricli.models.dissipative import DissipativeFriction
+from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
 
-DEFAULT_HIDDEN = {"mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
+ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
+DEFAULT_ARCH = "dissipative"
+DEFAULT_HIDDEN = {"dissipative": (30, 30), "mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
 DEFAULT_MAX_SAMPLES = 2500
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
@@ -39,17 +43,18 @@ def check_motion(name: str, qd: np.ndarray, moving: np.ndarray, job: str) -> Non
                             f"{MIN_ROWS_PER_DIRECTION} moving samples in each direction (a movement out and back)")
 
 
-def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | None = None, steps: int = 50_000,
+def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ...] | None = None, steps: int = 50_000,
                lr: float = 0.01, batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
-    """Train a network (``arch`` mlp, selmic or nnacm) on the friction target of ``log``.
+    """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
     Rows at rest (|qd| under 0.1 % of the top speed) are left out: the friction there is held
     by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
-    quantile of the training speeds; "linear" feeds qd itself. Returns (model,
+    quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
+    always sees asinh(|qd| / v0)). Returns (model,
     summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the training rows,
     the validation rows, the moving rows and the whole log.
     """
@@ -57,6 +62,9 @@ def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | No
         raise ValueError(f"unknown architecture {arch!r}")
     if velocity_input not in VELOCITY_INPUTS:
         raise ValueError(f"unknown velocity input {velocity_input!r}")
+    if arch == "dissipative" and velocity_input != "asinh":
+        raise ValueError("the dissipative network always sees asinh(|qd| / v0): --velocity-input linear "
+                         "applies to the paper's networks (mlp, selmic, nnacm)")
     sig = log.signals
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
@@ -79,6 +87,8 @@ def train_base(log: logs.Log, *, arch: str = "mlp", hidden: tuple[int, ...] | No
                "log": metrics.errors(target, pred)}
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
+    if getattr(model, "v_ps_", None) is not None:
+        summary["presliding_speed"] = model.v_ps_
     return model, summary
 
 
@@ -96,7 +106,8 @@ def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]
 
 def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int = 200, batch_size: int = 64,
           lr: float = 0.01, seed: int = 0, val_fraction: float = 0.2, max_seconds: float | None = None,
-          min_speed: float | None = None, on_eval: Callable | None = None) -> tuple[ResidualFriction, dict]:
+          min_speed: float | None = None, on_eval: Callable | None = None,
+          base_envelope=None) -> tuple[ResidualFriction, dict]:
     """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
 
     Rows slower than ``min_speed`` (default 2 % of the log's top speed) are left out: at rest
@@ -104,7 +115,8 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
     nothing about (tau_g, direction)), and sign(qd) flips with noise. When the log moves at
     discrete velocities (the paper's one velocity out and back), only the rows at those
     velocities are used, not the accelerations between them. When predicting, rows at rest get
-    sign(qd) = 0, between the network's two directions.
+    sign(qd) = 0, between the network's two directions. ``base_envelope`` (the base's training
+    envelope, ``fricli.envelope.Envelope``): the summary gives the share of the log outside it.
     """
     sig = first_seconds(log, max_seconds)
     qd = sig["qd"]
@@ -126,7 +138,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
                              min_speed=float(min_speed), units=log.units)
     base_pred = base.predict(sig)[0]
     model.fit(sig, target, sel.train, sel.val, rng=rng, on_eval=on_eval, base_pred=base_pred)
-    pred = base_pred + model.add.predict(sig)[0]
+    pred = model.on_base(sig, base_pred)
     moving_rows = np.flatnonzero(moving)
     summary = {**sel.summary(), "rows_used": int(len(qd)), "seconds_used": float(sig["t"][-1] - sig["t"][0]),
                "min_speed": float(min_speed), "epochs": epochs, "batch_size": batch_size,
@@ -137,5 +149,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
         summary["base_val"] = _errors(target, base_pred, sel.val)
+    if base_envelope is not None:
+        summary["outside_base_envelope"] = share_outside(base_envelope, sig)
     return model, summary
 

@@ -24,6 +24,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from fricli import joints
 from fricli.atomic import atomic_open
 from fricli.errors import DataError, LogError
 
@@ -69,6 +70,17 @@ def canonical_unit(spelling: str) -> str:
     if s not in _UNITS:
         raise LogError(f"unknown unit {spelling!r}")
     return s
+
+
+def column_unit(column: str, spelling: str) -> tuple[str | None, float]:
+    """(axis kind, factor to the canonical unit) of ``spelling`` for a known column: the kind is
+    ``rotary`` or ``linear`` for motion and torque columns, None for t, i_m and temp. LogError
+    when the unit is unknown or does not fit the column."""
+    dim, factor = _UNITS[canonical_unit(spelling)]
+    for axis, expected in _EXPECTED[column].items():
+        if dim == expected:
+            return (None if expected == _EXPECTED[column]["linear"] == _EXPECTED[column]["rotary"] else axis), factor
+    raise LogError(f"unit {spelling!r} does not fit column {column!r}")
 
 
 def field_unit(field: pa.Field) -> str | None:
@@ -262,13 +274,17 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     return mask
 
 
+def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
+    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below the Nyquist
+    frequency (by more than 1 ppm: a recorded sample rate carries rounding in its timestamps)."""
+    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t))) * (1 - 1e-6)
+
+
 def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
-    if len(x) < 16:
+    if not lowpass_applies(t, cutoff_hz):
         return x.copy()
     fs = 1.0 / float(np.median(np.diff(t)))
-    if cutoff_hz >= 0.5 * fs:
-        return x.copy()
     from scipy import signal  # imported here: it costs about a second at start-up
 
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
@@ -293,28 +309,27 @@ def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
 
 
-def joints_of(table: pa.Table) -> list:
+def joints_of(table: pa.Table, name: str = "log") -> list | None:
+    """The joints in the log's ``joint`` column in order of appearance; None without the column
+    (or with one of nulls only, ``joints.named``)."""
     if "joint" not in table.column_names:
-        return [None]
-    return list(dict.fromkeys(table.column("joint").to_pylist()))
+        return None
+    return joints.named(list(dict.fromkeys(table.column("joint").to_pylist())), name)
 
 
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
-    """Rows of one joint. ``joint=None`` means the only joint; several need a choice."""
-    joints = joints_of(table)
-    if joints == [None] or not joints:  # no joint column, or no rows (refused as empty later)
+    """Rows of one joint by the joint rule (``fricli.joints``): ``joint=None`` means the only
+    joint; several need a choice; ``--joint`` on a log without a joint column is refused."""
+    found = joints_of(table, name)
+    if found is None:
+        return table, joints.select(None, joint, name)[0]   # refuses --joint
+    if not found:  # no rows: refused as empty later
         return table, joint
-    if joint is None:
-        if len(joints) > 1:
-            listed = ", ".join(str(j) for j in joints)
-            raise LogError(f"{name}: the log holds joints {listed}: choose one with --joint")
-        joint = joints[0]
-    match = [j for j in joints if str(j) == str(joint)]
-    if not match:
-        listed = ", ".join(str(j) for j in joints)
-        raise LogError(f"{name}: no joint {joint} in the log (it holds {listed})")
+    covered = joints.select(found, joint, name)
+    if len(covered) > 1:
+        raise joints.several(found, name)
     import pyarrow.compute as pc
-    return table.filter(pc.equal(table.column("joint"), pa.scalar(match[0]))), match[0]
+    return table.filter(pc.equal(table.column("joint"), pa.scalar(covered[0]))), covered[0]
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
@@ -341,29 +356,26 @@ def load_log(path: str, **kwargs) -> Log:
 
 def friction_target(sig: dict[str, np.ndarray]) -> np.ndarray:
     """tau_f = tau_m + tau_ext - tau_g - tau_dyn [Nm]: the torque lost to friction,
-    positive along the motion. Absent optional terms count as zero."""
-    out = sig["tau_m"].copy()
-    for column, sign in (("tau_ext", 1.0), ("tau_g", -1.0), ("tau_dyn", -1.0)):
-        if column in sig:
-            out += sign * sig[column]
-    return out
+    positive along the motion. Absent optional terms count as zero (``column``)."""
+    return sig["tau_m"] + column(sig, "tau_ext") - column(sig, "tau_g") - column(sig, "tau_dyn")
 
 
 def external_torque(sig: dict[str, np.ndarray], tau_f_pred: np.ndarray) -> np.ndarray:
     """tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m [Nm]."""
-    out = tau_f_pred - sig["tau_m"]
-    for column in ("tau_g", "tau_dyn"):
-        if column in sig:
-            out = out + sig[column]
-    return out
+    return tau_f_pred - sig["tau_m"] + column(sig, "tau_g") + column(sig, "tau_dyn")
 
 
-def column(sig: dict[str, np.ndarray], name: str) -> np.ndarray:
-    """A signal, or zeros for the optional torque terms."""
+# Torque terms a log may leave out: a missing one counts as zero everywhere.
+OPTIONAL_TORQUES = ("tau_g", "tau_dyn", "tau_ext")
+
+
+def column(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
+    """Rows start:stop of a signal, or zeros for a missing optional torque term (OPTIONAL_TORQUES)."""
     if name in sig:
-        return sig[name]
-    if name in ("tau_g", "tau_dyn", "tau_ext"):
-        return np.zeros_like(sig["t"])
+        return sig[name][start:stop]
+    if name in OPTIONAL_TORQUES:
+        rows = next((len(v) for v in sig.values()), 0)
+        return np.zeros(len(range(rows)[start:stop]))
     raise DataError(f"the log has no column {name!r}")
 
 

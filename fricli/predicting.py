@@ -1,10 +1,12 @@
 """Batched prediction and external-torque estimation for any model kind.
 
-``run`` reads a log in record batches (``pq.ParquetFile.iter_batches``), checks each batch
-against the log contract (``t`` strictly increasing across batch boundaries too), predicts with
-the model's state carried from one batch to the next (e.g. the LuGre bristle state), and streams
-the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All columns and
-their field and schema metadata are carried through.
+``run_models`` reads a log in record batches (``pq.ParquetFile.iter_batches``), checks each
+batch against the log contract (``t`` strictly increasing across batch boundaries too), predicts
+with the model's state carried from one batch to the next (e.g. the LuGre bristle state), and
+streams the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All
+columns and their field and schema metadata are carried through. On a log of several joints
+each joint covered gets its own model (the joint rule, fricli/joints.py), state and time check;
+the rows keep their order.
 
 The log is read whole instead, as one batch, when a batch-wise reading would change the result:
 when ``qd`` or ``qdd`` must be derived from ``q`` (the zero-phase filter needs the whole series)
@@ -24,9 +26,9 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from fricli import logs, models
+from fricli import joints, logs, models
 from fricli.atomic import atomic_open
-from fricli.errors import LogError
+from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
 
 DEFAULT_BATCH_ROWS = 262_144
@@ -51,6 +53,12 @@ class ErrorSums:
         self.sq_sum += float(np.einsum("i,i->", e, e))
         self.max = max(self.max, float(np.max(np.abs(e))))
 
+    def merge(self, other: "ErrorSums") -> None:
+        self.n += other.n
+        self.abs_sum += other.abs_sum
+        self.sq_sum += other.sq_sum
+        self.max = max(self.max, other.max)
+
     def result(self) -> dict:
         if self.n == 0:
             return {"mae": float("nan"), "rmse": float("nan"), "max": float("nan"), "n": 0}
@@ -61,18 +69,21 @@ class ErrorSums:
 @dataclasses.dataclass
 class Result:
     rows: int                      # rows written
-    joint: object                  # the joint predicted for (None: the log has no joint column)
+    joint: object                  # the joint predicted for (None: no joint column, or several joints)
     unit: str                      # unit of the torque columns (Nm or N)
     friction: dict                 # errors of tau_f_pred against the friction target
     external: dict | None          # errors of tau_ext_pred against the sensor column tau_ext
     batches: int
     read_whole: str | None         # why the log was read whole, or None
     dropped: int                   # rows dropped by --drop-invalid
+    per_joint: dict | None = None  # several joints: {joint: {"rows", "model", "friction"[, "external"]}}
+    extrapolation: dict | None = None   # rows outside the training envelope (None: no model has one)
 
     def as_json(self) -> dict:
         out = dataclasses.asdict(self)
-        if out["external"] is None:
-            del out["external"]
+        for key in ("external", "per_joint", "extrapolation"):
+            if out[key] is None:
+                del out[key]
         return out
 
 
@@ -94,38 +105,19 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
         raise LogError(f"{path}: not a Parquet file") from None
 
 
-def choose_joint(pf: pq.ParquetFile, name: str, requested, model_joint,
-                 warn: Callable[[str], None] | None) -> tuple[object, int]:
-    """(joint, number of joints in the log): --joint, else the only joint in the log, else the
-    model's joint."""
+def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
+    """The joints in the file's ``joint`` column in order of appearance (None without the column),
+    read row group by row group: the whole column of a large log is hundreds of MB."""
     if "joint" not in pf.schema_arrow.names:
-        return requested, 0
+        return None
     found: dict = {}
-    try:  # row group by row group: the whole column of a large log is hundreds of MB
+    try:
         for group in range(pf.num_row_groups):
             column = pf.read_row_group(group, columns=["joint"]).column("joint")
             found.update(dict.fromkeys(pc.unique(column).to_pylist()))
     except Exception as exc:
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
-    joints = list(found)
-    if not joints:
-        return requested, 0
-    choice = requested
-    if choice is None:
-        if len(joints) == 1:
-            choice = joints[0]
-            if model_joint is not None and str(model_joint) != str(choice) and warn:
-                warn(f"warning: the model was fitted on joint {model_joint}; the log holds joint {choice}")
-        elif model_joint is not None:
-            choice = model_joint
-        else:
-            listed = ", ".join(str(j) for j in joints)
-            raise LogError(f"{name}: the log holds joints {listed}: choose one with --joint")
-    match = [j for j in joints if str(j) == str(choice)]
-    if not match:
-        listed = ", ".join(str(j) for j in joints)
-        raise LogError(f"{name}: no joint {choice} in the log (it holds {listed})")
-    return match[0], len(joints)
+    return joints.named(list(found), name)
 
 
 def whole_reason(schema: pa.Schema, lowpass_hz: float | None) -> str | None:
@@ -158,71 +150,93 @@ def _batches(pf: pq.ParquetFile, name: str, batch_rows: int, whole: bool) -> Ite
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
 
 
-def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, external: bool = False,
-        lowpass_hz: float | None = None, joint=None, kt: float | None = None,
-        cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
-        warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
-        progress: bool = False, model_name: str = "model") -> Result:
-    """Predict friction on the log at ``log_path`` and write it with ``tau_f_pred`` added to
-    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external``. Returns the figures."""
+@dataclasses.dataclass
+class _Stream:
+    """One joint's model and what carries from one batch to the next."""
+
+    joint: object
+    model: FrictionModel
+    meta: dict
+    model_name: str
+    env: object = None             # the training envelope (fricli.envelope), None for older files
+    state: object = None
+    t_last: float | None = None
+    outside: int = 0
+    rows: int = 0
+    fric: ErrorSums = dataclasses.field(default_factory=ErrorSums)
+    ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
+
+
+_ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart
+
+
+def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, model_name: str = "model",
+        **kwargs) -> Result:
+    """``run_models`` with one model in memory (its recorded joint applies, docs/joints.md)."""
+    source = joints.Source(model_name, {meta.get("joint"): model_name})
+    return run_models(source, log_path, out_path, load=lambda _path: (model, meta), **kwargs)
+
+
+def run_models(source: joints.Source, log_path: str, out_path: str, *, external: bool = False,
+               lowpass_hz: float | None = None, joint=None, kt: float | None = None,
+               cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
+               warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
+               progress: bool = False, load: Callable[[str], tuple] = models.load,
+               flag_extrapolation: bool = False) -> Result:
+    """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
+    file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` added to
+    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
+    ``extrapolating`` (the row lies outside its model's training envelope) when ``flag_extrapolation``.
+    Rows keep their order;
+    rows of joints the run does not cover are left out. Returns the figures."""
     from tqdm import tqdm
 
     pf, name = open_log(log_path)
-    joint, n_joints = choose_joint(pf, name, joint, meta.get("joint"), warn)
-    multi = n_joints > 1
+    found = file_joints(pf, name)
+    streams = {}
+    for j, path in joints.pair(source, found, joint, name):
+        model, meta = load(path)
+        streams[j] = _Stream(j, model, meta, path, env=models.envelope(meta, path))
+    several = len(streams) > 1
+    filtered = found is not None and len(found) > len(streams)
     reason = whole_reason(pf.schema_arrow, lowpass_hz if external else None)
     warnings: list[str] = []
     fric, ext_err = ErrorSums(), ErrorSums()
-    state = None
-    t_last = None
     rows = batches = dropped = 0
     unit = None
     has_ext = False
     total = pf.metadata.num_rows
+    for st in streams.values():
+        if flag_extrapolation and st.env is None:
+            raise ModelFileError(f"{st.model_name}: the model file records no training envelope (written by an "
+                                 "older fricli): --flag-extrapolation needs one")
+    any_env = any(st.env is not None for st in streams.values())
     with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
                                             leave=False) as bar:
         writer = None
         try:
             for offset, table in _batches(pf, name, batch_rows, reason is not None):
                 bar.update(table.num_rows)
-                if multi:
-                    table = table.filter(pc.equal(table.column("joint"), pa.scalar(joint, table.schema.field("joint").type)))
-                if table.num_rows == 0:
+                if several:
+                    table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
+                outs = []
+                for j, st in streams.items():
+                    part = table
+                    if several or filtered:
+                        jcol = table.column("joint")
+                        part = table.filter(pc.equal(jcol, pa.scalar(j, jcol.type)))
+                    if part.num_rows == 0:
+                        continue
+                    out, n_in = _predict_part(st, part, offset, name, total, reason, external, lowpass_hz, kt,
+                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation)
+                    unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
+                    dropped += n_in - out.num_rows
+                    outs.append(out)
+                if not outs:
                     continue
-                # the rows are this joint's already: set the joint column aside (cheaper to check)
-                jpos = table.schema.get_field_index("joint")
-                jfield = table.schema.field(jpos) if jpos >= 0 else None
-                if jfield is not None:
-                    table = table.remove_column(jpos)
-                try:
-                    log = logs.from_table(table, name=name, joint=joint, kt=kt, cutoff_hz=cutoff_hz,
-                                          drop_invalid=drop_invalid, warn=warnings.append)
-                except LogError as exc:
-                    if reason is None and (offset or table.num_rows < total):
-                        raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
-                    raise
-                if batches == 0:
-                    models.check_log(meta, log, model_name)
-                    unit = log.units["tau"]
-                sig = log.signals
-                t = sig["t"]
-                if t_last is not None and not t[0] > t_last:
-                    what = "duplicate timestamps" if t[0] == t_last else "'t' is not increasing"
-                    raise LogError(f"{name}: {what} (at row {offset} between two batches, t = {t[0]:g} s)")
-                t_last = float(t[-1])
-                dropped += table.num_rows - len(t)
-                tau_f, state = model.predict(sig, state)
-                out = log.table
-                if jfield is not None:
-                    out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(joint, jfield.type), out.num_rows))
-                out = logs.with_column(out, "tau_f_pred", tau_f, unit)
-                fric.add(logs.friction_target(sig), tau_f)
-                if external:
-                    est = external_estimate(sig, tau_f, lowpass_hz, warn)
-                    out = logs.with_column(out, "tau_ext_pred", est, unit)
-                    if "tau_ext" in sig:
-                        has_ext = True
-                        ext_err.add(sig["tau_ext"], est)
+                out = outs[0] if len(outs) == 1 else pa.concat_tables(outs)
+                if several:
+                    out = out.take(pc.sort_indices(out.column(_ROW))).drop_columns([_ROW])
                 if writer is None:
                     writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
                 writer.write_table(out)
@@ -239,9 +253,71 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
         else:
             for message in dict.fromkeys(warnings):
                 warn(message)
-    return Result(rows=rows, joint=joint, unit=unit or "Nm", friction=fric.result(),
+    per_joint = None
+    n_outside = sum(st.outside for st in streams.values())
+    for st in streams.values():
+        fric.merge(st.fric)
+        ext_err.merge(st.ext)
+        has_ext = has_ext or st.ext.n > 0
+    if several:
+        per_joint = {str(j): {"rows": st.rows, "model": st.model_name, "friction": st.fric.result(),
+                              **({"external": st.ext.result()} if st.ext.n else {})} for j, st in streams.items()}
+    only = next(iter(streams)) if not several else None
+    return Result(rows=rows, joint=only, unit=unit or "Nm", friction=fric.result(),
                   external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,
-                  dropped=dropped)
+                  dropped=dropped, per_joint=per_joint,
+                  extrapolation=None if not any_env else {"rows": n_outside, "of": rows,
+                                                          "share": n_outside / rows if rows else 0.0})
+
+
+def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, external: bool,
+                  lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list,
+                  flag_extrapolation: bool = False) -> tuple[pa.Table, int]:
+    """One joint's rows of one batch with tau_f_pred (and tau_ext_pred) added; the rows it had."""
+    # the rows are this joint's already: set the joint column aside (cheaper to check)
+    jpos = table.schema.get_field_index("joint")
+    jfield = table.schema.field(jpos) if jpos >= 0 else None
+    if jfield is not None:
+        table = table.remove_column(jpos)
+    try:
+        log = logs.from_table(table, name=name, kt=kt, cutoff_hz=cutoff_hz, drop_invalid=drop_invalid,
+                              warn=warnings.append)
+    except LogError as exc:
+        if reason is None and (offset or table.num_rows < total):
+            raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
+        raise
+    log.joint = st.joint
+    if st.t_last is None:
+        models.check_log(st.meta, log, st.model_name)
+    sig = log.signals
+    t = sig["t"]
+    if st.t_last is not None and not t[0] > st.t_last:
+        what = "duplicate timestamps" if t[0] == st.t_last else "'t' is not increasing"
+        where = f" of joint {st.joint}" if st.joint is not None else ""
+        raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
+    st.t_last = float(t[-1])
+    tau_f, st.state = st.model.predict(sig, st.state)
+    unit = log.units["tau"]
+    out = log.table
+    if jfield is not None:
+        out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(st.joint, jfield.type), out.num_rows))
+    out = logs.with_column(out, "tau_f_pred", tau_f, unit)
+    st.fric.add(logs.friction_target(sig), tau_f)
+    if external:
+        est = external_estimate(sig, tau_f, lowpass_hz, warn)
+        out = logs.with_column(out, "tau_ext_pred", est, unit)
+        if "tau_ext" in sig:
+            st.ext.add(sig["tau_ext"], est)
+    if st.env is not None:
+        outside = st.env.outside(sig)
+        st.outside += int(outside.sum())
+        if flag_extrapolation:
+            out = out.append_column(pa.field("extrapolating", pa.bool_()), pa.array(outside))
+    if _ROW in out.column_names:   # keep it last, where the joints' pieces expect it
+        col = out.column(_ROW)
+        out = out.drop_columns([_ROW]).append_column(_ROW, col)
+    st.rows += out.num_rows
+    return out, table.num_rows
 
 
 def external_estimate(signals: dict[str, np.ndarray], tau_f_pred: np.ndarray, lowpass_hz: float | None = None,

@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 from fricli import logs, metrics, models  # noqa: E402
 from fricli.atomic import atomic_write_bytes  # noqa: E402
 from fricli.errors import OutputError  # noqa: E402
+from fricli.envelope import share_outside  # noqa: E402
 from fricli.evaluation import static_friction  # noqa: E402
 from fricli.predicting import external_estimate  # noqa: E402
 
@@ -77,7 +78,8 @@ def fig_velocity(model, sig, u, folder: str, rng) -> str:
     return _save(fig, folder, "friction_velocity.png")
 
 
-def fig_heatmap(model, sig, u, folder: str) -> str:
+def fig_heatmap(model, sig, u, folder: str, envelope=None) -> str:
+    """Friction over (qd, tau_g); the region outside the model's training envelope is greyed and hatched."""
     qd, g = sig["qd"], logs.column(sig, "tau_g")
     vmax = float(np.max(np.abs(qd))) or 1.0
     gmax = float(np.max(np.abs(g))) or 1.0
@@ -88,9 +90,17 @@ def fig_heatmap(model, sig, u, folder: str) -> str:
     fig, ax = plt.subplots(figsize=(6.5, 4.6))
     mesh = ax.pcolormesh(V, G, F, shading="auto", cmap="coolwarm")
     fig.colorbar(mesh, ax=ax, label=f"friction [{u['tau']}]")
+    title = "model over velocity and gravity torque"
+    if envelope is not None:
+        out = ~envelope.covered_grid("qd", v, "tau_g", gg)
+        if out.any():
+            ax.pcolormesh(V, G, np.ma.masked_where(~out, np.ones(out.shape)), shading="auto", cmap="Greys",
+                          vmin=0, vmax=2.5, alpha=0.6)
+            ax.contourf(V, G, out.astype(float), levels=[0.5, 1.5], colors="none", hatches=["//"])
+        title += f"\n(hatched: outside the training envelope, {100 * out.mean():.0f} % of the map)"
     ax.set_xlabel(f"velocity qd [{u['qd']}]")
     ax.set_ylabel(f"gravity torque tau_g [{u['tau']}]")
-    ax.set_title("model over velocity and gravity torque")
+    ax.set_title(title, fontsize=10)
     return _save(fig, folder, "heatmap.png")
 
 
@@ -151,21 +161,59 @@ def write_report(model_path: str, log: logs.Log, folder: str, *, lowpass_hz: flo
         raise OutputError(f"cannot create {folder}: {exc.strerror}") from None
     sig, u = log.signals, log.units
     pred = model.predict(sig)[0]
+    env = models.envelope(meta, model_path)
     rng = np.random.default_rng(seed)
     figures = [f for f in (
         fig_loss(model, folder),
         fig_velocity(model, sig, u, folder, rng),
-        fig_heatmap(model, sig, u, folder),
+        fig_heatmap(model, sig, u, folder, env),
         fig_time(sig, pred, u, folder),
         fig_quadrants(sig, u, folder),
         fig_external(sig, pred, u, folder, lowpass_hz),
     ) if f]
     summary = {"model": os.path.basename(model_path), "kind": meta.get("kind"), "log": os.path.basename(log.name),
                "friction": metrics.errors(logs.friction_target(sig), pred)}
+    if env is not None:
+        summary["extrapolation"] = share_outside(env, sig)
     if "tau_ext" in sig:
         summary["external"] = metrics.errors(sig["tau_ext"], external_estimate(sig, pred, lowpass_hz))
     atomic_write_bytes(os.path.join(folder, "index.html"), _html(summary, figures, u).encode())
     return {"figures": figures, **summary}
+
+
+def write_reports(runs: list[tuple[str, logs.Log]], folder: str, *, lowpass_hz: float | None = 5.0,
+                  seed: int = 0) -> dict:
+    """One report per (model file, joint's log) in ``folder/joint_<name>/`` and an index.html
+    linking them with each joint's errors; a single run is written into ``folder`` itself."""
+    from fricli.modelset import file_name
+
+    if len(runs) == 1:
+        return {str(runs[0][1].joint): write_report(runs[0][0], runs[0][1], folder, lowpass_hz=lowpass_hz, seed=seed)}
+    out = {}
+    for model_path, log in runs:
+        sub = file_name(log.joint)[:-len(".npz")]
+        out[str(log.joint)] = dict(write_report(model_path, log, os.path.join(folder, sub), lowpass_hz=lowpass_hz,
+                                                seed=seed), folder=sub)
+    rows = []
+    for j, r in out.items():
+        ext = f"{r['external']['mae']:.3f}" if "external" in r else "–"
+        rows.append(f'<tr><td><a href="{html.escape(r["folder"])}/index.html">joint {html.escape(j)}</a></td>'
+                    f'<td>{html.escape(r["model"])}</td><td>{r["friction"]["mae"]:.3f}</td>'
+                    f'<td>{r["friction"]["rmse"]:.3f}</td><td>{ext}</td></tr>')
+    rows = "\n".join(rows)
+    u = runs[0][1].units
+    page = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>fricli report: {html.escape(os.path.basename(runs[0][1].name))}</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}
+table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;text-align:right}}</style></head>
+<body><h1>fricli report</h1><p>{html.escape(os.path.basename(runs[0][1].name))}: {len(out)} joints</p>
+<table><tr><th>joint</th><th>model</th><th>friction MAE [{u['tau']}]</th><th>friction RMSE [{u['tau']}]</th>
+<th>external torque MAE [{u['tau']}]</th></tr>
+{rows}</table>
+</body></html>
+"""
+    atomic_write_bytes(os.path.join(folder, "index.html"), page.encode())
+    return out
 
 
 def _html(summary: dict, figures: list[str], u: dict) -> str:
@@ -177,6 +225,9 @@ def _html(summary: dict, figures: list[str], u: dict) -> str:
     imgs = "\n".join(f'<figure><img src="{html.escape(f)}" alt="{html.escape(f)}"><figcaption>{html.escape(f)}</figcaption></figure>'
                      for f in figures)
     title = html.escape(f"{summary['model']} ({summary['kind']}) on {summary['log']}")
+    out = summary.get("extrapolation")
+    extra = "" if out is None else (f"<p>{100 * out['share']:.1f} % of the rows ({out['rows']:,} of {out['of']:,}) lie "
+                                    "outside the model's training envelope.</p>")
     return f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>fricli report: {title}</title>
 <style>body{{font-family:sans-serif;max-width:1000px;margin:2em auto}}img{{max-width:100%}}
@@ -184,6 +235,7 @@ table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:4px 10px;t
 <body><h1>fricli report</h1><p>{title}</p>
 <table><tr><th></th><th>MAE [{u['tau']}]</th><th>RMSE [{u['tau']}]</th><th>max [{u['tau']}]</th></tr>
 {''.join(rows)}</table>
+{extra}
 {imgs}
 </body></html>
 """

@@ -14,7 +14,7 @@ from fricli.cli import cli
 from fricli.diagnosis import diagnose
 from fricli.diagnosis import effects as E
 from fricli.diagnosis import selection
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.diagnosis.fix import augment
 from fricli.models.augmented import AugmentedModel
 from fricli.models.base import FrictionModel
@@ -72,6 +72,7 @@ def test_term_values_and_inputs():
     assert cols.value(T.term("x", T.P, T.POS)).tolist() == [5, 4, 0, 0]
     assert cols.value(T.term("x", T.sig_("qd"), T.dev("temp", 21.0))).tolist() == [-1, 0, -2, 0]
     assert cols.value(T.term("x", T.ABSGEAR, T.SIGN)).tolist() == [2, 1, -2, 0]
+    assert cols.value(T.term("x", T.HELDGEAR)).tolist() == [2, 2, 2, 2]      # held through rests
     assert T.inputs([T.term("x", T.P, T.dev("temp", 0)), T.term("y", T.GEAR)]) == {"temp", "tau_g"}
     with pytest.raises(ValueError):
         T.check({"name": "bad", "factors": [{"f": "nonsense"}]})
@@ -98,6 +99,7 @@ def test_heldout_sse_matches_a_direct_blocked_cross_validation(rng):
     r = X @ [0.5, 2.0] + 0.3 * rng.standard_normal(n)
     d = selection.Design(r, 5)
     d.add("a", X[:, 0])
+    d.sse(["a"])                       # the Gram matrices grow with the columns added after this
     d.add("b", X[:, 1])
     got = d.sse(["a", "b"])
     edges = selection.fold_bounds(n, 5)
@@ -175,11 +177,17 @@ def test_clean_log_adds_nothing_and_json_schema(rng):
     assert d.added == []
     assert d.mae_after == d.mae_before
     out = d.to_json()
-    assert set(out) == {"mae_before", "mae_after", "effects", "added"}
+    assert set(out) == {"mae_before", "mae_after", "cut", "intervals", "effects", "added", "model_errors",
+                        "notes", "unexplained_share", "unexplained"}
     for e in out["effects"]:
-        assert set(e) == {"name", "significant", "gain", "params"}
+        assert set(e) == {"name", "significant", "gain", "params", "part"}
+        assert e["part"] in ("friction", "model")
         for par in e["params"].values():
             assert set(par) == {"value", "unit"}
+    lo, hi = out["intervals"]["mae_before"]
+    assert lo < out["mae_before"] < hi
+    assert set(out["unexplained"]) == {"share", "main", "time", "velocity", "position"}
+    assert 0 <= out["unexplained_share"] < 0.1
     json.dumps(out, allow_nan=False)
 
 
@@ -212,8 +220,10 @@ def _lugre():
 
 def test_augmented_model_round_trip_and_batches(tmp_path, rng):
     log = synthetic(rng)
-    terms = [T.term("1", T.ONE), T.term("p*pos", T.P, T.POS), T.term("qdd", T.sig_("qdd"))]
-    aug = AugmentedModel(_lugre(), terms, [0.3, 0.2, 1.5], effects=["offset", "direction", "acceleration"])
+    terms = [T.term("p*pos", T.P, T.POS), T.term("tau_l held", T.HELDGEAR)]
+    errors = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd"))]
+    aug = AugmentedModel(_lugre(), terms, [0.2, 0.05], error_terms=errors, error_coef=[0.3, 1.5],
+                         effects=["offset", "direction", "acceleration", "quadrant"], errors=["offset", "acceleration"])
     path = tmp_path / "aug.npz"
     models.save_for_log(str(path), aug, log, rows_used=len(log))
     back, meta = models.load(str(path))
@@ -221,6 +231,8 @@ def test_augmented_model_round_trip_and_batches(tmp_path, rng):
     assert back.required_inputs() == {"t", "qd", "qdd", "tau_g"}
     whole = back.predict(log.signals)[0]
     np.testing.assert_array_equal(whole, aug.predict(log.signals)[0])
+    assert back.errors == ["offset", "acceleration"] and [t["name"] for t in back.error_terms] == ["1", "qdd"]
+    np.testing.assert_allclose(whole - back.friction_only().predict(log.signals)[0], 0.3 + 1.5 * log.signals["qdd"])
     # cut into batches at awkward places (inside rests too): the state carries across
     parts, state = [], None
     for a, b in [(0, 137), (137, 1400), (1400, 1401), (1401, 6000)]:
@@ -309,6 +321,81 @@ def test_simulated_clean_log_adds_nothing(lugre_base):
     _, log = _sim(2)
     d = diagnose(lugre_base, log)
     assert d.added == []
+    assert d.unexplained.share < 0.1
+
+
+HARD_CASES = {  # simulator effects -> the effects diagnose must add, in any order
+    ("gravity",): {"gravity"},
+    ("quadrant",): {"quadrant"},
+    ("temperature", "ripple"): {"temperature", "position"},
+}
+
+
+@pytest.mark.parametrize("effects", sorted(HARD_CASES))
+def test_harder_cases_are_named_and_fixed(lugre_base, effects):
+    _, log2 = _sim(2, *effects)
+    _, log3 = _sim(3, *effects)
+    d = diagnose(lugre_base, log2)
+    want = HARD_CASES[effects]
+    assert set(d.added) == want
+    assert {e.name for e in d.effects[:len(want)]} == want
+    lo, hi = d.intervals["cut"]
+    assert 0.4 < lo <= d.cut <= hi
+    fixed = augment(lugre_base, d, log2)
+    before, after = _mae(lugre_base, log3), _mae(fixed, log3)
+    assert after <= 0.6 * before, f"MAE {before:.3f} -> {after:.3f}"
+
+
+def test_gravity_error_is_a_model_error_kept_apart_from_friction(lugre_base):
+    from fricli import sim
+
+    t2, log2 = _sim(2, "gravity")
+    low = next(e for e in sim.metadata(t2)["effects"] if e["name"] == "gravity")["strength"]
+    d = diagnose(lugre_base, log2)
+    gravity = d.effects[0]
+    assert gravity.part == "model" and d.errors == ["gravity"]
+    assert gravity.params["error"]["value"] == pytest.approx(-100 * low, abs=0.5)
+    fixed = augment(lugre_base, d, log2)
+    assert fixed.errors == ["gravity"] and [t["name"] for t in fixed.error_terms] == ["tau_g"] and fixed.terms == []
+    friction, error, _ = fixed.predict_parts(log2.signals)
+    np.testing.assert_array_equal(friction, lugre_base.predict(log2.signals)[0])
+    np.testing.assert_allclose(error, (1 / (1 - low) - 1) * log2.signals["tau_g"], rtol=0.02)
+    np.testing.assert_array_equal(fixed.friction_only().predict(log2.signals)[0], friction)
+    text = fixed.describe()
+    assert "robot-model errors (not friction): gravity" in text
+    assert text.index("robot-model errors") > text.index("augmented model")
+
+
+@pytest.mark.parametrize("effect", ["gravity", "quadrant"])
+def test_a_measured_payload_tells_gravity_from_quadrant(lugre_base, effect):
+    from fricli import sim
+
+    table = sim.simulate("extended", joint=2, seed=2, load="sym", effects=(effect,), duration=60.0,
+                         friction_state="base")
+    d = diagnose(lugre_base, logs.from_table(table, name="payload"))
+    # the payload also loads the gear, which the base model's load term does not see
+    assert d.added[0] == effect and set(d.added) <= {effect, "payload"} and d.notes == []
+
+
+def test_a_payload_the_model_does_not_see_in_its_load_term_is_found(lugre_base):
+    from fricli import sim
+
+    table = sim.simulate("extended", joint=2, seed=2, load="asym", duration=60.0, friction_state="base")
+    d = diagnose(lugre_base, logs.from_table(table, name="payload"))
+    assert d.added == ["payload"]
+    assert d.effects[0].params["kc"]["value"] == pytest.approx(sim.true_params(2)["kc"], rel=0.1)
+    assert d.unexplained.share < 0.1
+
+
+def test_disturbance_is_unexplained_structure_not_an_effect(lugre_base):
+    _, log2 = _sim(2, "disturbance")
+    _, log3 = _sim(3, "disturbance")
+    d = diagnose(lugre_base, log2)
+    assert d.added == []
+    assert d.unexplained.share > 0.3 and d.unexplained.main == "time"
+    assert 2.0 <= d.unexplained.time.where["frequency_hz"] <= 3.0
+    fixed = augment(lugre_base, d, log2)
+    assert _mae(fixed, log3) <= _mae(lugre_base, log3)
 
 
 def test_simulated_inertia_is_reported_in_kg_m2(lugre_base):
@@ -384,7 +471,7 @@ def test_cli_fix_on_clean_log_writes_an_equivalent_model(files):
 @pytest.mark.parametrize("args, code, message", [
     (["--fix"], 2, "--fix needs -o"),
     (["-o", "x.npz"], 2, "add --fix"),
-    (["--effects", "gravity"], 2, "unknown effect"),
+    (["--effects", "sparkle"], 2, "unknown effect"),
 ])
 def test_cli_usage_errors(files, args, code, message):
     res = CliRunner().invoke(cli, ["diagnose", files["model"], files["clean"], *args])

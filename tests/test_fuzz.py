@@ -208,7 +208,7 @@ def test_random_tables_in_record_batches(tmp_path, lugre, table):
 
 @pytest.fixture(scope="module")
 def model_files(tmp_path_factory):
-    """Real model files of every kind made by the commands: lugre, mlp, selmic, nnacm, residual."""
+    """Real model files of every kind made by the commands: lugre, dissipative, mlp, selmic, nnacm, residual."""
     folder = tmp_path_factory.mktemp("models")
     log = folder / "log.parquet"
     log.write_bytes(VALID_LOG)
@@ -216,10 +216,11 @@ def model_files(tmp_path_factory):
     paths = {"lugre": folder / "lugre.npz"}
     models.save(str(paths["lugre"]), LuGreModel(**PARAMS), joint=2, axis="rotary",
                 units=logs.CANONICAL["rotary"], provenance={})
-    for arch in ("mlp", "selmic", "nnacm"):
+    for arch in ("dissipative", "mlp", "selmic", "nnacm"):
         paths[arch] = folder / f"{arch}.npz"
         res = runner.invoke(cli, ["train-base", str(log), "-o", str(paths[arch]), "--arch", arch, "--steps", "3",
-                                  "--hidden", {"mlp": "4,4", "selmic": "12", "nnacm": "4"}[arch], "-q"])
+                                  "--hidden", {"dissipative": "4,4", "mlp": "4,4", "selmic": "12", "nnacm": "4"}[arch],
+                                  "-q"])
         assert res.exit_code == 0, res.stderr
     paths["residual"] = folder / "residual.npz"
     res = runner.invoke(cli, ["adapt", str(paths["mlp"]), str(log), "-o", str(paths["residual"]), "--epochs", "1",
@@ -275,7 +276,7 @@ def test_random_bytes_after_zip_magic(tmp_path, data):
 
 
 @FUZZ
-@given(kind=st.sampled_from(["lugre", "mlp", "selmic", "nnacm", "residual"]), data=st.data())
+@given(kind=st.sampled_from(["lugre", "dissipative", "mlp", "selmic", "nnacm", "residual"]), data=st.data())
 def test_corrupted_model_file(tmp_path, model_files, kind, data):
     load_model(data.draw(corrupted(model_files[kind])), tmp_path)
 
@@ -309,7 +310,7 @@ def _paths(node, prefix=()):
 
 
 @FUZZ
-@given(kind=st.sampled_from(["lugre", "mlp", "selmic", "nnacm", "residual"]), data=st.data())
+@given(kind=st.sampled_from(["lugre", "dissipative", "mlp", "selmic", "nnacm", "residual"]), data=st.data())
 def test_model_meta_with_a_random_value(tmp_path, model_files, kind, data):
     """A well-formed file whose meta has one entry replaced by random JSON."""
     meta, arrays = modelfile.loads(model_files[kind])
@@ -324,7 +325,7 @@ def test_model_meta_with_a_random_value(tmp_path, model_files, kind, data):
 
 
 @FUZZ
-@given(kind=st.sampled_from(["mlp", "selmic", "nnacm", "residual"]), data=st.data())
+@given(kind=st.sampled_from(["dissipative", "mlp", "selmic", "nnacm", "residual"]), data=st.data())
 def test_model_arrays_with_random_shapes_and_values(tmp_path, model_files, kind, data):
     """A well-formed file whose arrays are dropped, reshaped, retyped or filled with odd values."""
     meta, arrays = modelfile.loads(model_files[kind])

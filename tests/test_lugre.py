@@ -269,7 +269,7 @@ def test_identify_command(tmp_path, sweep_file):
         assert needle in res.stderr
     model, meta = models.load(str(out))
     assert meta["kind"] == "lugre" and meta["units"]["tau"] == "Nm"
-    assert meta["fit"]["mae"] > 0 and meta["provenance"]["identify"]["hold"] == 0.2
+    assert meta["fit"]["mae"] > 0 and meta["provenance"]["job"]["options"]["hold"] == 0.2
     first = out.read_bytes()
     res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out), "--json", "-q"])
     assert res.exit_code == 0 and res.stderr == ""

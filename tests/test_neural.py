@@ -143,7 +143,7 @@ def test_each_kind_learns_and_round_trips(cls, files, tmp_path):
 
 def test_velocity_input_is_asinh_of_qd_over_v0(files, tmp_path):
     log = load(files["base"])
-    model, summary = learning.train_base(log, steps=30, seed=0)
+    model, summary = learning.train_base(log, arch="mlp", steps=30, seed=0)
     assert summary["velocity_input"] == "asinh" and model.velocity_scale == "auto"
     sel = training_data.select(log.signals["qd"], rng=np.random.default_rng(0),
                                keep=np.abs(log.signals["qd"]) > training_data.LOW * 0.4)
@@ -162,11 +162,13 @@ def test_velocity_input_is_asinh_of_qd_over_v0(files, tmp_path):
 
 def test_velocity_input_options(files, tmp_path):
     linear, scaled = tmp_path / "linear.npz", tmp_path / "scaled.npz"
-    assert run("train-base", files["base"], "-o", linear, "--steps", 20, "--velocity-input", "linear", "-q").exit_code == 0
-    assert run("train-base", files["base"], "-o", scaled, "--steps", 20, "--velocity-scale", 0.01, "-q").exit_code == 0
+    assert run("train-base", files["base"], "-o", linear, "--steps", 20, "--velocity-input", "linear", "--arch", "mlp",
+               "-q").exit_code == 0
+    assert run("train-base", files["base"], "-o", scaled, "--steps", 20, "--velocity-scale", 0.01, "--arch", "mlp",
+               "-q").exit_code == 0
     model, meta = models.load(str(linear))
     assert "velocity" not in meta["model"]["params"] and model.v0_ is None
-    assert meta["provenance"]["options"]["velocity_input"] == "linear"
+    assert meta["provenance"]["job"]["options"]["velocity_input"] == "linear"
     model, meta = models.load(str(scaled))
     assert meta["model"]["params"]["velocity"] == {"transform": "asinh", "scale": 0.01, "v0": 0.01}
     sig = load(files["base"]).signals
@@ -187,7 +189,7 @@ def test_asinh_velocity_input_resolves_slow_speeds():
     slow = (sig["qd"] != 0) & (np.abs(sig["qd"]) < 0.04)
     err = {}
     for how in learning.VELOCITY_INPUTS:
-        model, _ = learning.train_base(log, steps=3000, seed=0, velocity_input=how)
+        model, _ = learning.train_base(log, arch="mlp", steps=3000, seed=0, velocity_input=how)
         err[how] = np.mean(np.abs(model.predict(sig)[0] - sig["tau_f_true"])[slow])
     assert err["asinh"] < err["linear"], err
 
@@ -228,13 +230,13 @@ def test_predict_is_chunked_and_threaded_consistently(files):
 
 def test_train_base_cli(files, tmp_path):
     out = tmp_path / "nn.npz"
-    result = run("train-base", files["base"], "-o", out, "--steps", 400, "--hidden", "12,12", "--seed", 1)
+    result = run("train-base", files["base"], "-o", out, "--steps", 400, "--hidden", "12,12", "--seed", 1, "--arch", "mlp")
     assert result.exit_code == 0, result.stderr
     assert result.stdout == ""
     assert "friction MAE [Nm]: training" in result.stderr and "validation" in result.stderr
     model, meta = models.load(str(out))
-    assert meta["kind"] == "mlp" and meta["provenance"]["seed"] == 1
-    assert meta["provenance"]["options"]["hidden"] == [12, 12]
+    assert meta["kind"] == "mlp" and meta["provenance"]["job"]["options"]["seed"] == 1
+    assert meta["provenance"]["job"]["options"]["hidden"] == [12, 12]
     assert [n for n, _ in model.hidden] == [12, 12]
     assert meta["fit"]["val"]["n"] > 0
 
@@ -290,14 +292,14 @@ def test_adapt_learns_the_residual(files, base_model, tmp_path):
     assert "base" in result.stderr and "adapted" in result.stderr
     adapted, meta = models.load(str(out))
     base, _ = models.load(str(base_model))
-    assert meta["kind"] == "residual" and meta["model"]["children"]["base"]["kind"] == "mlp"
-    assert meta["provenance"]["base"]["kind"] == "mlp"
+    assert meta["kind"] == "residual" and meta["model"]["children"]["base"]["kind"] == "dissipative"
+    assert meta["provenance"]["base"]["kind"] == "dissipative"
     assert isinstance(adapted, ResidualFriction)
     # on a new log with the same shift, the adapted model errs no more than the base does without it
     assert mae(adapted, files["shifted"], moving=True) < mae(base, files["base2"], moving=True)
     assert mae(adapted, files["shifted"]) < mae(base, files["shifted"])
     sig = load(files["shifted"]).signals
-    np.testing.assert_allclose(adapted.predict(sig)[0], base.predict(sig)[0] + adapted.add.predict(sig)[0])
+    np.testing.assert_allclose(adapted.predict(sig)[0], adapted.on_base(sig, base.predict(sig)[0]))
     assert adapted.add.inputs == ("tau_g", "sign(qd)")
     assert adapted.add.history_train_.size == 60
 
@@ -402,6 +404,6 @@ def test_model_to_stdout(files):
     result = CliRunner().invoke(cli, ["train-base", str(files["base"]), "-o", "-", "--steps", "20", "-q"])
     assert result.exit_code == 0, result.stderr
     meta, arrays = modelfile.loads(result.stdout_bytes)
-    assert meta["kind"] == "mlp" and "W0" in arrays
+    assert meta["kind"] == "dissipative" and "W0" in arrays
     clash = run("train-base", files["base"], "-o", "-", "--json")
     assert clash.exit_code == 2 and "stdout" in clash.stderr

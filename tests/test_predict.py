@@ -202,15 +202,16 @@ def test_several_joints(tmp_path, model_file):
     got = read(str(tmp_path / "p.parquet"))
     assert got.num_rows == 400 and set(got.column("joint").to_pylist()) == {2}
     res = invoke("predict", model_file, src, "-o", tmp_path / "p4.parquet", "--joint", "4", "-q")
-    assert res.exit_code == 0 and read(str(tmp_path / "p4.parquet")).num_rows == 300
+    assert res.exit_code == errors.MODEL and "fitted on joint 2, not on joint 4" in res.stderr
+    assert not (tmp_path / "p4.parquet").exists()
     res = invoke("predict", model_file, src, "-o", tmp_path / "p5.parquet", "--joint", "5")
     assert res.exit_code == errors.INPUT and "no joint 5" in res.stderr
 
 
-def test_single_other_joint_is_used_with_a_warning(tmp_path, model_file):
+def test_single_other_joint_is_refused(tmp_path, model_file):
     src = write(log_table(n=200, joint=4), tmp_path / "j4.parquet")
     res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet")
-    assert res.exit_code == 0 and "fitted on joint 2" in res.stderr
+    assert res.exit_code == errors.MODEL and "fitted on joint 2, not on joint 4" in res.stderr
 
 
 def test_log_without_velocity_is_read_whole(tmp_path, model_file):

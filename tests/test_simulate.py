@@ -211,7 +211,7 @@ def test_the_shifted_state_differs_from_base_by_tau_g_and_direction():
 
 # -------------------------------------------------------------------- effects
 
-FRICTION_EFFECTS = sorted(set(EFFECTS) - {"inertia", "offset", "payload"})
+FRICTION_EFFECTS = sorted(set(EFFECTS) - {"inertia", "offset", "payload", "gravity", "disturbance"})
 
 
 @pytest.mark.parametrize("scenario", ["extended", "base"])
@@ -229,6 +229,24 @@ def test_offset_is_a_bias_on_tau_m():
     clean, sig = signals(sim("extended", 2)), signals(sim("extended", 2, effects=("offset=1.5",)))
     np.testing.assert_allclose(logs.friction_target(sig) - logs.friction_target(clean), 1.5)
     np.testing.assert_array_equal(sig["tau_f_true"], clean["tau_f_true"])
+
+
+def test_gravity_error_is_in_the_logged_tau_g():
+    clean, sig = signals(sim("extended", 2)), signals(sim("extended", 2, effects=("gravity",)))
+    np.testing.assert_allclose(sig["tau_g"], 0.93 * clean["tau_g"], rtol=1e-12)
+    np.testing.assert_allclose(logs.friction_target(sig) - logs.friction_target(clean), 0.07 * clean["tau_g"],
+                               atol=1e-9)
+    np.testing.assert_array_equal(sig["tau_f_true"], clean["tau_f_true"])
+
+
+def test_disturbance_is_a_periodic_torque_in_tau_m():
+    clean, sig = signals(sim("extended", 2)), signals(sim("extended", 2, effects=("disturbance",)))
+    change = sig["tau_m"] - clean["tau_m"]
+    np.testing.assert_array_equal(sig["tau_f_true"], clean["tau_f_true"])
+    assert np.abs(change).max() == pytest.approx(1.0, rel=0.01)
+    power = np.abs(np.fft.rfft(change)) ** 2
+    freq = np.fft.rfftfreq(len(change), 0.01)
+    assert freq[np.argmax(power)] == pytest.approx(fx.DISTURBANCE_HZ, abs=0.02)
 
 
 def test_inertia_error_is_in_the_logged_tau_dyn():

@@ -2,6 +2,7 @@
 documented one and the interpreter exits cleanly (pyarrow has been seen to abort at
 interpreter exit, turning a success into a failure code)."""
 
+import importlib.util
 import io
 import os
 import re
@@ -9,10 +10,12 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
+import test_urdf
 from conftest import ROOT, SAMPLE
 from fricli import errors, logs, models
 from fricli.cli import cli
@@ -47,8 +50,8 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "demo", "diagnose", "estimate-ext", "evaluate", "identify", "inspect", "predict", "report",
-            "simulate", "train-base"]
+COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
+            "import", "inspect", "predict", "report", "simulate", "train-base", "trend"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():
@@ -67,13 +70,15 @@ def test_every_command_is_smoke_tested():
 def test_every_command_in_a_process(tmp_path):
     base, adapt, ext = SAMPLE / "joint2_base.parquet", SAMPLE / "joint2_adapt.parquet", \
         SAMPLE / "joint2_extended_asym.parquet"
+    test_urdf.write_case(tmp_path, np.random.default_rng(0), n=100)
     first = run_all({
         "--version": ["--version"],
-        "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "-o", "sim.parquet", "-q"],
+        "simulate": ["simulate", "--scenario", "adapt", "--joint", "2", "-o", "sim.parquet", "-q"],
         "identify": ["identify", base, "-o", "lugre.npz", "--json"],
         "train-base": ["train-base", base, "-o", "nn.npz", "--steps", "20", "-q"],
         "demo": ["demo", "--steps", "3", "-o", "demo", "-q"],
         "bad model": ["predict", "missing.npz", ext, "-o", "x.parquet"],
+        "import": ["import", "rec.csv", "--mapping", "map.toml", "-o", "rec.parquet", "-q"],
     }, tmp_path)
     for name, proc in first.items():
         check(name, proc, errors.MODEL if name == "bad model" else 0)
@@ -87,12 +92,17 @@ def test_every_command_in_a_process(tmp_path):
         "report": ["report", "nn.npz", ext, "-o", "report", "-q"],
         "diagnose": ["diagnose", "lugre.npz", ext, "--fix", "-o", "fixed.npz", "--folds", "5", "-q"],
         "inspect": ["inspect", "lugre.npz"],
+        "export": ["export", "lugre.npz", "-o", "friction.h", "-q"],
         "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
+        "dynamics": ["dynamics", "rec.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "dyn.parquet",
+                     "-q"],
     }, tmp_path)
+    has_pinocchio = importlib.util.find_spec("pinocchio") is not None
     for name, proc in second.items():
-        check(name, proc, errors.UNCHANGED if name == "unchanged" else 0)
+        code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
+        check(name, proc, code)
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
-                 "report/index.html", "demo/table.md"):
+                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet",) if has_pinocchio else ()):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
 

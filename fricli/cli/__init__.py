@@ -63,6 +63,9 @@ from fricli.cli import neural  # noqa: E402,F401
 from fricli.cli import simulate  # noqa: E402,F401
 from fricli.cli import lugre, predict  # noqa: E402,F401
 from fricli.cli import diagnose  # noqa: E402,F401
+from fricli.cli import robot  # noqa: E402,F401
+from fricli.cli import export  # noqa: E402,F401
+from fricli.cli import fleet  # noqa: E402,F401
 
 
 def main() -> None:

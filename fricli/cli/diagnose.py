@@ -6,10 +6,10 @@ import os
 
 import click
 
-from fricli import logs, metrics, models
+from fricli import joints, logs, metrics, modelset, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job, reading_kwargs,
-                                say)
+from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
+                                reading_kwargs, say)
 from fricli.diagnosis import driver
 from fricli.diagnosis import effects as E
 from fricli.errors import OutputError
@@ -26,39 +26,52 @@ def _effect_names(ctx, param, value):
     return names
 
 
-def table(d: driver.Diagnosis) -> str:
+def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> str:
     """The readable report printed on stdout without --json."""
     u = d.tau_unit
     lines = []
+    level = round(100 * driver.INTERVAL_LEVEL)
     if d.added:
-        cut = 100.0 * (1.0 - d.mae_after / d.mae_before) if d.mae_before > 0 else 0.0
-        lines.append(f"held-out MAE {d.mae_before:.4g} {u} -> {d.mae_after:.4g} {u} ({cut:.0f} % lower) "
+        lo, hi = d.intervals["cut"]
+        lines.append(f"held-out MAE {d.mae_before:.4g} {u} -> {d.mae_after:.4g} {u} ({100 * d.cut:.0f} % lower; "
+                     f"{level} % interval {100 * lo:.0f} to {100 * hi:.0f} % over the {d.folds} folds) "
                      f"with {', '.join(d.added)}")
     else:
-        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}; "
-                     f"no candidate removes {100 * d.min_gain:g} % of the residual significantly)")
+        lo, hi = d.intervals["mae_before"]
+        lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}, {level} % "
+                     f"interval {lo:.4g} to {hi:.4g}; no candidate removes {100 * d.min_gain:g} % of the residual "
+                     f"significantly)")
+    for e in d.effects:
+        if e.added and e.part == "model":
+            lines.append(f"robot-model error, not friction: {e.name}: {e.summary}")
+    lines.extend(f"note: {n}" for n in d.notes)
+    if d.unexplained is not None:
+        lines.append(d.unexplained.line(u, v_unit, q_unit))
     lines.append("")
-    head = f"{'rank':>4}  {'effect':<18} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  parameters"
+    head = (f"{'rank':>4}  {'effect':<18} {'part':<8} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  "
+            f"parameters")
     lines.append(head)
     order = {name: i + 1 for i, name in enumerate(d.added)}
     for rank, e in enumerate(d.effects, 1):
         added = str(order[e.name]) if e.name in order else "-"
         sig = "yes" if e.significant else "no"
-        lines.append(f"{rank:>4}  {e.name:<18} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  {sig:<7}  "
-                     f"{added:<5}  {e.summary}")
+        lines.append(f"{rank:>4}  {e.name:<18} {e.part:<8} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  "
+                     f"{sig:<7}  {added:<5}  {e.summary}")
     for name, reason in d.skipped.items():
         lines.append(f"   -  {name:<18} not tested: {reason}")
     lines.append("")
     lines.append(f"gain: share of the model's squared residual an effect explains on held-out data ({d.folds} "
-                 f"blocks over time); of rest: share of what the effects added before it left")
+                 f"blocks over time); of rest: share of what the effects added before it left; part: friction, "
+                 f"or model (an error of the robot model or the measurement)")
     return "\n".join(lines)
 
 
 @cli.command("diagnose")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.argument("log")
 @click.option("--fix", is_flag=True, help="Write the model augmented with the added effects (needs -o).")
-@click.option("-o", "--output", default=None, help="Augmented model file to write with --fix (.npz).")
+@click.option("-o", "--output", default=None,
+              help="Augmented model file to write with --fix (.npz), or a folder for one per joint.")
 @click.option("--folds", type=click.IntRange(min=3, max=100), default=driver.DEFAULT_FOLDS, show_default=True,
               help="Contiguous folds over time for the held-out scores.")
 @click.option("--min-gain", type=click.FloatRange(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
@@ -80,13 +93,19 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
     The residual (friction target minus the model's prediction) is tested against a library
     of candidate effects: position (gear ripple), temperature, drift (wear), direction
-    (asymmetry), acceleration (inertia), load (quadrant dependence), velocity (curve shape),
-    level, offset and column:NAME for any other numeric column. Effects are scored on held-out
+    (asymmetry), acceleration (inertia), gravity (the logged tau_g off by a factor), load
+    (friction growing with |tau_g|), payload (a measured tau_ext loading the gear), quadrant
+    (driving vs back-driven), velocity (curve shape), level, offset and column:NAME for any
+    other numeric column. Gravity, acceleration and offset are errors of the robot model or
+    the measurement, not friction, and are reported as such. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
-    still removes enough of the residual (docs/diagnose.md). The ranked effects, their physical
-    parameters and the held-out MAE before and after go to stdout (a table, or JSON with
+    still removes enough of the residual (docs/diagnose.md). The ranked effects, their
+    physical parameters, the held-out MAE before and after with an interval over the folds,
+    and the structure left that no candidate explains go to stdout (a table, or JSON with
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
-    self-contained model file. Exit 0 whether or not something was found.
+    self-contained model file. Exit 0 whether or not something was found. MODEL may be a
+    model folder: every joint of the log is diagnosed with its own model (a result per joint)
+    and --fix -o DIR writes one fixed model per joint (docs/joints.md).
 
     \b
     Example:
@@ -106,39 +125,60 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
             raise OutputError(f"cannot write {output}: folder {folder} does not exist")
-    base, meta = models.load(model)
+    source = modelset.source(model)
+    reading = reading_kwargs(None, kt, cutoff, drop_invalid)
+    del reading["joint"]
     table_, digest = logs.read_table(log)
-    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
-    if kwargs["joint"] is None and "joint" in table_.column_names and meta.get("joint") is not None:
-        if len(logs.joints_of(table_)) > 1:
-            kwargs["joint"] = meta["joint"]
-    data = logs.from_table(table_, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
-    models.check_log(meta, data, model)
-    # with --fix: hold the output's lock until the command ends; --if-changed may exit here (9)
-    job = click.get_current_context().with_resource(
-        model_job(output, data, if_changed=if_changed, quiet=quiet, inputs={"model": model})) if fix else None
-    result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                             max_effects=max_effects)
-    if as_json:
-        emit_json(result.to_json())
-    else:
-        click.echo(table(result))
-    if fix:
-        from fricli.diagnosis.fix import augment
+    name = "stdin" if log == "-" else log
+    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
+    several = len(pairs) > 1
 
-        fixed = augment(base, result, data, carry=not no_carry)
-        fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-        fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-                   carried=fixed.carried, refitted=fixed.refitted)
-        options = {"folds": folds, "min_gain": min_gain, "alpha": alpha, "effects": only, "max_effects": max_effects,
-                   "carry": not no_carry, "base_model": os.path.basename(model)}
-        models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, diagnose=options, job=job)
-        if not quiet:
-            if result.added:
-                carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
-                if fixed.refitted:
-                    carried += f"; refitted with them: {', '.join(fixed.refitted)}"
-                say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
-                    f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
-            else:
-                say(f"wrote {output}: nothing added, same predictions as {model}")
+    def one(data, out, job, model_path):
+        base, meta = models.load(model_path)
+        models.check_log(meta, data, model_path)
+        result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
+                                 max_effects=max_effects)
+        if not as_json:
+            if several:
+                click.echo(f"joint {data.joint} ({model_path}):")
+            click.echo(table(result, data.units["qd"], data.units["q"]) + ("\n" if several else ""))
+        if fix:
+            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
+        return result.to_json()
+
+    if fix:
+        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
+                                         source=source, read=(table_, digest))
+    else:
+        results, folder_run = {}, several
+
+        def work(j):
+            data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
+            results[j] = one(data, None, None, pairs[j])
+
+        modelset.each_joint(list(pairs), work, what="results")
+    if as_json:
+        emit_results(results, folder_run)
+
+
+def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -> None:
+    from fricli.diagnosis.fix import augment
+
+    fixed = augment(base, result, data, carry=not no_carry)
+    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+               carried=fixed.carried, refitted=fixed.refitted)
+    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
+                        base={"path": model_path, "kind": base.kind})
+    if quiet:
+        return
+    if result.added:
+        carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
+        if fixed.errors:
+            carried += f"; robot-model error terms, kept apart from friction: {', '.join(fixed.errors)}"
+        if fixed.refitted:
+            carried += f"; refitted with them: {', '.join(fixed.refitted)}"
+        say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
+            f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
+    else:
+        say(f"wrote {output}: nothing added, same predictions as {model_path}")

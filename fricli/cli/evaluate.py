@@ -26,8 +26,8 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 
 
 @cli.command("evaluate")
-@click.option("--model", "model_specs", multiple=True, required=True, metavar="[NAME=]MODEL.npz",
-              help="A model to evaluate (repeatable).")
+@click.option("--model", "model_specs", multiple=True, required=True, metavar="[NAME=]MODEL",
+              help="A model file, or a model folder with one model per joint, to evaluate (repeatable).")
 @click.option("--log", "log_specs", multiple=True, required=True, metavar="[NAME=]LOG.parquet",
               help="A log to evaluate on (repeatable).")
 @click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
@@ -40,6 +40,9 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
     external-torque error is against the log's sensor column tau_ext, when it has one.
+    A model folder (one model per joint) is evaluated on every joint of a log, one row per
+    joint; a model fitted on another joint than the log's is refused (docs/joints.md).
+    The share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
 
     \b
     Example:
@@ -54,10 +57,14 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+    for r in results:
+        if r.extrapolation is not None and not quiet:
+            say(f"{r.model} on {r.log}: {100 * r.extrapolation['share']:.1f} % of the rows outside the model's "
+                "training envelope")
 
 
 @cli.command("report")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @click.argument("log")
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Folder for the figures and index.html.")
 @click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
@@ -69,20 +76,27 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
 
     Figures: training/validation loss, friction against velocity, a heat map over velocity and
     gravity torque, friction over time, the four quadrants, and the external torque against the
-    sensor when the log has one.
+    sensor when the log has one. MODEL may be a model folder (one model per joint): every joint
+    of the log gets its report in DIR/joint_<name>/, and DIR/index.html links them (docs/joints.md).
 
     \b
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
-    from fricli import models, report  # matplotlib loads only for this command
+    from fricli import joints, modelset, report  # matplotlib loads only for this command
 
-    _, meta = models.load(model)
-    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
+    source = modelset.source(model)
     table, digest = logs.read_table(log)
-    if kwargs["joint"] is None and "joint" in table.column_names:
-        kwargs["joint"] = meta.get("joint")
-    the_log = logs.from_table(table, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
-    summary = report.write_report(model, the_log, output, lowpass_hz=lowpass)
-    say(f"wrote {len(summary['figures'])} figures and index.html to {output} "
-        f"(friction MAE {summary['friction']['mae']:.3f})", quiet)
+    name = "stdin" if log == "-" else log
+    kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
+    del kwargs["joint"]
+    runs = [(path, logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs))
+            for j, path in joints.pair(source, logs.joints_of(table, name), joint, name)]
+    summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
+    if len(summaries) == 1:
+        summary = next(iter(summaries.values()))
+        say(f"wrote {len(summary['figures'])} figures and index.html to {output} "
+            f"(friction MAE {summary['friction']['mae']:.3f})", quiet)
+    else:
+        maes = ", ".join(f"joint {j} {r['friction']['mae']:.3f}" for j, r in summaries.items())
+        say(f"wrote a report per joint and index.html to {output} (friction MAE: {maes})", quiet)

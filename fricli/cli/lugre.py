@@ -6,10 +6,10 @@ import os
 
 import click
 
-from fricli import logs, models
+from fricli import models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job, output_option,
-                                reading_kwargs, say)
+from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
+                                output_option, reading_kwargs, say)
 from fricli.errors import OutputError
 from fricli.identify import LuGreIdentifier
 from fricli.models.lugre import PARAM_INFO, unit_of
@@ -21,7 +21,7 @@ def _figures(errs: dict, unit: str) -> str:
 
 @cli.command("identify")
 @click.argument("log")
-@output_option(help="Model file to write (.npz).")
+@output_option(help="Model file to write (.npz), or a folder for one model per joint (docs/joints.md).")
 @log_reading
 @click.option("--hold", type=click.FloatRange(min=0, min_open=True), default=0.2, show_default=True,
               help="Steady state: the velocity must have been constant for at least this long [s].")
@@ -40,39 +40,50 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
     log (see docs/lugre.md). Parameters and fit errors go to stderr, or as JSON to stdout with
     --json. On failure the previous model file is left untouched.
 
+    A log of several joints without --joint gives one model per joint in the folder -o DIR
+    (DIR/joint_<name>.npz; docs/joints.md).
+
     \b
     Example:
       fricli identify sample_data/joint2_base.parquet -o lugre.npz
       fricli identify emps.parquet -o emps.npz --cutoff 100 --json
       fricli identify nightly.parquet -o lugre.npz --if-changed   # cron: exit 9 when up to date
+      fricli identify arm.parquet -o lugre-arm/                    # every joint of the arm
     """
     if output == "-":
-        raise click.UsageError("identify writes a model file: give -o FILE.npz, not -")
+        raise click.UsageError("identify writes a model file: give -o FILE.npz (or a folder), not -")
     folder = os.path.dirname(os.path.abspath(output))
     if not os.path.isdir(folder):
         raise OutputError(f"cannot write {output}: folder {folder} does not exist")
-    data = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
-    with model_job(output, data, if_changed=if_changed, quiet=quiet) as job:
+
+    def fit_one(data, out, job, _model):
         idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine).fit(data.signals, units=data.units,
                                                                            axis=data.axis)
         model, fit = idf.model_, idf.fit_
-        options = {"hold": hold, "travel": travel, "refine": refine}
-        models.save_for_log(output, model, data, rows_used=len(data), fit=fit, identify=options, job=job)
+        models.save_for_log(out, model, data, rows_used=len(data), fit=fit, job=job)
+        _report(data, model, fit, out, quiet)
+        params = model.parameters()
+        return {"model": out, "log": data.name, "joint": data.joint, "axis": data.axis,
+                "units": data.units, "parameters": params,
+                "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit}
 
-    unit = data.units["tau"]
-    params = model.parameters()
-    if not quiet:
-        where = f"joint {data.joint}, " if data.joint is not None else ""
-        say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
-            f"{fit['steady_rows']:,} steady-state)")
-        for name, value in params.items():
-            say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
-        say(f"fit error, all rows:          {_figures(fit, unit)}")
-        say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
-        for note in fit["notes"]:
-            say(f"note: {note}")
-        say(f"wrote {output}")
+    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
+                                     if_changed=if_changed, quiet=quiet)
     if as_json:
-        emit_json({"model": output, "log": data.name, "joint": data.joint, "axis": data.axis,
-                   "units": data.units, "parameters": params,
-                   "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit})
+        emit_results(results, folder_run)
+
+
+def _report(data, model, fit, output, quiet) -> None:
+    if quiet:
+        return
+    unit = data.units["tau"]
+    where = f"joint {data.joint}, " if data.joint is not None else ""
+    say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
+        f"{fit['steady_rows']:,} steady-state)")
+    for name, value in model.parameters().items():
+        say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
+    say(f"fit error, all rows:          {_figures(fit, unit)}")
+    say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
+    for note in fit["notes"]:
+        say(f"note: {note}")
+    say(f"wrote {output}")

@@ -6,9 +6,9 @@ import time
 
 import click
 
-from fricli import learning, logs, models
+from fricli import learning, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, model_job,
+from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 output_option, progress_enabled, reading_kwargs, say)
 
 
@@ -65,12 +65,16 @@ def _wrote(output: str) -> str:
 
 @cli.command("train-base")
 @click.argument("log")
-@output_option()
-@click.option("--arch", type=click.Choice(["mlp", "selmic", "nnacm"]), default="mlp", show_default=True,
-              help="mlp: the paper's NN_base; selmic: Selmic & Lewis (sigmoid and jump units); "
-                   "nnacm: Ciliz & Tomizuka (network plus learned Coulomb terms per direction).")
+@output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
+@click.option("--arch", type=click.Choice(["dissipative", "mlp", "selmic", "nnacm"]), default="dissipative",
+              show_default=True,
+              help="dissipative: a non-negative magnitude of (speed, direction) and |tau_g| times a smooth "
+                   "sign of qd, never along the motion (docs/neural-models.md); mlp: the paper's NN_base "
+                   "NN(tau_g, qd); selmic: Selmic & Lewis (sigmoid and jump units); nnacm: Ciliz & Tomizuka "
+                   "(network plus learned Coulomb terms per direction).")
 @click.option("--hidden", callback=_sizes, default=None, metavar="N[,N...]",
-              help="Hidden layer sizes [default: mlp 30,30; selmic 30 (10 of them jump units); nnacm 50].")
+              help="Hidden layer sizes [default: dissipative and mlp 30,30; selmic 30 (10 of them jump units); "
+                   "nnacm 50].")
 @click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True, help="Adam steps.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,
               help="Adam learning rate.")
@@ -86,7 +90,7 @@ def _wrote(output: str) -> str:
               help="Rows kept after velocity balancing (training plus validation).")
 @click.option("--velocity-input", type=click.Choice(learning.VELOCITY_INPUTS), default="asinh", show_default=True,
               help="asinh: the network sees asinh(qd / v0), which spreads the slow speeds apart; "
-                   "linear: qd itself (the paper's input).")
+                   "linear: qd itself (the paper's input; not for --arch dissipative).")
 @click.option("--velocity-scale", type=click.FloatRange(min=0, min_open=True), default=None, metavar="V0",
               help="v0 of --velocity-input asinh [rad/s or m/s]; default the 5 % quantile of the training "
                    "rows' speeds.")
@@ -96,7 +100,11 @@ def _wrote(output: str) -> str:
 @common
 def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fraction, no_balance, max_samples,
                velocity_input, velocity_scale, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
-    """Train a neural friction model on LOG (tau_f = NN(tau_g, qd)) and write it to MODEL.npz.
+    """Train a neural friction model on LOG and write it to MODEL.npz.
+
+    The default network (--arch dissipative) predicts tau_f = tanh(qd / v_ps) * m with a
+    magnitude m >= 0 from the speed, the direction and |tau_g|, so it never predicts friction
+    along the motion; --arch mlp is the paper's NN_base, tau_f = NN(tau_g, qd).
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
@@ -104,11 +112,12 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Training and validation MAE are printed at the end. The same seed gives the same file.
+    A log of several joints without --joint gives one model per joint in the folder -o DIR.
 
     \b
     Example:
       fricli train-base sample_data/joint2_base.parquet -o nn_base.npz
-      fricli train-base sample_data/joint2_base.parquet --arch selmic -o selmic.npz
+      fricli train-base sample_data/joint2_base.parquet --arch mlp -o paper_nn_base.npz
       fricli train-base base.parquet --steps 5000 --batch-size 256 --seed 3 -o quick.npz --json
     """
     _check_outputs(output, as_json)
@@ -116,14 +125,12 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
         learning.ARCHS[arch](hidden_sizes=tuple(hidden or learning.DEFAULT_HIDDEN[arch]))
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--hidden") from None
-    the_log = logs.load_log(log, **reading_kwargs(joint, kt, cutoff, drop_invalid))
-    options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": steps, "lr": lr,
-               "batch_size": batch_size, "val_fraction": val_fraction, "balance": not no_balance,
-               "max_samples": max_samples, "velocity_input": velocity_input}
-    if velocity_scale is not None:
-        options["velocity_scale"] = velocity_scale
-    with model_job(output, the_log, if_changed=if_changed, quiet=quiet) as job:
-        progress = _Progress(quiet, f"train-base {arch}")
+    if arch == "dissipative" and velocity_input != "asinh":
+        raise click.BadParameter("the dissipative network always sees asinh(|qd| / v0); use --arch mlp",
+                                 param_hint="--velocity-input")
+
+    def fit_one(the_log, out, job, _model):
+        progress = _Progress(quiet, f"train-base {arch}" + (f" joint {the_log.joint}" if the_log.joint is not None else ""))
         start = time.perf_counter()
         try:
             model, summary = learning.train_base(
@@ -134,23 +141,28 @@ def train_base(log, output, arch, hidden, steps, lr, batch_size, seed, val_fract
             progress.close()
         seconds = time.perf_counter() - start
         rows = summary["train_rows"] + summary["val_rows"]
-        models.save_for_log(output, model, the_log, rows_used=rows, seed=seed, fit=summary, options=options,
-                            job=job)
-    say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
-        f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
-        f"of {the_log.name} in {seconds:.1f} s; weights from step {summary['best_step']} of {summary['steps']}", quiet)
-    tau = the_log.units["tau"]
-    say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
-        f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
-    say(_wrote(output), quiet)
+        models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
+        where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
+        say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
+            f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
+            f"of {the_log.name}{where} in {seconds:.1f} s; weights from step {summary['best_step']} of "
+            f"{summary['steps']}", quiet)
+        tau = the_log.units["tau"]
+        say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
+            f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+        say(_wrote(out), quiet)
+        return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}
+
+    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
+                                     if_changed=if_changed, quiet=quiet)
     if as_json:
-        emit_json({"model": output, "kind": arch, "seconds": round(seconds, 3), **summary})
+        emit_results(results, folder_run)
 
 
 @cli.command("adapt")
-@click.argument("base", type=click.Path(dir_okay=False))
+@click.argument("base", type=click.Path())
 @click.argument("log")
-@output_option()
+@output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
 @click.option("--hidden", type=click.IntRange(min=1), default=30, show_default=True,
               help="Units in NN_add's hidden layer (ELU).")
 @click.option("--epochs", type=click.IntRange(min=1), default=200, show_default=True,
@@ -177,7 +189,8 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
     NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model.
+    with every command that takes a model. BASE may be a model folder (one model per joint):
+    on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
 
     \b
     Example:
@@ -185,33 +198,42 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
       fricli adapt lugre.npz sample_data/joint2_adapt.parquet --max-seconds 40 -o lugre_adapted.npz
     """
     _check_outputs(output, as_json)
-    kwargs = reading_kwargs(joint, kt, cutoff, drop_invalid)
-    base_model, base_meta = models.load(base)
-    table, digest = logs.read_table(log)
-    if kwargs["joint"] is None and "joint" in table.column_names:
-        kwargs["joint"] = base_meta.get("joint")
-    the_log = logs.from_table(table, name="stdin" if log == "-" else log, sha256=digest, **kwargs)
-    models.check_log(base_meta, the_log, base)
-    options = {"hidden": hidden, "epochs": epochs, "batch_size": batch_size, "lr": lr, "val_fraction": val_fraction,
-               "max_seconds": max_seconds, "min_speed": min_speed}
-    with model_job(output, the_log, if_changed=if_changed, quiet=quiet, inputs={"base": base}) as job:
-        progress = _Progress(quiet, "adapt")
+    from fricli import modelset
+
+    def fit_one(the_log, out, job, base_path):
+        base_model, base_meta = models.load(base_path)
+        models.check_log(base_meta, the_log, base_path)
+        progress = _Progress(quiet, "adapt" + (f" joint {the_log.joint}" if the_log.joint is not None else ""))
         start = time.perf_counter()
         try:
             model, summary = learning.adapt(
                 base_model, the_log, hidden=hidden, epochs=epochs, batch_size=batch_size, lr=lr, seed=seed,
-                val_fraction=val_fraction, max_seconds=max_seconds, min_speed=min_speed, on_eval=progress)
+                val_fraction=val_fraction, max_seconds=max_seconds, min_speed=min_speed, on_eval=progress,
+                base_envelope=models.envelope(base_meta, base_path))
         finally:
             progress.close()
         seconds = time.perf_counter() - start
-        models.save_for_log(output, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary,
-                            options=options, job=job, base={"path": base, "kind": base_meta.get("kind"),
-                                                   "provenance": base_meta.get("provenance", {})})
-    tau = the_log.units["tau"]
-    say(f"adapted {base_meta.get('kind')} model {base} on {summary['seconds_used']:.1f} s of {the_log.name} "
-        f"({summary['train_rows']} training rows, {summary['val_rows']} validation) in {seconds:.1f} s", quiet)
-    say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
-        f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}", quiet)
-    say(_wrote(output), quiet)
+        models.save_for_log(out, model, the_log, rows_used=summary["rows_used"], seed=seed, fit=summary, job=job,
+                            envelope=base_meta.get("envelope"),
+                            base={"path": base_path, "kind": base_meta.get("kind"),
+                                  "provenance": base_meta.get("provenance", {})})
+        tau = the_log.units["tau"]
+        where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
+        say(f"adapted {base_meta.get('kind')} model {base_path} on {summary['seconds_used']:.1f} s of "
+            f"{the_log.name}{where} ({summary['train_rows']} training rows, {summary['val_rows']} validation) "
+            f"in {seconds:.1f} s", quiet)
+        say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
+            f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}",
+            quiet)
+        outside = summary.get("outside_base_envelope")
+        if outside is not None:
+            say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
+                "outside the base model's training envelope", quiet)
+        say(_wrote(out), quiet)
+        return {"model": out, "kind": "residual", "base": base_path, "seconds": round(seconds, 3), **summary}
+
+    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
+                                     if_changed=if_changed, quiet=quiet, source=modelset.source(base),
+                                     input_name="base")
     if as_json:
-        emit_json({"model": output, "kind": "residual", "base": base, "seconds": round(seconds, 3), **summary})
+        emit_results(results, folder_run)

@@ -95,9 +95,10 @@ def if_changed_option(f):
 
 @contextlib.contextmanager
 def model_job(output: str, log, *, if_changed: bool, quiet: bool,
-              inputs: dict[str, str] | None = None) -> Iterator[dict]:
+              inputs: dict[str, str] | None = None, exit_unchanged: bool = True) -> Iterator[dict | None]:
     """Hold the lock on OUTPUT for the block (LOCKED, exit 8, when another job holds it); with
-    --if-changed exit UNCHANGED (9) and touch nothing when OUTPUT is up to date.
+    --if-changed exit UNCHANGED (9) and touch nothing when OUTPUT is up to date (or, with
+    ``exit_unchanged=False``, yield None: one joint of a whole-arm run is skipped).
 
     Yields the job record (command, shaping options, input model hashes) to save in the
     model's provenance as ``job=``. ``inputs``: name -> path of input model files."""
@@ -110,5 +111,49 @@ def model_job(output: str, log, *, if_changed: bool, quiet: bool,
             same = "options and input models" if inputs else "options"
             say(f"{output} is up to date: made from the same log ({log.sha256[:12]}...) with the same {same}; "
                 "nothing to do", quiet)
-            ctx.exit(errors.UNCHANGED)
+            if exit_unchanged:
+                ctx.exit(errors.UNCHANGED)
+            yield None
+            return
         yield job
+
+
+def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_changed: bool, quiet: bool,
+               source=None, input_name: str = "model", read=None) -> tuple[dict, bool]:
+    """Run ``fit_one(data, out_path, job, model_path)`` for every joint LOG's run covers (the
+    joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the folder OUTPUT.
+
+    ``source``: the input models (``joints.Source``) of a command that starts from a model, each
+    joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns
+    ({joint: what fit_one returned} for the joints fitted, whether OUTPUT is a folder); exits
+    UNCHANGED (9) when --if-changed finds every output up to date."""
+    from fricli import logs, modelset
+
+    table, digest = read or logs.read_table(log)
+    name = "stdin" if log == "-" else log
+    pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
+    results: dict = {}
+    reading = {k: v for k, v in reading.items() if k != "joint"}
+
+    def work(j):
+        data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
+        out = modelset.path_for(folder, data.joint) if folder else output
+        model_path = pairs[j]
+        inputs = {input_name: model_path} if model_path else None
+        with model_job(out, data, if_changed=if_changed, quiet=quiet, inputs=inputs,
+                       exit_unchanged=folder is None) as job:
+            if job is not None:
+                results[j] = fit_one(data, out, job, model_path)
+
+    modelset.each_joint(list(pairs), work)
+    if folder and not results:
+        click.get_current_context().exit(errors.UNCHANGED)
+    return results, folder is not None
+
+
+def emit_results(results: dict, folder_run: bool) -> None:
+    """One JSON document: the one joint's result, or {"joints": {joint: result}}."""
+    if folder_run:
+        emit_json({"joints": {str(j): r for j, r in results.items()}})
+    elif results:
+        emit_json(next(iter(results.values())))

@@ -19,10 +19,22 @@ def _effects(ctx, param, values):
         raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
+def _fleet_size(ctx, param, value):
+    if value is None:
+        return None
+    try:
+        sizes = tuple(int(v) for v in value.lower().split("x"))
+    except ValueError:
+        sizes = ()
+    if len(sizes) != 3 or min(sizes) < 1:
+        raise click.BadParameter(f"expected ROBOTSxJOINTSxDAYS like 40x6x1, got {value!r}", ctx=ctx, param=param)
+    return sizes
+
+
 @cli.command("simulate")
 @click.option("--scenario", type=click.Choice(simulator.SCENARIOS), default="base", show_default=True,
               help="base: constant-velocity sweeps (warm joint); extended: simultaneous motion, new "
-                   "friction state (~2 min); adapt: one out-and-back movement at one velocity (<60 s).")
+                   "friction state (~2 min); adapt: one out-and-back movement at one velocity (<60 s); daily: a short check, every velocity level out and back (~70 s).")
 @click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True, help="Joint preset.")
 @click.option("--load", type=click.Choice(simulator.LOADS), default="none", show_default=True,
               help="External payload measured as tau_ext (not in tau_g): sym zero-mean, asym one-sided.")
@@ -36,9 +48,18 @@ def _effects(ctx, param, values):
 @click.option("--friction-state", type=click.Choice(["base", "shifted"]), default=None,
               help="Friction state: base (warm, an exact extended LuGre model) or shifted (cold, "
                    "quadrant and direction dependence). Default: base for --scenario base, else shifted.")
-@click.option("-o", "--output", required=True, help="Output Parquet log (- for stdout).")
+@click.option("--thin", is_flag=True,
+              help="base scenario: each slow level (< 0.1 rad/s) one short stretch at a random position, "
+                   "so it meets one narrow band of gravity torques.")
+@click.option("--fleet", "fleet_size", callback=_fleet_size, metavar="RxJxD", default=None,
+              help="Simulate a fleet of R robots x J joints x D days of daily-check logs into the folder -o, "
+                   "with a manifest for fricli fleet (see docs/fleet.md).")
+@click.option("--wearing", type=click.IntRange(min=0), default=0, show_default=True,
+              help="--fleet: joints whose Coulomb and viscous friction grow over the days.")
+@click.option("-o", "--output", required=True, help="Output Parquet log (- for stdout); with --fleet a folder.")
 @common
-def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, output, quiet):
+def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, thin, fleet_size, wearing,
+                 output, quiet):
     """Simulate a log of a harmonic-drive robot joint with known friction.
 
     The log holds t, joint, q, qd, qdd, tau_m (with noise), tau_g, tau_dyn, tau_ext, temp and
@@ -51,13 +72,46 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
       fricli simulate --scenario extended --load asym --effect ripple --effect drift=0.5 -o ext.parquet
       fricli simulate --scenario adapt -o - | fricli predict lugre.npz - -o pred.parquet
     """
+    if fleet_size is not None:
+        _fleet(fleet_size, wearing, seed, rate, output, quiet)
+        return
+    if wearing:
+        raise click.UsageError("--wearing applies to --fleet only")
     if duration is not None and scenario != "extended":
         raise click.UsageError("--duration applies to --scenario extended only")
+    if thin and scenario != "base":
+        raise click.UsageError("--thin applies to --scenario base only")
     table = simulator.simulate(scenario, int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
-                               duration=duration, friction_state=friction_state)
+                               duration=duration, friction_state=friction_state, thin=thin)
     simulator.write(table, output)
     t = table.column("t")
     names = ", ".join(name if s is None else f"{name}={s:g}" for name, s in effect_specs) or "no effects"
     where = "stdout" if output == "-" else output
-    say(f"simulated {scenario} joint {joint} (load {load}, {names}, seed {seed}): {table.num_rows} rows, "
+    say(f"simulated {'thin ' if thin else ''}{scenario} joint {joint} (load {load}, {names}, seed {seed}): {table.num_rows} rows, "
         f"{t[-1].as_py() - t[0].as_py():.1f} s at {rate:g} Hz -> {where}", quiet)
+
+
+def _fleet(size, wearing, seed, rate, output, quiet):
+    import concurrent.futures
+    import os
+
+    from fricli.sim import fleet
+
+    ctx = click.get_current_context()
+    given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
+                                                    "friction_state", "thin")
+             if ctx.get_parameter_source(p) is not click.core.ParameterSource.DEFAULT]
+    if given:
+        raise click.UsageError(f"{given[0].replace('-specs', '')} does not apply to --fleet (it simulates daily checks)")
+    if output == "-":
+        raise click.UsageError("--fleet writes a folder: give -o FOLDER")
+    if ctx.get_parameter_source("rate") is click.core.ParameterSource.DEFAULT:
+        rate = fleet.DEFAULT_RATE
+    robots, joints_per_robot, days = size
+    with concurrent.futures.ProcessPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        joints = fleet.simulate_fleet(output, robots=robots, joints_per_robot=joints_per_robot, days=days,
+                                      wearing=wearing, seed=seed, rate=rate,
+                                      map_fn=lambda f, tasks: pool.map(f, tasks, chunksize=8))
+    wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
+    say(f"simulated a fleet of {robots} robots x {joints_per_robot} joints x {days} days "
+        f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)

@@ -9,14 +9,17 @@ import numpy as np
 
 from fricli import logs
 from fricli.diagnosis import effects as E
-from fricli.diagnosis import selection
-from fricli.diagnosis import terms as T
+from fricli.diagnosis import selection, structure
+from fricli.models import terms as T
 from fricli.errors import DataError, ModelFileError
 
 DEFAULT_FOLDS = 10
 DEFAULT_MIN_GAIN = 0.1
 DEFAULT_ALPHA = 0.01
 MIN_ROWS_PER_FOLD = 20
+INTERVAL_LEVEL = 0.95
+#: effects that the same log may explain about equally, and what tells them apart
+TWINS = {("gravity", "quadrant"): "rests with a varying tau_g, or a measured payload (tau_ext)"}
 
 
 @dataclasses.dataclass
@@ -29,6 +32,7 @@ class EffectResult:
     summary: str
     terms: list[dict]
     step_gain: float = 0.0         # share of what was left of it when scored (when added, or at the end)
+    part: str = "friction"         # or "model": an error of the robot model or the measurement
 
 
 @dataclasses.dataclass
@@ -49,13 +53,34 @@ class Diagnosis:
     skipped: dict[str, str]        # effects that do not apply to this log, with the reason
     tau_unit: str
     alone: dict[str, float] = dataclasses.field(default_factory=dict)   # each candidate's gain on its own
+    intervals: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # mae_before, mae_after, cut
+    unexplained: structure.Structure | None = None    # structure left in the held-out residual
+    notes: list[str] = dataclasses.field(default_factory=list)   # for people: what the log cannot decide
+
+    @property
+    def cut(self) -> float:
+        """Share of the held-out MAE the added effects remove."""
+        return 1.0 - self.mae_after / self.mae_before if self.mae_before > 0 else 0.0
+
+    @property
+    def errors(self) -> list[str]:
+        """Added effects that are errors of the robot model or the measurement, not friction."""
+        return [e.name for e in self.effects if e.added and e.part == "model"]
+
+    def error_term_names(self) -> set[str]:
+        return {t["name"] for e in self.effects if e.added and e.part == "model" for t in e.terms}
 
     def to_json(self) -> dict:
         """The ``--json`` schema."""
-        return {"mae_before": self.mae_before, "mae_after": self.mae_after,
-                "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params}
-                            for e in self.effects],
-                "added": list(self.added)}
+        out = {"mae_before": self.mae_before, "mae_after": self.mae_after, "cut": self.cut,
+               "intervals": {"level": INTERVAL_LEVEL, **self.intervals},
+               "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params,
+                            "part": e.part} for e in self.effects],
+               "added": list(self.added), "model_errors": self.errors, "notes": list(self.notes)}
+        if self.unexplained is not None:
+            out["unexplained_share"] = self.unexplained.share
+            out["unexplained"] = self.unexplained.to_json()
+        return out
 
 
 def column_units(table) -> dict[str, str]:
@@ -131,7 +156,8 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
             out.append(selection.Candidate(effect.name, names, effect.rivals))
         return out
 
-    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects)
+    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects,
+                            twins=tuple(TWINS))
     coef = design.fit(sel.terms)
     by_name = {e.name: e for e in usable}
     results = []
@@ -141,21 +167,60 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
         own = {t: coef[t] for t in names}
         params = effect.params(own, ctx)
         results.append(EffectResult(step.name, True, step.gain, params, True, effect.summary(params),
-                                    [registry[t] for t in names], step.step_gain))
+                                    [registry[t] for t in names], step.step_gain, effect.part))
     others = []
     for name, sc in sel.final.items():
         effect = by_name[name]
         names = sc.terms
         params = effect.params(_marginal_fit(design, sel.terms, names), ctx)
         others.append(EffectResult(name, sc.significant, sc.gain, params, False, effect.summary(params),
-                                   [registry[t] for t in names], sc.step_gain))
+                                   [registry[t] for t in names], sc.step_gain, effect.part))
     others.sort(key=lambda e: -e.gain)
+    left = r - design.heldout_prediction(sel.terms) if sel.terms else r
     mae_before = float(np.mean(np.abs(r)))
-    mae_after = float(np.mean(np.abs(r - design.heldout_prediction(sel.terms)))) if sel.terms else mae_before
+    mae_after = float(np.mean(np.abs(left))) if sel.terms else mae_before
     return Diagnosis(effects=results + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
                      terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
-                     alone={name: sc.gain for name, sc in sel.first.items()})
+                     alone={name: sc.gain for name, sc in sel.first.items()},
+                     intervals=fold_intervals(r, left, folds),
+                     unexplained=structure.analyse(left, sig, alpha),
+                     notes=_twin_notes(design, sel, cache, alpha, min_gain))
+
+
+def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float) -> list[str]:
+    """A note for each added effect whose twin (``TWINS``) would explain the log nearly as well."""
+    notes = []
+    for pair, evidence in TWINS.items():
+        for a, b in (pair, pair[::-1]):
+            if a not in sel.added or b in sel.added or a not in cache or b not in cache:
+                continue
+            others = [t for t in sel.terms if t not in cache[a]]
+            swapped = others + [t for t in cache[b] if t not in others]
+            cmp = selection.compare(design.sse(sel.terms), design.sse(swapped), alpha)
+            if not cmp.clear(min_gain):
+                notes.append(f"{a} or {b}: this log does not tell them apart clearly ({a} leaves "
+                             f"{100 * cmp.gain:.0f} % less held-out squared error); {evidence} would")
+    return notes
+
+
+def fold_intervals(before: np.ndarray, after: np.ndarray, folds: int) -> dict[str, list[float]]:
+    """Intervals (INTERVAL_LEVEL, Student t over the folds of the blocked cross-validation) of
+    the held-out MAE before and after, from the folds' MAEs, and of the cut (1 - after/before),
+    from the folds' cuts: ``{"mae_before": [lo, hi], "mae_after": [lo, hi], "cut": [lo, hi]}``."""
+    from scipy import stats  # imported here: it costs a noticeable part of start-up
+
+    edges = selection.fold_bounds(len(before), folds)
+    b = np.array([np.mean(np.abs(before[i:j])) for i, j in zip(edges[:-1], edges[1:])])
+    a = np.array([np.mean(np.abs(after[i:j])) for i, j in zip(edges[:-1], edges[1:])])
+    q = float(stats.t.ppf(0.5 + INTERVAL_LEVEL / 2, folds - 1)) / float(np.sqrt(folds))
+
+    def around(x):
+        half = q * float(np.std(x, ddof=1))
+        return [float(x.mean()) - half, float(x.mean()) + half]
+
+    cut = around(1.0 - a / np.where(b > 0, b, 1.0))
+    return {"mae_before": around(b), "mae_after": around(a), "cut": [cut[0], min(cut[1], 1.0)]}
 
 
 def _marginal_fit(design: selection.Design, chosen: list[str], names: list[str]) -> dict[str, float]:

@@ -1,6 +1,6 @@
 """The library of candidate effects a friction model may be missing.
 
-Each effect is a small group of physically motivated regressor terms (``fricli.diagnosis.terms``)
+Each effect is a small group of physically motivated regressor terms (``fricli.models.terms``)
 built from the log's signals and the base model's prediction p [Nm], and a rule turning the
 fitted coefficients into named physical parameters with units. Terms are shared by name: the
 level terms ``p`` (the model scaled as a whole) and ``qd`` (a viscous change) are part of the
@@ -19,7 +19,7 @@ import dataclasses
 
 import numpy as np
 
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.logs import KNOWN
 
 # ---------------------------------------------------------------------------- context
@@ -95,6 +95,8 @@ class Effect:
     #: combinations of simpler effects this one must beat on held-out data to be chosen
     rivals: tuple[tuple[str, ...], ...] = ()
     description: str = ""
+    #: "friction", or "model" for an error of the robot model or the measurement (not friction)
+    part: str = "friction"
 
     def applicable(self, ctx: Context) -> str | None:
         """None when the log supports the effect, else the reason it does not."""
@@ -130,6 +132,7 @@ def _level_coefs(coef: dict[str, float]) -> tuple[float, float]:
 class Offset(Effect):
     name = "offset"
     description = "a constant (a bias in the torque measurement)"
+    part = "model"
 
     def terms(self, ctx, residual):
         return [T.term("1", T.ONE)]
@@ -250,6 +253,7 @@ class Drift(_ScaledBy):
 class Acceleration(Effect):
     name = "acceleration"
     description = "a term in qdd (inertia missing or wrong in tau_dyn)"
+    part = "model"
 
     def applicable(self, ctx):
         if np.ptp(ctx.signals["qdd"]) <= 0:
@@ -266,22 +270,96 @@ class Acceleration(Effect):
         return f"missing inertia {_fmt(params['inertia']['value'])} {params['inertia']['unit']}"
 
 
+def _needs_tau_g(ctx) -> str | None:
+    if "tau_g" not in ctx.signals or np.ptp(ctx.signals["tau_g"]) <= 0:
+        return "the log has no varying 'tau_g'"
+    return None
+
+
 class Load(Effect):
     name = "load"
-    description = ("terms in |tau_l| and tau_l*sign(qd), tau_l = tau_g - tau_ext the torque through the "
-                   "gear (quadrant dependence)")
+    description = ("Coulomb level growing with |tau_l|, tau_l = tau_g - tau_ext the torque through the gear "
+                   "(its normal force)")
 
     def applicable(self, ctx):
-        if "tau_g" not in ctx.signals or np.ptp(ctx.signals["tau_g"]) <= 0:
-            return "the log has no varying 'tau_g'"
-        return None
+        return _needs_tau_g(ctx)
 
     def terms(self, ctx, residual):
-        return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN), T.term("tau_l*moving", T.GEAR, T.MOVING)]
+        return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN)]
 
     def params(self, coef, ctx):
-        u = f"{ctx.tau_unit}/{ctx.tau_unit}"
-        return {"kc": _par(coef["|tau_l|*sign"], u), "kq": _par(coef["tau_l*moving"], u)}
+        return {"kc": _par(coef["|tau_l|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+
+class Payload(Effect):
+    """A payload measured by tau_ext loads the gear: the friction's load dependence follows the
+    torque through the gear, |tau_g - tau_ext|, where the model sees only |tau_g|."""
+
+    name = "payload"
+    description = "friction growing with |tau_g - tau_ext| - |tau_g|: the measured payload loads the gear"
+
+    def applicable(self, ctx):
+        if "tau_ext" not in ctx.signals or np.ptp(ctx.signals["tau_ext"]) <= 0:
+            return "the log has no varying 'tau_ext'"
+        return _needs_tau_g(ctx)
+
+    def terms(self, ctx, residual):
+        return [T.term("(|tau_l|-|tau_g|)*sign", T.PAYLOADGEAR, T.SIGN)]
+
+    def params(self, coef, ctx):
+        return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+
+class Gravity(Effect):
+    """The logged gravity torque is off by a factor: the residual holds k*tau_g, at rest as in
+    motion, and the true gravity torque is (1 + k) times the logged one."""
+
+    name = "gravity"
+    description = "the logged tau_g (the robot model's gravity) is off by a factor: a robot-model error"
+    part = "model"
+
+    def applicable(self, ctx):
+        return _needs_tau_g(ctx)
+
+    def terms(self, ctx, residual):
+        return [T.term("tau_g", T.sig_("tau_g"))]
+
+    def params(self, coef, ctx):
+        k = coef["tau_g"]
+        return {"scale": _par(1.0 + k, ""),
+                "error": _par(100.0 * (1.0 / (1.0 + k) - 1.0) if k > -1 else float("nan"), "%")}
+
+    def summary(self, params):
+        e = params["error"]["value"]
+        if e is None:
+            return "logged tau_g has the wrong sign"
+        return (f"logged tau_g {_fmt(abs(e))} % {'low' if e < 0 else 'high'} "
+                f"(true = {_fmt(params['scale']['value'])} x logged)")
+
+
+class Quadrant(Effect):
+    """Friction that differs between the quadrants of (qd, tau_l): the Coulomb level is
+    Fc + kq*tau_l*sign(qd), higher when the joint drives against the torque through the gear
+    (sign(qd*tau_l) > 0) than when that torque back-drives it. In the signed friction that is
+    kq*tau_l, held through rests at its value when the motion stopped (the bristles hold the
+    friction they had), which tells it apart from an error of the logged gravity torque."""
+
+    name = "quadrant"
+    rivals = (("offset",),)
+    description = "friction kq*|tau_l| higher when the joint drives against tau_l than when back-driven"
+
+    def applicable(self, ctx):
+        return _needs_tau_g(ctx)
+
+    def terms(self, ctx, residual):
+        return [T.term("tau_l held", T.HELDGEAR)]
+
+    def params(self, coef, ctx):
+        return {"kq": _par(coef["tau_l held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+    def summary(self, params):
+        kq = params["kq"]["value"]
+        return f"kq {_fmt(kq)} {params['kq']['unit']}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
 
 
 class Velocity(Effect):
@@ -418,7 +496,8 @@ class Column(Effect):
                 f"dtau/d{self.column}": _par(coef.get(f"d{self.column}", 0.0), f"{u}/{cu}")}
 
 
-BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Load, Velocity, Level, Offset)
+BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Gravity, Load, Payload, Quadrant, Velocity, Level,
+           Offset)
 NAMES = tuple(cls.name for cls in BUILTIN)
 
 

@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from fricli import logs, metrics
-from fricli.diagnosis import terms as T
+from fricli.models import terms as T
 from fricli.diagnosis.driver import Diagnosis
 from fricli.models.augmented import AugmentedModel
 
@@ -43,7 +43,7 @@ def augment(model, diagnosis: Diagnosis, log: logs.Log, carry: bool = True) -> A
     terms = list(diagnosis.terms)
     coef = np.array([diagnosis.coef[t["name"]] for t in terms])
     params = {e.name: e.params for e in diagnosis.effects if e.added}
-    additive = AugmentedModel(model, terms, coef, effects=diagnosis.added, params=params)
+    additive = _split(model, terms, coef, diagnosis, effects=diagnosis.added, params=params)
     if not carry or model.kind != "lugre":
         return additive
     carried = _carry_lugre(model, diagnosis, log, params)
@@ -73,7 +73,8 @@ def _final_params(model: AugmentedModel, diagnosis: Diagnosis, log: logs.Log) ->
     sig = log.signals
     ctx = E.Context(sig, np.asarray(model.base.predict(sig)[0]), log.axis, column_units(log.table))
     lib = {e.name: e for e in E.library(sig)}
-    coef = {t["name"]: float(c) for t, c in zip(model.terms, model.coef)}
+    coef = {t["name"]: float(c) for t, c in zip(model.terms + model.error_terms,
+                                                 np.concatenate([model.coef, model.error_coef]))}
     out = {}
     for result in diagnosis.effects:
         if not result.added:
@@ -158,8 +159,18 @@ def _carry_lugre(model, diagnosis: Diagnosis, log: logs.Log, params: dict) -> Au
     if base is None:
         return None
     refitted = ["sigma0", "sigma1"] if bristles else []
-    return AugmentedModel(base, rest, coef, effects=diagnosis.added,
-                          carried=[e for e in diagnosis.added if e in which], refitted=refitted, params=params)
+    return _split(base, rest, coef, diagnosis, effects=diagnosis.added,
+                  carried=[e for e in diagnosis.added if e in which], refitted=refitted, params=params)
+
+
+def _split(base, terms: list[dict], coef: np.ndarray, diagnosis: Diagnosis, **kwargs) -> AugmentedModel:
+    """The augmented model with the robot-model error terms apart from the friction terms."""
+    errors = diagnosis.error_term_names()
+    coef = np.asarray(coef, dtype=np.float64)
+    is_error = np.array([t["name"] in errors for t in terms], dtype=bool)
+    return AugmentedModel(base, [t for t, e in zip(terms, is_error) if not e], coef[~is_error],
+                          error_terms=[t for t, e in zip(terms, is_error) if e], error_coef=coef[is_error],
+                          errors=diagnosis.errors, **kwargs)
 
 
 def _fit_terms(terms: list[dict], sig: dict, p: np.ndarray, target: np.ndarray,

@@ -75,7 +75,6 @@ class Design:
         self.names.append(name)
         self.cols.append(column)
         self.scale.append(rms)
-        self._gram = None
 
     def live(self, names) -> list[int]:
         """Column indices of ``names`` that are not identically zero."""
@@ -91,13 +90,29 @@ class Design:
         return z
 
     def gram(self) -> np.ndarray:
-        if self._gram is None:
-            blocks = []
-            for a, b in zip(self.bounds[:-1], self.bounds[1:]):
-                z = self._z(a, b)
-                blocks.append(z.T @ z)
-            self._gram = np.stack(blocks)
-        return self._gram
+        """Per-block Gram matrices (B, m+1, m+1) of the standardised columns and, last, the
+        residual; columns added since the last call only add their own rows and columns."""
+        m = len(self.cols)
+        old = self._gram
+        if old is not None and old.shape[1] == m + 1:
+            return old
+        m0 = 0 if old is None else old.shape[1] - 1
+        G = np.empty((self.k, m + 1, m + 1))
+        if m0:
+            G[:, :m0, :m0] = old[:, :m0, :m0]
+            G[:, :m0, m] = old[:, :m0, m0]
+            G[:, m, :m0] = old[:, m0, :m0]
+            G[:, m, m] = old[:, m0, m0]
+        for i, (a, b) in enumerate(zip(self.bounds[:-1], self.bounds[1:])):
+            z = self._z(a, b)
+            if m0:
+                cross = z[:, m0:m].T @ z
+                G[i, m0:m, :] = cross
+                G[i, :, m0:m] = cross.T
+            else:
+                G[i] = z.T @ z
+        self._gram = G
+        return G
 
     def _solve(self, A: np.ndarray, b: np.ndarray, n_train: int) -> np.ndarray:
         A = A + RIDGE * max(n_train, 1) * np.eye(len(A))
@@ -265,35 +280,111 @@ def _union(a: list[str], b: list[str]) -> list[str]:
 
 
 def forward(design: Design, candidates, *, alpha: float = 0.01, min_gain: float = 0.1,
-            max_effects: int | None = None) -> Selection:
-    """Forward selection. ``candidates(chosen_terms, residual)`` returns the list of
-    ``Candidate`` for the current step (terms already added to ``design``)."""
+            max_effects: int | None = None, twins: tuple[tuple[str, str], ...] = ()) -> Selection:
+    """Forward selection with backward pruning. ``candidates(chosen_terms, residual)`` returns
+    the list of ``Candidate`` for the current step (terms already added to ``design``).
+
+    When no candidate qualifies any more, an effect added earlier that the others now make
+    unnecessary (the full set does not beat the set without it by the same criteria, e.g. a
+    trend in time taken before the temperature that explains it) is dropped and may not return;
+    the forward steps then go on. Last, an effect whose twin (``twins``: pairs of effects that
+    explain much the same, e.g. a gravity-model error and quadrant friction) is not chosen
+    is replaced by it when that leaves less held-out error, and the steps go on again."""
     chosen: list[str] = []
-    chosen_terms: list[str] = []
     steps: list[Score] = []
     first: dict[str, Score] = {}
+    dropped: set[str] = set()
+    added: dict[str, list[str]] = {}        # the chosen effects' terms as they were chosen
+    rivals_of: dict[str, tuple] = {}
     sse0 = float(design.sse([]).sum())
     while True:
+        chosen_terms = _terms_of(chosen, added)
         residual = design.r - design.fitted(chosen_terms)
         cands = candidates(chosen_terms, residual)
         term_of = {c.name: c.terms for c in cands}
+        term_of.update(added)
+        rivals_of.update({c.name: c.rivals for c in cands})
         sse_base = design.sse(chosen_terms)
         scores = {c.name: score(design, c, chosen_terms, sse_base, sse0, term_of, alpha, min_gain)
                   for c in cands if c.name not in chosen}
-        if not chosen:
+        if not first:
             first = dict(scores)
         limit = max_effects is not None and len(chosen) >= max_effects
-        eligible = sorted((s for s in scores.values() if s.eligible), key=lambda s: -s.gain)
-        if not eligible or limit:
-            return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
-        best = eligible[0]
-        for other in eligible[1:]:
-            if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],
-                                                       chosen_terms, alpha, min_gain):
-                best = other
-        chosen.append(best.name)
-        chosen_terms = _union(chosen_terms, term_of[best.name])
-        steps.append(best)
+        eligible = sorted((s for s in scores.values() if s.eligible and s.name not in dropped), key=lambda s: -s.gain)
+        if eligible and not limit:
+            best = eligible[0]
+            for other in eligible[1:]:
+                if other.n_new < best.n_new and not _beats(design, term_of[best.name], term_of[other.name],
+                                                           chosen_terms, alpha, min_gain):
+                    best = other
+            chosen.append(best.name)
+            added[best.name] = term_of[best.name]
+            steps.append(best)
+            continue
+        spare = _spare(design, chosen, added, alpha, min_gain)
+        if spare is not None:
+            dropped.add(spare)
+            chosen.remove(spare)
+            del added[spare]
+        else:
+            swap = _better_twin(design, chosen, added, term_of, twins, dropped)
+            if swap is None:
+                break
+            old, new = swap
+            dropped.add(old)
+            chosen[chosen.index(old)] = new
+            del added[old]
+            added[new] = term_of[new]
+        steps = _rescore(design, chosen, added, rivals_of, sse0, alpha, min_gain)
+    return Selection(chosen, steps, scores, first, chosen_terms, sse0, float(sse_base.sum()))
+
+
+def _terms_of(names: list[str], term_of: dict[str, list[str]]) -> list[str]:
+    out: list[str] = []
+    for name in names:
+        out = _union(out, term_of[name])
+    return out
+
+
+def _better_twin(design: Design, chosen: list[str], added, term_of, twins, dropped) -> tuple[str, str] | None:
+    """(chosen effect, its twin) when the twin in its place leaves less held-out error, else None."""
+    full = _terms_of(chosen, added)
+    for pair in twins:
+        for a, b in (pair, pair[::-1]):
+            if a in chosen and b not in chosen and b not in dropped and b in term_of:
+                swapped = _union(_terms_of([c for c in chosen if c != a], added), term_of[b])
+                if design.sse(swapped).sum() < design.sse(full).sum():
+                    return a, b
+    return None
+
+
+def _spare(design: Design, chosen: list[str], term_of, alpha: float, min_gain: float) -> str | None:
+    """The earliest chosen effect the others make unnecessary, or None."""
+    full = _terms_of(chosen, term_of)
+    for name in chosen:
+        rest = _terms_of([c for c in chosen if c != name], term_of)
+        if set(rest) >= set(full):
+            continue
+        if not compare(design.sse(full), design.sse(rest), alpha).clear(min_gain):
+            return name
+    return None
+
+
+def _rescore(design: Design, chosen: list[str], term_of, rivals_of, sse0: float, alpha: float,
+             min_gain: float) -> list[Score]:
+    """Scores of the chosen effects, reordered greedily: each the one that removes the most of
+    what the ones before it leave (``chosen`` is reordered in place to match)."""
+    out, base, left = [], [], list(chosen)
+    while left:
+        sse_base = design.sse(base)
+        scores = [score(design, Candidate(n, term_of[n], rivals_of.get(n, ())), base, sse_base, sse0, term_of,
+                        alpha, min_gain) for n in left]
+        best = max(scores, key=lambda sc: sc.gain)
+        out.append(best)
+        left.remove(best.name)
+        base = _union(base, term_of[best.name])
+    chosen[:] = [sc.name for sc in out]
+    return out
 
 
 def _beats(design: Design, richer: list[str], simpler: list[str], base: list[str], alpha: float,

@@ -15,7 +15,7 @@ from fricli import modelfile
 from fricli.errors import ModelFileError
 from fricli.models.base import FrictionModel
 
-_KIND_MODULES = ("lugre", "neural", "residual", "augmented")
+_KIND_MODULES = ("lugre", "neural", "dissipative", "residual", "augmented")
 KINDS: dict[str, type[FrictionModel]] = {}
 
 
@@ -32,6 +32,21 @@ def _load_kinds() -> None:
         except ModuleNotFoundError as exc:
             if exc.name != module:
                 raise
+
+
+PRECISIONS = ("single", "double")
+
+
+def set_precision(model: FrictionModel, precision: str) -> FrictionModel:
+    """Evaluate every network in the model tree in ``precision``: "single" (float32, the
+    default) or "double" (float64, the arithmetic of exported C code). Returns ``model``."""
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {PRECISIONS}, not {precision!r}")
+    if hasattr(model, "precision"):
+        model.precision = precision
+    for child in model.children().values():
+        set_precision(child, precision)
+    return model
 
 
 def to_parts(model: FrictionModel, prefix: str = "") -> tuple[dict, dict[str, np.ndarray]]:
@@ -67,12 +82,15 @@ def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name
 
 
 def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,
-         fit: dict | None = None) -> dict:
-    """Write ``model`` with its meta; returns the meta."""
+         fit: dict | None = None, envelope: dict | None = None) -> dict:
+    """Write ``model`` with its meta (``envelope``: the training envelope, ``Envelope.to_meta``);
+    returns the meta."""
     spec, arrays = to_parts(model)
     meta = modelfile.base_meta()
     meta.update(kind=model.kind, model=spec, joint=joint, axis=axis, units=units,
                 inputs=sorted(model.required_inputs()), provenance=provenance, fit=fit or {})
+    if envelope is not None:
+        meta["envelope"] = envelope
     modelfile.write(path, meta, arrays)
     return meta
 
@@ -93,17 +111,37 @@ def check_log(meta: dict, log, model_name: str = "model") -> None:
 
 
 def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict:
-    """Where a model came from: enough to reproduce it (no wall-clock time)."""
+    """Where a model came from: enough to reproduce it (no wall-clock time). A command's options,
+    the seed among them, are recorded once, in ``job`` (``extra``); ``seed`` is kept here only for
+    a model written without one."""
     import os
 
     out = {"log_sha256": log.sha256, "log_name": os.path.basename(log.name), "log_rows": len(log),
-           "rows_used": int(rows_used), "seed": seed, "derived": log.derived}
+           "rows_used": int(rows_used), "derived": log.derived}
+    if "job" not in extra:
+        out["seed"] = seed
     out.update(extra)
     return out
 
 
+def envelope(meta: dict, name: str = "model"):
+    """The training envelope (``fricli.envelope.Envelope``) recorded in a model file's meta, or
+    None for files without one."""
+    from fricli.envelope import Envelope
+
+    try:
+        return Envelope.from_meta(meta.get("envelope"))
+    except ValueError as exc:
+        raise ModelFileError(f"{name}: {exc}") from None
+
+
 def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: int | None = None,
-                 fit: dict | None = None, **extra) -> dict:
-    """``save`` with joint, units and provenance taken from the log the model was fitted on."""
+                 fit: dict | None = None, envelope: dict | None = None, **extra) -> dict:
+    """``save`` with joint, units and provenance taken from the log the model was fitted on; the
+    training envelope is the log's over the model's inputs unless ``envelope`` is given."""
+    from fricli.envelope import Envelope
+
+    if envelope is None:
+        envelope = Envelope.fit(log.signals, model.required_inputs()).to_meta()
     return save(path, model, joint=log.joint, axis=log.axis, units=log.units,
-                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit)
+                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit, envelope=envelope)

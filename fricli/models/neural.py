@@ -27,6 +27,7 @@ from typing import Callable
 
 import numpy as np
 
+from fricli import logs
 from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
@@ -36,7 +37,6 @@ from fricli.nn.network import Network
 from fricli.nn.training import PREDICT_CHUNK, Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
-_OPTIONAL_TORQUES = ("tau_g", "tau_dyn", "tau_ext")
 VELOCITY_QUANTILE = 0.05   # velocity_scale="auto": v0 = this quantile of |qd| over the training rows
 
 
@@ -50,11 +50,7 @@ def feature(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | N
         if name == "neg(qd)":
             return 0.5 * (1.0 - s)
         return s
-    if name in sig:
-        return sig[name][start:stop]
-    if name in _OPTIONAL_TORQUES:
-        return np.zeros(len(range(_rows(sig))[start:stop]))
-    raise DataError(f"the log has no column {name!r}")
+    return logs.column(sig, name, start, stop)
 
 
 def _rows(sig: dict[str, np.ndarray]) -> int:
@@ -80,8 +76,9 @@ class NeuralFriction(FrictionModel):
     def __init__(self, *, inputs=("tau_g", "qd"), hidden=((30, "elu"), (30, "elu")), skip=(),
                  steps: int | None = 50_000, epochs: int | None = None, lr: float = 0.01,
                  batch_size: int = 0, eval_every: int | None = None, units: dict | None = None,
-                 velocity_scale: float | str | None = None):
+                 velocity_scale: float | str | None = None, precision: str = "single"):
         self.inputs, self.skip = tuple(inputs), tuple(skip)
+        self.precision = precision
         if not (velocity_scale is None or velocity_scale == "auto"
                 or (isinstance(velocity_scale, (int, float)) and velocity_scale > 0)):
             raise ValueError(f"velocity_scale must be None, 'auto' or a positive speed, got {velocity_scale!r}")
@@ -154,7 +151,8 @@ class NeuralFriction(FrictionModel):
         return {_source(name) for name in self.inputs + self.skip}
 
     def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
-        """tau_f (n,) [Nm] for the log's signals; stateless."""
+        """tau_f (n,) [Nm] for the log's signals; stateless. The network runs in float32
+        (``precision="single"``, the fast default) or float64 (``"double"``, as exported C code)."""
         if self.net_ is None:
             raise ValueError("the model is not fitted")
         names = self.inputs + self.skip
@@ -165,6 +163,10 @@ class NeuralFriction(FrictionModel):
         cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
         pieces = list(zip(cuts[:-1], cuts[1:]))
         net, mean_x, scale_x = self.net_, self.x_std_.mean_, self.x_std_.scale_
+        if self.precision == "double":
+            net = net.astype(np.float64)
+        elif self.precision != "single":
+            raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
         y_mean, y_scale = float(self.y_std_.mean_[0]), float(self.y_std_.scale_[0])
 
         def run(part: list[tuple[int, int]]) -> None:

@@ -173,3 +173,13 @@ def from_spec(spec) -> Activation:
     if name == "mixed":
         return Mixed([(n, from_spec(s)) for n, s in spec["parts"]])
     raise ValueError(f"unknown activation {name!r}")
+
+
+def softplus(x: np.ndarray) -> np.ndarray:
+    """log(1 + e^x), without overflow: max(x, 0) + log1p(e^-|x|)."""
+    return np.maximum(x, 0) + np.log1p(np.exp(-np.abs(x)))
+
+
+def softplus_grad(x: np.ndarray) -> np.ndarray:
+    """d softplus / dx = sigmoid(x)."""
+    return sigmoid(x)

@@ -92,6 +92,12 @@ class Network:
                 raise ValueError(f"weight matrix {i} holds non-finite values")
             self.weights[i][...] = w
 
+    def astype(self, dtype) -> "Network":
+        """A copy computing in ``dtype`` (float32 weights are exact in float64)."""
+        net = Network(self.n_in, self.hidden, n_out=self.n_out, n_skip=self.n_skip, dtype=dtype)
+        net.theta[...] = self.theta
+        return net
+
     # ------------------------------------------------------------------ computing
 
     def workspace(self, n: int) -> "Workspace":

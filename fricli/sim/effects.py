@@ -10,6 +10,9 @@ Friction, in the terms of a ``Scene`` (s = sign(v), tau_gear = tau_g - tau_ext, 
     Fs_eff = (fs*dir_c + ks*tau_l) * thermal * coulomb + shift + kq*tau_gear*s + k_abs*tau_l
     viscous = fv*dir_v * exp(-alpha_v*(T - t_ref)) * viscous_scale * shape(v)
     tau_f  = LuGre(Fc_eff, Fs_eff) + viscous + extra,   thermal = 1 - alpha_c*(T - t_ref)
+
+Effects that are not friction change what is logged instead: the robot model's gravity torque
+(``gravity_logged`` times the true one) or a disturbance torque in tau_m (``tau_m_extra``).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ RIPPLE_SECOND = 0.35       # amplitude of the second harmonic, relative to the f
 VELOCITY_REF = 0.3         # velocity where the changed viscous curve meets the linear one [rad/s]
 HUMIDITY_REF = 45.0        # [%]
 HUMIDITY_SWING = 12.0      # [%]
+DISTURBANCE_HZ = 2.5       # frequency of the disturbance torque [Hz]
 WARM_START = 20.0          # temperature at the start of a log with the temperature effect [degC]
 
 
@@ -50,6 +54,7 @@ class Scene:
     visc_exponent: float = 1.0
     tau_m_bias: float = 0.0    # constant bias on the measured motor torque [Nm]
     inertia_logged: float | None = None   # inertia the logged tau_dyn uses [kg m^2]
+    gravity_logged: float = 1.0           # logged tau_g = gravity_logged * the true tau_g
     columns: dict = dataclasses.field(default_factory=dict)   # name -> (values (n,), unit)
 
     def __post_init__(self):
@@ -59,6 +64,7 @@ class Scene:
         self.coulomb = np.ones(n)    # multiplies the whole Coulomb/static level
         self.viscous = np.ones(n)    # multiplies the viscous term
         self.extra = np.zeros(n)     # additive torque, part of the friction [Nm]
+        self.tau_m_extra = np.zeros(n)   # disturbance torque in tau_m, not friction [Nm]
         if self.inertia_logged is None:
             self.inertia_logged = self.joint.inertia
 
@@ -209,15 +215,57 @@ class Level(Effect):
 
 class Load(Effect):
     name, unit = "load", "Nm/Nm"
-    help = "quadrant dependence: Coulomb/static levels gain k*tau_gear*sign(v) + k/2*|tau_gear|"
+    help = "Coulomb/static levels gain k*|tau_gear| (the gear's normal force grows with the load)"
 
     def default(self, j):
         return 0.05 if j.number == 2 else 0.08
 
     def apply(self, scene, strength, rng):
+        scene.k_abs += strength
+        return {"kl": strength}
+
+
+class Quadrant(Effect):
+    name, unit = "quadrant", "Nm/Nm"
+    help = ("quadrant dependence: Coulomb/static levels gain k*tau_gear*sign(v), more friction when the "
+            "joint drives against the gear torque than when it is back-driven")
+
+    def default(self, j):
+        return 0.065 if j.number == 2 else 0.1
+
+    def apply(self, scene, strength, rng):
         scene.kq += strength
-        scene.k_abs += 0.5 * strength
-        return {"kq": strength, "kl": 0.5 * strength}
+        return {"kq": strength}
+
+
+class Gravity(Effect):
+    name, unit = "gravity", "-"
+    help = "the logged tau_g (the robot model's gravity) is this fraction too low: (1-f) times the true one"
+
+    def default(self, j):
+        return 0.07
+
+    def check(self, strength):
+        if not -1 < strength < 1:
+            raise ValueError("gravity must be between -1 and 1")
+
+    def apply(self, scene, strength, rng):
+        scene.gravity_logged *= 1.0 - strength
+        return {"logged_over_true": scene.gravity_logged}
+
+
+class Disturbance(Effect):
+    name, unit = "disturbance", "Nm"
+    help = (f"a {DISTURBANCE_HZ:g} Hz sinusoidal torque of this amplitude in tau_m (e.g. a pump or fan), "
+            "not friction")
+
+    def default(self, j):
+        return 1.0 if j.number == 2 else 0.6
+
+    def apply(self, scene, strength, rng):
+        ph = rng.uniform(0, 2 * np.pi)
+        scene.tau_m_extra += strength * np.sin(2 * np.pi * DISTURBANCE_HZ * (scene.t - scene.t[0]) + ph)
+        return {"amplitude": strength, "frequency": DISTURBANCE_HZ, "phase": float(ph)}
 
 
 class Velocity(Effect):
@@ -270,7 +318,7 @@ class Payload(Effect):
 # Registry order is the order effects are applied in (and their random streams).
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Payload(), Temperature(), Column(), Ripple(), Asymmetry(), Drift(), Inertia(), Offset(), Level(),
-    Load(), Velocity())}
+    Load(), Velocity(), Quadrant(), Gravity(), Disturbance())}
 
 
 def parse(spec: str) -> tuple[str, float | None]:

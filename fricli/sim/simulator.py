@@ -25,7 +25,7 @@ from fricli.logs import table_from_arrays
 from fricli.sim import effects as fx
 from fricli.sim import joints, trajectories
 
-SCENARIOS = ("base", "extended", "adapt")
+SCENARIOS = ("base", "extended", "adapt", "daily")
 LOADS = ("none", "sym", "asym")
 INTERNAL_RATE_MIN = 1000.0     # [Hz]
 COUPLING = 0.25                # coupling inertia to the other joints, relative to J
@@ -37,11 +37,11 @@ UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "
 
 
 def default_state(scenario: str) -> str:
-    """Friction state of a scenario: ``base`` (warm) for base, ``shifted`` for extended and adapt."""
-    return "base" if scenario == "base" else "shifted"
+    """Friction state of a scenario: ``base`` (warm) for base and daily, ``shifted`` for extended and adapt."""
+    return "base" if scenario in ("base", "daily") else "shifted"
 
 
-def true_params(joint: int, scenario: str = "base", friction_state: str | None = None) -> dict[str, float]:
+def true_params(joint: int | joints.Joint, scenario: str = "base", friction_state: str | None = None) -> dict[str, float]:
     """The true friction parameters of a scenario (names as in the LuGre model kind).
 
     fc, fs, vs, delta, fv, kc, ks, sigma0, sigma1 (extended LuGre, load tau_l = |tau_g - tau_ext|),
@@ -50,7 +50,7 @@ def true_params(joint: int, scenario: str = "base", friction_state: str | None =
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r} (choose from {', '.join(SCENARIOS)})")
-    j = joints.joint(joint)
+    j = joint if isinstance(joint, joints.Joint) else joints.joint(joint)
     out = j.lugre()
     out.update(t_ref=j.t_ref, alpha_c=j.alpha_c, alpha_v=j.alpha_v)
     out.update(joints.state_params(j, friction_state or default_state(scenario)))
@@ -69,11 +69,13 @@ def _rates(rate: float) -> tuple[float, int]:
     return rate * k, k
 
 
-def _plan(scenario, j, rng, duration):
+def _plan(scenario, j, rng, duration, thin=False):
     if scenario == "base":
-        return trajectories.base_plan(j, rng)
+        return trajectories.base_plan(j, rng, thin=thin)
     if scenario == "adapt":
         return trajectories.adapt_plan(j, rng)
+    if scenario == "daily":
+        return trajectories.daily_plan(j, rng)
     return trajectories.extended_plan(j, rng, trajectories.EXTENDED_DURATION if duration is None else duration)
 
 
@@ -121,15 +123,17 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
     return list(out.items())
 
 
-def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effects=(), seed: int = 0,
-             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None) -> pa.Table:
+def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str = "none", effects=(), seed: int = 0,
+             rate: float = 100.0, duration: float | None = None, friction_state: str | None = None,
+             thin: bool = False) -> pa.Table:
     """A simulated log as a pyarrow table (columns and units of the log contract).
 
-    scenario: base | extended | adapt; joint: 2 | 4; load: none | sym | asym (external payload
+    scenario: base | extended | adapt | daily; joint: 2 | 4 or a ``joints.Joint``; load: none | sym | asym (external payload
     measured by the sensor, not in tau_g); effects: ``NAME[=STRENGTH]`` strings (see
     ``fricli.sim.effects.EFFECTS``); rate: output rate [Hz]; duration [s]: extended only;
-    friction_state: base | shifted (default: base for the base scenario, else shifted).
-    The same arguments give the same table.
+    friction_state: base | shifted (default: base for the base scenario, else shifted); thin:
+    base only, each slow level one short stretch at a random position (see
+    ``trajectories.base_plan``). The same arguments give the same table.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r} (choose from {', '.join(SCENARIOS)})")
@@ -137,13 +141,15 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         raise ValueError(f"unknown load {load!r} (choose from {', '.join(LOADS)})")
     if duration is not None and scenario != "extended":
         raise ValueError("a duration can only be given for the extended scenario")
-    j = joints.joint(joint)
+    if thin and scenario != "base":
+        raise ValueError("thin applies to the base scenario only")
+    j = joint if isinstance(joint, joints.Joint) else joints.joint(joint)
     state = friction_state or default_state(scenario)
     state_p = joints.state_params(j, state)
     chosen = resolve_effects(effects)
     fs_int, k = _rates(float(rate))
 
-    plan = _plan(scenario, j, _rng(seed, _STREAM_PLAN), duration)
+    plan = _plan(scenario, j, _rng(seed, _STREAM_PLAN), duration, thin)
     n_out = int(math.floor(plan.t * rate + 1e-9)) + 1
     t = np.arange((n_out - 1) * k + 1) / fs_int
     q, qd, qdd = trajectories.evaluate(plan, t)
@@ -174,13 +180,15 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
     rng_noise = _rng(seed, _STREAM_NOISE)
     noise_m = rng_noise.normal(0.0, j.noise_sd, n_out)
     noise_ext = rng_noise.normal(0.0, j.ext_noise_sd, n_out)
-    tau_m = (tau_dyn_true + scene.tau_g + tau_f - scene.tau_ext)[out] + noise_m + scene.tau_m_bias
+    tau_m = (tau_dyn_true + scene.tau_g + tau_f - scene.tau_ext + scene.tau_m_extra)[out]
+    tau_m = tau_m + noise_m + scene.tau_m_bias
     sensor = scene.tau_ext[out] + noise_ext if scene.loaded else np.zeros(n_out)
 
     columns = {
         "t": t[out], "joint": np.full(n_out, j.number, dtype=np.int64),
         "q": q[out], "qd": qd[out], "qdd": qdd[out],
-        "tau_m": tau_m, "tau_g": scene.tau_g[out], "tau_dyn": tau_dyn_logged[out], "tau_ext": sensor,
+        "tau_m": tau_m, "tau_g": scene.gravity_logged * scene.tau_g[out], "tau_dyn": tau_dyn_logged[out],
+        "tau_ext": sensor,
         "temp": scene.temp[out], "tau_f_true": tau_f[out],
     }
     units = dict(UNITS)
@@ -188,7 +196,7 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         columns[name] = values[out]
         units[name] = unit
     table = table_from_arrays(columns, units)
-    parameters = true_params(j.number, scenario, state)
+    parameters = true_params(j, scenario, state)
     for name in ("inertia", "gravity_amplitude", "load_amplitude", "noise_sd", "ext_noise_sd"):
         parameters[name] = getattr(j, name)
     meta = {
@@ -198,6 +206,8 @@ def simulate(scenario: str = "base", joint: int = 2, *, load: str = "none", effe
         "units": {name: joints.PARAM_UNITS[name] for name in parameters},
         "effects": applied, "configuration": conf.as_dict(),
     }
+    if thin:
+        meta["thin"] = True
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True)})
 
 

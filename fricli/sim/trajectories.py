@@ -30,6 +30,8 @@ BASE_STRETCH_S = 12.0     # longest constant-velocity stretch per direction and 
 BASE_SPLIT_BELOW = 0.1    # levels below this are split over several positions [rad/s]
 BASE_SLOW_PARTS = 6       # ... this many, spread over the position range
 ADAPT_VELOCITY = 0.2      # the one velocity of the adapt movement [rad/s]
+DAILY_LEVELS = (0.01, 0.025, 0.05, 0.1, 0.2, 0.4, 0.7)   # velocity levels of the daily check [rad/s]
+DAILY_STRETCH_S = 2.5     # constant-velocity stretch per direction and level of the daily check [s]
 EXTENDED_DURATION = 120.0
 
 
@@ -97,6 +99,16 @@ class Plan:
         self.stretch(math.copysign(v, d), q_end, a_max)
         self.q = q_end   # absorb rounding
 
+    def out_and_back(self, start: float, v: float, d: float, approach: float, rest: float) -> None:
+        """Move to ``start`` at up to ``approach``, then a stretch of ``d`` at ``v`` and back at -v,
+        with a rest of ``rest`` seconds before, between and after."""
+        self.move_to(start, approach)
+        self.hold(rest)
+        self.stretch(v, start + d)
+        self.hold(rest)
+        self.stretch(-v, start)
+        self.hold(rest)
+
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(getattr(self, k), dtype=np.float64) for k in ("t0", "T", "v0", "v1", "q0")}
 
@@ -129,13 +141,17 @@ def evaluate(plan: Plan, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndar
 # ----------------------------------------------------------------- scenarios
 
 
-def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
+def base_plan(j: Joint, rng: np.random.Generator, thin: bool = False) -> Plan:
     """Constant-velocity sweeps: every level of BASE_LEVELS once in each direction.
 
     Fast levels sweep the whole position range; slow ones a stretch of BASE_STRETCH_S seconds,
     split for levels below BASE_SPLIT_BELOW into BASE_SLOW_PARTS pieces stratified over the
     range (placed by ``rng`` within their strata), so slow data meets the whole span of gravity
     loads, as sweeps over the whole range would.
+
+    ``thin``: every level below BASE_SPLIT_BELOW is one unsplit stretch at a random position
+    instead, so each slow level meets one narrow band of gravity loads (slow sweeps kept short
+    because they are expensive).
     """
     lo, hi = j.q_min, j.q_max
     full = hi - lo
@@ -146,18 +162,16 @@ def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
         d = v * BASE_STRETCH_S + 2 * ramp_distance(0.0, v)
         if d >= full:
             continue
+        if thin and v < BASE_SPLIT_BELOW:
+            placed.append((lo + 0.02 + float(rng.uniform()) * (full - 0.04 - d), v, d))
+            continue
         parts = BASE_SLOW_PARTS if v < BASE_SPLIT_BELOW else 1
         # stratified over the range, so every slow level meets the whole span of gravity loads
         slots = (np.arange(parts) + rng.uniform(0.15, 0.85, parts)) / parts
         placed += [(lo + 0.02 + slot * (full - 0.04 - d / parts), v, d / parts) for slot in slots]
     placed.sort()
     for start, v, d in placed:
-        plan.move_to(start, 0.3)
-        plan.hold(0.5)
-        plan.stretch(v, start + d)
-        plan.hold(0.5)
-        plan.stretch(-v, start)
-        plan.hold(0.5)
+        plan.out_and_back(start, v, d, approach=0.3, rest=0.5)
     plan.move_to(lo, 0.5)
     plan.hold(0.5)
     for v in BASE_LEVELS:
@@ -167,6 +181,20 @@ def base_plan(j: Joint, rng: np.random.Generator) -> Plan:
         plan.hold(0.5)
         plan.stretch(-v, lo)
         plan.hold(0.5)
+    plan.hold(0.5)
+    return plan
+
+
+def daily_plan(j: Joint, rng: np.random.Generator) -> Plan:
+    """A short daily check (about a minute): every level of DAILY_LEVELS out and back for up to
+    DAILY_STRETCH_S seconds, each from a start position drawn over the range by ``rng``."""
+    lo, hi = j.q_min, j.q_max
+    plan = Plan(q=lo)
+    plan.hold(0.5)
+    for v in DAILY_LEVELS:
+        d = min(v * DAILY_STRETCH_S + 2 * ramp_distance(0.0, v), hi - lo - 0.04)
+        start = lo + 0.02 + float(rng.uniform(0.0, 1.0)) * (hi - lo - 0.04 - d)
+        plan.out_and_back(start, v, d, approach=0.5, rest=0.3)
     plan.hold(0.5)
     return plan
 

@@ -11,21 +11,26 @@ any later log from the constants it carries. Factors:
     {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column)
     {"f": "abs", "name": S}                        |S|
     {"f": "gear"}, {"f": "absgear"}                tau_g - tau_ext (the torque through the gear), |...|
+    {"f": "payloadgear"}                           |tau_g - tau_ext| - |tau_g|: what a payload adds to the gear load
     {"f": "sign"}                                  direction of motion, held at rest
     {"f": "moving"}                                |direction| (0 only before the first motion)
     {"f": "pos"}                                   1 where the direction is positive, else 0
+    {"f": "heldgear"}                              tau_g - tau_ext while moving, held through samples at
+                                                   rest at its value when the motion stopped
     {"f": "sat", "scale": s}                       sign(qd) * (1 - exp(-|qd| / s))
     {"f": "sin" | "cos", "name": S, "w": w}        sin(w S), cos(w S)
 
 The direction is sign(qd), held through samples at rest at the sign of the last motion: a
 joint at rest holds the friction of the direction it last moved in (the bristles stay
-deflected). It carries over from one batch of rows to the next as the terms' state.
+deflected); a friction term in the gear torque is held the same way (0 before the first
+motion). Both carry over from one batch of rows to the next as the terms' state.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from fricli import logs
 from fricli.errors import DataError
 
 
@@ -33,8 +38,10 @@ def factor_inputs(factor: dict) -> set[str]:
     f = factor["f"]
     if f in ("one", "p"):
         return set()
-    if f in ("gear", "absgear"):
+    if f in ("gear", "absgear", "payloadgear"):
         return {"tau_g"}
+    if f == "heldgear":
+        return {"qd", "tau_g"}
     if f in ("sign", "moving", "pos", "sat"):
         return {"qd"}
     return {factor["name"]}
@@ -52,29 +59,36 @@ def inputs(terms: list[dict]) -> set[str]:
 def _signal(sig: dict, name: str) -> np.ndarray:
     if name in sig:
         return sig[name]
-    if name in ("tau_g", "tau_dyn", "tau_ext"):
-        return np.zeros_like(sig["t"])
+    if name in logs.OPTIONAL_TORQUES:
+        return logs.column(sig, name)
     raise DataError(f"the log has no column {name!r}, which the model's term needs")
 
 
 def held_sign(qd: np.ndarray, s0: float = 0.0) -> np.ndarray:
     """sign(qd) (n,), held at the last nonzero value through zeros; s0 before the first motion."""
-    s = np.sign(qd)
-    idx = np.where(s != 0, np.arange(len(s)), -1)
+    return held(np.sign(qd), qd, s0)
+
+
+def held(x: np.ndarray, qd: np.ndarray, x0: float = 0.0) -> np.ndarray:
+    """x (n,) where qd != 0, else its value at the last moving sample; x0 before the first."""
+    idx = np.where(qd != 0, np.arange(len(qd)), -1)
     np.maximum.accumulate(idx, out=idx)
-    return np.where(idx >= 0, s[np.maximum(idx, 0)], s0)
+    return np.where(idx >= 0, x[np.maximum(idx, 0)], x0)
 
 
 class Columns:
     """Evaluates terms on one batch of signals (n,) with the base prediction p (n,).
 
-    ``state`` is the direction held from the previous batch (None: no motion seen yet).
+    ``state`` is what is held from the previous batch: (direction, gear torque) or a direction
+    alone (None: no motion seen yet).
     """
 
-    def __init__(self, sig: dict, p: np.ndarray | None = None, state: float | None = None):
+    def __init__(self, sig: dict, p: np.ndarray | None = None, state=None):
         self.sig, self.p = sig, p
-        self._dir = None
-        self._s0 = 0.0 if state is None else float(state)
+        self._dir = self._gear = None
+        s0, g0 = (state, 0.0) if state is None or np.isscalar(state) else state
+        self._s0 = 0.0 if s0 is None else float(s0)
+        self._g0 = float(g0)
 
     @property
     def direction(self) -> np.ndarray:
@@ -83,9 +97,16 @@ class Columns:
         return self._dir
 
     @property
-    def state(self) -> float:
-        d = self.direction
-        return float(d[-1]) if len(d) else self._s0
+    def held_gear(self) -> np.ndarray:
+        if self._gear is None:
+            gear = _signal(self.sig, "tau_g") - _signal(self.sig, "tau_ext")
+            self._gear = held(gear, self.sig["qd"], self._g0)
+        return self._gear
+
+    @property
+    def state(self) -> tuple[float, float]:
+        d, g = self.direction, self.held_gear
+        return (float(d[-1]), float(g[-1])) if len(d) else (self._s0, self._g0)
 
     def factor(self, factor: dict) -> np.ndarray | float:
         f = factor["f"]
@@ -102,8 +123,10 @@ class Columns:
             return _signal(sig, factor["name"]) - float(factor["center"])
         if f == "abs":
             return np.abs(_signal(sig, factor["name"]))
-        if f in ("gear", "absgear"):
+        if f in ("gear", "absgear", "payloadgear"):
             gear = _signal(sig, "tau_g") - _signal(sig, "tau_ext")
+            if f == "payloadgear":
+                return np.abs(gear) - np.abs(_signal(sig, "tau_g"))
             return np.abs(gear) if f == "absgear" else gear
         if f == "sign":
             return self.direction
@@ -111,6 +134,8 @@ class Columns:
             return np.abs(self.direction)
         if f == "pos":
             return (self.direction > 0).astype(np.float64)
+        if f == "heldgear":
+            return self.held_gear
         if f == "sat":
             v = sig["qd"]
             return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
@@ -159,7 +184,8 @@ def check(term: dict) -> None:
 
 
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "gear": (), "absgear": (), "sign": (), "moving": (), "pos": (), "sat": ("scale",),
+          "gear": (), "absgear": (), "payloadgear": (), "sign": (), "moving": (), "pos": (), "heldgear": (),
+          "sat": ("scale",),
           "sin": ("name", "w"), "cos": ("name", "w")}
 
 
@@ -173,8 +199,10 @@ P = {"f": "p"}
 SIGN = {"f": "sign"}
 MOVING = {"f": "moving"}
 POS = {"f": "pos"}
+HELDGEAR = {"f": "heldgear"}
 GEAR = {"f": "gear"}
 ABSGEAR = {"f": "absgear"}
+PAYLOADGEAR = {"f": "payloadgear"}
 
 
 def sig_(name: str) -> dict:

@@ -1,0 +1,158 @@
+"""fricli import: a robot's delimited text recording (+ URDF) -> a long-format Parquet log;
+fricli dynamics: the URDF terms for a log that exists."""
+
+from __future__ import annotations
+
+import click
+
+from fricli.cli import cli
+from fricli.cli.options import common, output_option, say, warn
+
+
+def urdf_options(f):
+    """--match, --rotor-inertia, --gravity, --payload-*, --cutoff: the robot model's options."""
+    for option in reversed([
+        click.option("--match", type=click.Choice(["name", "order"]), default=None,
+                     help="How log joints match URDF joints (import: overrides the mapping's robot.match)."),
+        click.option("--rotor-inertia", "inertia_pairs", multiple=True, metavar="JOINT=VALUE",
+                     help="Reflected rotor inertia [kg m^2] added to the joint's mass-matrix diagonal. Repeatable."),
+        click.option("--gravity", nargs=3, type=float, default=None, metavar="X Y Z",
+                     help="Gravity in the URDF's base frame [m/s^2] (default 0 0 -9.81; import: the mapping's if given)."),
+        click.option("--payload-mass", type=click.FloatRange(min=0), default=None, help="Known payload mass [kg]."),
+        click.option("--payload-com", nargs=3, type=float, default=None, metavar="X Y Z",
+                     help="Payload centre of mass [m] in the payload frame (default 0 0 0)."),
+        click.option("--payload-frame", default=None, help="URDF frame (link) that carries the payload."),
+        click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+                     help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model (default: "
+                          "the log contract's, 50 Hz)."),
+    ]):
+        f = option(f)
+    return f
+
+
+def _payload(mp, base, mass, com, frame):
+    if frame is None and base is None:
+        raise click.UsageError("--payload-mass/--payload-com need --payload-frame (or robot.payload in the mapping)")
+    return mp.merge_payload(base, mass, com, frame)
+
+
+def _derived_text(record: dict) -> str:
+    derived = record["derived"]
+    if not derived:
+        return ""
+    lowpass = f"low-pass {derived['cutoff_hz']:g} Hz" if derived["filtered"] else "no low-pass"
+    return f", derived {' and '.join(derived['columns'])} ({lowpass}, central differences)"
+
+
+@cli.command("import")
+@click.argument("recording")
+@click.option("--mapping", "mapping_path", required=True, metavar="MAP.toml",
+              help="Which column holds what (docs/robot-import.md; docs/ur10e-mapping.toml is an example).")
+@click.option("--kt", "kt_pairs", multiple=True, metavar="JOINT=VALUE",
+              help="Drive gain [Nm/A] of a joint (torque constant x gear ratio); overrides the mapping. Repeatable.")
+@click.option("--urdf", default=None, metavar="ROBOT.urdf",
+              help="Add tau_g and tau_dyn from this robot description (needs Pinocchio: pip install 'fricli[robot]').")
+@urdf_options
+@click.option("--drop-backward", is_flag=True,
+              help="Drop rows whose time goes back (reported) instead of refusing the recording.")
+@output_option(help="Output Parquet log (- for stdout).")
+@common
+def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass, payload_com,
+               payload_frame, cutoff, drop_backward, output, quiet):
+    """Import a robot's delimited text recording as one long-format log.
+
+    RECORDING is a CSV (or other delimited) text file, - for stdin. The mapping says which
+    column is the time and, per joint, which are q, qd, i_m or tau_m, with units and drive
+    gains. Malformed rows, a truncated last line and repeated time steps are dropped and
+    reported on stderr; time going back is refused unless --drop-backward.
+
+    \b
+    Example:
+      fricli import run.csv --mapping docs/ur10e-mapping.toml -o run.parquet
+      fricli import run.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf -o run.parquet
+      fricli import load.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf \\
+          --payload-mass 2.805 --payload-com 0 0 0.05 --payload-frame tool0 -o load.parquet
+    """
+    from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
+    from fricli.robot import mapping as mp
+    from fricli.robot.importing import import_recording
+
+    mapping = mp.load_mapping(mapping_path)
+    payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
+    payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
+    mp.apply_overrides(mapping, kt=mp.parse_overrides(kt_pairs, "--kt"),
+                       rotor_inertia=mp.parse_overrides(inertia_pairs, "--rotor-inertia", nonnegative=True),
+                       match=match, gravity=gravity or None, payload=payload)
+    model = None
+    if urdf is not None:
+        from fricli.robot.dynamics import load_model
+
+        model = load_model(urdf, mapping)
+    name = "stdin" if recording == "-" else recording
+    result = import_recording(read_bytes(recording), mapping, name, model=model,
+                              cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff,
+                              drop_backward=drop_backward)
+    for kind, d in result.meta["dropped"].items():
+        warn(f"warning: {name}: dropped {d['count']} row{'s' if d['count'] != 1 else ''} with {d['what']} "
+             f"(first at line {d['first_line']})")
+    if result.meta["unterminated_last_line"]:
+        say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
+            "complete and kept", quiet)
+    write_table(result.table, output)
+    robot = result.meta["robot"]
+    extra = ""
+    if robot:
+        extra = f", tau_g and tau_dyn from {urdf} (joints matched by {robot['match']}{_derived_text(robot)})"
+    where = "stdout" if output == "-" else output
+    say(f"imported {result.meta['rows']:,} rows x {len(mapping.joints)} joints from {name}{extra} -> {where}", quiet)
+
+
+@cli.command("dynamics")
+@click.argument("log")
+@click.option("--urdf", required=True, metavar="ROBOT.urdf",
+              help="Robot description (needs Pinocchio: pip install 'fricli[robot]').")
+@click.option("--urdf-joint", "urdf_pairs", multiple=True, metavar="JOINT=NAME",
+              help="The URDF joint of a log joint, with --match name (default: the log joint's name). Repeatable.")
+@urdf_options
+@output_option(help="Output Parquet log (- for stdout).")
+@common
+def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_mass, payload_com, payload_frame,
+                 cutoff, output, quiet):
+    """Add tau_g and tau_dyn from a URDF to a long-format log of all joints of a robot.
+
+    Every moving joint of the URDF must be in the log, all sampled at the same times; qd and
+    qdd come from the log or are derived as the log contract derives them. Existing tau_g and
+    tau_dyn columns are replaced. See docs/robot-import.md.
+
+    \b
+    Example:
+      fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
+    """
+    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
+    from fricli.robot import mapping as mp
+    from fricli.robot.dynamics import load_model
+    from fricli.robot.logterms import add_terms
+
+    if match is None:
+        raise click.UsageError("choose how the log's joints match the URDF's: --match name|order")
+    names = {}
+    for pair in urdf_pairs:
+        joint, sep, urdf_name = pair.partition("=")
+        if not sep or not joint or not urdf_name:
+            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
+        names[joint] = urdf_name
+    payload = None
+    if payload_mass is not None or payload_com is not None or payload_frame is not None:
+        payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
+    robot = mp.Mapping(time=None, joints=[], gravity=tuple(gravity) if gravity else (0.0, 0.0, -9.81), payload=payload)
+    model = load_model(urdf, robot)
+    table, _ = read_table(log)
+    name = "stdin" if log == "-" else log
+    table, record = add_terms(table, model, name, match=match, urdf_names=names,
+                              rotor_inertia=mp.parse_overrides(inertia_pairs, "--rotor-inertia", nonnegative=True),
+                              gravity=robot.gravity, payload=payload,
+                              cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    write_table(table, output)
+    where = "stdout" if output == "-" else output
+    say(f"added tau_g and tau_dyn from {urdf} to {len(record['joints'])} joints of {name} "
+        f"(matched by {match}{_derived_text(record)}) -> {where}", quiet)

@@ -1,0 +1,281 @@
+"""C99 code for fricli models: one header, parameters baked in, <math.h> only, no heap, no globals.
+
+Every model node becomes a ``Part``: C definitions under a symbol prefix, with a ``_step``
+function (and, for stateful parts, a ``_state`` struct and an ``_init`` function). An emitter
+per model kind (registered with ``@emitter``) builds a node's part, composing its children's
+parts; ``header`` wraps the root part in the public API
+
+    typedef ... PREFIX_state;
+    static inline void PREFIX_init(PREFIX_state *s);
+    static inline double PREFIX_step(PREFIX_state *s, double <signal>, ...);   [Nm]
+    static inline double PREFIX_step_array(PREFIX_state *s, const double *x); x: PREFIX_N_SIGNALS
+
+and puts the model file's meta (provenance, units, parameters) in a comment at the top. Numbers
+are written with 17 significant digits, so they read back as the same doubles; the same model
+always gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+from typing import Callable
+
+import numpy as np
+
+from fricli import __version__
+from fricli.errors import ModelFileError
+from fricli.models.base import FrictionModel
+
+# signals in the order the step function takes them; other columns follow in name order
+SIGNAL_ORDER = ("t", "q", "qd", "qdd", "tau_g", "tau_dyn", "tau_ext", "temp")
+SIGNAL_INFO = {"t": ("s", "time"), "q": ("q", "position"), "qd": ("qd", "velocity"),
+               "qdd": ("qdd", "acceleration"), "tau_g": ("tau", "gravity torque"),
+               "tau_dyn": ("tau", "rigid-body dynamics torque"), "tau_ext": ("tau", "external torque"),
+               "temp": ("degC", "temperature")}
+_C_KEYWORDS = set("""auto break case char const continue default do double else enum extern float for goto if
+inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
+volatile while bool class delete new operator private protected public template this throw try virtual""".split())
+
+
+def num(x: float) -> str:
+    """A C double literal that reads back as exactly ``x`` ("%.17g")."""
+    x = float(x)
+    if not math.isfinite(x):
+        raise ModelFileError(f"cannot export the non-finite number {x}")
+    s = "%.17g" % x
+    return s if any(c in s for c in ".en") else s + ".0"
+
+
+def array(values, per_line: int = 4) -> str:
+    """A brace initialiser of doubles, ``per_line`` to a line."""
+    flat = [num(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
+    lines = [", ".join(flat[i:i + per_line]) for i in range(0, len(flat), per_line)]
+    return "{\n        " + ",\n        ".join(lines) + "}"
+
+
+def identifier(text: str) -> str:
+    """``text`` as a C identifier: other characters become '_', never a keyword or a leading digit."""
+    out = re.sub(r"[^A-Za-z0-9_]", "_", str(text))
+    if not out or out[0].isdigit() or out in _C_KEYWORDS:
+        out = "x_" + out
+    return out
+
+
+def check_prefix(prefix: str) -> str:
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix or "") or prefix in _C_KEYWORDS:
+        raise ValueError(f"the prefix {prefix!r} is not a C identifier (or is a keyword)")
+    return prefix
+
+
+def comment(text: str) -> str:
+    """Text safe inside a C block comment, ASCII only."""
+    return text.encode("ascii", "backslashreplace").decode("ascii").replace("*/", "* /").replace("/*", "/ *")
+
+
+class Context:
+    """What emitters share while building one model's code: the input struct, the signals read
+    (collected as emitters ask for them) and the header's sign function."""
+
+    def __init__(self, prefix: str, sgn: str):
+        self.prefix = prefix
+        self.fields: dict[str, str] = {}     # signal name -> C field name
+        self.in_type = f"{prefix}_in"
+        self.sgn = sgn
+
+    def signal(self, name: str) -> str:
+        """The C expression of signal ``name`` inside a step function (argument ``in``)."""
+        if name not in self.fields:
+            field = identifier(name)
+            if field in self.fields.values():
+                raise ModelFileError(f"two of the model's signal names give the C name {field!r}")
+            self.fields[name] = field
+        return f"in->{self.fields[name]}"
+
+    def signals(self) -> list[str]:
+        """The signals read, in the order of the step function's arguments."""
+        return ([s for s in SIGNAL_ORDER if s in self.fields]
+                + sorted(s for s in self.fields if s not in SIGNAL_ORDER))
+
+
+@dataclasses.dataclass
+class Part:
+    """C code of one model node: definitions of ``<name>_step`` (and ``_state``, ``_init``)."""
+
+    name: str
+    code: str
+    stateful: bool
+
+    def step(self, state: str = "") -> str:
+        """The call of the step function; ``state`` a pointer expression to its state."""
+        return f"{self.name}_step({state + ', ' if self.stateful else ''}in)"
+
+    def init(self, state: str) -> str:
+        return f"{self.name}_init({state});" if self.stateful else ""
+
+
+EMITTERS: dict[str, Callable[[FrictionModel, str, Context], Part]] = {}
+
+
+def emitter(*kinds: str):
+    """Register a function (model, name, context) -> Part for the model kinds given."""
+    def register(fn):
+        for kind in kinds:
+            EMITTERS[kind] = fn
+        return fn
+    return register
+
+
+def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
+    """The part of ``model`` under the symbol prefix ``name``."""
+    _load_emitters()
+    fn = EMITTERS.get(model.kind)
+    if fn is None:
+        raise ModelFileError(f"cannot export a model of kind {model.kind!r} to C (no emitter for it)")
+    return fn(model, name, ctx)
+
+
+EMITTER_MODULES = ("lugre", "neural", "composite")   # modules under fricli.export that register emitters
+
+
+def _load_emitters() -> None:
+    import importlib
+
+    for name in EMITTER_MODULES:
+        importlib.import_module(f"fricli.export.{name}")
+
+
+def signals_of(model: FrictionModel) -> list[str]:
+    """The signals the exported step function of ``model`` takes, in their order."""
+    ctx = Context("x", "x_sgn")
+    emit(model, "x_m", ctx)
+    return ctx.signals()
+
+
+def _signal_doc(name: str, units: dict) -> str:
+    unit_key, meaning = SIGNAL_INFO.get(name, ("", "log column"))
+    unit = units.get(unit_key, unit_key) if unit_key in ("q", "qd", "qdd", "tau") else unit_key
+    return f"{name} [{unit or '-'}] {meaning}"
+
+
+def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
+    """The public API (state, init, step) of one model under ``prefix``, with its parts; ``sgn``
+    names the header's sign function."""
+    ctx = Context(prefix, sgn)
+    root = emit(model, f"{prefix}_m", ctx)
+    signals = ctx.signals()
+    if not signals:
+        raise ModelFileError("cannot export a model that reads no signal")
+    units = meta.get("units", {})
+    tau = units.get("tau", "Nm")
+    args = ", ".join(f"double {ctx.fields[s]}" for s in signals)
+    out = [f"/* Signals of {prefix}_step, in this order (pass 0 for a torque the robot does not measure):"]
+    out += [f" *   {i}. {comment(_signal_doc(s, units))}" for i, s in enumerate(signals)]
+    out += [f" * Returns the friction torque tau_f [{tau}], positive along the motion. */",
+            f"enum {{ {prefix}_N_SIGNALS = {len(signals)} }};",
+            "typedef struct {", *[f"    double {ctx.fields[s]};" for s in signals], f"}} {ctx.in_type};", "",
+            root.code.rstrip(), ""]
+    if root.stateful:
+        out += [f"typedef {root.name}_state {prefix}_state;", "",
+                "/* Start a run: state before the first sample (call again after a pause in the samples). */",
+                f"static inline void {prefix}_init({prefix}_state *s) {{ {root.init('s')} }}"]
+    else:
+        out += [f"typedef struct {{ int unused; }} {prefix}_state;  /* the model has no state */", "",
+                "/* Start a run (the model has no state: kept so that every kind has the same calls). */",
+                f"static inline void {prefix}_init({prefix}_state *s) {{ s->unused = 0; }}"]
+    body = [f"    {ctx.in_type} in_;", f"    const {ctx.in_type} *in = &in_;"]
+    body += [f"    in_.{ctx.fields[s]} = {ctx.fields[s]};" for s in signals]
+    if not root.stateful:
+        body.append("    (void)s;")
+    body.append(f"    return {root.step('s')};")
+    out += ["", f"/* One sample: friction torque [{tau}] for the signals above; updates the state. */",
+            f"static inline double {prefix}_step({prefix}_state *s, {args}) {{", *body, "}", "",
+            f"/* {prefix}_step with the signals as an array x[{prefix}_N_SIGNALS], in the order above. */",
+            f"static inline double {prefix}_step_array({prefix}_state *s, const double *x) {{",
+            f"    return {prefix}_step(s, {', '.join(f'x[{i}]' for i in range(len(signals)))});", "}"]
+    return "\n".join(out) + "\n"
+
+
+def _meta_block(meta: dict, model: FrictionModel, prefix: str, source: str, sha256: str) -> list[str]:
+    keep = {k: meta.get(k) for k in ("kind", "joint", "axis", "units", "inputs", "fricli_version",
+                                     "format_version", "provenance")}
+    lines = [f"model {source} (sha256 {sha256}) as {prefix}_*"]
+    lines += ["  " + line for line in json.dumps(keep, indent=1, sort_keys=True, ensure_ascii=True).splitlines()]
+    lines += ["  " + line for line in model.describe().splitlines()]
+    return [comment(line) for line in lines]
+
+
+@dataclasses.dataclass
+class Entry:
+    """One model to export: the model, its file meta, its symbol prefix, its file name and hash."""
+
+    model: FrictionModel
+    meta: dict
+    prefix: str
+    source: str
+    sha256: str
+
+
+def header(entries: list[Entry], guard: str) -> str:
+    """The whole header for one or several models (one per joint)."""
+    for entry in entries:
+        check_prefix(entry.prefix)
+    top = [f"/* Friction model code generated by fricli {__version__} (fricli export): C99, <math.h> only,",
+           " * no heap, no global state. Include it wherever it is needed; every function is static inline.",
+           " * Usage (see docs/deploy.md): PREFIX_state s; PREFIX_init(&s); then once per sample, in time order,",
+           " *   tau_f = PREFIX_step(&s, signals...);",
+           " *"]
+    for entry in entries:
+        top += [" * " + line for line in _meta_block(entry.meta, entry.model, entry.prefix, entry.source,
+                                                   entry.sha256)]
+        top.append(" *")
+    top[-1] = " */"
+    sgn = f"{guard}_sgn"
+    out = top + [f"#ifndef FRICLI_{guard.upper()}_H", f"#define FRICLI_{guard.upper()}_H", "", "#include <math.h>", "",
+                 "/* sign(v): -1, 0 or 1 */",
+                 f"static inline double {sgn}(double v) {{ return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }}", ""]
+    for entry in entries:
+        out.append(f"/* ---------------------------------------------------------------- {entry.prefix} */")
+        out.append(model_code(entry.model, entry.meta, entry.prefix, sgn))
+    out += [f"#endif /* FRICLI_{guard.upper()}_H */", ""]
+    return "\n".join(out)
+
+
+def entries_for(paths: list[str], prefix: str, *, per_joint: bool) -> list[Entry]:
+    """Load the model files; with ``per_joint`` each gets the prefix ``<prefix>_<file name stem>``."""
+    import hashlib
+
+    from fricli import models
+
+    out, seen = [], {}
+    for path in paths:
+        model, meta = models.load(path)
+        with open(path, "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()
+        stem = os.path.splitext(os.path.basename(path))[0]
+        name = f"{prefix}_{identifier(stem)}" if per_joint else prefix
+        if name in seen:
+            raise ModelFileError(f"{path} and {seen[name]} give the same C names ({name}_*)")
+        seen[name] = path
+        out.append(Entry(model, meta, name, os.path.basename(path), digest))
+    return out
+
+
+def model_paths(source: str) -> tuple[list[str], bool]:
+    """(model files, one per joint?) for a model file or a folder of them (one .npz per joint)."""
+    if os.path.isdir(source):
+        paths = sorted(os.path.join(source, f) for f in os.listdir(source) if f.endswith(".npz"))
+        if not paths:
+            raise ModelFileError(f"{source}: no .npz model files in the folder")
+        return paths, True
+    return [source], False
+
+
+def export(source: str, prefix: str = "friction") -> str:
+    """C header text for the model file or folder of per-joint model files ``source``."""
+    check_prefix(prefix)
+    paths, per_joint = model_paths(source)
+    return header(entries_for(paths, prefix, per_joint=per_joint), prefix)

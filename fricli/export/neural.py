@@ -1,0 +1,38 @@
+"""C code of the neural kinds (``fricli.models.neural``): input features, standardisation,
+the dense network, and the output scaling
+
+    tau_f = y_mean + y_scale * net((features - x_mean) / x_scale)     [Nm]
+
+with the velocity input asinh(qd / v0) when the model has a velocity scale. Stateless.
+"""
+
+from __future__ import annotations
+
+from fricli.errors import ModelFileError
+from fricli.export import network
+from fricli.export.c import Context, Part, emitter, num
+
+
+def feature(model, name: str, ctx: Context) -> str:
+    """C expression of the network input ``name`` before standardisation (as ``NeuralFriction._input``)."""
+    if name in ("sign(qd)", "pos(qd)", "neg(qd)"):
+        s = f"{ctx.sgn}({ctx.signal('qd')})"
+        return {"sign(qd)": s, "pos(qd)": f"0.5 * (1.0 + {s})", "neg(qd)": f"0.5 * (1.0 - {s})"}[name]
+    if name == "qd" and model.v0_ is not None:
+        return f"asinh({ctx.signal('qd')} / {num(model.v0_)})"
+    return ctx.signal(name)
+
+
+@emitter("mlp", "selmic", "nnacm")
+def neural(model, name: str, ctx: Context) -> Part:
+    if model.net_ is None:
+        raise ModelFileError("cannot export a network that is not fitted")
+    names = model.inputs + model.skip
+    mean, scale = model.x_std_.mean_, model.x_std_.scale_
+    lines = [network.dense(model.net_, f"{name}_net"),
+             f"static inline double {name}_step(const {ctx.in_type} *in) {{",
+             f"    double x[{len(names)}];"]
+    for i, feat in enumerate(names):
+        lines.append(f"    x[{i}] = ({feature(model, feat, ctx)} - {num(mean[i])}) * {num(1.0 / scale[i])};")
+    lines += [f"    return {name}_net(x) * {num(model.y_std_.scale_[0])} + {num(model.y_std_.mean_[0])};", "}", ""]
+    return Part(name, "\n".join(lines), stateful=False)

@@ -1,0 +1,45 @@
+"""C code of the regressor terms of diagnosed effects (``fricli.models.terms``).
+
+A term is a product of factors; ``FACTORS`` maps each factor kind to a function
+(factor, context) -> C expression. The held direction of motion is the variable ``dir``
+(updated before the terms, as ``Columns.direction``) and the base prediction ``p``.
+A new factor kind needs one entry here.
+"""
+
+from __future__ import annotations
+
+from fricli.errors import ModelFileError
+from fricli.export.c import Context, num
+
+FACTORS = {
+    "one": lambda f, ctx: "1.0",
+    "p": lambda f, ctx: "p",
+    "signal": lambda f, ctx: ctx.signal(f["name"]),
+    "dev": lambda f, ctx: f"({ctx.signal(f['name'])} - {num(f['center'])})",
+    "abs": lambda f, ctx: f"fabs({ctx.signal(f['name'])})",
+    "gear": lambda f, ctx: f"({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
+    "absgear": lambda f, ctx: f"fabs({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
+    "sign": lambda f, ctx: "dir",
+    "moving": lambda f, ctx: "fabs(dir)",
+    "pos": lambda f, ctx: "(dir > 0.0 ? 1.0 : 0.0)",
+    "sat": lambda f, ctx: (f"({ctx.sgn}({ctx.signal('qd')}) * -expm1(-fabs({ctx.signal('qd')}) / "
+                           f"{num(f['scale'])}))"),
+    "sin": lambda f, ctx: f"sin({num(f['w'])} * {ctx.signal(f['name'])})",
+    "cos": lambda f, ctx: f"cos({num(f['w'])} * {ctx.signal(f['name'])})",
+}
+HELD_DIRECTION = ("sign", "moving", "pos")   # factors that read the held direction
+
+
+def uses_direction(terms: list[dict]) -> bool:
+    return any(f["f"] in HELD_DIRECTION for term in terms for f in term["factors"])
+
+
+def term(spec: dict, ctx: Context) -> str:
+    """C statements setting ``v`` to the term's value (1 times each factor, in order)."""
+    out = ["v = 1.0;"]
+    for factor in spec["factors"]:
+        fn = FACTORS.get(factor["f"])
+        if fn is None:
+            raise ModelFileError(f"cannot export the term factor {factor['f']!r} to C")
+        out.append(f"v = v * {fn(factor, ctx)};")
+    return " ".join(out)

@@ -1,0 +1,162 @@
+"""The fleet manifest (TOML): robots, their logs, joints, the pipeline per joint and its options.
+
+    [fleet]
+    history = "history"          # Parquet dataset the runs append to (relative to the manifest)
+    models = "models"            # models/ROBOT/jointJ/STEM.npz
+    pipeline = "identify"        # identify | train-base | adapt (default for every robot)
+    diagnose = false             # also record the effects each new model misses (slow)
+
+    [defaults]                   # any robot key, for every robot
+    logs = "{robot}/joint{joint}/*.parquet"
+    joints = [1, 2, 3, 4, 5, 6]
+
+    [options.identify]           # options of each pipeline, as the command's long options
+    hold = 0.2
+
+    [[robot]]
+    name = "robot001"
+    pipeline = "adapt"                              # overrides [fleet] pipeline
+    base = "bases/{robot}/joint{joint}.npz"         # adapt: the model to adapt
+
+Paths are relative to the manifest's folder; ``{robot}`` and ``{joint}`` are replaced; ``logs``
+is a glob (or a list of globs). Every (robot, joint, log file) is one job.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import glob
+import os
+import re
+import tomllib
+
+from fricli.errors import FricliError, NOTHING_RAN
+
+PIPELINES = ("identify", "train-base", "adapt")
+_ROBOT_KEYS = {"name", "logs", "joints", "pipeline", "base", "options", "diagnose"}
+_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+_DATE = re.compile(r"(\d{4})-(\d{2})-(\d{2})")
+
+
+class ManifestError(FricliError):
+    """A manifest that cannot be read or is incomplete: nothing can run."""
+
+    exit_code = NOTHING_RAN
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """One (robot, joint, log) job. Paths are absolute."""
+
+    robot: str
+    joint: str
+    log: str
+    date: str              # ISO date of the data (from the log's path, else its modification day)
+    pipeline: str
+    model: str             # output model file
+    options: tuple         # sorted (name, value) pairs of the pipeline's options
+    base: str | None = None
+    diagnose: bool = False  # also look for effects the new model misses (fricli diagnose)
+
+    @property
+    def key(self) -> str:
+        return f"{self.robot}/{self.joint}/{os.path.basename(self.log)}"
+
+
+@dataclasses.dataclass(frozen=True)
+class Manifest:
+    path: str
+    history: str
+    jobs: tuple[Job, ...]
+
+
+def data_date(path: str) -> str:
+    """The day a log's data is from: the last YYYY-MM-DD in its path, else its modification day (UTC)."""
+    found = _DATE.findall(path)
+    for y, m, d in reversed(found):
+        try:
+            return dt.date(int(y), int(m), int(d)).isoformat()
+        except ValueError:
+            continue
+    return dt.datetime.fromtimestamp(os.path.getmtime(path), dt.timezone.utc).date().isoformat()
+
+
+def _fill(template: str, robot: str, joint) -> str:
+    return template.replace("{robot}", robot).replace("{joint}", str(joint))
+
+
+def _check_options(where: str, options) -> dict:
+    if not isinstance(options, dict):
+        raise ManifestError(f"{where}: options must be a table")
+    for name, value in options.items():
+        if isinstance(value, dict):
+            raise ManifestError(f"{where}: option {name} must be a value, not a table")
+    return {k.replace("-", "_"): v for k, v in options.items()}
+
+
+def load(path: str) -> Manifest:
+    """Read a manifest and list its jobs; ManifestError when it cannot be used."""
+    try:
+        with open(path, "rb") as fh:
+            raw = tomllib.load(fh)
+    except OSError as exc:
+        raise ManifestError(f"{path}: cannot read ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ManifestError(f"{path}: not valid TOML ({exc})") from None
+    root = os.path.dirname(os.path.abspath(path))
+    fleet = raw.get("fleet", {})
+    defaults = raw.get("defaults", {})
+    all_options = raw.get("options", {})
+    robots = raw.get("robot", [])
+    if not isinstance(fleet, dict) or not isinstance(defaults, dict) or not isinstance(all_options, dict):
+        raise ManifestError(f"{path}: [fleet], [defaults] and [options] must be tables")
+    if not isinstance(robots, list) or not robots:
+        raise ManifestError(f"{path}: no [[robot]] entries")
+    history = os.path.join(root, str(fleet.get("history", "history")))
+    models_dir = os.path.join(root, str(fleet.get("models", "models")))
+    jobs, seen = [], set()
+    for index, entry in enumerate(robots):
+        if not isinstance(entry, dict):
+            raise ManifestError(f"{path}: robot {index + 1} is not a table")
+        robot = {**defaults, **entry}
+        unknown = set(robot) - _ROBOT_KEYS
+        name = robot.get("name")
+        where = f"{path}: robot {name or index + 1}"
+        if unknown:
+            raise ManifestError(f"{where}: unknown key {sorted(unknown)[0]!r} (use {', '.join(sorted(_ROBOT_KEYS))})")
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise ManifestError(f"{where}: name must be letters, digits, '.', '_' or '-'")
+        if name in seen:
+            raise ManifestError(f"{where}: the name is used twice")
+        seen.add(name)
+        pipeline = robot.get("pipeline", fleet.get("pipeline", "identify"))
+        if pipeline not in PIPELINES:
+            raise ManifestError(f"{where}: unknown pipeline {pipeline!r} (choose from {', '.join(PIPELINES)})")
+        if pipeline == "adapt" and not isinstance(robot.get("base"), str):
+            raise ManifestError(f"{where}: the adapt pipeline needs base = \"MODEL.npz\"")
+        joint_list = robot.get("joints", [None])
+        if not isinstance(joint_list, list) or not joint_list:
+            raise ManifestError(f"{where}: joints must be a non-empty list")
+        patterns = robot.get("logs")
+        patterns = [patterns] if isinstance(patterns, str) else patterns
+        if not isinstance(patterns, list) or not patterns or not all(isinstance(p, str) for p in patterns):
+            raise ManifestError(f"{where}: logs must be a glob or a list of globs")
+        diagnose = robot.get("diagnose", fleet.get("diagnose", False))
+        if not isinstance(diagnose, bool):
+            raise ManifestError(f"{where}: diagnose must be true or false")
+        options = _check_options(where, all_options.get(pipeline, {}))
+        options.update(_check_options(where, robot.get("options", {})))
+        for joint in joint_list:
+            jname = "" if joint is None else str(joint)
+            files = sorted({os.path.abspath(f) for p in patterns
+                            for f in glob.glob(os.path.join(root, _fill(p, name, jname)))})
+            for log in files:
+                stem = os.path.splitext(os.path.basename(log))[0]
+                model = os.path.join(models_dir, name, f"joint{jname}" if jname else "joint", f"{stem}.npz")
+                base = robot.get("base")
+                jobs.append(Job(robot=name, joint=jname, log=log, date=data_date(log), pipeline=pipeline,
+                                model=model, options=tuple(sorted(options.items())),
+                                base=os.path.join(root, _fill(base, name, jname)) if base else None,
+                                diagnose=diagnose))
+    return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs))

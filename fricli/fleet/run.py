@@ -1,0 +1,126 @@
+"""Run a manifest's jobs on Dask (``dask.distributed``): a local cluster sized to the machine by
+default, or an existing scheduler. Each job runs ``fricli.fleet.pipelines.run`` on a worker;
+the results are appended to the history here, on the client."""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import datetime as dt
+import os
+import secrets
+from typing import Callable, Iterator
+
+from fricli import errors
+from fricli.fleet import history, pipelines
+from fricli.fleet.manifest import Manifest
+
+INSTALL_HINT = "fricli fleet needs Dask: pip install 'fricli[fleet]'"
+# One BLAS thread per worker process: the processes are the parallelism.
+_SINGLE_THREADED = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+
+
+class ClusterError(errors.FricliError):
+    """Dask is missing or the cluster cannot be reached: nothing can run."""
+
+    exit_code = errors.NOTHING_RAN
+
+
+@dataclasses.dataclass
+class Outcome:
+    """A run: every job with its result, the history files written, the exit code for cron."""
+
+    run: str
+    jobs: list
+    results: list
+    written: list
+
+    def count(self, status: str) -> int:
+        return sum(r["status"] == status for r in self.results)
+
+    @property
+    def exit_code(self) -> int:
+        failed = self.count("failed")
+        if not self.results or failed == len(self.results):
+            return errors.NOTHING_RAN
+        return errors.SOME_FAILED if failed else errors.OK
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ClusterError(INSTALL_HINT) from None
+    return distributed
+
+
+@contextlib.contextmanager
+def client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
+    """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://10.0.0.5:8786) or on a
+    local cluster of ``workers`` single-threaded processes (default: one per core)."""
+    distributed = _distributed()
+    if scheduler:
+        try:
+            c = distributed.Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ClusterError(f"cannot reach the Dask scheduler {scheduler}: {errors.one_line(str(exc))}") from None
+        with c:
+            yield c
+        return
+    import logging
+
+    logging.getLogger("distributed").setLevel(logging.ERROR)  # its shutdown warnings are not ours to show
+    n = workers or os.cpu_count() or 1
+    import warnings
+
+    with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
+        warnings.simplefilter("ignore", UserWarning)
+        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED)
+    with cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+def run_id(now: dt.datetime) -> str:
+    return f"{now:%Y%m%dT%H%M%SZ}-{secrets.token_hex(3)}"
+
+
+def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None = None,
+        if_changed: bool = True, on_done: Callable[[int, int], None] | None = None) -> Outcome:
+    """Run every job of ``manifest`` and append the rows of the jobs that ran to its history.
+
+    ``on_done(done, total)`` is called as jobs finish (for a progress bar)."""
+    now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
+    run = run_id(now)
+    jobs = list(manifest.jobs)
+    results: list = [None] * len(jobs)
+    if jobs:
+        distributed = _distributed()
+        with client(scheduler, workers) as c:
+            futures = c.map(pipelines.run, jobs, if_changed=if_changed, pure=False)
+            index = {f.key: i for i, f in enumerate(futures)}
+            for done, future in enumerate(distributed.as_completed(futures), 1):
+                i = index[future.key]
+                try:
+                    results[i] = future.result()
+                except Exception as exc:  # the worker died or the task could not be sent
+                    results[i] = {"status": "failed", "seconds": float("nan"),
+                                  "reason": errors.one_line(f"worker lost the job: {type(exc).__name__}: {exc}")}
+                if on_done:
+                    on_done(done, len(jobs))
+    rows = [history.row(job, res, run, now) for job, res in zip(jobs, results) if res["status"] != "unchanged"]
+    written = history.append(manifest.history, rows, run) if rows else []
+    return Outcome(run=run, jobs=jobs, results=results, written=written)
+
+
+def table(outcome: Outcome) -> str:
+    """Every job and its status, one per line, and a summary line."""
+    lines = [f"{'robot':<12} {'joint':<6} {'date':<10}  {'status':<9} {'s':>6}  reason"]
+    for job, res in sorted(zip(outcome.jobs, outcome.results), key=lambda p: (p[0].robot, p[0].joint, p[0].log)):
+        sec = res.get("seconds")
+        sec = f"{sec:6.2f}" if sec == sec and sec is not None else "     -"
+        lines.append(f"{job.robot:<12} {job.joint or '-':<6} {job.date:<10}  {res['status']:<9} {sec}  "
+                     f"{res.get('reason', '')}".rstrip())
+    lines.append(f"{len(outcome.jobs)} jobs: {outcome.count('ok')} ok, {outcome.count('unchanged')} unchanged, "
+                 f"{outcome.count('failed')} failed")
+    return "\n".join(lines)

@@ -1,0 +1,147 @@
+"""Wear trends from the fleet history: per joint, friction parameters and fit errors over the days,
+relative to the joint's own first days, and a wear flag.
+
+For each joint and parameter p (Coulomb fc and viscous fv by default), with the baseline b the
+median of p over the first ``baseline_days`` days of data:
+
+    level  = median(p over the last ``recent`` days) / b - 1            [-]
+    growth = Theil-Sen slope of p / b over the last ``window_days`` days  [1/day]
+
+A joint is flagged when, for any parameter, level > ``max_level`` or growth > ``max_growth``.
+Friction rises as a gear wears, so only increases are flagged. Medians and the Theil-Sen slope
+(median of pairwise slopes) keep one bad day from raising a flag.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+
+import numpy as np
+
+DEFAULT_PARAMS = ("fc", "fv")
+
+
+@dataclasses.dataclass
+class WearRule:
+    """Thresholds of the wear flag (see the module docstring)."""
+
+    params: tuple = DEFAULT_PARAMS
+    baseline_days: int = 7
+    window_days: int = 14
+    recent: int = 3
+    max_level: float = 0.15
+    max_growth: float = 0.01
+
+
+@dataclasses.dataclass
+class JointTrend:
+    robot: str
+    joint: str
+    dates: list            # ISO dates with data (one value per day: the latest run)
+    series: dict           # name -> values per date (the parameters and "mae")
+    baseline: dict         # parameter -> baseline value
+    level: dict            # parameter -> level [-]
+    growth: dict           # parameter -> growth [1/day]
+    flagged: bool
+    reasons: list
+    note: str = ""
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def theil_sen(days: np.ndarray, y: np.ndarray) -> float:
+    """Median of the pairwise slopes of y over days (n,) [y per day]; NaN below 2 distinct days."""
+    i, j = np.triu_indices(len(days), k=1)
+    dd = days[j] - days[i]
+    keep = dd != 0
+    return float(np.median((y[j] - y[i])[keep] / dd[keep])) if keep.any() else float("nan")
+
+
+def _daily(rows: list[dict], names: tuple) -> tuple[list, dict]:
+    """One value per date: the latest run's row of that date."""
+    latest: dict = {}
+    for r in rows:
+        if r["date"] not in latest or r["run_time"] >= latest[r["date"]]["run_time"]:
+            latest[r["date"]] = r
+    dates = sorted(latest)
+    return dates, {n: np.array([latest[d][n] for d in dates], dtype=float) for n in names}
+
+
+def joint_trend(robot: str, joint: str, rows: list[dict], rule: WearRule) -> JointTrend:
+    """The trend of one joint from its history rows (status ok)."""
+    dates, series = _daily(rows, tuple(rule.params) + ("mae",))
+    out = JointTrend(robot=robot, joint=joint, dates=[d.isoformat() for d in dates],
+                     series={k: v.tolist() for k, v in series.items()}, baseline={}, level={}, growth={},
+                     flagged=False, reasons=[])
+    if not dates:
+        out.note = "no successful job"
+        return out
+    day = np.array([(d - dates[0]).days for d in dates], dtype=float)
+    base_rows = day < rule.baseline_days
+    if day[-1] < rule.baseline_days or base_rows.sum() < 3:
+        out.note = f"too little data: {len(dates)} days over {int(day[-1]) + 1}, needs {rule.baseline_days} " \
+                   "days of baseline (3 logs at least) and later data"
+        return out
+    recent_window = day > day[-1] - rule.window_days
+    for p in rule.params:
+        x = series[p]
+        good = np.isfinite(x)
+        b = float(np.median(x[base_rows & good])) if (base_rows & good).any() else float("nan")
+        if not (np.isfinite(b) and b > 0):
+            continue
+        later = good & ~base_rows
+        if not later.any():
+            continue
+        level = float(np.median(x[later][-rule.recent:]) / b - 1.0)
+        w = recent_window & good
+        growth = theil_sen(day[w], x[w] / b) if w.sum() >= 5 else float("nan")
+        out.baseline[p], out.level[p], out.growth[p] = b, level, growth
+        if level > rule.max_level:
+            out.reasons.append(f"{p} {100 * level:+.0f} % over its first {rule.baseline_days} days "
+                               f"(limit {100 * rule.max_level:g} %)")
+        if growth > rule.max_growth:
+            out.reasons.append(f"{p} growing {100 * growth:.1f} %/day over the last {rule.window_days} days "
+                               f"(limit {100 * rule.max_growth:g} %/day)")
+    out.flagged = bool(out.reasons)
+    return out
+
+
+def trends(table, rule: WearRule | None = None) -> list[JointTrend]:
+    """Trends of every joint in a history table (``fricli.fleet.history.read``), sorted by robot, joint."""
+    rule = rule or WearRule()
+    status = table.column("status").to_pylist()
+    cols = {n: table.column(n).to_pylist() for n in ("robot", "joint", "date", "run_time", "mae", *rule.params)}
+    groups: dict = {}
+    for i, s in enumerate(status):
+        key = (cols["robot"][i], cols["joint"][i])
+        groups.setdefault(key, [])
+        if s == "ok":
+            groups[key].append({n: (np.nan if v[i] is None else v[i]) if n not in ("date", "run_time", "robot",
+                                                                                  "joint") else v[i]
+                                for n, v in cols.items()})
+    return [joint_trend(robot, joint, rows, rule) for (robot, joint), rows in sorted(groups.items())]
+
+
+def figure(t: JointTrend, rule: WearRule, path: str) -> None:
+    """A PNG of one joint's parameters relative to their baseline over the days, with the level limit."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from fricli import atomic
+
+    dates = [dt.date.fromisoformat(d) for d in t.dates]
+    fig, ax = plt.subplots(figsize=(7, 3.5), layout="constrained")
+    for p, b in t.baseline.items():
+        ax.plot(dates, np.asarray(t.series[p], dtype=float) / b, marker=".", label=p)
+    ax.axhline(1 + rule.max_level, color="0.4", ls="--", lw=1, label=f"level limit +{100 * rule.max_level:g} %")
+    ax.axhline(1.0, color="0.7", lw=1)
+    ax.set_ylabel("relative to the first days")
+    ax.set_title(f"{t.robot} joint {t.joint}: {'; '.join(t.reasons)}", fontsize=8)
+    ax.legend(fontsize=8)
+    fig.autofmt_xdate()
+    atomic.atomic_write_with(path, lambda fh: fig.savefig(fh, format="png", dpi=90))
+    plt.close(fig)

@@ -1,0 +1,256 @@
+"""The dissipative network (kind ``dissipative``, the default of ``train-base``): friction that
+never pushes the joint, with the load dependence as its own factor.
+
+    tau_f = y_scale * tanh(qd / v_ps) * m
+    m     = softplus(r0) + softplus(b1) * |tau_g| / g_scale
+    r0    = NN(u, sign(qd)),   u = (asinh(|qd| / v0) - u_mean) / u_scale
+
+NN is a dense network (by default two hidden layers of 30 ELU units) with two linear outputs,
+r0 and b1; b1 is the bias of the second alone (its weights from the hidden layer stay 0), so
+the load slope k = y_scale softplus(b1) / g_scale [Nm/Nm] is one learned constant.
+The magnitude m is non-negative for every input and every weight, and tanh(qd / v_ps) has the
+sign of qd, so tau_f * qd >= 0 everywhere: friction acts against the motion by structure.
+Above the pre-sliding speed v_ps (recorded in the model) tanh(qd / v_ps) is close to sign(qd);
+below it the prediction fades to zero at rest, where the bristles hold a torque set by the
+motion before.
+
+The network sees the speed and the direction only; the gravity torque enters through one
+non-negative slope (the Coulomb and static levels of an extended LuGre model grow as fc +
+kc |tau_g| and fs + ks |tau_g|, with kc and ks close). A velocity dependence learned at one load
+therefore carries over to every other load, where a network of (tau_g, qd) has to see every
+pair; and the slope is learned from every speed at once, so a slow level seen at one load
+cannot trade it for a different velocity dependence. Asymmetry between the directions comes
+through the sign(qd) input.
+
+v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
+PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
+training target. Training minimises the mean squared error of tau_f / y_scale with the
+trainer of ``fricli.nn.training`` (the head is part of the network, ``fricli.nn.heads``).
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable
+
+import numpy as np
+
+from fricli.errors import DataError
+from fricli.models import register
+from fricli.models.base import FrictionModel
+from fricli.models.neural import VELOCITY_QUANTILE, _describe_activation
+from fricli.nn import activations as acts
+from fricli.nn.blas import single_threaded
+from fricli.nn.heads import DissipativeHead, HeadedNetwork
+from fricli.nn.training import PREDICT_CHUNK, Trainer
+
+PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
+
+
+@register
+class DissipativeFriction(FrictionModel):
+    """tau_f = y_scale tanh(qd / v_ps) (softplus(r0(|qd|, sign qd)) + softplus(b1) |tau_g| / g_scale).
+
+    Hyperparameters are keyword arguments; ``fit`` trains; fitted attributes end in ``_``.
+    """
+
+    kind = "dissipative"
+    label = "dissipative network: non-negative magnitude times a smooth sign of qd"
+
+    def __init__(self, *, hidden_sizes=(30, 30), activation: str = "elu", steps: int | None = 50_000,
+                 epochs: int | None = None, lr: float = 0.01, batch_size: int = 0, eval_every: int | None = None,
+                 units: dict | None = None, velocity_scale: float | str = "auto",
+                 presliding_speed: float | str = "auto"):
+        self.hidden_sizes, self.activation = tuple(hidden_sizes), activation
+        self.steps, self.epochs, self.lr, self.batch_size = steps, epochs, lr, batch_size
+        self.eval_every, self.units = eval_every, dict(units or {})
+        self.velocity_scale, self.presliding_speed = velocity_scale, presliding_speed
+        self.net_: HeadedNetwork | None = None
+
+    # ------------------------------------------------------------------ inputs
+
+    def new_network(self) -> HeadedNetwork:
+        hidden = [(int(n), acts.from_spec(self.activation)) for n in self.hidden_sizes]
+        return HeadedNetwork(2, hidden, DissipativeHead(), constant_outputs=(1,))
+
+    def _rows(self, sig: dict[str, np.ndarray]) -> np.ndarray:
+        """Network inputs and aux rows (4, n) float64: u, sign(qd), tanh(qd / v_ps), |tau_g| / g_scale."""
+        if "qd" not in sig:
+            raise DataError("the log has no column 'qd'")
+        qd = np.asarray(sig["qd"], dtype=np.float64)
+        g = sig.get("tau_g")
+        g = np.zeros_like(qd) if g is None else np.asarray(g, dtype=np.float64)
+        out = np.empty((4, qd.size))
+        np.arcsinh(np.abs(qd) / self.v0_, out=out[0])
+        out[0] -= self.u_mean_
+        out[0] /= self.u_scale_
+        np.sign(qd, out=out[1])
+        np.tanh(qd / self.v_ps_, out=out[2])
+        np.abs(g, out=out[3])
+        out[3] /= self.g_scale_
+        return out
+
+    # ------------------------------------------------------------------ fitting
+
+    def fit(self, sig: dict[str, np.ndarray], target: np.ndarray, val_sig: dict[str, np.ndarray] | None = None,
+            val_target: np.ndarray | None = None, *, rng: np.random.Generator,
+            on_eval: Callable | None = None) -> "DissipativeFriction":
+        """Train on signals ``sig`` (moving rows already selected) against ``target`` (n,) [Nm]."""
+        target = np.asarray(target, dtype=np.float64)
+        if target.size == 0:
+            raise DataError("no training samples")
+        speed = np.abs(np.asarray(sig["qd"], dtype=np.float64))
+        moving = speed[speed > 0]
+        if not moving.size:
+            raise DataError("no moving training samples")
+        self.v0_ = (float(np.quantile(moving, VELOCITY_QUANTILE)) if self.velocity_scale == "auto"
+                    else float(self.velocity_scale))
+        self.v_ps_ = (PRESLIDING_SHARE * self.v0_ if self.presliding_speed == "auto"
+                      else float(self.presliding_speed))
+        if not (self.v0_ > 0 and self.v_ps_ > 0):
+            raise DataError("no moving training samples to scale the velocity with")
+        g = np.abs(np.asarray(sig.get("tau_g", np.zeros_like(speed)), dtype=np.float64))
+        self.g_scale_ = float(g.mean()) if g.mean() > 0 else 1.0
+        u = np.arcsinh(speed / self.v0_)
+        self.u_mean_, self.u_scale_ = float(u.mean()), float(u.std()) if u.std() > 1e-12 else 1.0
+        rms = float(np.sqrt(np.mean(target ** 2)))
+        self.y_scale_ = rms if rms > 0 else 1.0
+        net = self.new_network().init(rng)
+        x = self._rows(sig)
+        y = (target / self.y_scale_)[None, :]
+        xv = tv = None
+        if val_sig is not None and val_target is not None and len(val_target):
+            xv = self._rows(val_sig)
+            tv = (np.asarray(val_target, dtype=np.float64) / self.y_scale_)[None, :]
+        trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
+                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval)
+        trainer.fit(net, x, y, xv, tv, rng=rng)
+        self.net_ = net
+        self.history_train_, self.history_val_ = trainer.history_train_, trainer.history_val_
+        self.best_step_, self.steps_, self.eval_every_ = trainer.best_step_, trainer.steps_, trainer.eval_every_
+        self.n_train_, self.n_val_ = x.shape[1], 0 if xv is None else xv.shape[1]
+        return self
+
+    # ------------------------------------------------------------------ predicting
+
+    def required_inputs(self) -> set[str]:
+        return {"qd", "tau_g"}
+
+    def load_slope(self) -> float:
+        """k [Nm/Nm]: the growth of the friction magnitude per |tau_g|."""
+        b1 = float(self.net_.weights[-1][1, -1])
+        return self.y_scale_ * float(acts.softplus(np.array(b1))) / self.g_scale_
+
+    def magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
+        """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
+        return self._run(signals, sliding=True)
+
+    def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
+        """tau_f (n,) [Nm]; stateless."""
+        if self.net_ is None:
+            raise ValueError("the model is not fitted")
+        return self._run(signals, sliding=False), None
+
+    def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
+        """y_scale * head output (n,) in chunks of PREDICT_CHUNK rows on two threads (one BLAS
+        thread each, so the figures do not depend on the machine); ``sliding``: c = 1."""
+        n = len(signals["qd"]) if "qd" in signals else 0
+        out = np.empty(n, dtype=np.float64)
+        cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
+        pieces = list(zip(cuts[:-1], cuts[1:]))
+
+        def run(part: list[tuple[int, int]]) -> None:
+            ws = None
+            for start, stop in part:
+                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")})
+                if sliding:
+                    x[2] = 1.0
+                if ws is None or ws.n != stop - start:
+                    ws = self.net_.workspace(stop - start)
+                ws.set_inputs(x)
+                np.multiply(self.net_.forward(ws)[0], self.y_scale_, out=out[start:stop])
+
+        with single_threaded():
+            if len(pieces) < 4:
+                run(pieces)
+            else:
+                with ThreadPoolExecutor(max_workers=2) as pool:
+                    list(pool.map(run, [pieces[0::2], pieces[1::2]]))
+        return out
+
+    # ------------------------------------------------------------------ files
+
+    _SCALARS = ("v0", "v_ps", "g_scale", "u_mean", "u_scale", "y_scale")
+
+    def get_params(self) -> dict:
+        params = {"hidden_sizes": list(self.hidden_sizes), "activation": self.activation,
+                  "training": {"steps": self.steps, "epochs": self.epochs, "lr": self.lr,
+                               "batch_size": self.batch_size, "eval_every": self.eval_every},
+                  "velocity_scale": self.velocity_scale, "presliding_speed": self.presliding_speed,
+                  "units": self.units}
+        if self.net_ is not None:
+            params["network"] = self.net_.spec()
+            params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
+            params["fitted"] = {key: int(getattr(self, f"{key}_", 0))
+                                for key in ("steps", "best_step", "eval_every", "n_train", "n_val")}
+        return params
+
+    def get_arrays(self) -> dict[str, np.ndarray]:
+        if self.net_ is None:
+            return {}
+        arrays = {f"W{i}": w.copy() for i, w in enumerate(self.net_.weights)}
+        arrays.update(history_train=np.asarray(self.history_train_, dtype=np.float64),
+                      history_val=np.asarray(self.history_val_, dtype=np.float64))
+        return arrays
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "DissipativeFriction":
+        tr = params.get("training", {})
+        model = cls(hidden_sizes=params["hidden_sizes"], activation=params.get("activation", "elu"),
+                    steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
+                    batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"),
+                    velocity_scale=params.get("velocity_scale", "auto"),
+                    presliding_speed=params.get("presliding_speed", "auto"))
+        scales = params["scales"]
+        for key in cls._SCALARS:
+            value = scales[key]
+            if not isinstance(value, (int, float)) or not np.isfinite(value):
+                raise ValueError(f"scale {key} is not a finite number")
+            if key != "u_mean" and not value > 0:
+                raise ValueError(f"scale {key} must be positive")
+            setattr(model, f"{key}_", float(value))
+        net = model.new_network()
+        if params.get("network", {}).get("head") != net.head.name:
+            raise ValueError("the network does not match the model")
+        net.set_weights([arrays[f"W{i}"] for i in range(len(net.shapes))])
+        if net.theta[net.frozen].any():
+            raise ValueError("the load slope depends on the speed")
+        model.net_ = net
+        model.history_train_ = arrays.get("history_train", np.empty(0))
+        model.history_val_ = arrays.get("history_val", np.empty(0))
+        fitted = params.get("fitted", {})
+        model.steps_, model.best_step_ = fitted.get("steps", 0), fitted.get("best_step", 0)
+        model.eval_every_ = fitted.get("eval_every", 0)
+        model.n_train_, model.n_val_ = fitted.get("n_train", 0), fitted.get("n_val", 0)
+        return model
+
+    # ------------------------------------------------------------------ people
+
+    def describe(self) -> str:
+        tau, v = self.units.get("tau", "Nm"), self.units.get("qd", "rad/s")
+        act = _describe_activation(self.activation)
+        lines = [f"{self.kind}: {self.label}",
+                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)",
+                 f"  r0 = NN(asinh(|qd| / v0), sign(qd)); hidden layers: "
+                 f"{' | '.join(f'{n} {act}' for n in self.hidden_sizes)}; linear output"]
+        if self.net_ is None:
+            return "\n".join(lines + ["  (not fitted)"])
+        lines += [f"  {self.net_.n_params} parameters",
+                  f"  v0 {self.v0_:.4g} {v}, pre-sliding speed v_ps {self.v_ps_:.4g} {v}, "
+                  f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}",
+                  f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"]
+        how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
+               else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
+        lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
+                     f"({self.n_val_} for validation); weights kept from step {self.best_step_}")
+        return "\n".join(lines)

@@ -1,0 +1,121 @@
+"""A model set: a folder of model files, one per joint, as whole-arm commands write and read it.
+
+    DIR/joint_<name>.npz     the model of joint <name> (characters other than letters, digits,
+                             ``.``, ``_`` and ``-`` written as ``_``)
+
+The joint a file belongs to is the ``joint`` recorded in its meta, not its name. Other files in
+the folder are ignored. Each file is written atomically on its own, so a joint that fails leaves
+the other joints' files valid (docs/joints.md).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Callable
+
+from fricli import modelfile
+from fricli.errors import FricliError, LogError, ModelFileError, OutputError
+from fricli.joints import Source, listed, pair, same, select, several
+
+
+def file_name(joint) -> str:
+    return "joint_" + re.sub(r"[^A-Za-z0-9._-]", "_", str(joint)) + ".npz"
+
+
+def path_for(folder: str, joint) -> str:
+    return os.path.join(folder, file_name(joint))
+
+
+def listing(folder: str) -> dict:
+    """{recorded joint: path} of the model files in ``folder``, in name order."""
+    try:
+        names = sorted(n for n in os.listdir(folder) if n.endswith(".npz") and not n.startswith("."))
+    except OSError as exc:
+        raise ModelFileError(f"{folder}: cannot read the folder ({exc.strerror})") from None
+    out: dict = {}
+    for name in names:
+        path = os.path.join(folder, name)
+        meta, _ = modelfile.read(path)
+        joint = meta.get("joint")
+        if joint is None:
+            raise ModelFileError(f"{path}: records no joint; a model folder holds one model per named joint")
+        if any(same(joint, j) for j in out):
+            raise ModelFileError(f"{folder}: two models of joint {joint} ({name} and another)")
+        out[joint] = path
+    if not out:
+        raise ModelFileError(f"{folder}: no model files (.npz) in the folder")
+    return out
+
+
+def source(path: str) -> Source:
+    """A model file or a model set folder as a ``joints.Source``."""
+    if os.path.isdir(path):
+        return Source(path, listing(path), folder=True)
+    meta, _ = modelfile.read(path)
+    return Source(path, {meta.get("joint"): path})
+
+
+def output_folder(output: str, covered: list, log_joints: list | None, log_name: str) -> str | None:
+    """The folder to write one model per joint into, or None for one model file at ``output``.
+
+    A folder when the run covers several joints or ``output`` is an existing folder. The folder
+    is made when missing (its parent must exist)."""
+    names = [file_name(j) for j in covered]
+    if len(set(names)) < len(names):
+        raise LogError(f"{log_name}: joints {listed(covered)} do not give distinct file names")
+    if os.path.isdir(output):
+        if covered == [None]:
+            raise OutputError(f"{output} is a folder, but {log_name} has no 'joint' column to name a model "
+                              "file by: give -o FILE.npz")
+        return output
+    if len(covered) <= 1:
+        return None
+    if output == "-" or output.endswith(".npz") or os.path.exists(output):
+        raise several(log_joints, log_name, "choose one with --joint, or give -o a folder for one model per joint")
+    parent = os.path.dirname(os.path.abspath(output))
+    if not os.path.isdir(parent):
+        raise OutputError(f"cannot write {output}: folder {parent} does not exist")
+    try:
+        os.makedirs(output, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot create {output}: {exc.strerror}") from None
+    return output
+
+
+def plan(log_joints: list | None, requested, output: str, log_name: str,
+         source: Source | None = None) -> tuple[dict, str | None]:
+    """({joint: input model file or None}, output folder or None) of a run that writes models:
+    the joints by the joint rule (paired with ``source``'s models when it starts from models),
+    and where their models go (``output_folder``)."""
+    if source is None:
+        pairs = {j: None for j in select(log_joints, requested, log_name)}
+    else:
+        pairs = dict(pair(source, log_joints, requested, log_name))
+    return pairs, output_folder(output, list(pairs), log_joints, log_name)
+
+
+class PartialFailure(FricliError):
+    """Some joints of a whole-arm run failed; the others' outputs are written. The exit code is
+    the first failure's."""
+
+
+def each_joint(covered: list, work: Callable[[object], None], what: str = "models") -> list:
+    """Run ``work(joint)`` for every joint; a joint's FricliError does not stop the others.
+    Returns the joints done; raises ``PartialFailure`` naming the failed joints after the rest."""
+    done, failed = [], []
+    for joint in covered:
+        try:
+            work(joint)
+            done.append(joint)
+        except FricliError as exc:
+            if len(covered) == 1:
+                raise
+            failed.append((joint, exc))
+    if failed:
+        first = failed[0][1]
+        err = PartialFailure(f"joint {failed[0][0]}: {first}" + "".join(f"; joint {j}: {e}" for j, e in failed[1:])
+                             + (f" ({what} of joints {listed(done)} written)" if done else ""))
+        err.exit_code = first.exit_code
+        raise err
+    return done

@@ -1,0 +1,131 @@
+"""A network whose linear outputs pass through a fixed, differentiable head before the loss.
+
+    raw = Network(x)                      (k, n)  the dense layers of ``fricli.nn.network``
+    y   = head(raw, aux)                  (1, n)  elementwise, no trainable parameters
+
+``aux`` are per-sample values the head needs besides the network's outputs (a smooth sign of
+the velocity, the load); they ride along as extra input rows after the network's inputs, so
+the trainer of ``fricli.nn.training`` batches them with the inputs and trains a
+``HeadedNetwork`` like any ``Network``: ``forward`` returns y, ``backward`` takes dL/dy.
+
+    dissipative  aux = (c, g), raw = (r0, r1):
+                 y = c * (softplus(r0) + softplus(r1) g)
+                 with c = tanh(qd / v_ps) in [-1, 1] and g = |tau_g| / g_scale >= 0, so
+                 y qd >= 0 for every input and every weight.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fricli.nn.network import Network, Workspace
+
+_CLIP = 60.0
+
+
+def _softplus_and_sigmoid(r: np.ndarray, sp: np.ndarray, sig: np.ndarray) -> None:
+    """sp[:] = softplus(r), sig[:] = sigmoid(r), no overflow for any r."""
+    np.abs(r, out=sp)
+    np.negative(sp, out=sp)
+    np.exp(sp, out=sp)                   # e^-|r|
+    np.add(sp, 1, out=sig)
+    np.reciprocal(sig, out=sig)          # 1 / (1 + e^-|r|) = sigmoid(|r|)
+    np.copyto(sig, 1 - sig, where=r < 0)  # sigmoid(r) = 1 - sigmoid(|r|) for r < 0
+    np.log1p(sp, out=sp)
+    sp += np.maximum(r, 0)
+
+
+class DissipativeHead:
+    """y = c (softplus(r0) + softplus(r1) g); aux rows (c, g)."""
+
+    name = "dissipative"
+    n_raw, n_aux = 2, 2
+
+    def forward(self, raw: np.ndarray, aux: np.ndarray, y: np.ndarray, fac: np.ndarray, tmp: np.ndarray) -> None:
+        """y (1, n) from raw (2, n), aux (2, n); fac (2, n) gets dy/draw; tmp (2, n) scratch."""
+        _softplus_and_sigmoid(raw, tmp, fac)
+        c = aux[0]
+        tmp[1:] *= aux[1:]                   # softplus(r1) g
+        np.sum(tmp, axis=0, out=y[0])        # the magnitude, >= 0
+        y[0] *= c
+        fac[1:] *= aux[1:]
+        fac *= c
+
+    def spec(self) -> str:
+        return self.name
+
+
+HEADS = {DissipativeHead.name: DissipativeHead}
+
+
+class HeadedWorkspace(Workspace):
+    """A ``Workspace`` plus the head's buffers: aux (n_aux, n), out (1, n), fac, draw, tmp (n_raw, n)."""
+
+    def __init__(self, net: "HeadedNetwork", n: int):
+        super().__init__(net, n)
+        dt = net.dtype
+        self.aux = np.empty((net.head.n_aux, n), dtype=dt)
+        self.out = np.empty((1, n), dtype=dt)
+        self.fac = np.empty((net.n_out, n), dtype=dt)
+        self.draw = np.empty((net.n_out, n), dtype=dt)
+        self.tmp = np.empty((net.n_out, n), dtype=dt)
+
+    def set_inputs(self, x: np.ndarray) -> None:
+        """Copy inputs and aux rows (n_in + n_aux, n) into place."""
+        self.x[...] = x[:self.n_in]
+        self.aux[...] = x[self.n_in:]
+
+    def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
+        np.take(x[:self.n_in], idx, axis=1, out=self.x, mode="clip")
+        np.take(x[self.n_in:], idx, axis=1, out=self.aux, mode="clip")
+
+
+class HeadedNetwork(Network):
+    """A dense ``Network`` with ``head.n_raw`` linear outputs followed by ``head``; one output.
+
+    ``constant_outputs``: raw outputs that do not depend on the inputs, only on their bias (the
+    weights from the last hidden layer to them start at 0 and get no gradient)."""
+
+    def __init__(self, n_in: int, hidden, head, dtype=np.float32, constant_outputs=()):
+        super().__init__(n_in, hidden, n_out=head.n_raw, n_skip=0, dtype=dtype)
+        self.head = head
+        self.constant_outputs = tuple(int(k) for k in constant_outputs)
+        self.frozen = np.zeros(self.n_params, dtype=bool)
+        for k in self.constant_outputs:
+            self.views(self.frozen)[-1][k, :-1] = True
+
+    def init(self, rng: np.random.Generator) -> "HeadedNetwork":
+        super().init(rng)
+        self.theta[self.frozen] = 0
+        return self
+
+    def workspace(self, n: int) -> HeadedWorkspace:
+        return HeadedWorkspace(self, n)
+
+    def forward(self, ws: HeadedWorkspace) -> np.ndarray:
+        """y (1, n) for the inputs and aux rows already in ``ws``."""
+        raw = super().forward(ws)
+        self.head.forward(raw, ws.aux, ws.out, ws.fac, ws.tmp)
+        return ws.out
+
+    def backward(self, ws: HeadedWorkspace, dy: np.ndarray, grad: np.ndarray) -> None:
+        np.multiply(ws.fac, dy, out=ws.draw)
+        super().backward(ws, ws.draw, grad)
+        if self.constant_outputs:
+            grad[self.frozen] = 0
+
+    def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
+        """y (1, n) for inputs and aux rows ``x`` (n_in + n_aux, n)."""
+        n = x.shape[1]
+        out = np.empty((1, n), dtype=self.dtype)
+        ws = None
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            if ws is None or ws.n != stop - start:
+                ws = self.workspace(stop - start)
+            ws.set_inputs(x[:, start:stop])
+            out[:, start:stop] = self.forward(ws)
+        return out
+
+    def spec(self) -> dict:
+        return {**super().spec(), "head": self.head.spec(), "constant_outputs": list(self.constant_outputs)}

@@ -1,0 +1,135 @@
+"""Rigid-body terms from a URDF with Pinocchio (the optional extra ``fricli[robot]``).
+
+For joint positions q, velocities qd and accelerations qdd, arrays of shape (n, joints) in the
+URDF's joint order (rad or m, per second, per second squared):
+
+    tau_g   = g(q)                              gravity torque [Nm or N]
+    tau_dyn = M(q) qdd + C(q, qd) qd + I_r qdd  with reflected rotor inertias I_r [kg m^2]
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from fricli.errors import MissingDependencyError, ModelFileError
+from fricli.robot.mapping import Payload
+
+INSTALL = "pip install 'fricli[robot]'"
+
+
+def pinocchio():
+    """The pinocchio module, or MissingDependencyError (exit 10) with the install line."""
+    try:
+        import pinocchio as pin
+    except ImportError:
+        raise MissingDependencyError(f"--urdf needs Pinocchio: {INSTALL}") from None
+    return pin
+
+
+class RobotModel:
+    """A URDF's rigid-body model with a gravity vector [m/s^2] and an optional point payload."""
+
+    def __init__(self, urdf_text: str, name: str, gravity=(0.0, 0.0, -9.81), payload: Payload | None = None):
+        pin = pinocchio()
+        self.name = name
+        self.sha256 = hashlib.sha256(urdf_text.encode("utf-8")).hexdigest()
+        try:
+            model = pin.buildModelFromXML(urdf_text)
+        except Exception as exc:  # pinocchio raises ValueError/RuntimeError for bad XML
+            raise ModelFileError(f"{name}: not a usable URDF ({str(exc).splitlines()[0] if str(exc) else exc})") from None
+        if model.nv == 0:
+            raise ModelFileError(f"{name}: the URDF has no moving joints")
+        self.joints = list(model.names)[1:]
+        self.kinds = []
+        self._unbounded = []  # continuous joints: pinocchio's configuration is (cos q, sin q)
+        for joint in model.joints[1:]:
+            short = joint.shortname().removeprefix("JointModel")
+            if joint.nv != 1 or short[:1] not in ("R", "P") or short.startswith("Planar"):
+                raise ModelFileError(f"{name}: joint type {joint.shortname()} is not supported "
+                                     "(revolute, continuous and prismatic only)")
+            self.kinds.append("rotary" if short[0] == "R" else "linear")
+            self._unbounded.append(joint.nq == 2)
+        if payload is not None and payload.mass > 0:
+            if not model.existFrame(payload.frame):
+                raise ModelFileError(f"{name}: no frame {payload.frame!r} for the payload")
+            frame = model.frames[model.getFrameId(payload.frame)]
+            point = pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3)))
+            model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(point)
+        model.gravity = pin.Motion(np.asarray(gravity, dtype=float), np.zeros(3))
+        self._with_g = model
+        self._no_g = model.copy()
+        self._no_g.gravity = pin.Motion.Zero()
+
+    def match(self, urdf_names: list[str | None], how: str) -> list[int]:
+        """For each log joint, the index of its URDF joint. ``how``: "order" (the i-th log joint
+        is the i-th moving URDF joint) or "name" (``urdf_names``). ModelFileError when they differ."""
+        n_log, n_urdf = len(urdf_names), len(self.joints)
+        if how == "order":
+            if n_log != n_urdf:
+                raise ModelFileError(f"{self.name}: {n_urdf} moving joints, but the log has {n_log}: "
+                                     "matching by order needs the same count")
+            return list(range(n_urdf))
+        missing = [u for u in urdf_names if u not in self.joints]
+        if missing:
+            raise ModelFileError(f"{self.name}: no joint {missing[0]!r} (it has {', '.join(self.joints)})")
+        dup = next((u for u in urdf_names if urdf_names.count(u) > 1), None)
+        if dup is not None:
+            raise ModelFileError(f"{self.name}: joint {dup!r} is matched by two log joints")
+        unmatched = [j for j in self.joints if j not in urdf_names]
+        if unmatched:
+            raise ModelFileError(f"{self.name}: joint {unmatched[0]!r} is not in the log (every moving joint "
+                                 "needs its position)")
+        return [self.joints.index(u) for u in urdf_names]
+
+    def terms(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+              rotor_inertia: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(tau_g, tau_dyn), each (n, joints), for inputs of shape (n, joints) in URDF order."""
+        zeros = np.zeros_like(q)
+        config = self._configuration(q)
+        tau_g = _rnea(self._with_g, config, zeros, zeros)
+        tau_dyn = _rnea(self._no_g, config, qd, qdd)
+        if rotor_inertia is not None:
+            tau_dyn += qdd * np.asarray(rotor_inertia, dtype=float)
+        return tau_g, tau_dyn
+
+
+    def _configuration(self, q: np.ndarray) -> np.ndarray:
+        if not any(self._unbounded):
+            return q
+        parts = [np.column_stack([np.cos(q[:, k]), np.sin(q[:, k])]) if unbounded else q[:, k:k + 1]
+                 for k, unbounded in enumerate(self._unbounded)]
+        return np.hstack(parts)
+
+
+def _rnea(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """Inverse dynamics for every row: shape (n, nv)."""
+    pin = pinocchio()
+    if len(q) and hasattr(pin, "rneaInParallel"):  # one call for all samples (pinocchio >= 3)
+        pool = pin.ModelPool(model, 1)
+        out = pin.rneaInParallel(1, pool, np.asfortranarray(q.T), np.asfortranarray(qd.T), np.asfortranarray(qdd.T))
+        return np.ascontiguousarray(np.asarray(out).T)
+    return _rnea_rows(model, q, qd, qdd)
+
+
+def _rnea_rows(model, q, qd, qdd) -> np.ndarray:
+    pin = pinocchio()
+    data = model.createData()
+    out = np.empty_like(q)
+    for k in range(len(q)):
+        out[k] = pin.rnea(model, data, q[k], qd[k], qdd[k])
+    return out
+
+
+def load_model(path: str, mapping) -> RobotModel:
+    """The URDF at ``path`` with the mapping's gravity and payload."""
+    pinocchio()  # the install hint comes before any complaint about the file
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        raise ModelFileError(f"{path}: no such URDF file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelFileError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
+    return RobotModel(text, path, gravity=mapping.gravity, payload=mapping.payload)

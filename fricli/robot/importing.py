@@ -1,0 +1,120 @@
+"""A robot recording (+ mapping, + optional URDF) -> one long-format log in the log contract.
+
+Rows are grouped by joint, in the mapping's order; every column is in canonical units (s, rad,
+rad/s, rad/s^2, A, Nm, degC; m and N on linear axes) with the unit in the field metadata.
+The Parquet schema metadata key ``fricli.import`` records the source, the drive gains, the
+dropped rows and, with a URDF, the robot model options and which of qd/qdd were derived.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+
+import numpy as np
+
+from fricli import logs
+from fricli.errors import LogError, ModelFileError
+from fricli.robot.mapping import Mapping
+from fricli.robot.recording import KINDS, Recording, read_recording
+
+META_KEY = b"fricli.import"
+
+
+@dataclasses.dataclass
+class Imported:
+    table: object                  # pyarrow.Table
+    recording: Recording
+    meta: dict
+
+
+def _signals(mapping: Mapping, rec: Recording, name: str) -> tuple[np.ndarray, list[dict], str]:
+    """Time [s] and, per joint, its signals in canonical units; and the axis kind."""
+    t = rec.values[mapping.time.ref] * mapping.time.factor
+    per_joint = []
+    for jm in mapping.joints:
+        sig = {s: rec.values[c.ref] * c.factor for s, c in jm.columns.items()}
+        if "i_m" in sig:
+            if jm.kt is None:
+                raise LogError(f"{name}: joint {jm.name} has a current column i_m but no drive gain: "
+                               f"give kt in the mapping or --kt {jm.name}=VALUE [Nm/A]")
+            sig["tau_m"] = sig["i_m"] * jm.kt
+        per_joint.append(sig)
+    kinds = {c.kind for jm in mapping.joints for c in jm.columns.values()} - {None}
+    return t, per_joint, kinds.pop() if kinds else "rotary"
+
+
+def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], axis: str,
+                 cutoff_hz: float) -> dict:
+    """Add tau_g and tau_dyn (and derived qd/qdd) to ``per_joint`` (one dict of signals of shape
+    (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it."""
+    if mapping.match is None:
+        raise LogError("choose how the log's joints match the URDF's: match = \"name\" or \"order\" under "
+                       "[robot] in the mapping, or --match name|order")
+    order = model.match([jm.urdf or str(jm.name) for jm in mapping.joints], mapping.match)
+    derived: dict[str, list] = {}
+    for jm, sig, k in zip(mapping.joints, per_joint, order):
+        if model.kinds[k] != axis:
+            raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
+                                 f"{jm.name} is {axis}")
+        if "q" not in sig:
+            raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
+        motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
+        for column in logs.derive_motion(motion, cutoff_hz).get("columns", []):
+            derived.setdefault(column, []).append(jm.name)
+            sig[column] = motion[column]
+    stack = lambda column: np.column_stack([per_joint[order.index(k)][column] for k in range(len(order))])  # noqa: E731
+    inertia = [mapping.joints[order.index(k)].rotor_inertia for k in range(len(order))]
+    tau_g, tau_dyn = model.terms(stack("q"), stack("qd"), stack("qdd"), np.array(inertia))
+    for sig, k in zip(per_joint, order):
+        sig["tau_g"], sig["tau_dyn"] = tau_g[:, k], tau_dyn[:, k]
+    payload = mapping.payload
+    return {
+        "urdf": model.name, "urdf_sha256": model.sha256, "match": mapping.match,
+        "joints": {str(jm.name): model.joints[k] for jm, k in zip(mapping.joints, order)},
+        "gravity": list(mapping.gravity),
+        "rotor_inertia": {str(jm.name): jm.rotor_inertia for jm in mapping.joints},
+        "payload": dataclasses.asdict(payload) if payload is not None else None,
+        "derived": {"columns": derived, "cutoff_hz": cutoff_hz,
+                    "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {},
+    }
+
+
+_ORDER = ("t", "joint", "q", "qd", "qdd", "i_m", "tau_m", "tau_g", "tau_dyn", "tau_ext", "temp")
+
+
+def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
+                     cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_backward: bool = False) -> Imported:
+    """Parse ``data`` with ``mapping`` into a long-format table; with ``model`` (a
+    ``fricli.robot.dynamics.RobotModel``) add tau_g and tau_dyn."""
+    rec = read_recording(data, mapping, name, drop_backward=drop_backward)
+    t, per_joint, axis = _signals(mapping, rec, name)
+    robot = robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
+    units = dict(logs.CANONICAL[axis])
+    units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
+             **{c: units["tau"] for c in logs.TORQUES}}
+    present = [c for c in _ORDER if c == "t" or c == "joint" or all(c in sig for sig in per_joint)]
+    partial = sorted({c for sig in per_joint for c in sig} - set(present))
+    if partial:
+        raise LogError(f"{name}: column {partial[0]!r} is mapped for some joints only: map it for every joint")
+    n = len(t)
+    names = [jm.name for jm in mapping.joints]
+    columns = {}
+    for c in present:
+        if c == "t":
+            columns[c] = np.tile(t, len(names))
+        elif c == "joint":
+            columns[c] = np.repeat(np.array(names, dtype=np.int64 if isinstance(names[0], int) else object), n)
+        else:
+            columns[c] = np.concatenate([sig[c] for sig in per_joint])
+    table = logs.table_from_arrays(columns, {c: units[c] for c in present if c in units})
+    meta = {
+        "source": name, "source_sha256": hashlib.sha256(data).hexdigest(), "rows": n,
+        "dropped": {k: {"count": d.count, "first_line": d.first_line, "what": KINDS[k]} for k, d in rec.defects.items()},
+        "unterminated_last_line": int(rec.unterminated) if rec.unterminated else None,
+        "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
+        "robot": robot,
+    }
+    table = table.replace_schema_metadata({**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()})
+    return Imported(table=table, recording=rec, meta=meta)

@@ -1,0 +1,61 @@
+"""Rigid-body terms from a URDF for a log that already exists (long format, one block of rows
+per joint, all joints sampled at the same times)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from fricli import logs
+from fricli.errors import LogError
+from fricli.robot.importing import robot_terms
+from fricli.robot.mapping import JointMap, Mapping
+
+META_KEY = b"fricli.dynamics"
+
+
+def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[str, str] | None = None,
+              rotor_inertia: dict[str, float] | None = None, gravity=(0.0, 0.0, -9.81), payload=None,
+              cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
+    """``table`` with tau_g and tau_dyn set (replaced if present) for every row, qd/qdd added
+    when derived, and the record under the schema metadata key ``fricli.dynamics``.
+    ``urdf_names`` and ``rotor_inertia`` are keyed by the joint's name as text."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    urdf_names, rotor_inertia = urdf_names or {}, rotor_inertia or {}
+    names = logs.joints_of(table)
+    if names == [None]:
+        raise LogError(f"{name}: the log has no 'joint' column: a robot model needs every joint's position")
+    unknown = sorted((set(urdf_names) | set(rotor_inertia)) - {str(j) for j in names})
+    if unknown:
+        raise LogError(f"{name}: no joint {unknown[0]} in the log (it holds {', '.join(str(j) for j in names)})")
+    logs_per_joint = [logs.from_table(table, name=name, joint=j, cutoff_hz=cutoff_hz) for j in names]
+    axes = {log.axis for log in logs_per_joint}
+    if len(axes) > 1:
+        raise LogError(f"{name}: mixes rotary and linear joints")
+    t = logs_per_joint[0].signals["t"]
+    for log in logs_per_joint[1:]:
+        if len(log) != len(t) or not np.array_equal(log.signals["t"], t):
+            raise LogError(f"{name}: joints {names[0]} and {log.joint} are not sampled at the same times")
+    mapping = Mapping(time=None, joints=[JointMap(name=j, columns={}, rotor_inertia=rotor_inertia.get(str(j), 0.0),
+                                                  urdf=urdf_names.get(str(j))) for j in names],
+                      match=match, gravity=tuple(gravity), payload=payload)
+    per_joint = [dict(log.signals) for log in logs_per_joint]
+    record = robot_terms(model, mapping, t, per_joint, axes.pop(), cutoff_hz)
+    derived = {c: [log.joint for log in logs_per_joint if c in log.derived.get("columns", [])] for c in ("qd", "qdd")}
+    derived = {c: js for c, js in derived.items() if js}
+    record["derived"] = {"columns": derived, "cutoff_hz": cutoff_hz,
+                         "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {}
+    joint_col = table.column("joint")
+    units = logs.CANONICAL[logs_per_joint[0].axis]
+    for column, unit in (("qd", units["qd"]), ("qdd", units["qdd"]), ("tau_g", units["tau"]), ("tau_dyn", units["tau"])):
+        if column in ("qd", "qdd") and column not in derived:
+            continue
+        values = np.empty(table.num_rows)
+        for j, sig in zip(names, per_joint):
+            values[np.asarray(pc.equal(joint_col, pa.scalar(j)))] = sig[column]
+        table = logs.with_column(table, column, values, unit)
+    meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(record).encode()}
+    return table.replace_schema_metadata(meta), record

@@ -1,0 +1,257 @@
+"""The mapping of a robot recording: which text column holds what, in which unit, per joint.
+
+A mapping is a TOML file (see docs/robot-import.md). Columns are given by 1-based index or,
+when the file has a header line, by header name. Example::
+
+    header = false
+    time = {column = 1, unit = "s"}
+
+    [[joints]]
+    name = 1
+    q = {column = 2, unit = "rad"}
+    i_m = {column = 14, unit = "A"}
+    kt = 10.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+
+from fricli.errors import LogError
+from fricli.logs import column_unit
+
+# per-joint signals a mapping may name, with their default unit
+SIGNALS = {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "i_m": "A", "tau_m": "Nm",
+           "tau_ext": "Nm", "temp": "degC"}
+MATCHES = ("name", "order")
+_TOP_KEYS = {"header", "delimiter", "time", "joints", "robot"}
+_JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS}
+_ROBOT_KEYS = {"match", "gravity", "payload"}
+_PAYLOAD_KEYS = {"mass", "com", "frame"}
+
+
+@dataclasses.dataclass(frozen=True)
+class Column:
+    """A text column: ``ref`` is a 1-based index (int) or a header name (str)."""
+
+    ref: int | str
+    unit: str
+    factor: float          # to the canonical unit
+    kind: str | None       # "rotary", "linear" or None (time, current, temperature)
+
+
+@dataclasses.dataclass(frozen=True)
+class Payload:
+    """A point mass [kg] at ``com`` [m] in the frame named ``frame`` of the robot description."""
+
+    mass: float
+    com: tuple[float, float, float]
+    frame: str
+
+
+@dataclasses.dataclass
+class JointMap:
+    name: int | str                 # the joint's name in the log
+    columns: dict[str, Column]      # signal -> column
+    kt: float | None = None         # drive gain [Nm/A]: torque constant x gear ratio
+    rotor_inertia: float = 0.0      # reflected to the joint side [kg m^2]
+    urdf: str | None = None         # the URDF joint's name when matching by name
+
+
+@dataclasses.dataclass
+class Mapping:
+    time: Column
+    joints: list[JointMap]
+    header: bool = False
+    delimiter: str = ","
+    match: str | None = None
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    payload: Payload | None = None
+
+    def joint(self, name: str) -> JointMap:
+        """The joint whose log name reads ``name``."""
+        for jm in self.joints:
+            if str(jm.name) == str(name):
+                return jm
+        raise LogError(f"no joint {name} in the mapping (it has {', '.join(str(j.name) for j in self.joints)})")
+
+
+def _fail(where: str, text: str):
+    raise LogError(f"{where}: {text}")
+
+
+def _unknown(table: dict, allowed: set, where: str) -> None:
+    extra = sorted(set(table) - allowed)
+    if extra:
+        _fail(where, f"unknown key {extra[0]!r} (allowed: {', '.join(sorted(allowed))})")
+
+
+def _number(value, where: str, *, positive: bool = False, nonnegative: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        _fail(where, f"expected a finite number, got {value!r}")
+    if positive and value <= 0:
+        _fail(where, f"must be positive, got {value!r}")
+    if nonnegative and value < 0:
+        _fail(where, f"must not be negative, got {value!r}")
+    return float(value)
+
+
+def _vector3(value, where: str) -> tuple[float, float, float]:
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        _fail(where, f"expected three numbers, got {value!r}")
+    return tuple(_number(v, where) for v in value)
+
+
+def _column(spec, signal: str, where: str, default_unit: str) -> Column:
+    if isinstance(spec, dict):
+        _unknown(spec, {"column", "unit"}, where)
+        if "column" not in spec:
+            _fail(where, "missing key 'column'")
+        ref, unit = spec["column"], spec.get("unit", default_unit)
+    else:
+        ref, unit = spec, default_unit
+    if isinstance(ref, bool) or not isinstance(ref, (int, str)) or (isinstance(ref, int) and ref < 1) or ref == "":
+        _fail(where, f"a column is a 1-based index or a header name, got {ref!r}")
+    if not isinstance(unit, str):
+        _fail(where, f"unit must be a string, got {unit!r}")
+    try:
+        kind, factor = column_unit(signal, unit)
+    except LogError as exc:
+        _fail(where, str(exc))
+    return Column(ref=ref, unit=unit, factor=factor, kind=kind)
+
+
+def _payload(spec, where: str) -> Payload:
+    if not isinstance(spec, dict):
+        _fail(where, "expected a table with mass, com and frame")
+    _unknown(spec, _PAYLOAD_KEYS, where)
+    missing = sorted(_PAYLOAD_KEYS - set(spec))
+    if missing:
+        _fail(where, f"missing key {missing[0]!r}")
+    if not isinstance(spec["frame"], str) or not spec["frame"]:
+        _fail(f"{where}.frame", "expected a frame name")
+    return Payload(mass=_number(spec["mass"], f"{where}.mass", nonnegative=True),
+                   com=_vector3(spec["com"], f"{where}.com"), frame=spec["frame"])
+
+
+def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
+    """A ``Mapping`` from a parsed TOML document; LogError (exit 3) on any mistake."""
+    _unknown(doc, _TOP_KEYS, name)
+    header = doc.get("header", False)
+    if not isinstance(header, bool):
+        _fail(f"{name}: header", "expected true or false")
+    delimiter = doc.get("delimiter", ",")
+    if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"":
+        _fail(f"{name}: delimiter", f"expected one character, got {delimiter!r}")
+    if "time" not in doc:
+        _fail(name, "missing key 'time' (the time column)")
+    time = _column(doc["time"], "t", f"{name}: time", "s")
+    joints_doc = doc.get("joints")
+    if not isinstance(joints_doc, list) or not joints_doc:
+        _fail(name, "needs at least one [[joints]] table")
+    joints: list[JointMap] = []
+    for i, spec in enumerate(joints_doc, start=1):
+        where = f"{name}: joints #{i}"
+        if not isinstance(spec, dict):
+            _fail(where, "expected a table")
+        _unknown(spec, _JOINT_KEYS, where)
+        jname = spec.get("name")
+        if isinstance(jname, bool) or not isinstance(jname, (int, str)) or jname == "":
+            _fail(where, f"'name' (the joint's name in the log, an integer or a string) is required, got {jname!r}")
+        columns = {s: _column(spec[s], s, f"{where}.{s}", unit) for s, unit in SIGNALS.items() if s in spec}
+        if "q" not in columns and "qd" not in columns:
+            _fail(where, "needs a column for q or qd")
+        if ("i_m" in columns) == ("tau_m" in columns):
+            _fail(where, "needs exactly one of i_m (with kt) and tau_m")
+        kinds = {c.kind for c in columns.values()} - {None}
+        if len(kinds) > 1:
+            _fail(where, "mixes rotary (rad, Nm) and linear (m, N) units")
+        kt = _number(spec["kt"], f"{where}.kt", positive=True) if "kt" in spec else None
+        if kt is not None and "tau_m" in columns:
+            _fail(where, "kt applies to a current column i_m, not to tau_m")
+        urdf = spec.get("urdf")
+        if urdf is not None and (not isinstance(urdf, str) or not urdf):
+            _fail(f"{where}.urdf", "expected a URDF joint name")
+        joints.append(JointMap(name=jname, columns=columns, kt=kt, urdf=urdf,
+                               rotor_inertia=_number(spec.get("rotor_inertia", 0.0), f"{where}.rotor_inertia",
+                                                     nonnegative=True)))
+    names = [str(j.name) for j in joints]
+    dup = next((n for n in names if names.count(n) > 1), None)
+    if dup is not None:
+        _fail(name, f"joint {dup} appears twice")
+    if len({type(j.name) for j in joints}) > 1:
+        _fail(name, "joint names must be all integers or all strings")
+    kinds = {c.kind for j in joints for c in j.columns.values()} - {None}
+    if len(kinds) > 1:
+        _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately)")
+    robot = doc.get("robot", {})
+    if not isinstance(robot, dict):
+        _fail(f"{name}: robot", "expected a table")
+    _unknown(robot, _ROBOT_KEYS, f"{name}: robot")
+    match = robot.get("match")
+    if match is not None and match not in MATCHES:
+        _fail(f"{name}: robot.match", f"expected 'name' or 'order', got {match!r}")
+    gravity = _vector3(robot["gravity"], f"{name}: robot.gravity") if "gravity" in robot else (0.0, 0.0, -9.81)
+    payload = _payload(robot["payload"], f"{name}: robot.payload") if "payload" in robot else None
+    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, match=match,
+                   gravity=gravity, payload=payload)
+
+
+def load_mapping(path: str) -> Mapping:
+    """Read a TOML mapping file; LogError (exit 3) when it is missing or wrong."""
+    try:
+        with open(path, "rb") as fh:
+            doc = tomllib.load(fh)
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such mapping file") from None
+    except IsADirectoryError:
+        raise LogError(f"{path}: is a folder, not a mapping file") from None
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise LogError(f"{path}: not a valid TOML mapping ({str(exc).splitlines()[0]})") from None
+    return parse_mapping(doc, path)
+
+
+def parse_overrides(pairs, what: str, *, nonnegative: bool = False) -> dict[str, float]:
+    """``("JOINT=VALUE", ...)`` -> {joint: value}; LogError on a malformed pair."""
+    out: dict[str, float] = {}
+    for pair in pairs:
+        joint, sep, value = pair.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not sep or not joint or not math.isfinite(number) or number < 0 or (number == 0 and not nonnegative):
+            raise LogError(f"{what}: expected JOINT=VALUE with a {'non-negative' if nonnegative else 'positive'} "
+                           f"number, got {pair!r}")
+        out[joint] = number
+    return out
+
+
+def merge_payload(base: Payload | None, mass=None, com=None, frame=None) -> Payload:
+    """``base`` with the given fields replaced (mass 0 kg and com at the frame's origin by default)."""
+    return Payload(mass=float(mass) if mass is not None else (base.mass if base else 0.0),
+                   com=tuple(float(c) for c in com) if com is not None else (base.com if base else (0.0, 0.0, 0.0)),
+                   frame=frame if frame is not None else base.frame)
+
+
+def apply_overrides(mapping: Mapping, *, kt=None, rotor_inertia=None, match=None, gravity=None,
+                    payload: Payload | None = None) -> Mapping:
+    """``mapping`` with options from the command line taking precedence (in place; returned)."""
+    for joint, value in (kt or {}).items():
+        jm = mapping.joint(joint)
+        if "tau_m" in jm.columns:
+            raise LogError(f"--kt {joint}={value:g}: joint {joint} has a torque column tau_m, not a current")
+        jm.kt = value
+    for joint, value in (rotor_inertia or {}).items():
+        mapping.joint(joint).rotor_inertia = value
+    if match is not None:
+        mapping.match = match
+    if gravity is not None:
+        mapping.gravity = tuple(float(g) for g in gravity)
+    if payload is not None:
+        mapping.payload = payload
+    return mapping

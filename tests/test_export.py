@@ -1,0 +1,281 @@
+"""`fricli export`: the generated C gives the numbers of `fricli predict --precision double`.
+
+Every kind is exported, compiled with the system C compiler (warnings are errors; C99 and C++)
+and run over a held-out simulated log and the EMPS log through a small driver; every row must
+agree with `fricli predict` to 1e-9 Nm + 1e-9 relative. Compiling tests skip without a compiler.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+from conftest import SAMPLE, shared_data
+
+from fricli import logs, models
+from fricli.cli import cli
+from fricli.models import terms as T
+from fricli.export import c, check, network
+from fricli.models.augmented import AugmentedModel
+from fricli.models.lugre import LuGreModel
+from fricli.models.neural import ARCHS
+from fricli.models.residual import ResidualFriction
+
+ABS, REL = 1e-9, 1e-9
+needs_cc = pytest.mark.skipif(check.compiler() is None, reason="no C compiler")
+needs_cxx = pytest.mark.skipif(check.compiler(cxx=True) is None, reason="no C++ compiler")
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
+    """Every kind, small and quickly trained on ``log`` (the numbers need not be good ones)."""
+    sig = log.signals
+    rows = np.arange(0, len(log), max(1, len(log) // 300))
+    pick = {k: v[rows] for k, v in sig.items()}
+    target = logs.friction_target(sig)
+    out = {"lugre": lugre}
+    for arch, cls in ARCHS.items():
+        out[arch] = cls(steps=100, velocity_scale="auto").fit(pick, target[rows], rng=rng)
+    out["residual"] = ResidualFriction(lugre, epochs=2).fit(sig, target, rows[::2], rows[1::2], rng=rng)
+    out["residual-mlp"] = ResidualFriction(out["mlp"], epochs=2).fit(sig, target, rows[::2], rows[1::2], rng=rng)
+    out["augmented"] = AugmentedModel(lugre, terms, rng.normal(size=len(terms)))
+    out["augmented-nn"] = AugmentedModel(out["nnacm"], terms[:4], rng.normal(size=4))
+    return out
+
+
+SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T.term("p*pos", T.P, T.POS),
+             T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN),
+             T.term("tau_l*moving", T.GEAR, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
+             T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
+             T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
+             T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd"))]
+EMPS_TERMS = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd")), T.term("p*pos", T.P, T.POS),
+              T.term("sign", T.SIGN), T.term("sat1", {"f": "sat", "scale": 0.01}),
+              T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0})]
+
+
+@pytest.fixture(scope="module")
+def sim_models(tmp_path_factory):
+    """Model files of every kind fitted on the sample base log (joint 2)."""
+    folder = tmp_path_factory.mktemp("sim_models")
+    log = logs.load_log(str(SAMPLE / "joint2_base.parquet"))
+    rng = np.random.default_rng(5)
+    variants = {"lugre-loaded": LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, kc=0.04, ks=0.05, sigma0=1.7e4, sigma1=0.002),
+                "lugre-asym-thermal": LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, kc=0.04, ks=0.05, sigma0=1.7e4,
+                                                 sigma1=0.5, fc_neg=6.0, fv_neg=11.0, t_ref=30.0, alpha_c=0.004,
+                                                 alpha_v=0.01),
+                "lugre-plain": LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, sigma0=1.7e4)}
+    trained = _train(log, rng, lugre=variants["lugre-loaded"], terms=SIM_TERMS)
+    trained.update(variants)
+    paths = {}
+    for kind, model in trained.items():
+        paths[kind] = str(folder / f"{kind}.npz")
+        models.save_for_log(paths[kind], model, log, rows_used=len(log), seed=5)
+    return paths
+
+
+@pytest.fixture(scope="module")
+def emps_models(tmp_path_factory):
+    path = str(shared_data("emps/emps.parquet"))
+    folder = tmp_path_factory.mktemp("emps_models")
+    log = logs.load_log(path, cutoff_hz=100.0)
+    lugre = LuGreModel(21.3, 21.3, 0.01, 1.0, 195.65, sigma0=1.82e6, sigma1=1.82e4, axis="linear")
+    trained = _train(log, np.random.default_rng(6), lugre=lugre, terms=EMPS_TERMS)
+    paths = {}
+    for kind, model in trained.items():
+        paths[kind] = str(folder / f"{kind}.npz")
+        models.save_for_log(paths[kind], model, log, rows_used=len(log), seed=6)
+    return path, paths
+
+
+def _compiled(model_path: str, folder, prefix: str = "fr") -> tuple[str, list[str]]:
+    header = os.path.join(folder, f"{prefix}.h")
+    res = invoke("export", model_path, "-o", header, "--prefix", prefix, "-q")
+    assert res.exit_code == 0, res.output
+    exe = os.path.join(folder, f"{prefix}_driver")
+    assert check.build(header, prefix, exe) == ""          # no warnings (they are errors, too)
+    model, _ = models.load(model_path)
+    return exe, c.signals_of(model)
+
+
+def _compare(model_path: str, log_path: str, tmp_path, *, cutoff: float = 50.0, batch_rows: int = 4000) -> float:
+    """Worst |C - predict| / (ABS + REL |predict|) over every row of the log."""
+    out = tmp_path / "pred.parquet"
+    res = invoke("predict", model_path, log_path, "-o", out, "--precision", "double", "--cutoff", cutoff,
+                 "--batch-rows", batch_rows, "-q")
+    assert res.exit_code == 0, res.output
+    ref = pq.read_table(out).column("tau_f_pred").to_numpy()
+    exe, names = _compiled(model_path, tmp_path)
+    sig = logs.load_log(log_path, cutoff_hz=cutoff).signals
+    got = check.run(exe, check.signal_matrix(sig, names))
+    assert got.shape == ref.shape and np.isfinite(got).all()
+    return float(np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))))
+
+
+KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "residual",
+         "residual-mlp", "augmented", "augmented-nn"]
+
+
+@needs_cc
+@pytest.mark.parametrize("kind", KINDS)
+def test_export_matches_predict_on_a_held_out_simulated_log(kind, sim_models, tmp_path):
+    log = str(SAMPLE / "joint2_extended_asym.parquet")       # held out: the models saw the base log
+    assert _compare(sim_models[kind], log, tmp_path) <= 1.0
+
+
+@needs_cc
+@pytest.mark.parametrize("kind", ["lugre", "mlp", "selmic", "nnacm", "residual", "residual-mlp", "augmented",
+                                  "augmented-nn"])
+def test_export_matches_predict_on_emps(kind, emps_models, tmp_path):
+    log, paths = emps_models
+    assert _compare(paths[kind], log, tmp_path, cutoff=100.0, batch_rows=7000) <= 1.0
+
+
+@needs_cc
+def test_single_precision_predict_is_what_differs(sim_models, tmp_path):
+    """The default float32 networks differ from the C code by far more than the tolerance,
+    which is why the comparison uses --precision double."""
+    log = str(SAMPLE / "joint2_extended_asym.parquet")
+    out = tmp_path / "pred.parquet"
+    assert invoke("predict", sim_models["mlp"], log, "-o", out, "-q").exit_code == 0
+    ref = pq.read_table(out).column("tau_f_pred").to_numpy()
+    exe, names = _compiled(sim_models["mlp"], tmp_path)
+    got = check.run(exe, check.signal_matrix(logs.load_log(log).signals, names))
+    assert np.max(np.abs(got - ref)) > 1e-8
+
+
+@needs_cxx
+@pytest.mark.parametrize("kind", ["lugre-asym-thermal", "selmic", "residual", "augmented"])
+def test_header_compiles_as_cpp_without_warnings(kind, sim_models, tmp_path):
+    header = tmp_path / "fr.h"
+    assert invoke("export", sim_models[kind], "-o", header, "--prefix", "fr").exit_code == 0
+    assert check.build(str(header), "fr", str(tmp_path / "drv"), cxx=True) == ""
+
+
+def test_export_is_byte_identical_and_carries_the_meta(sim_models, tmp_path):
+    a, b = tmp_path / "a.h", tmp_path / "b.h"
+    assert invoke("export", sim_models["augmented"], "-o", a).exit_code == 0
+    assert invoke("export", sim_models["augmented"], "-o", b).exit_code == 0
+    text = a.read_text()
+    assert a.read_bytes() == b.read_bytes()
+    head = text[:text.index("*/")]
+    _, meta = models.load(sim_models["augmented"])
+    assert meta["provenance"]["log_sha256"] in head and "augmented.npz" in head and '"tau": "Nm"' in head
+    assert "#include <math.h>" in text and text.count("#include") == 1
+    assert "malloc" not in text and "float " not in text
+
+
+def test_numbers_are_written_to_round_trip():
+    for x in (0.1, 1.0 / 3.0, -2.5e-300, 12.0, 1e22, np.float32(0.1), np.nextafter(1.0, 2.0)):
+        assert float(c.num(x)) == float(x)
+    assert c.num(3.0) == "3.0" and c.num(1e22) == "1e+22"
+
+
+def test_step_takes_the_signals_in_the_documented_order(sim_models):
+    text = c.export(sim_models["augmented"], "fr")
+    assert "static inline double fr_step(fr_state *s, double t, double q, double qd, double qdd, double tau_g, " \
+           "double tau_ext, double temp)" in text
+    assert " *   0. t [s] time" in text and " *   6. temp [degC] temperature" in text
+
+
+@needs_cc
+def test_a_folder_gives_one_function_set_per_joint(sim_models, tmp_path):
+    folder = tmp_path / "arm"
+    folder.mkdir()
+    for joint, kind in (("joint2", "lugre-loaded"), ("joint4", "mlp")):
+        (folder / f"{joint}.npz").write_bytes(open(sim_models[kind], "rb").read())
+    header = tmp_path / "arm.h"
+    res = invoke("export", folder, "--prefix", "arm", "-o", header)
+    assert res.exit_code == 0, res.output
+    text = header.read_text()
+    assert "arm_joint2_step(arm_joint2_state *s, double t, double qd, double tau_g)" in text
+    assert "arm_joint4_step(arm_joint4_state *s, double qd, double tau_g)" in text
+    main = tmp_path / "main.c"
+    main.write_text(f'#include "{header}"\n#include <stdio.h>\nint main(void) {{\n'
+                    "    arm_joint2_state a; arm_joint4_state b;\n    arm_joint2_init(&a); arm_joint4_init(&b);\n"
+                    '    printf("%.17g\\n", arm_joint2_step(&a, 0.0, 0.1, 5.0) + arm_joint4_step(&b, 0.1, 5.0));\n'
+                    "    return 0;\n}\n")
+    import subprocess
+
+    for compiler, flags in ((check.compiler(), check.C_FLAGS), (check.compiler(cxx=True), check.CXX_FLAGS)):
+        if compiler is None:
+            continue
+        exe = tmp_path / "main"
+        proc = subprocess.run([compiler, *flags, str(main), "-o", str(exe), "-lm"], capture_output=True, text=True)
+        assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+        assert np.isfinite(float(subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout))
+
+
+@needs_cc
+def test_softplus_and_tanh_activations_compile_to_the_reference_formulas(tmp_path):
+    x = np.r_[-800.0, -40.0, -1.5, -1e-9, 0.0, 1e-9, 0.7, 40.0, 800.0]
+    lines = ["#include <math.h>", "#include <stdio.h>", "int main(void) {",
+             f"    static const double X[{len(x)}] = {c.array(x)};", "    int i;",
+             f"    for (i = 0; i < {len(x)}; ++i) {{"]
+    for name in ("softplus", "tanh"):
+        lines += [f"        {{ double v = X[i]; {network.ACTIVATIONS[name](None, 'i')} printf(\"%.17g\\n\", v); }}"]
+    lines += ["    }", "    return 0;", "}"]
+    src = tmp_path / "act.c"
+    src.write_text("\n".join(lines) + "\n")
+    import subprocess
+
+    exe = tmp_path / "act"
+    subprocess.run([check.compiler(), *check.C_FLAGS, str(src), "-o", str(exe), "-lm"], check=True)
+    out = np.array(subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split(), dtype=float)
+    np.testing.assert_allclose(out[0::2], np.logaddexp(0.0, x), rtol=1e-15, atol=0)
+    np.testing.assert_allclose(out[1::2], np.tanh(x), rtol=1e-15, atol=0)
+
+
+def test_errors_are_one_line_with_the_documented_codes(sim_models, tmp_path):
+    res = invoke("export", sim_models["mlp"], "--prefix", "9bad", "-o", tmp_path / "x.h")
+    assert res.exit_code == 2
+    res = invoke("export", tmp_path / "missing.npz", "-o", tmp_path / "x.h")
+    assert res.exit_code == 4 and "no such file" in res.output
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    res = invoke("export", empty, "-o", tmp_path / "x.h")
+    assert res.exit_code == 4 and "no .npz" in res.output
+    assert not (tmp_path / "x.h").exists()
+
+
+@needs_cc
+def test_the_examples_in_the_deploy_doc_compile(sim_models, tmp_path):
+    import re
+    import subprocess
+
+    from conftest import ROOT
+
+    text = (ROOT / "docs" / "deploy.md").read_text()
+    blocks = re.findall(r"```(c|cpp)\n(.*?)```", text, flags=re.S)
+    assert [lang for lang, _ in blocks] == ["c", "cpp"]
+    assert invoke("export", sim_models["lugre-loaded"], "-o", tmp_path / "friction.h").exit_code == 0
+    for lang, code in blocks:
+        cxx = lang == "cpp"
+        compiler = check.compiler(cxx=cxx)
+        if compiler is None:
+            continue
+        src = tmp_path / f"example.{lang}"
+        src.write_text(code)
+        flags = ["-Wall", "-Wextra", "-pedantic", "-Werror", "-O2"] + ([] if cxx else ["-std=c99"])
+        proc = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
+                              capture_output=True, text=True)
+        assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
+    model, _ = models.load(sim_models["residual-mlp"])
+    assert {model.base.precision, model.add.precision} == {"single"}
+    models.set_precision(model, "double")
+    assert {model.base.precision, model.add.precision} == {"double"}
+    with pytest.raises(ValueError):
+        models.set_precision(model, "half")
+    sig = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet")).signals
+    double = model.predict(sig)[0]
+    single = models.set_precision(model, "single").predict(sig)[0]
+    assert 0 < np.max(np.abs(double - single)) < 1e-3

@@ -1,0 +1,310 @@
+"""fricli fleet, fricli trend and simulate --fleet: a small simulated fleet end to end."""
+
+import datetime as dt
+import importlib.util
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from fricli import errors
+from fricli.fleet import history, manifest, trend
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ENV = {**os.environ, "PYTHONPATH": ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")}
+COMPARED = ["robot", "joint", "date", "status", "pipeline", "model_kind", "log_sha256", *history.PARAMETERS,
+            *history.ERRORS]
+
+needs_dask = pytest.mark.skipif(importlib.util.find_spec("distributed") is None,
+                                reason="the fleet extra (dask[distributed]) is not installed")
+
+
+def fricli(*args, cwd):
+    """The command in a fresh process (runs that start Dask workers)."""
+    return subprocess.run([sys.executable, "-m", "fricli", *map(str, args)], cwd=cwd, env=ENV,
+                          capture_output=True, text=True, timeout=300)
+
+
+def invoke(*args, cwd):
+    """The command in this process (commands that start no cluster): (exit code, stdout, stderr)."""
+    from click.testing import CliRunner
+
+    from fricli.cli import cli
+
+    old = os.getcwd()
+    os.chdir(cwd)
+    try:
+        res = CliRunner().invoke(cli, [str(a) for a in args])
+    finally:
+        os.chdir(old)
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
+    return subprocess.CompletedProcess(args, res.exit_code, res.stdout, res.stderr)
+
+
+@pytest.fixture(scope="module")
+def fleet_dir(tmp_path_factory):
+    """2 robots x 2 joints x 1 day, simulated once."""
+    folder = tmp_path_factory.mktemp("fleet") / "plant"
+    res = invoke("simulate", "--fleet", "2x2x1", "--seed", 3, "-o", folder, cwd=folder.parent)
+    assert res.returncode == 0, res.stderr
+    return folder
+
+
+def copy_of(fleet_dir, tmp_path, name="plant"):
+    dst = tmp_path / name
+    shutil.copytree(fleet_dir, dst)
+    return dst
+
+
+def history_rows(folder):
+    table = history.read(str(folder / "history"))
+    return table.select(COMPARED).sort_by([("robot", "ascending"), ("joint", "ascending"),
+                                           ("date", "ascending")]).to_pylist()
+
+
+def test_simulated_fleet_layout(fleet_dir):
+    m = manifest.load(str(fleet_dir / "fleet.toml"))
+    assert [(j.robot, j.joint, j.date) for j in m.jobs] == [
+        ("robot001", "1", "2026-01-01"), ("robot001", "2", "2026-01-01"),
+        ("robot002", "1", "2026-01-01"), ("robot002", "2", "2026-01-01")]
+    truth = json.loads((fleet_dir / "truth.json").read_text())
+    fcs = {(d["robot"], d["joint"]): d["fc"] for d in truth["daily"]}
+    assert len(set(fcs.values())) == 4  # every joint its own friction
+
+
+@needs_dask
+def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
+    folder = copy_of(fleet_dir, tmp_path)
+    first = fricli("fleet", "fleet.toml", cwd=folder)
+    assert first.returncode == errors.OK, first.stderr
+    assert "4 jobs: 4 ok, 0 unchanged, 0 failed" in first.stdout
+    rows = history_rows(folder)
+    assert len(rows) == 4 and all(r["status"] == "ok" for r in rows)
+    truth = {(d["robot"], str(d["joint"])): d for d in json.loads((folder / "truth.json").read_text())["daily"]}
+    for r in rows:  # the identified Coulomb friction is the joint's own, within 5 %
+        assert r["fc"] == pytest.approx(truth[(r["robot"], r["joint"])]["fc"], rel=0.05)
+
+    # a model made by the fleet is up to date for the identify command with the same options
+    log = folder / "robot001/joint1/2026-01-01.parquet"
+    same = invoke("identify", log, "-o", folder / "models/robot001/joint1/2026-01-01.npz", "--joint", "1",
+                  "--if-changed", cwd=folder)
+    assert same.returncode == errors.UNCHANGED, same.stderr
+
+    files = sorted((folder / "history").rglob("*.parquet"))
+    second = fricli("fleet", "fleet.toml", "--json", cwd=folder)
+    assert second.returncode == errors.OK, second.stderr
+    assert {j["status"] for j in json.loads(second.stdout)["jobs"]} == {"unchanged"}
+    assert sorted((folder / "history").rglob("*.parquet")) == files  # nothing appended
+
+    bad = folder / "robot002/joint2/2026-01-01.parquet"
+    bad.write_bytes(b"PAR1 this is not a parquet file")
+    third = fricli("fleet", "fleet.toml", cwd=folder)
+    assert third.returncode == errors.SOME_FAILED, third.stderr
+    assert "4 jobs: 0 ok, 3 unchanged, 1 failed" in third.stdout
+    failed = [line for line in third.stdout.splitlines() if " failed " in line and "jobs:" not in line]
+    assert len(failed) == 1 and failed[0].startswith("robot002     2 "), third.stdout
+    assert failed[0].endswith(f"{bad}: not a Parquet file"), failed[0]
+    assert "Traceback" not in third.stdout + third.stderr
+    rows = history.read(str(folder / "history")).to_pylist()
+    assert [(r["robot"], r["joint"], r["status"]) for r in rows if r["status"] != "ok"] == [
+        ("robot002", "2", "failed")]
+
+
+def test_nothing_could_run(tmp_path):
+    (tmp_path / "empty.toml").write_text('[[robot]]\nname = "r1"\nlogs = "nowhere/*.parquet"\njoints = [1]\n')
+    res = invoke("fleet", "empty.toml", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and "no log matches" in res.stderr
+    (tmp_path / "broken.toml").write_text("[[robot]\n")
+    res = invoke("fleet", "broken.toml", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and res.stderr.startswith("fricli: error: ") \
+        and "not valid TOML" in res.stderr and len(res.stderr.splitlines()) == 1
+    (tmp_path / "typo.toml").write_text('[[robot]]\nname = "r1"\nlog = "x.parquet"\n')
+    res = invoke("fleet", "typo.toml", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and "unknown key 'log'" in res.stderr
+
+
+@needs_dask
+def test_every_job_failing_is_nothing_ran(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "2026-02-01.parquet").write_bytes(b"junk")
+    (tmp_path / "m.toml").write_text('[[robot]]\nname = "r1"\nlogs = "a/*.parquet"\n')
+    res = fricli("fleet", "m.toml", "--workers", 1, cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN, res.stderr
+    assert "1 jobs: 0 ok, 0 unchanged, 1 failed" in res.stdout
+
+
+def test_missing_dask_gives_the_install_hint(fleet_dir, tmp_path):
+    folder = copy_of(fleet_dir, tmp_path)
+    blocker = tmp_path / "blocked" / "distributed"
+    blocker.mkdir(parents=True)
+    (blocker / "__init__.py").write_text("raise ImportError('blocked for the test')\n")
+    env = {**ENV, "PYTHONPATH": str(blocker.parent) + os.pathsep + ENV["PYTHONPATH"]}
+    res = subprocess.run([sys.executable, "-m", "fricli", "fleet", "fleet.toml"], cwd=folder, env=env,
+                         capture_output=True, text=True, timeout=60)
+    assert res.returncode == errors.NOTHING_RAN
+    assert res.stderr == "fricli: error: fricli fleet needs Dask: pip install 'fricli[fleet]'\n"
+    assert not (folder / "history").exists()
+
+
+def _free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@needs_dask
+def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
+    local = copy_of(fleet_dir, tmp_path, "local")
+    remote = copy_of(fleet_dir, tmp_path, "remote")
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = os.path.join(os.path.dirname(sys.executable), "dask")
+    procs = [subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                              env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    try:
+        for _ in range(2):
+            procs.append(subprocess.Popen([dask, "worker", address, "--host", "127.0.0.1", "--nthreads", "1",
+                                           "--no-dashboard"], env=ENV, stdout=subprocess.DEVNULL,
+                                          stderr=subprocess.DEVNULL))
+        from distributed import Client
+
+        with Client(address, timeout="30s") as c:  # both workers up before the run
+            c.wait_for_workers(2, timeout=60)
+        res = fricli("fleet", "fleet.toml", "--scheduler", address, cwd=remote)
+        assert res.returncode == errors.OK, res.stderr
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    assert fricli("fleet", "fleet.toml", cwd=local).returncode == errors.OK
+    assert history_rows(remote) == history_rows(local)
+
+
+@needs_dask
+def test_unreachable_scheduler(fleet_dir, tmp_path):
+    folder = copy_of(fleet_dir, tmp_path)
+    res = invoke("fleet", "fleet.toml", "--scheduler", f"tcp://127.0.0.1:{_free_port()}", cwd=folder)
+    assert res.returncode == errors.NOTHING_RAN
+    assert "cannot reach the Dask scheduler" in res.stderr and len(res.stderr.splitlines()) == 1
+
+
+# ------------------------------------------------------------------ trends on made-up histories
+
+
+def synthetic_history(folder, rng, days=30, wearing=(("r1", "2"),), rate=0.02, onset=10, sd=0.02):
+    """One row per joint and day: fc, fv with day-to-day noise ``sd``; ``wearing`` grow by ``rate`` per day."""
+    start = dt.date(2026, 3, 1)
+    run_time = dt.datetime(2026, 4, 1, tzinfo=dt.timezone.utc)
+    rows = []
+    for robot in ("r1", "r2"):
+        for joint in ("1", "2", "3"):
+            grow = rate if (robot, joint) in wearing else 0.0
+            for day in range(days):
+                f = (1 + grow * max(0, day - onset)) * (1 + sd * rng.standard_normal(2))
+                job = manifest.Job(robot=robot, joint=joint, log=f"{robot}/{joint}/{day}.parquet",
+                                   date=(start + dt.timedelta(days=day)).isoformat(), pipeline="identify",
+                                   model="m.npz", options=())
+                rows.append(history.row(job, {"status": "ok", "kind": "lugre", "seconds": 0.1,
+                                              "parameters": {"fc": 7 * f[0], "fv": 12 * f[1]},
+                                              "errors": {"mae": 0.2, "rmse": 0.3, "max": 1.0}}, "run1", run_time))
+    history.append(str(folder), rows, "run1")
+    return folder
+
+
+def test_trend_flags_the_wearing_joint_only(tmp_path, rng):
+    synthetic_history(tmp_path / "h", rng)
+    result = trend.trends(history.read(str(tmp_path / "h")))
+    assert [(t.robot, t.joint) for t in result if t.flagged] == [("r1", "2")]
+    worn = next(t for t in result if t.flagged)
+    assert worn.level["fc"] == pytest.approx(0.02 * 18, abs=0.05)   # 19 days of 2 %/day from day 10, median of 3
+    assert worn.growth["fc"] == pytest.approx(0.02, abs=0.004)
+
+
+def test_trend_history_keeps_units_and_reads_with_pandas(tmp_path, rng):
+    import pandas as pd
+
+    synthetic_history(tmp_path / "h", rng, days=3)
+    table = history.read(str(tmp_path / "h"))
+    assert table.schema.field("fc").metadata[b"unit"] == b"Nm"
+    df = pd.read_parquet(tmp_path / "h")
+    assert len(df) == 2 * 3 * 3 and set(df["robot"].astype(str)) == {"r1", "r2"}
+    assert not list((tmp_path / "h").rglob("*.tmp"))
+
+
+def test_trend_one_bad_day_is_no_wear(tmp_path, rng):
+    folder = synthetic_history(tmp_path / "h", rng, wearing=())
+    rows = history.read(str(folder)).to_pylist()
+    spike = dict(next(r for r in rows if r["robot"] == "r2" and r["joint"] == "3" and r["date"].day == 25))
+    spike["fc"] *= 1.6
+    spike["run_time"] = dt.datetime(2026, 4, 2, tzinfo=dt.timezone.utc)
+    history.append(str(folder), [spike], "run2")   # a later run of the same day replaces it
+    assert not any(t.flagged for t in trend.trends(history.read(str(folder))))
+
+
+def test_trend_cli_exit_codes_json_and_figures(tmp_path, rng):
+    synthetic_history(tmp_path / "h", rng)
+    (tmp_path / "fig").mkdir()
+    res = invoke("trend", "h", "--json", "--figures", "fig", cwd=tmp_path)
+    assert res.returncode == errors.WEAR, res.stderr
+    out = json.loads(res.stdout)
+    assert out["flagged"] == ["r1/2"] and out["rule"]["max_level"] == 0.15
+    assert [p.name for p in (tmp_path / "fig").iterdir()] == ["r1-joint2.png"]
+    calm = invoke("trend", "h", "--max-level", "1", "--max-growth", "0.05", cwd=tmp_path)
+    assert calm.returncode == errors.OK and "0 of 6 joints flagged" in calm.stderr
+    short = tmp_path / "short"
+    synthetic_history(short, rng, days=5)
+    res = invoke("trend", "short", cwd=tmp_path)
+    assert res.returncode == errors.OK and "too little data" in res.stdout
+
+
+def test_theil_sen_is_robust():
+    days = np.arange(10.0)
+    y = 0.5 * days
+    y[3] = 100.0
+    assert trend.theil_sen(days, y) == pytest.approx(0.5)
+
+
+def test_job_with_diagnose_records_effects_in_process(fleet_dir, tmp_path):
+    from fricli.fleet import pipelines
+
+    folder = copy_of(fleet_dir, tmp_path)
+    text = (folder / "fleet.toml").read_text().replace('pipeline = "identify"', 'pipeline = "identify"\ndiagnose = true')
+    (folder / "fleet.toml").write_text(text)
+    job = manifest.load(str(folder / "fleet.toml")).jobs[0]
+    assert job.diagnose
+    result = pipelines.run(job)
+    assert result["status"] == "ok" and result["reason"] == "", result
+    assert result["effects"] == []          # the daily log is exactly an extended LuGre model
+    assert "model" not in result            # only plain data goes back to the client
+    again = pipelines.run(job)
+    assert again["status"] == "unchanged"
+
+
+def test_manifest_options_over_the_command_defaults(tmp_path):
+    from fricli.fleet import pipelines
+
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "2026-05-04.parquet").write_bytes(b"")
+    (tmp_path / "m.toml").write_text('[options.identify]\ncutoff = 20\nhold = 0.5\n\n'
+                                     '[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [2]\n'
+                                     '[[robot]]\nname = "r2"\nlogs = "logs/*.parquet"\noptions = { travle = 1.0 }\n')
+    first, second = manifest.load(str(tmp_path / "m.toml")).jobs
+    assert first.date == "2026-05-04" and first.joint == "2" and first.model.endswith("models/r1/joint2/2026-05-04.npz")
+    opts = pipelines.options_of(first)
+    assert opts == {"joint": "2", "kt": None, "cutoff": 20.0, "drop_invalid": False, "hold": 0.5, "travel": 0.002,
+                    "refine": False}
+    assert isinstance(opts["cutoff"], float)
+    result = pipelines.run(second)
+    assert result["status"] == "failed" and "unknown identify option 'travle'" in result["reason"]

@@ -1,0 +1,274 @@
+"""fricli import: a delimited text recording + a TOML mapping -> a long-format log."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from conftest import ROOT, shared_data
+from fricli import errors
+from fricli.logs import friction_target, from_table
+from fricli.robot import recording
+from fricli.robot.importing import import_recording
+from fricli.robot.mapping import apply_overrides, parse_mapping, parse_overrides
+
+MAPPING = """
+time = {column = 1, unit = "s"}
+
+[[joints]]
+name = 1
+q = {column = 2, unit = "rad"}
+qd = {column = 4, unit = "rad/s"}
+i_m = {column = 6, unit = "A"}
+kt = 2.0
+
+[[joints]]
+name = 2
+q = 3
+qd = 5
+i_m = 7
+kt = 4.0
+"""
+
+
+def rows(n=40):
+    """Text rows: t, q1, q2, qd1, qd2, i1, i2, a status word (not mapped)."""
+    t = 100.0 + np.arange(n) * 0.01
+    out = []
+    for k in range(n):
+        q1, q2 = np.sin(t[k]), np.cos(t[k])
+        out.append(f"{t[k]:.2f},{q1:.6f},{q2:.6f},{np.cos(t[k]):.6f},{-np.sin(t[k]):.6f},"
+                   f"{0.5 + k / n:.4f},{-0.25 + k / n:.4f},ok")
+    return out
+
+
+def mapping(text=MAPPING):
+    import tomllib
+
+    return parse_mapping(tomllib.loads(text))
+
+
+def parse(lines, text=MAPPING, end="\n", **kw):
+    data = ("\n".join(lines) + end).encode()
+    return import_recording(data, mapping(text), "rec.csv", **kw)
+
+
+def run(*args, cwd, stdin=None):
+    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
+                          input=stdin, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+
+
+def test_clean_recording_becomes_a_long_log_in_the_contract():
+    lines = rows()
+    result = parse(lines)
+    table = result.table
+    assert table.num_rows == 2 * len(lines)
+    assert table.column_names == ["t", "joint", "q", "qd", "i_m", "tau_m"]
+    assert table.column("joint").to_pylist() == [1] * 40 + [2] * 40
+    units = {f.name: (f.metadata or {}).get(b"unit") for f in table.schema}
+    assert units == {"t": b"s", "joint": None, "q": b"rad", "qd": b"rad/s", "i_m": b"A", "tau_m": b"Nm"}
+    values = np.array([[float(v) for v in ln.split(",")[:7]] for ln in lines])
+    np.testing.assert_array_equal(table.column("t").to_numpy()[40:], values[:, 0])
+    np.testing.assert_array_equal(table.column("q").to_numpy()[40:], values[:, 2])
+    np.testing.assert_allclose(table.column("tau_m").to_numpy()[40:], 4.0 * values[:, 6], rtol=1e-15)
+    assert result.meta["dropped"] == {} and result.meta["kt"] == {"1": 2.0, "2": 4.0}
+    assert result.meta["robot"] is None
+    # the log reader takes it as it is, joint by joint
+    log = from_table(table, name="out", joint="2")
+    np.testing.assert_allclose(friction_target(log.signals), 4.0 * values[:, 6], rtol=1e-15)
+
+
+def test_header_names_units_and_string_joints_are_converted():
+    text = """
+header = true
+delimiter = ";"
+time = {column = "time_ms", unit = "ms"}
+[[joints]]
+name = "elbow"
+q = {column = "pos", unit = "deg"}
+tau_m = {column = "torque", unit = "Nm"}
+temp = {column = "temp", unit = "C"}
+"""
+    data = "time_ms;pos;torque;temp\n0;90;1.5;30\n10;180;2.5;31\n20;270;3.5;32\n"
+    table = import_recording(data.encode(), mapping(text), "rec.csv").table
+    np.testing.assert_allclose(table.column("t").to_numpy(), [0.0, 0.01, 0.02])
+    np.testing.assert_allclose(table.column("q").to_numpy(), [np.pi / 2, np.pi, 1.5 * np.pi])
+    assert table.column("joint").to_pylist() == ["elbow"] * 3
+    assert table.schema.field("temp").metadata[b"unit"] == b"degC"
+
+
+@pytest.mark.parametrize("path", ["fast", "slow"])
+def test_each_defect_is_dropped_and_reported_with_its_first_line(path):
+    lines = rows()
+    expected = list(range(len(lines)))
+    if path == "slow":
+        lines[4] = "100.04,0.1,0.2"                       # line 5: wrong number of fields
+        lines[7] = lines[7].replace(",0.", ",x.", 1)      # line 8: non-numeric
+        lines[20] = ",".join(["nan" if i == 5 else v for i, v in enumerate(lines[20].split(","))])
+        lines[25] = lines[25] + ",extra"                  # line 26: wrong number of fields
+        for k in (4, 7, 20, 25):
+            expected.remove(k)
+    lines[11] = lines[10]                                 # line 12: same time as line 11
+    expected.remove(11)
+    truncated = lines + [lines[-1][:12].replace("100.39", "100.40")]   # unterminated and cut short
+    result = parse(truncated, end="")
+    got = {k: (d.count, d.first_line) for k, d in result.recording.defects.items()}
+    want = {"duplicate_time": (1, 12), "truncated": (1, 41)}
+    if path == "slow":
+        want.update(field_count=(2, 5), non_numeric=(2, 8))
+    assert got == want
+    assert list(result.recording.lines) == [k + 1 for k in expected]
+    assert result.table.num_rows == 2 * len(expected)
+    assert result.meta["dropped"]["truncated"] == {"count": 1, "first_line": 41, "what": "truncated last line"}
+
+
+def test_a_non_numeric_value_in_an_unmapped_column_is_no_defect():
+    lines = rows()
+    lines[3] = lines[3].replace(",ok", ",fault")
+    result = parse(lines)
+    assert result.recording.defects == {} and result.table.num_rows == 80
+
+
+def test_fast_and_slow_path_read_the_same_numbers():
+    lines = rows()
+    text = "\n".join(lines) + "\n"
+    mp = mapping()
+    fast = recording.read_recording(text.encode(), mp, "rec.csv")
+    slow = recording.read_recording((text + "1,2\n").encode(), mp, "rec.csv")  # a bad row forces the slow path
+    assert slow.defects["field_count"].first_line == 41 and not fast.defects
+    for ref in fast.values:
+        np.testing.assert_array_equal(fast.values[ref], slow.values[ref])
+    np.testing.assert_array_equal(fast.lines, slow.lines)
+
+
+def test_crlf_line_ends_read_like_lf():
+    lines = rows()
+    lf = parse(lines)
+    crlf = import_recording(("\r\n".join(lines) + "\r\n").encode(), mapping(), "rec.csv")
+    assert crlf.table.equals(lf.table.replace_schema_metadata(crlf.table.schema.metadata))
+
+
+def test_an_unterminated_complete_last_line_is_kept():
+    result = parse(rows(), end="")
+    assert result.recording.defects == {} and result.recording.unterminated == 40
+    assert result.table.num_rows == 80 and result.meta["unterminated_last_line"] == 40
+
+
+def test_time_going_back_is_refused_unless_dropped():
+    lines = rows()
+    lines[30], lines[31] = lines[31], lines[30]     # line 32 goes back
+    with pytest.raises(errors.LogError, match="time goes back at line 32"):
+        parse(lines)
+    result = parse(lines, drop_backward=True)
+    assert {k: (d.count, d.first_line) for k, d in result.recording.defects.items()} == {"backward_time": (1, 32)}
+    t = result.table.column("t").to_numpy()[:39]
+    assert np.all(np.diff(t) > 0)
+
+
+@pytest.mark.parametrize("content, message", [
+    ("", "the recording is empty"),
+    ("\n\n", "the recording is empty"),
+    ("a,b,c,d,e,f,g,h\nx,y,z,w,v,u,s,r\n", "no usable rows (2 with non-numeric"),
+    ("1,2,3,4,5,6,7,8\r1,2,3,4,5,6,7,8\r", "carriage returns that are not part of a CRLF"),
+])
+def test_nothing_usable_is_one_clear_error(content, message):
+    with pytest.raises(errors.LogError, match=message.replace("(", r"\(")):
+        import_recording(content.encode(), mapping(), "rec.csv")
+
+
+@pytest.mark.parametrize("change, message", [
+    (("kt = 4.0", "kt = -4.0"), "must be positive"),
+    (("kt = 4.0", ""), "no drive gain"),
+    (("q = 3", "q = 9"), "names column 9, but rows have 8 fields"),
+    (("q = 3", "q = 0"), "1-based index"),
+    (("q = 3", 'q = "pos"'), "header = false"),
+    (('unit = "rad"}', 'unit = "furlong"}'), "unknown unit 'furlong'"),
+    (('unit = "rad"}', 'unit = "A"}'), "does not fit column 'q'"),
+    (("name = 2", "name = 1"), "joint 1 appears twice"),
+    (("name = 2", 'name = "two"'), "all integers or all strings"),
+    (("kt = 4.0", "kt = 4.0\ngain = 4.0"), "unknown key 'gain'"),
+    (("i_m = 7", "tau_m = 7"), "kt applies to a current column"),
+])
+def test_mapping_mistakes_are_input_errors(change, message):
+    text = MAPPING.replace(*change)
+    assert text != MAPPING
+    with pytest.raises(errors.LogError, match=message):
+        import_recording(("\n".join(rows()) + "\n").encode(), mapping(text), "rec.csv")
+
+
+def test_kt_options_override_the_mapping():
+    mp = apply_overrides(mapping(), kt=parse_overrides(["2=5.5"], "--kt"))
+    table = import_recording(("\n".join(rows()) + "\n").encode(), mp, "rec.csv").table
+    i_m, tau_m = table.column("i_m").to_numpy()[40:], table.column("tau_m").to_numpy()[40:]
+    np.testing.assert_allclose(tau_m, 5.5 * i_m, rtol=1e-15)
+    for bad in (["2"], ["2=abc"], ["2=-1"], ["=3"]):
+        with pytest.raises(errors.LogError, match="JOINT=VALUE"):
+            parse_overrides(bad, "--kt")
+    with pytest.raises(errors.LogError, match="no joint 7"):
+        apply_overrides(mapping(), kt={"7": 1.0})
+
+
+# ---------------------------------------------------------------------- the command
+
+
+def test_command_reports_defects_and_writes_atomically(tmp_path):
+    lines = rows()
+    lines[4] = "100.04,0.1"
+    (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "warning: rec.csv: dropped 1 row with wrong number of fields (first at line 5)" in res.stderr
+    assert "imported 39 rows x 2 joints from rec.csv -> out.parquet" in res.stderr
+    table = pq.read_table(tmp_path / "out.parquet")
+    meta = json.loads(table.schema.metadata[b"fricli.import"])
+    assert meta["kt"] == {"1": 3.0, "2": 4.0} and meta["rows"] == 39
+    assert meta["dropped"]["field_count"]["first_line"] == 5
+    # a refused recording leaves the previous output untouched
+    before = (tmp_path / "out.parquet").read_bytes()
+    lines[30], lines[31] = lines[31], lines[30]
+    (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == errors.INPUT
+    assert res.stderr.startswith("fricli: error: rec.csv: time goes back at line 32")
+    assert len(res.stderr.splitlines()) == 1
+    assert (tmp_path / "out.parquet").read_bytes() == before
+
+
+def test_command_reads_stdin_and_refuses_a_missing_mapping(tmp_path):
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "-", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path,
+              stdin="\n".join(rows()) + "\n")
+    assert res.returncode == 0, res.stderr
+    assert pq.read_table(tmp_path / "out.parquet").num_rows == 80
+    res = run("import", "-", "--mapping", "none.toml", "-o", "out.parquet", cwd=tmp_path, stdin="")
+    assert res.returncode == errors.INPUT and "none.toml: no such mapping file" in res.stderr
+    (tmp_path / "bad.toml").write_text("time = [\n")
+    res = run("import", "-", "--mapping", "bad.toml", "-o", "out.parquet", cwd=tmp_path, stdin="")
+    assert res.returncode == errors.INPUT and "not a valid TOML mapping" in res.stderr
+
+
+def test_every_ur10e_recording_imports(tmp_path):
+    folder = shared_data("ur10e")
+    from fricli.robot.mapping import load_mapping
+
+    mp = load_mapping(str(ROOT / "docs" / "ur10e-mapping.toml"))
+    files = sorted(folder.glob("*/*.csv"))
+    assert len(files) == 21
+    unterminated = []
+    for path in files:
+        data = path.read_bytes()
+        result = import_recording(data, mp, path.name)
+        lines = data.count(b"\n") + (not data.endswith(b"\n"))
+        dropped = sum(d.count for d in result.recording.defects.values())
+        assert result.meta["rows"] + dropped == lines, path.name   # every line is kept or reported
+        assert result.recording.defects == {}, path.name            # as docs/robot-import.md says
+        if result.recording.unterminated:
+            unterminated.append(path.name)
+        assert result.table.num_rows == 6 * result.meta["rows"]
+        log = from_table(result.table, name=path.name, joint="2")
+        assert np.isfinite(friction_target(log.signals)).all()
+    assert unterminated == ["ur-20_02_19_14harm50sec.csv"]

@@ -1,0 +1,324 @@
+"""Rigid-body terms from a URDF (fricli import --urdf) against a two-link planar arm's analytic
+gravity, mass matrix and Coriolis terms."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from conftest import ROOT, shared_data
+from fricli import errors
+from fricli.robot.mapping import Payload, parse_mapping
+
+# two-link planar arm, both axes along z: masses [kg], lengths [m], centre-of-mass distances
+# [m], inertias about the centre of mass [kg m^2]
+M1, M2, L1, L2, LC1, LC2, I1, I2 = 3.0, 2.0, 0.7, 0.5, 0.3, 0.2, 0.11, 0.05
+URDF = f"""<?xml version="1.0"?>
+<robot name="two_link">
+  <link name="base"/>
+  <joint name="shoulder" type="revolute">
+    <parent link="base"/><child link="link1"/>
+    <origin xyz="0 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-10" upper="10" effort="100" velocity="10"/>
+  </joint>
+  <link name="link1">
+    <inertial><origin xyz="{LC1} 0 0" rpy="0 0 0"/><mass value="{M1}"/>
+      <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="{I1}"/></inertial>
+  </link>
+  <joint name="elbow" type="revolute">
+    <parent link="link1"/><child link="link2"/>
+    <origin xyz="{L1} 0 0" rpy="0 0 0"/><axis xyz="0 0 1"/>
+    <limit lower="-10" upper="10" effort="100" velocity="10"/>
+  </joint>
+  <link name="link2">
+    <inertial><origin xyz="{LC2} 0 0" rpy="0 0 0"/><mass value="{M2}"/>
+      <inertia ixx="0.003" ixy="0" ixz="0" iyy="0.004" iyz="0" izz="{I2}"/></inertial>
+  </link>
+  <joint name="flange_joint" type="fixed">
+    <parent link="link2"/><child link="flange"/>
+    <origin xyz="{L2} 0 0" rpy="0 0 1.5707963267948966"/>
+  </joint>
+  <link name="flange"/>
+</robot>
+"""
+
+
+def analytic(q, qd, qdd, gravity, payload_mass=0.0, payload_reach=0.0, rotor=(0.0, 0.0)):
+    """tau_g and tau_dyn of the two-link arm, shapes (n, 2); the payload is a point mass on
+    link 2's x axis at ``payload_reach`` from the elbow."""
+    c1, s1, c2, s2 = np.cos(q[:, 0]), np.sin(q[:, 0]), np.cos(q[:, 1]), np.sin(q[:, 1])
+    c12, s12 = np.cos(q[:, 0] + q[:, 1]), np.sin(q[:, 0] + q[:, 1])
+    mass2 = M2 + payload_mass                                        # link 2 with the payload
+    first2 = M2 * LC2 + payload_mass * payload_reach                 # its first moment about the elbow
+    j1 = I1 + M1 * LC1 ** 2                                          # inertia about the axis
+    j2 = I2 + M2 * LC2 ** 2 + payload_mass * payload_reach ** 2
+    m11 = j1 + j2 + mass2 * L1 ** 2 + 2 * L1 * first2 * c2
+    m12 = j2 + L1 * first2 * c2
+    h = L1 * first2 * s2
+    tau_dyn = np.column_stack([
+        m11 * qdd[:, 0] + m12 * qdd[:, 1] - h * (2 * qd[:, 0] * qd[:, 1] + qd[:, 1] ** 2) + rotor[0] * qdd[:, 0],
+        m12 * qdd[:, 0] + j2 * qdd[:, 1] + h * qd[:, 0] ** 2 + rotor[1] * qdd[:, 1],
+    ])
+    gx, gy, _ = gravity
+    # potential V = -g . (sum of m p): tau_g = dV/dq
+    d1 = (M1 * LC1 + mass2 * L1) * np.column_stack([-s1, c1]) + first2 * np.column_stack([-s12, c12])
+    d2 = first2 * np.column_stack([-s12, c12])
+    tau_g = -np.column_stack([gx * d1[:, 0] + gy * d1[:, 1], gx * d2[:, 0] + gy * d2[:, 1]])
+    return tau_g, tau_dyn
+
+
+def close(actual, expected, rtol=1e-9):
+    """Relative to each column's scale."""
+    scale = np.abs(expected).max(axis=0)
+    assert np.all(np.abs(actual - expected) <= rtol * scale), np.abs(actual - expected).max(axis=0) / scale
+
+
+def motion(rng, n=200):
+    return rng.uniform(-np.pi, np.pi, (n, 2)), rng.normal(0, 2, (n, 2)), rng.normal(0, 5, (n, 2))
+
+
+def test_gravity_and_dynamics_match_the_analytic_two_link_arm(rng):
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    gravity = (1.3, -9.81, 4.0)   # the z part acts along the axes: no torque
+    model = RobotModel(URDF, "two_link.urdf", gravity=gravity)
+    assert model.joints == ["shoulder", "elbow"] and model.kinds == ["rotary", "rotary"]
+    q, qd, qdd = motion(rng)
+    tau_g, tau_dyn = model.terms(q, qd, qdd)
+    g_ref, dyn_ref = analytic(q, qd, qdd, gravity)
+    close(tau_g, g_ref)
+    close(tau_dyn, dyn_ref)
+
+
+def test_rotor_inertia_and_payload_in_a_rotated_frame(rng):
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    gravity = (0.0, -9.81, 0.0)
+    # the flange frame is turned 90 degrees about z: its -y axis points along link 2
+    payload = Payload(mass=1.7, com=(0.0, -0.08, 0.0), frame="flange")
+    model = RobotModel(URDF, "two_link.urdf", gravity=gravity, payload=payload)
+    q, qd, qdd = motion(rng)
+    tau_g, tau_dyn = model.terms(q, qd, qdd, rotor_inertia=np.array([0.9, 0.25]))
+    g_ref, dyn_ref = analytic(q, qd, qdd, gravity, payload_mass=1.7, payload_reach=L2 + 0.08, rotor=(0.9, 0.25))
+    close(tau_g, g_ref)
+    close(tau_dyn, dyn_ref)
+    with pytest.raises(errors.ModelFileError, match="no frame 'tool0'"):
+        RobotModel(URDF, "two_link.urdf", payload=Payload(1.0, (0, 0, 0), "tool0"))
+
+
+def test_row_by_row_path_gives_the_same_terms(rng, monkeypatch):
+    pin = pytest.importorskip("pinocchio")
+    from fricli.robot import dynamics
+
+    model = dynamics.RobotModel(URDF, "two_link.urdf", gravity=(0, -9.81, 0))
+    q, qd, qdd = motion(rng, 50)
+    batched = model.terms(q, qd, qdd)
+    monkeypatch.delattr(pin, "rneaInParallel", raising=False)
+    rows = model.terms(q, qd, qdd)
+    for a, b in zip(batched, rows):
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_joint_matching_is_explicit_and_checked():
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    model = RobotModel(URDF, "two_link.urdf")
+    assert model.match([None, None], "order") == [0, 1]
+    assert model.match(["elbow", "shoulder"], "name") == [1, 0]
+    with pytest.raises(errors.ModelFileError, match="3 moving joints|2 moving joints, but the log has 3"):
+        model.match([None, None, None], "order")
+    with pytest.raises(errors.ModelFileError, match="no joint 'wrist'"):
+        model.match(["shoulder", "wrist"], "name")
+    with pytest.raises(errors.ModelFileError, match="'elbow' is not in the log"):
+        model.match(["shoulder"], "name")
+    with pytest.raises(errors.ModelFileError, match="matched by two"):
+        model.match(["shoulder", "shoulder"], "name")
+
+
+def test_not_a_urdf_is_a_model_error():
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    with pytest.raises(errors.ModelFileError, match="not a usable URDF"):
+        RobotModel("<robot name='x'><link", "bad.urdf")
+
+
+# ---------------------------------------------------------------------- the command
+
+
+def mapping_text(match="order", qdd=True):
+    joints = ""
+    for k, (name, urdf) in enumerate([("a", "shoulder"), ("b", "elbow")]):
+        joints += f"""
+[[joints]]
+name = "{name}"
+urdf = "{urdf}"
+q = {2 + k}
+qd = {4 + k}
+{f"qdd = {6 + k}" if qdd else ""}
+tau_m = {8 + k}
+rotor_inertia = {0.5 * (k + 1)}
+"""
+    return f"""time = 1
+[robot]
+match = "{match}"
+gravity = [0.0, -9.81, 0.0]
+{joints}"""
+
+
+def write_case(tmp_path, rng, n=300, match="order", qdd=True):
+    q, qd, acc = motion(rng, n)
+    t = np.arange(n) * 0.01
+    data = np.column_stack([t, q, qd, acc, rng.normal(size=(n, 2))])
+    np.savetxt(tmp_path / "rec.csv", data, delimiter=",", fmt="%.17g")
+    (tmp_path / "two_link.urdf").write_text(URDF)
+    (tmp_path / "map.toml").write_text(mapping_text(match, qdd))
+    return t, q, qd, acc
+
+
+def run(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+
+
+def test_import_with_urdf_writes_the_analytic_terms(tmp_path, rng):
+    pytest.importorskip("pinocchio")
+    t, q, qd, qdd = write_case(tmp_path, rng)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "two_link.urdf",
+              "--payload-mass", "1.2", "--payload-com", "0", "-0.05", "0", "--payload-frame", "flange",
+              "--rotor-inertia", "b=0.3", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(tmp_path / "out.parquet")
+    assert table.column("joint").to_pylist() == ["a"] * len(t) + ["b"] * len(t)
+    n = len(t)
+    tau_g = np.column_stack([table.column("tau_g").to_numpy()[:n], table.column("tau_g").to_numpy()[n:]])
+    tau_dyn = np.column_stack([table.column("tau_dyn").to_numpy()[:n], table.column("tau_dyn").to_numpy()[n:]])
+    g_ref, dyn_ref = analytic(q, qd, qdd, (0, -9.81, 0), payload_mass=1.2, payload_reach=L2 + 0.05, rotor=(0.5, 0.3))
+    close(tau_g, g_ref)
+    close(tau_dyn, dyn_ref)
+    assert table.schema.field("tau_dyn").metadata[b"unit"] == b"Nm"
+    meta = json.loads(table.schema.metadata[b"fricli.import"])
+    robot = meta["robot"]
+    assert robot["joints"] == {"a": "shoulder", "b": "elbow"} and robot["match"] == "order"
+    assert robot["rotor_inertia"] == {"a": 0.5, "b": 0.3}
+    assert robot["payload"] == {"mass": 1.2, "com": [0.0, -0.05, 0.0], "frame": "flange"}
+    assert robot["derived"] == {}
+
+
+def test_derived_acceleration_is_recorded_and_follows_the_log_contract(tmp_path, rng):
+    pytest.importorskip("pinocchio")
+    from fricli.logs import derive_motion
+
+    t, q, qd, _ = write_case(tmp_path, rng, qdd=False)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "two_link.urdf", "--cutoff", "10",
+              "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "derived qdd (low-pass 10 Hz" in res.stderr
+    table = pq.read_table(tmp_path / "out.parquet")
+    meta = json.loads(table.schema.metadata[b"fricli.import"])
+    assert meta["robot"]["derived"] == {"columns": {"qdd": ["a", "b"]}, "cutoff_hz": 10.0, "filtered": True}
+    sig = {"t": t, "q": q[:, 1], "qd": qd[:, 1]}
+    derive_motion(sig, 10.0)
+    np.testing.assert_allclose(table.column("qdd").to_numpy()[len(t):], sig["qdd"], rtol=1e-12, atol=1e-12)
+
+
+def test_import_refuses_unmatched_joints_and_a_missing_choice(tmp_path, rng):
+    pytest.importorskip("pinocchio")
+    write_case(tmp_path, rng, n=50, match="name")
+    text = (tmp_path / "map.toml").read_text().replace('urdf = "elbow"', 'urdf = "knee"')
+    (tmp_path / "bad.toml").write_text(text)
+    res = run("import", "rec.csv", "--mapping", "bad.toml", "--urdf", "two_link.urdf", "-o", "out.parquet",
+              cwd=tmp_path)
+    assert res.returncode == errors.MODEL and "no joint 'knee'" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    (tmp_path / "nomatch.toml").write_text(text.replace('match = "name"\n', ""))
+    res = run("import", "rec.csv", "--mapping", "nomatch.toml", "--urdf", "two_link.urdf", "-o", "out.parquet",
+              cwd=tmp_path)
+    assert res.returncode == errors.INPUT and "--match name|order" in res.stderr
+    res = run("import", "rec.csv", "--mapping", "nomatch.toml", "--urdf", "two_link.urdf", "--match", "order",
+              "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert not (tmp_path / "bad.parquet").exists()
+
+
+def test_without_pinocchio_one_line_says_how_to_install(tmp_path, rng):
+    write_case(tmp_path, rng, n=50)
+    code = ("import sys; sys.modules['pinocchio'] = None; from fricli.cli import main; "
+            "sys.argv = ['fricli', 'import', 'rec.csv', '--mapping', 'map.toml', '--urdf', 'two_link.urdf', "
+            "'-o', 'out.parquet']; main()")
+    res = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == errors.DEPENDENCY
+    assert res.stderr == "fricli: error: --urdf needs Pinocchio: pip install 'fricli[robot]'\n"
+    assert not (tmp_path / "out.parquet").exists()
+
+
+def test_mapping_options_parse_robot_section():
+    doc = {"time": 1, "robot": {"match": "name", "gravity": [0, 0, -9.8],
+                                "payload": {"mass": 2.0, "com": [0, 0, 0.1], "frame": "tool0"}},
+           "joints": [{"name": 1, "q": 2, "tau_m": 3}]}
+    mapping = parse_mapping(doc)
+    assert mapping.match == "name" and mapping.gravity == (0.0, 0.0, -9.8)
+    assert mapping.payload == Payload(2.0, (0.0, 0.0, 0.1), "tool0")
+    doc["robot"]["match"] = "index"
+    with pytest.raises(errors.LogError, match="robot.match"):
+        parse_mapping(doc)
+
+
+def doc_example():
+    """The UR10e command and its output as docs/robot-import.md shows them."""
+    text = (ROOT / "docs" / "robot-import.md").read_text()
+    block = text.split("```console\n$ fricli ", 1)[1].split("```", 1)[0]
+    command, output = block.split("\n", 1)
+    return command.split(), output
+
+
+def test_ur10e_import_with_urdf_as_documented(tmp_path):
+    pytest.importorskip("pinocchio")
+    folder = shared_data("ur10e")
+    args, expected = doc_example()
+    out = str(tmp_path / "run.parquet")
+    args[args.index("run.parquet")] = out
+    res = subprocess.run([sys.executable, "-m", "fricli", *args], cwd=ROOT, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0, res.stderr
+    assert res.stderr == expected.replace("-> run.parquet", f"-> {out}")
+    table = pq.read_table(out)
+    assert sorted(set(table.column("joint").to_pylist())) == [1, 2, 3, 4, 5, 6]
+    # the gravity model explains most of the shoulder-lift motor torque
+    rows = np.asarray(table.column("joint")) == 2
+    tau_m, tau_g = table.column("tau_m").to_numpy()[rows], table.column("tau_g").to_numpy()[rows]
+    assert np.corrcoef(tau_m, tau_g)[0, 1] > 0.9
+    # joint 1's axis is vertical: no gravity torque
+    assert np.abs(table.column("tau_g").to_numpy()[np.asarray(table.column("joint")) == 1]).max() < 1e-9
+    assert (folder / "ur10e.urdf").exists()
+
+
+def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
+    pytest.importorskip("pinocchio")
+    t, q, qd, qdd = write_case(tmp_path, rng)
+    assert run("import", "rec.csv", "--mapping", "map.toml", "-o", "plain.parquet", cwd=tmp_path).returncode == 0
+    res = run("dynamics", "plain.parquet", "--urdf", "two_link.urdf", "--match", "name", "--urdf-joint", "a=shoulder",
+              "--urdf-joint", "b=elbow", "--gravity", "0", "-9.81", "0", "--rotor-inertia", "a=0.5",
+              "--rotor-inertia", "b=1.0", "-o", "dyn.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(tmp_path / "dyn.parquet")
+    n = len(t)
+    g_ref, dyn_ref = analytic(q, qd, qdd, (0, -9.81, 0), rotor=(0.5, 1.0))
+    for column, ref in (("tau_g", g_ref), ("tau_dyn", dyn_ref)):
+        values = table.column(column).to_numpy()
+        close(np.column_stack([values[:n], values[n:]]), ref)
+    assert json.loads(table.schema.metadata[b"fricli.dynamics"])["joints"] == {"a": "shoulder", "b": "elbow"}
+    # joints sampled at different times cannot share one robot model
+    shifted = table.set_column(0, table.schema.field("t"), [np.concatenate([t, t + 0.001])])
+    pq.write_table(shifted, tmp_path / "shifted.parquet")
+    res = run("dynamics", "shifted.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "x.parquet",
+              cwd=tmp_path)
+    assert res.returncode == errors.INPUT and "not sampled at the same times" in res.stderr
+    assert not (tmp_path / "x.parquet").exists()
