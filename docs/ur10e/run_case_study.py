@@ -145,11 +145,14 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False) ->
     load_ref_log = import_run(data, work, LOAD_RUN, payload=True, keep=keep)
 
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {}}
+    # the whole arm at once: one model per joint in a folder (docs/joints.md)
+    lugre_dir, fixed_dir = os.path.join(work, "lugre"), os.path.join(work, "fixed")
+    fricli("identify", fit_log, "-o", lugre_dir, "-q")
+    diagnosed = fricli("diagnose", lugre_dir, fit_log, "--fix", "-o", fixed_dir, "--json", json_out=True)["joints"]
     for j in joints:
-        lugre = os.path.join(work, f"lugre-j{j}.npz")
-        fixed = os.path.join(work, f"fixed-j{j}.npz")
-        fricli("identify", fit_log, "--joint", str(j), "-o", lugre, "-q")
-        diag = fricli("diagnose", lugre, fit_log, "--joint", str(j), "--fix", "-o", fixed, "--json", json_out=True)
+        lugre = os.path.join(lugre_dir, f"joint_{j}.npz")
+        fixed = os.path.join(fixed_dir, f"joint_{j}.npz")
+        diag = diagnosed[str(j)]
 
         fit_sig = signals(fit_log, j)
         coef = np.linalg.lstsq(linear_columns(fit_sig), logs.friction_target(fit_sig), rcond=None)[0]
