@@ -1,0 +1,39 @@
+"""The UR10e case study script (docs/ur10e/run_case_study.py) on a small part of the data.
+
+Skips when ../shared/data/ur10e is absent, and when the robot extra (Pinocchio) or
+``fricli import`` is not there: the script imports the CSV recordings with ``fricli import --urdf``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+from conftest import ROOT, shared_data
+
+SCRIPT = ROOT / "docs" / "ur10e" / "run_case_study.py"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("pinocchio") is None, reason="needs the robot extra (pin)")
+@pytest.mark.skipif(importlib.util.find_spec("fricli.robot") is None, reason="needs fricli import (fricli/robot)")
+def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):
+    data = shared_data("ur10e")
+    done = subprocess.run([sys.executable, str(SCRIPT), "--data", str(data), "--joints", "3", "--runs", "1",
+                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    text = (tmp_path / "docs" / "case-study-ur10e.md").read_text()
+    results = json.loads((tmp_path / "docs" / "ur10e-results.json").read_text())
+    row = results["joints"]["3"]
+    for key in ("linear", "published", "lugre", "fixed"):
+        assert math.isfinite(row[key]["all"]) and row[key]["all"] > 0
+    fv, fc, _offset = row["linear_coef"]
+    assert fv > 0 and fc > 0, "friction must oppose the motion: a sign or gain error in the import"
+    # the payload's torque on the elbow is tens of Nm; the linear model's estimate must see most of it
+    assert row["payload"]["reference_rms"] > 5.0
+    assert row["payload"]["linear"] < row["payload"]["reference_rms"]
+    assert "fricli import" in text and "fricli diagnose" in text
+    assert (tmp_path / "docs" / "img" / "ur10e-friction-ratio.png").stat().st_size > 0
