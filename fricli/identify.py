@@ -27,12 +27,13 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
-from fricli import logs, metrics
+from fricli import lazy, logs, metrics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
 from fricli.nn.blas import single_threaded
+
+ndimage = lazy.module("scipy.ndimage")
 
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
@@ -74,8 +75,8 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
         after = max(1, int(min(n, round(h / 4 / dt))))
         size = before + after + 1
         origin = before - size // 2
-        vmax = maximum_filter1d(qd, size=size, origin=origin, mode="nearest")
-        vmin = minimum_filter1d(qd, size=size, origin=origin, mode="nearest")
+        vmax = ndimage.maximum_filter1d(qd, size=size, origin=origin, mode="nearest")
+        vmin = ndimage.minimum_filter1d(qd, size=size, origin=origin, mode="nearest")
         ok = ((vmin > 0) | (vmax < 0)) & ((vmax - vmin) <= rel_tol * speed + abs_tol)
         ok[:before] = False                                # the window must not run off the log
         ok[n - after:] = False

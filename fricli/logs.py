@@ -21,11 +21,12 @@ import sys
 import tempfile
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
-
+from fricli import lazy
 from fricli.atomic import atomic_open
 from fricli.errors import DataError, LogError
+
+pa = lazy.module("pyarrow")
+pq = lazy.module("pyarrow.parquet")
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES

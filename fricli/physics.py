@@ -19,7 +19,10 @@ bidiagonal system (BLAS ``dtbsv``), with no Python loop over samples.
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.blas import dtbsv
+
+from fricli import lazy
+
+blas = lazy.module("scipy.linalg.blas")
 
 _TINY = 1e-300
 
@@ -43,7 +46,7 @@ def linear_recurrence(a: np.ndarray, b: np.ndarray, z0: float) -> np.ndarray:
     band[0] = 1.0
     band[1, :-1] = -a[1:]
     band[1, -1] = 0.0
-    return dtbsv(1, band, rhs, lower=1)
+    return blas.dtbsv(1, band, rhs, lower=1)
 
 
 def bristle_state(v: np.ndarray, g: np.ndarray, sigma0: float, dt: np.ndarray, z0: float | None = None) -> np.ndarray:

@@ -20,14 +20,14 @@ import sys
 from typing import Callable, Iterator
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.compute as pc
-import pyarrow.parquet as pq
-
-from fricli import logs, models
+from fricli import lazy, logs, models
 from fricli.atomic import atomic_open
 from fricli.errors import LogError
 from fricli.models.base import FrictionModel
+
+pa = lazy.module("pyarrow")
+pc = lazy.module("pyarrow.compute")
+pq = lazy.module("pyarrow.parquet")
 
 DEFAULT_BATCH_ROWS = 262_144
 

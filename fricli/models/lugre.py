@@ -19,12 +19,13 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg.blas import dtbsv
 
-from fricli import physics
+from fricli import lazy, physics
 from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
+
+blas = lazy.module("scipy.linalg.blas")
 
 CHUNK = 1 << 16           # rows per internal block: keeps the temporaries in cache
 _G_MIN = 1e-12            # floor on the Stribeck curve g [Nm], so the bristle rate stays finite
@@ -246,7 +247,7 @@ class LuGreModel(FrictionModel):
             z0 = float(zss[0])
         b[0] += a[0] * z0
         np.negative(a[1:], out=band[1, :-1])
-        z = dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
+        z = blas.dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
         if not np.shares_memory(z, out):
             out[:] = z
         z_last = float(out[-1])
