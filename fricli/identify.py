@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from fricli import lazy, logs, metrics
+from fricli import lazy, logs, metrics, physics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
 from fricli.nn.blas import single_threaded
@@ -202,7 +202,7 @@ class LuGreIdentifier:
         for vs in np.geomspace(vlo / 3, vhi, 25):
             lv = logv - math.log(vs)
             for delta in _DELTAS:
-                e = np.exp(-np.exp(delta * lv))
+                e = physics.stribeck_shape_log(lv, delta)
                 cols = [1 - e, e, speed]
                 if load is not None:
                     cols += [load * (1 - e), load * e]

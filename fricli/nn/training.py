@@ -28,6 +28,7 @@ from fricli.nn.network import Network
 CHUNK_MIN = 8192          # full batches this large are split over two threads
 EVAL_POINTS = 2000        # default number of loss records over a run given in steps
 PREDICT_CHUNK = 16384
+SCHEDULES = ("constant", "cosine")
 
 
 class Standardizer:
@@ -184,6 +185,8 @@ class Trainer:
                 else training) falling below (1 - min_delta) times its best, the learning rate
                 is multiplied by ``lr_factor``, from the best weights so far, up to ``lr_drops``
                 times; after one more such stretch training stops. None = run every step.
+    schedule    "constant": Adam at ``lr`` throughout; "cosine": the learning rate falls from
+                ``lr`` to ``lr_final`` over the steps as lr_final + (lr - lr_final) (1 + cos(pi s / S)) / 2
     """
 
     def __init__(self, *, steps: int | None = None, epochs: int | None = None, lr: float = 0.01,
@@ -195,6 +198,8 @@ class Trainer:
             raise ValueError("give steps or epochs")
         if epochs is not None and batch_size <= 0:
             raise ValueError("epochs need a batch size")
+        if schedule not in SCHEDULES:
+            raise ValueError(f"unknown learning-rate schedule {schedule!r}")
         self.steps, self.epochs, self.lr = steps, epochs, lr
         self.batch_size, self.eval_every, self.on_eval = int(batch_size), eval_every, on_eval
         self.patience, self.min_delta, self.lr_drops, self.lr_factor = patience, min_delta, lr_drops, lr_factor
