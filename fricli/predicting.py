@@ -193,6 +193,7 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                 jpos = table.schema.get_field_index("joint")
                 jfield = table.schema.field(jpos) if jpos >= 0 else None
                 if jfield is not None:
+                    jcol = table.column(jpos)
                     table = table.remove_column(jpos)
                 try:
                     log = logs.from_table(table, name=name, joint=joint, kt=kt, cutoff_hz=cutoff_hz,
@@ -214,7 +215,9 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                 tau_f, state = model.predict(sig, state)
                 out = log.table
                 if jfield is not None:
-                    out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(joint, jfield.type), out.num_rows))
+                    same = len(jcol) == out.num_rows   # the joint column as read, unless rows were dropped
+                    out = out.add_column(jpos, jfield, jcol if same else
+                                         pa.repeat(pa.scalar(joint, jfield.type), out.num_rows))
                 out = logs.with_column(out, "tau_f_pred", tau_f, unit)
                 fric.add(logs.friction_target(sig), tau_f)
                 if external:
