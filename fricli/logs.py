@@ -388,9 +388,11 @@ def friction_target(sig: dict[str, np.ndarray]) -> np.ndarray:
     """tau_f = tau_m + tau_ext - tau_g - tau_dyn [Nm]: the torque lost to friction,
     positive along the motion. Absent optional terms count as zero."""
     out = sig["tau_m"].copy()
-    for column, sign in (("tau_ext", 1.0), ("tau_g", -1.0), ("tau_dyn", -1.0)):
+    if "tau_ext" in sig:
+        out += sig["tau_ext"]
+    for column in ("tau_g", "tau_dyn"):
         if column in sig:
-            out += sign * sig[column]
+            out -= sig[column]
     return out
 
 

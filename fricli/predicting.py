@@ -16,7 +16,10 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import queue
 import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterator
 
 import numpy as np
@@ -43,13 +46,14 @@ class ErrorSums:
         self.max = 0.0
 
     def add(self, y: np.ndarray, y_pred: np.ndarray) -> None:
-        e = np.asarray(y_pred, dtype=np.float64) - np.asarray(y, dtype=np.float64)
+        e = np.subtract(y_pred, y, dtype=np.float64)
         if e.size == 0:
             return
         self.n += e.size
-        self.abs_sum += float(np.sum(np.abs(e)))
         self.sq_sum += float(np.einsum("i,i->", e, e))
-        self.max = max(self.max, float(np.max(np.abs(e))))
+        np.abs(e, out=e)
+        self.abs_sum += float(np.sum(e))
+        self.max = max(self.max, float(np.max(e)))
 
     def result(self) -> dict:
         if self.n == 0:
@@ -158,6 +162,50 @@ def _batches(pf: pq.ParquetFile, name: str, batch_rows: int, whole: bool) -> Ite
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
 
 
+class _Prefetch:
+    """Iterates over ``items`` one step ahead in a background thread (at most one item waiting)."""
+
+    _END = object()
+
+    def __init__(self, items: Iterator):
+        self._items, self._queue = items, queue.Queue(maxsize=1)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pull, daemon=True)
+        self._thread.start()
+
+    def _pull(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put((item, None)):
+                    return
+        except BaseException as exc:  # handed over to the consumer
+            self._put((None, exc))
+            return
+        self._put((self._END, None))
+
+    def _put(self, entry) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def __iter__(self):
+        while True:
+            item, exc = self._queue.get()
+            if exc is not None:
+                raise exc
+            if item is self._END:
+                return
+            yield item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, external: bool = False,
         lowpass_hz: float | None = None, joint=None, kt: float | None = None,
         cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
@@ -180,10 +228,13 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
     has_ext = False
     total = pf.metadata.num_rows
     with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
-                                            leave=False) as bar:
-        writer = None
+                                            leave=False) as bar, ThreadPoolExecutor(max_workers=1) as io:
+        # the next batch is read and the last one written (pyarrow releases the GIL while it
+        # decompresses and compresses) while this one is checked and predicted
+        writer = pending = None
+        reading = _Prefetch(_batches(pf, name, batch_rows, reason is not None))
         try:
-            for offset, table in _batches(pf, name, batch_rows, reason is not None):
+            for offset, table in reading:
                 bar.update(table.num_rows)
                 if multi:
                     table = table.filter(pc.equal(table.column("joint"), pa.scalar(joint, table.schema.field("joint").type)))
@@ -228,12 +279,18 @@ def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, exter
                         ext_err.add(sig["tau_ext"], est)
                 if writer is None:
                     writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
-                writer.write_table(out)
+                if pending is not None:
+                    pending.result()
+                pending = io.submit(writer.write_table, out)
                 rows += out.num_rows
                 batches += 1
             if writer is None:
                 raise LogError(f"{name}: the log is empty")
+            pending.result()
         finally:
+            reading.close()
+            if pending is not None:
+                pending.exception()   # wait: the writer must not close under a write
             if writer is not None:
                 writer.close()
     if warnings and warn:
