@@ -320,16 +320,3 @@ def lowpass_external(est: np.ndarray, t: np.ndarray, cutoff_hz: float, warn=None
         warn(f"warning: --lowpass {cutoff_hz:g} Hz not applied (at or above the Nyquist frequency "
              f"{0.5 * fs:g} Hz, or too few rows)")
     return logs.lowpass(est, t, cutoff_hz)
-
-
-def predict_signals(model: FrictionModel, signals: dict[str, np.ndarray], batch_rows: int | None = None) -> np.ndarray:
-    """tau_f_pred (n,) for in-memory signals, optionally in batches with the state carried."""
-    n = len(signals["t"])
-    if not batch_rows or batch_rows >= n:
-        return model.predict(signals)[0]
-    out = np.empty(n)
-    state = None
-    for i in range(0, n, batch_rows):
-        part = {k: v[i:i + batch_rows] for k, v in signals.items()}
-        out[i:i + batch_rows], state = model.predict(part, state)
-    return out
