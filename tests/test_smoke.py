@@ -67,6 +67,12 @@ def test_every_command_is_smoke_tested():
     assert cli.list_commands(None) == COMMANDS
 
 
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_is_in_the_readme_table(command):
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(rf"^\| `fricli {re.escape(command)}[ `]", readme, re.M), command
+
+
 def test_every_command_in_a_process(tmp_path):
     base, adapt, ext = SAMPLE / "joint2_base.parquet", SAMPLE / "joint2_adapt.parquet", \
         SAMPLE / "joint2_extended_asym.parquet"
