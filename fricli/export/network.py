@@ -140,9 +140,10 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
     return lines
 
 
-def dense(net, name: str) -> str:
-    """C definition of ``static inline double <name>(const double *x)`` for ``net``."""
-    if net.n_out != 1:
+def dense(net, name: str, output: int | None = None) -> str:
+    """C definition of ``static inline double <name>(const double *x)`` for ``net``: its single
+    output, or output number ``output`` of several."""
+    if output is None and net.n_out != 1:
         raise ModelFileError(f"cannot export a network with {net.n_out} outputs")
     weights = [np.asarray(w, dtype=np.float64) for w in net.weights]
     lines = [f"static inline double {name}(const double *x) {{", "    int i, j;", "    double y;"]
@@ -152,13 +153,11 @@ def dense(net, name: str) -> str:
     for i, ((units, act), w) in enumerate(zip(net.hidden, weights)):
         lines += _layer(i, w, act, src, fan_in)
         src, fan_in = f"h{i}", units
-    last = weights[-1][0]
+    last = weights[-1][output or 0]
     lines += [f"    static const double WO[{len(last)}] = {array(last, 6)};",
               f"    y = WO[{fan_in}];",
               f"    for (i = 0; i < {fan_in}; ++i) y += WO[i] * {src}[i];"]
     for k in range(net.n_skip):
         lines.append(f"    y += WO[{fan_in + 1 + k}] * x[{net.n_in + k}];")
-    if not net.hidden:
-        pass
     lines += ["    (void)i; (void)j;", "    return y;", "}", ""]
     return "\n".join(lines)
