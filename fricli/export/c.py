@@ -11,6 +11,7 @@ parts; ``header`` wraps the root part in the public API
     static inline double PREFIX_step_array(PREFIX_state *s, const double *x); x: PREFIX_N_SIGNALS
     static inline double PREFIX_step_parts(PREFIX_state *s, double <signal>, ..., double *model_error);
                                            friction [Nm]; *model_error: the robot-model error [Nm]
+    static inline double PREFIX_step_parts_array(PREFIX_state *s, const double *x, double *model_error);
 
 and puts the model file's meta (provenance, units, parameters) in a comment at the top. Numbers
 are written with 17 significant digits, so they read back as the same doubles; the same model
@@ -217,6 +218,10 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
             f" * motion; use it for friction compensation) and writes to *model_error the correction of the",
             f" * robot model's errors [{tau}] (0 when {prefix}_HAS_MODEL_ERROR is 0); their sum is {prefix}_step. */",
             f"static inline double {prefix}_step_parts({prefix}_state *s, {args}, double *model_error) {{", *parts,
+            "}", "",
+            f"/* {prefix}_step_parts with the signals as an array x[{prefix}_N_SIGNALS], in the order above. */",
+            f"static inline double {prefix}_step_parts_array({prefix}_state *s, const double *x, double *model_error) {{",
+            f"    return {prefix}_step_parts(s, {', '.join(f'x[{i}]' for i in range(len(signals)))}, model_error);",
             "}"]
     return "\n".join(out) + "\n"
 
