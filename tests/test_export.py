@@ -58,6 +58,8 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
                                              error_coef=rng.normal(size=len(ERROR_TERMS)),
                                              effects=["a", "gravity", "offset", "acceleration"],
                                              errors=["gravity", "offset", "acceleration"])
+    out["augmented-gravity"] = AugmentedModel(lugre, [T.term("sign", T.SIGN)], [0.5], error_terms=ERROR_TERMS[:1],
+                                              error_coef=[0.03], effects=["quadrant", "gravity"], errors=["gravity"])
     out["augmented-dissipative"] = AugmentedModel(out["dissipative"], terms[-4:], rng.normal(size=4),
                                                   error_terms=ERROR_TERMS[:1], error_coef=[0.03], errors=["gravity"])
     return out
@@ -320,8 +322,11 @@ def test_the_examples_in_the_deploy_doc_compile(sim_models, tmp_path):
 
     text = (ROOT / "docs" / "deploy.md").read_text()
     blocks = re.findall(r"```(c|cpp)\n(.*?)```", text, flags=re.S)
-    assert [lang for lang, _ in blocks] == ["c", "cpp"]
+    assert [lang for lang, _ in blocks] == ["c", "c", "cpp"]
     assert invoke("export", sim_models["lugre-loaded"], "-o", tmp_path / "friction.h").exit_code == 0
+    assert invoke("export", sim_models["augmented-gravity"], "--prefix", "j2", "-o",
+                  tmp_path / "j2_friction.h").exit_code == 0
+    assert "j2_HAS_MODEL_ERROR = 1 }" in (tmp_path / "j2_friction.h").read_text()
     for lang, code in blocks:
         cxx = lang == "cpp"
         compiler = check.compiler(cxx=cxx)
