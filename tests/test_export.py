@@ -351,3 +351,7 @@ def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
     double = model.predict(sig)[0]
     single = models.set_precision(model, "single").predict(sig)[0]
     assert 0 < np.max(np.abs(double - single)) < 1e-3
+    model, _ = models.load(sim_models["residual-dissipative"])
+    double = models.set_precision(model, "double").predict(sig)[0]
+    assert model.base.precision == "double" and model.base.net_.dtype == np.float32   # the file's weights stay
+    assert 0 < np.max(np.abs(double - models.set_precision(model, "single").predict(sig)[0])) < 1e-3
