@@ -46,7 +46,7 @@ SAMPLE = os.path.join(ROOT, "sample_data")
 BASE_LOG = os.path.join(SAMPLE, "joint2_base.parquet")
 ADAPT_LOG = os.path.join(SAMPLE, "joint2_adapt.parquet")
 EXT_LOG = os.path.join(SAMPLE, "joint2_extended_asym.parquet")
-KINDS = ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented")
+KINDS = ("lugre", "dissipative", "mlp", "selmic", "nnacm", "residual", "augmented")
 
 FULL = {"steps": 2000, "mini_steps": 3000, "train_base_steps": None, "identify_rows": 100_000,
         "predict_rows": 10_000_000, "diagnose_rows": 100_000, "lugre_rows": 100_000, "loop_rows": 100_000,
@@ -429,7 +429,7 @@ def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
     steps = 20 if quick else 200
     lugre = identify.identify(base_log).model_
     built = {"lugre": lugre}
-    for arch in ("mlp", "selmic", "nnacm"):
+    for arch in ("dissipative", "mlp", "selmic", "nnacm"):
         built[arch] = learning.train_base(base_log, arch=arch, steps=steps)[0]
     adapt_log = logs.load_log(ADAPT_LOG)
     built["residual"] = learning.adapt(lugre, adapt_log, epochs=2)[0]
@@ -622,7 +622,7 @@ def export_rows(add, paths: dict[str, str], log: logs.Log, reps: int, quick: boo
     if check.compiler() is None:
         add("export", "exported C step", None, "", "skipped: no C compiler")
         return
-    targets = {"lugre": "target <= 50", "mlp": "target <= 300 (default neural model)"}
+    targets = {"lugre": "target <= 50", "dissipative": "target <= 300 (default neural model)"}
     with tempfile.TemporaryDirectory() as tmp:
         for kind in KINDS:
             model, _ = models.load(paths[kind])

@@ -33,7 +33,7 @@ def test_quick_run_prints_every_measurement(quick_run):
     names = [r["name"] for r in res["rows"]]
     groups = {r["group"] for r in res["rows"]}
     assert groups == {"train", "startup", "limit", "lugre", "predict", "diagnose", "export"}
-    for kind in ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented"):
+    for kind in ("lugre", "dissipative", "mlp", "selmic", "nnacm", "residual", "augmented"):
         assert any(n.startswith(f"{kind}: model.predict") for n in names), kind
     assert any(n.startswith("train-base default") for n in names)
     assert any(n.startswith("plain pyarrow") for n in names)
@@ -46,7 +46,7 @@ def test_quick_run_prints_every_measurement(quick_run):
     assert all(np.isfinite(r["value"]) and r["value"] > 0 for r in measured)
     skipped = [r for r in res["rows"] if r["value"] is None]
     assert [r["name"] for r in skipped if r["group"] != "export"] == ["PyTorch"] and "skipped" in skipped[0]["note"]
-    for kind in ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented"):
+    for kind in ("lugre", "dissipative", "mlp", "selmic", "nnacm", "residual", "augmented"):
         assert any(n.startswith(f"{kind}: exported C step") for n in names) or "exported C step" in names, kind
     # the table goes to stderr as well
     assert "| group | measurement | value | unit | note |" in quick_run.stderr

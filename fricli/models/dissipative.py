@@ -60,7 +60,9 @@ class DissipativeFriction(FrictionModel):
     def __init__(self, *, hidden_sizes=(30, 30), activation: str = "elu", steps: int | None = 50_000,
                  epochs: int | None = None, lr: float = 0.01, batch_size: int = 0, eval_every: int | None = None,
                  units: dict | None = None, velocity_scale: float | str = "auto",
-                 presliding_speed: float | str = "auto", schedule: str = "constant", patience: int | None = None):
+                 presliding_speed: float | str = "auto", schedule: str = "constant", patience: int | None = None,
+                 precision: str = "single"):
+        self.precision = precision
         self.hidden_sizes, self.activation = tuple(hidden_sizes), activation
         self.schedule, self.patience = schedule, patience
         self.steps, self.epochs, self.lr, self.batch_size = steps, epochs, lr, batch_size
@@ -155,8 +157,12 @@ class DissipativeFriction(FrictionModel):
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
         """y_scale * head output (n,) in chunks of PREDICT_CHUNK rows on two threads (one BLAS
-        thread each, so the figures do not depend on the machine); ``sliding``: c = 1."""
+        thread each, so the figures do not depend on the machine); ``sliding``: c = 1. The network
+        runs in float32 (``precision="single"``) or float64 (``"double"``, as exported C code)."""
         n = len(signals["qd"]) if "qd" in signals else 0
+        if self.precision not in ("single", "double"):
+            raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
+        net = self.net_.astype(np.float64) if self.precision == "double" else self.net_
         out = np.empty(n, dtype=np.float64)
         cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
         pieces = list(zip(cuts[:-1], cuts[1:]))
@@ -168,9 +174,9 @@ class DissipativeFriction(FrictionModel):
                 if sliding:
                     x[2] = 1.0
                 if ws is None or ws.n != stop - start:
-                    ws = self.net_.workspace(stop - start)
+                    ws = net.workspace(stop - start)
                 ws.set_inputs(x)
-                np.multiply(self.net_.forward(ws)[0], self.y_scale_, out=out[start:stop])
+                np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
 
         with single_threaded():
             if len(pieces) < 4:
