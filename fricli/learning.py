@@ -25,6 +25,16 @@ DEFAULT_MAX_SAMPLES = 2500
 # paper's constant learning rate for 50,000 steps. Both keep the weights of the best
 # validation loss.
 SCHEDULES = {"cosine": ("cosine", 30_000), "paper": ("constant", 50_000)}   # name -> (Trainer schedule, steps)
+# The dissipative network reaches its held-out error in fewer cosine steps than the paper's
+# (docs/neural-models.md, "Schedule"; python benchmarks/schedules.py).
+COSINE_STEPS = {"dissipative": 20_000}
+
+
+def default_steps(arch: str, schedule: str = "cosine") -> int:
+    """Adam steps of ``train-base`` when --steps is not given."""
+    if schedule == "cosine" and arch in COSINE_STEPS:
+        return COSINE_STEPS[arch]
+    return SCHEDULES[schedule][1]
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
@@ -68,8 +78,8 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     """
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown schedule {schedule!r}")
-    trainer_schedule, default_steps = SCHEDULES[schedule]
-    steps = default_steps if steps is None else steps
+    trainer_schedule = SCHEDULES[schedule][0]
+    steps = default_steps(arch, schedule) if steps is None else steps
     if arch not in ARCHS:
         raise ValueError(f"unknown architecture {arch!r}")
     if velocity_input not in VELOCITY_INPUTS:

@@ -17,7 +17,7 @@ from fricli.cli.options import common, say
               help="Folder with the sample logs; missing logs are simulated (same seeds, same data).")
 @click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True)
 @click.option("--steps", type=click.IntRange(min=1), default=None,
-              help="Adam steps for each base network [default: train-base's, 30,000 with a cosine learning rate].")
+              help="Adam steps for each base network [default: train-base's, with a cosine learning rate].")
 @click.option("--seed", type=int, default=0, show_default=True)
 @common
 def demo_cmd(output, data, joint, steps, seed, quiet):

@@ -76,10 +76,10 @@ def _wrote(output: str) -> str:
               help="Hidden layer sizes [default: dissipative and mlp 30,30; selmic 30 (10 of them jump units); "
                    "nnacm 50].")
 @click.option("--schedule", type=click.Choice(list(learning.SCHEDULES)), default="cosine", show_default=True,
-              help="cosine: Adam's learning rate falls from --lr to 0 along a cosine over 30,000 steps; "
+              help="cosine: Adam's learning rate falls from --lr to 0 along a cosine over the steps; "
                    "paper: the paper's constant learning rate for 50,000 steps.")
 @click.option("--steps", type=click.IntRange(min=1), default=None,
-              help="Adam steps [default: 30,000 with --schedule cosine, 50,000 with paper].")
+              help="Adam steps [default: cosine 20,000 for dissipative, 30,000 for the others; paper 50,000].")
 @click.option("--patience", type=click.IntRange(min=1), default=None, metavar="STEPS",
               help="Stop early when the validation loss has not improved by 0.1 % for STEPS steps.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,
