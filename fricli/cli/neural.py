@@ -227,9 +227,9 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
                             base={"path": base_path, "kind": base_meta.get("kind"),
                                   "provenance": base_meta.get("provenance", {})})
         tau = the_log.units["tau"]
-        where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
+        where = f"joint {the_log.joint}; " if the_log.joint is not None else ""
         say(f"adapted {base_meta.get('kind')} model {base_path} on {summary['seconds_used']:.1f} s of "
-            f"{the_log.name}{where} ({summary['train_rows']} training rows, {summary['val_rows']} validation) "
+            f"{the_log.name} ({where}{summary['train_rows']} training rows, {summary['val_rows']} validation) "
             f"in {seconds:.1f} s", quiet)
         say(f"friction MAE [{tau}] on the moving rows: base {summary['base_moving']['mae']:.3f} -> adapted "
             f"{summary['moving']['mae']:.3f}; validation {_mae(summary, 'base_val')} -> {_mae(summary, 'val')}",
