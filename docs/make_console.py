@@ -39,11 +39,12 @@ def commands(block: str) -> list[str]:
 
 
 def run(command: str, cwd: pathlib.Path, env: dict) -> str:
-    proc = subprocess.run(["bash", "-o", "pipefail", "-c", command], cwd=cwd, env=env, capture_output=True,
-                          text=True)
+    """stdout and stderr in the order a terminal shows them, the scratch folder's path left out."""
+    proc = subprocess.run(["bash", "-o", "pipefail", "-c", command], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True)
     if proc.returncode != 0:
-        sys.exit(f"make_console: {command.splitlines()[0]!r} exited {proc.returncode}:\n{proc.stderr}")
-    return proc.stdout + proc.stderr
+        sys.exit(f"make_console: {command.splitlines()[0]!r} exited {proc.returncode}:\n{proc.stdout}")
+    return proc.stdout.replace(f"{cwd}{os.sep}", "")
 
 
 def rewrite(text: str, cwd: pathlib.Path, env: dict) -> str:
@@ -66,7 +67,7 @@ def main(paths: list[str]) -> None:
         shim = bin_dir / "fricli"
         shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m fricli "$@"\n')
         shim.chmod(0o755)
-        env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", COLUMNS="100",
+        env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", COLUMNS="100", PYTHONUNBUFFERED="1",
                    PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
         new = {path: rewrite(pathlib.Path(path).read_text(), work, env) for path in paths}
     for path, text in new.items():
