@@ -5,20 +5,24 @@ Two stages, both with ``scipy.optimize.least_squares`` (trf, bounds, ``x_scale='
 1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
    friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
    grid of (vs, delta) the curve is linear in (Fc, Fs, kc, ks, Fv), so each grid point is one
-   linear least-squares solve; the best point starts a bounded nonlinear fit (log-parameters
-   for Fc, Fs, vs, delta; Fv, kc, ks >= 0). Parameters the data cannot determine are fixed and
-   reported in ``notes_``: kc = ks = 0 without a varying tau_g, Fs = Fc with fewer than
+   linear least-squares solve; the best point in the physical order starts a bounded nonlinear
+   fit (log-parameters for Fc, vs, delta; Fs - Fc, Fv, kc, ks >= 0). Parameters the data
+   cannot determine are fixed and reported in ``notes_``: kc = ks = 0 without a varying tau_g, Fs = Fc with fewer than
    ``MIN_STRIBECK_LEVELS`` steady speed levels.
 2. Bristle parameters sigma0, sigma1 by simulating the bristle state over the whole log: a
    coarse grid, then a bounded fit in x = (log sigma0, log sigma1/sigma0) with the micro-damping
    time constant sigma1/sigma0 at most ``TAU1_MAX``. With ``refine`` all parameters are then
-   fitted jointly on the whole log.
+   fitted jointly on the whole log; a refinement that does not converge keeps its best iterate
+   (or the two-stage estimate) with a note.
 
 Steady-state samples (``steady_state_mask``): the velocity has kept its sign and stayed within
 ``rel_tol``*|v| (plus a small absolute tolerance from the velocity noise) from a hold time before
 the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
 at that speed, whichever is longer. This keeps samples away from reversals and accelerations,
-where bristle dynamics and inertia errors would bias the static curve.
+where bristle dynamics and inertia errors would bias the static curve. Logs of continuous
+excitation have few such holds; when the log has tau_dyn (the inertia is out of the target),
+every row far enough past a velocity reversal samples the static curve (``settled_mask``).
+The fit keeps Fs >= Fc > 0 and Fv >= 0 (Fs is carried as the excess Fs - Fc >= 0).
 """
 
 from __future__ import annotations
@@ -59,8 +63,7 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
     speed = np.abs(qd)
     top = float(np.percentile(speed, 99))
     if abs_tol is None:
-        jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
-        abs_tol = max(1e-3 * top, 4 * jitter)
+        abs_tol = _noise_tol(qd, top)
     with np.errstate(divide="ignore"):
         need = np.maximum(hold, travel / speed)            # hold required at each row [s]
     level = np.clip(np.ceil(np.log2(need / hold) - 1e-9), 0, 4).astype(int)
@@ -95,8 +98,7 @@ def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
     speed = np.abs(qd)
     top = float(np.percentile(speed, 99))
     if abs_tol is None:
-        jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
-        abs_tol = max(1e-3 * top, 4 * jitter)
+        abs_tol = _noise_tol(qd, top)
     moving = speed > abs_tol
     sign = np.where(moving, np.sign(qd), 0.0)
     # sign of the last moving row at or before each row: a reversal is a change of it
@@ -108,6 +110,12 @@ def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
     seg_start = np.where(start, np.arange(n), 0)
     np.maximum.accumulate(seg_start, out=seg_start)
     return moving & (held != 0) & (dist - dist[seg_start] >= settle)
+
+
+def _noise_tol(qd: np.ndarray, top: float) -> float:
+    """Velocity tolerance: 1e-3 of the top speed or four times the sample-to-sample noise."""
+    jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
+    return max(1e-3 * top, 4 * jitter)
 
 
 def speed_levels(speed: np.ndarray, width: float = 1.1) -> int:
