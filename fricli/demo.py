@@ -16,15 +16,15 @@ ROWS = (("LuGre", "lugre"), ("NN_base", "nn_base"), ("Selmic", "selmic"), ("NNAC
         ("NN_base + NN_add", "adapted"), ("LuGre + NN_add", "lugre_adapted"))
 SUBSETS = (("moving", "rows in motion (|qd| > 2 % of the top speed)"), ("all", "all rows, standstill included"))
 LOADS = (("asymmetric load", "extended_asym"), ("symmetric load", "extended_sym"), ("no load", "extended_none"))
-DEFAULT_STEPS = 50_000
 LOWPASS_HZ = 5.0
 
 
-def run(out: str, *, data: str | None = None, joint: int = 2, steps: int = DEFAULT_STEPS, seed: int = 0,
+def run(out: str, *, data: str | None = None, joint: int = 2, steps: int | None = None, seed: int = 0,
         say: Callable[[str], None] = lambda s: None) -> dict:
     """Identify, train, adapt, evaluate and report into folder ``out``; returns the results.
 
-    data: folder with the sample logs (missing ones are simulated into ``out/data``).
+    data: folder with the sample logs (missing ones are simulated into ``out/data``); steps:
+    Adam steps of the base networks (None: train-base's default).
     """
     os.makedirs(out, exist_ok=True)
     folder = data if data and os.path.isdir(data) else os.path.join(out, "data")
@@ -39,7 +39,7 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int = DEFAU
     idf = LuGreIdentifier().fit(base_log.signals, units=base_log.units, axis=base_log.axis)
     models.save_for_log(paths["lugre"], idf.model_, base_log, rows_used=len(base_log), fit=idf.fit_)
     for arch, key in ((learning.DEFAULT_ARCH, "nn_base"), ("selmic", "selmic"), ("nnacm", "nnacm")):
-        say(f"train-base: {arch}, {steps:,} full-batch Adam steps")
+        say(f"train-base: {arch}, {steps or learning.default_steps(arch):,} full-batch Adam steps")
         model, summary = learning.train_base(base_log, arch=arch, steps=steps, seed=seed)
         models.save_for_log(paths[key], model, base_log, rows_used=summary["train_rows"], seed=seed, fit=summary)
     say(f"adapt: NN_add on the residual of NN_base over {os.path.basename(adapt_log.name)} "
@@ -78,7 +78,8 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int = DEFAU
                                                / results["lugre"][lkey][sub][kind])
                                 for kind in ("friction_mae", "external_mae") if results["lugre"][lkey][sub][kind]}
                          for _, lkey in LOADS} for sub, _ in SUBSETS}
-    summary = {"joint": joint, "steps": steps, "seed": seed, "lowpass_hz": LOWPASS_HZ,
+    summary = {"joint": joint, "steps": {"nn_base": steps or learning.default_steps(learning.DEFAULT_ARCH),
+                                     "baselines": steps or learning.default_steps("selmic")}, "seed": seed, "lowpass_hz": LOWPASS_HZ,
                "adapt_seconds": float(adapt_log.signals["t"][-1] - adapt_log.signals["t"][0]),
                "results": results, "improvement_over_lugre_percent": improvement}
     atomic_write_bytes(os.path.join(out, "results.json"),
@@ -113,6 +114,8 @@ def format_table(summary: dict) -> str:
             if "external_mae" in imp:
                 parts.append(f"external torque {imp['external_mae']:.0f} %")
             lines.append(f"NN_base + NN_add vs LuGre, {label}, {sub} rows: " + ", ".join(parts) + " lower error")
-    lines.append(f"(neural networks trained for {summary['steps']:,} steps, seed {summary['seed']}; "
+    steps = summary["steps"]
+    lines.append(f"(NN_base trained for {steps['nn_base']:,} steps, the baselines for {steps['baselines']:,}, "
+                 f"seed {summary['seed']}; "
                  f"NN_add adapted on {summary['adapt_seconds']:.1f} s of load-free data)")
     return "\n".join(lines)

@@ -31,12 +31,12 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
-from fricli import logs, metrics
+from fricli import logs, metrics, physics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
 from fricli.nn.blas import single_threaded
+
 
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
@@ -75,10 +75,8 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
         h = hold * 2 ** k
         before = max(1, int(min(n, round(h / dt))))  # min: a window longer than the log is no window
         after = max(1, int(min(n, round(h / 4 / dt))))
-        size = before + after + 1
-        origin = before - size // 2
-        vmax = maximum_filter1d(qd, size=size, origin=origin, mode="nearest")
-        vmin = minimum_filter1d(qd, size=size, origin=origin, mode="nearest")
+        vmax = window_extreme(qd, before, after, np.maximum)
+        vmin = window_extreme(qd, before, after, np.minimum)
         ok = ((vmin > 0) | (vmax < 0)) & ((vmax - vmin) <= rel_tol * speed + abs_tol)
         ok[:before] = False                                # the window must not run off the log
         ok[n - after:] = False
@@ -116,6 +114,22 @@ def _noise_tol(qd: np.ndarray, top: float) -> float:
     """Velocity tolerance: 1e-3 of the top speed or four times the sample-to-sample noise."""
     jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
     return max(1e-3 * top, 4 * jitter)
+
+
+def window_extreme(x: np.ndarray, before: int, after: int, op=np.maximum) -> np.ndarray:
+    """op-extreme (np.maximum or np.minimum) of x (n,) over rows i - before .. i + after for
+    every row i, the ends extended with the first and last value; O(n) whatever the window
+    (van Herk / Gil-Werman: extremes of whole blocks from the left and from the right)."""
+    n, size = len(x), before + after + 1
+    padded = np.concatenate([np.full(before, x[0]), x, np.full(after, x[-1])])
+    blocks = -(-len(padded) // size)
+    fill = -np.inf if op is np.maximum else np.inf
+    grid = np.full(blocks * size, fill)
+    grid[:len(padded)] = padded
+    grid = grid.reshape(blocks, size)
+    left = op.accumulate(grid, axis=1).reshape(-1)
+    right = op.accumulate(grid[:, ::-1], axis=1)[:, ::-1].reshape(-1)
+    return op(right[:n], left[size - 1:size - 1 + n])
 
 
 def speed_levels(speed: np.ndarray, width: float = 1.1) -> int:
@@ -263,7 +277,7 @@ class LuGreIdentifier:
         for vs in np.geomspace(vlo / 3, vhi, 25):
             lv = logv - math.log(vs)
             for delta in _DELTAS:
-                e = np.exp(-np.exp(delta * lv))
+                e = physics.stribeck_shape_log(lv, delta)
                 cols = [1 - e, e, speed]
                 if load is not None:
                     cols += [load * (1 - e), load * e]

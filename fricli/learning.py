@@ -20,6 +20,21 @@ ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
 DEFAULT_ARCH = "dissipative"
 DEFAULT_HIDDEN = {"dissipative": (30, 30), "mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
 DEFAULT_MAX_SAMPLES = 2500
+# train-base: how the optimiser runs. "cosine" lowers Adam's learning rate from lr to 0 along a
+# cosine over its steps, which reaches the paper's error in fewer steps; "paper" is the
+# paper's constant learning rate for 50,000 steps. Both keep the weights of the best
+# validation loss.
+SCHEDULES = {"cosine": ("cosine", 30_000), "paper": ("constant", 50_000)}   # name -> (Trainer schedule, steps)
+# The dissipative network reaches its held-out error in fewer cosine steps than the paper's
+# (docs/neural-models.md, "Schedule"; python benchmarks/schedules.py).
+COSINE_STEPS = {"dissipative": 20_000}
+
+
+def default_steps(arch: str, schedule: str = "cosine") -> int:
+    """Adam steps of ``train-base`` when --steps is not given."""
+    if schedule == "cosine" and arch in COSINE_STEPS:
+        return COSINE_STEPS[arch]
+    return SCHEDULES[schedule][1]
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
@@ -43,8 +58,9 @@ def check_motion(name: str, qd: np.ndarray, moving: np.ndarray, job: str) -> Non
                             f"{MIN_ROWS_PER_DIRECTION} moving samples in each direction (a movement out and back)")
 
 
-def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ...] | None = None, steps: int = 50_000,
-               lr: float = 0.01, batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
+def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ...] | None = None,
+               steps: int | None = None, schedule: str = "cosine", patience: int | None = None, lr: float = 0.01,
+               batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
@@ -56,8 +72,14 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
     always sees asinh(|qd| / v0)). Returns (model,
     summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the training rows,
-    the validation rows, the moving rows and the whole log.
+    the validation rows, the moving rows and the whole log. ``schedule`` is a key of SCHEDULES;
+    ``steps`` None takes its number of steps; ``patience`` stops training after that many
+    steps without improvement of the validation loss (see ``fricli.nn.Trainer``).
     """
+    if schedule not in SCHEDULES:
+        raise ValueError(f"unknown schedule {schedule!r}")
+    trainer_schedule = SCHEDULES[schedule][0]
+    steps = default_steps(arch, schedule) if steps is None else steps
     if arch not in ARCHS:
         raise ValueError(f"unknown architecture {arch!r}")
     if velocity_input not in VELOCITY_INPUTS:
@@ -76,12 +98,13 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
                                rng=rng, keep=moving)
     model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
-                        batch_size=batch_size, units=log.units,
+                        batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
                         velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
     model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
               on_eval=on_eval)
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
+               "schedule": schedule, "max_steps": int(steps),
                "velocity_input": velocity_input, "v0": model.v0_,
                "train": _errors(target, pred, sel.train), "moving": _errors(target, pred, np.flatnonzero(moving)),
                "log": metrics.errors(target, pred)}

@@ -21,12 +21,12 @@ import sys
 import tempfile
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.parquet as pq
-
-from fricli import joints
+from fricli import joints, lazy
 from fricli.atomic import atomic_open
 from fricli.errors import DataError, LogError
+
+pa = lazy.module("pyarrow")
+pq = lazy.module("pyarrow.parquet")
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -197,6 +197,36 @@ def axis_of(schema: pa.Schema, name: str) -> str:
     return kinds.pop() if kinds else "rotary"
 
 
+# pyarrow's conversions between Arrow and Python or numpy objects (to_numpy, pa.array,
+# pa.scalar) import pandas on first use, half a second; these go through the buffers instead.
+
+
+def float64_values(col) -> np.ndarray:
+    """float64 (n,) of a numeric Arrow array or chunked array without nulls: float64 chunks are
+    viewed (read-only), others cast by Arrow."""
+    chunks = col.chunks if isinstance(col, pa.ChunkedArray) else [col]
+    parts = []
+    for chunk in chunks:
+        if chunk.type != pa.float64():
+            chunk = chunk.cast(pa.float64(), safe=False)
+        parts.append(np.frombuffer(chunk.buffers()[1], dtype=np.float64, count=len(chunk), offset=8 * chunk.offset))
+    if not parts:
+        return np.empty(0)
+    return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def float64_array(values: np.ndarray) -> pa.Array:
+    """An Arrow float64 array over the numpy values (n,) (no copy when already float64)."""
+    values = np.ascontiguousarray(values, dtype=np.float64)
+    return pa.Array.from_buffers(pa.float64(), len(values), [None, pa.py_buffer(values)])
+
+
+def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
+    """The rows of ``table`` where the bool mask ``keep`` (n,) is set."""
+    idx = np.flatnonzero(keep).astype(np.int64)
+    return table.take(pa.Array.from_buffers(pa.int64(), len(idx), [None, pa.py_buffer(idx)]))
+
+
 def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> np.ndarray:
     col = table.column(column)
     typ = col.type
@@ -205,7 +235,7 @@ def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> n
     if col.null_count:
         first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
         raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first})")
-    return np.asarray(col.to_numpy(zero_copy_only=False), dtype=np.float64)
+    return float64_values(col)
 
 
 def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None) -> dict[str, np.ndarray]:
@@ -309,12 +339,24 @@ def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
 
 
+def _joint_values(table: pa.Table) -> np.ndarray:
+    col = table.column("joint")
+    if pa.types.is_integer(col.type) and not col.null_count:
+        col = col.cast(pa.int64())
+        return np.concatenate([np.frombuffer(c.buffers()[1], dtype=np.int64, count=len(c), offset=8 * c.offset)
+                               for c in col.chunks] or [np.empty(0, dtype=np.int64)])
+    return np.array(col.to_pylist(), dtype=object)
+
+
 def joints_of(table: pa.Table, name: str = "log") -> list | None:
     """The joints in the log's ``joint`` column in order of appearance; None without the column
     (or with one of nulls only, ``joints.named``)."""
     if "joint" not in table.column_names:
         return None
-    return joints.named(list(dict.fromkeys(table.column("joint").to_pylist())), name)
+    values = _joint_values(table)
+    if len(values):
+        values = values[np.concatenate([[0], np.flatnonzero(values[1:] != values[:-1]) + 1])]
+    return joints.named(list(dict.fromkeys(values.tolist())), name)
 
 
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
@@ -328,8 +370,9 @@ def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
     covered = joints.select(found, joint, name)
     if len(covered) > 1:
         raise joints.several(found, name)
-    import pyarrow.compute as pc
-    return table.filter(pc.equal(table.column("joint"), pa.scalar(covered[0]))), covered[0]
+    if len(found) == 1:
+        return table, covered[0]
+    return take_rows(table, _joint_values(table) == covered[0]), covered[0]
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
@@ -340,7 +383,7 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     sig = table_signals(table, axis, name, kt=kt)
     mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
     if mask is not None:
-        table = table.filter(pa.array(mask))
+        table = take_rows(table, mask)
     derived = derive_motion(sig, cutoff_hz)
     return Log(table=table, signals=sig, axis=axis, joint=joint, sha256=sha256, name=name, derived=derived)
 
@@ -385,7 +428,7 @@ def column(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | No
 def with_column(table: pa.Table, name: str, values: np.ndarray, unit: str | None) -> pa.Table:
     """``table`` with a float64 column set (replaced if present), keeping field metadata."""
     field = pa.field(name, pa.float64(), metadata={"unit": unit} if unit else None)
-    array = pa.array(np.asarray(values, dtype=np.float64))
+    array = float64_array(values)
     idx = table.schema.get_field_index(name)
     if idx >= 0:
         return table.set_column(idx, field, array)

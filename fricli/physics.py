@@ -13,62 +13,104 @@ interval (zero-order hold), which is stable at any stiffness:
     z_ss = sign(v) * g / sigma0.
 
 That is a linear recurrence z[k] = a[k] z[k-1] + b[k], solved in one call as a unit lower
-bidiagonal system (BLAS ``dtbsv``), with no Python loop over samples.
+bidiagonal system (BLAS ``dtbsv``), with no Python loop over samples. These functions are the
+one implementation of the equations: the LuGre model, the simulator and identification call them.
 """
 
 from __future__ import annotations
 
-import numpy as np
-from scipy.linalg.blas import dtbsv
+import math
 
-_TINY = 1e-300
+import numpy as np
+
+from fricli import lazy
+
+blas = lazy.module("scipy.linalg.blas")
+
+_RATE_DT_MAX = 700.0   # exp(-700) is the smallest decay used: the state has reached z_ss
+
+
+def stribeck_shape_log(log_ratio: np.ndarray, delta: float, out: np.ndarray | None = None) -> np.ndarray:
+    """E = exp(-|v/vs|^delta) (n,) from log_ratio = log|v| - log vs (n,); -inf (v = 0) gives E = 1."""
+    out = np.multiply(log_ratio, delta, out=out)
+    np.exp(out, out=out)
+    np.negative(out, out=out)
+    return np.exp(out, out=out)
+
+
+def stribeck_shape(v: np.ndarray, vs: float, delta: float, out: np.ndarray | None = None) -> np.ndarray:
+    """E = exp(-|v/vs|^delta) (n,) for velocities v (n,) [rad/s], 1 at v = 0.
+
+    |v/vs|^delta is written exp(delta (log|v| - log vs)): np.power is several times slower."""
+    out = np.abs(v, out=out)
+    with np.errstate(divide="ignore"):
+        np.log(out, out=out)
+    out -= math.log(vs)
+    return stribeck_shape_log(out, delta, out=out)
 
 
 def stribeck(v: np.ndarray, fc: np.ndarray | float, fs: np.ndarray | float, vs: float, delta: float) -> np.ndarray:
     """Stribeck curve g(v) [Nm] for velocities v [rad/s]; fc, fs may be arrays (load-dependent)."""
-    absv = np.abs(v)
-    with np.errstate(divide="ignore"):
-        expo = np.exp(delta * (np.log(np.maximum(absv, _TINY)) - np.log(vs)))
-    return fc + (fs - fc) * np.exp(-expo)
+    return fc + (fs - fc) * stribeck_shape(v, vs, delta)
 
 
-def linear_recurrence(a: np.ndarray, b: np.ndarray, z0: float) -> np.ndarray:
-    """Solve z[k] = a[k] * z[k-1] + b[k] for k = 0..n-1 with z[-1] = z0. Shapes (n,)."""
-    n = len(a)
-    if n == 0:
-        return np.empty(0)
-    rhs = np.array(b, dtype=np.float64)
-    rhs[0] += a[0] * z0
-    band = np.empty((2, n))
-    band[0] = 1.0
-    band[1, :-1] = -a[1:]
-    band[1, -1] = 0.0
-    return dtbsv(1, band, rhs, lower=1)
+class Buffers:
+    """Work arrays for ``lugre_friction`` on up to ``n`` samples, to reuse across blocks."""
 
-
-def bristle_state(v: np.ndarray, g: np.ndarray, sigma0: float, dt: np.ndarray, z0: float | None = None) -> np.ndarray:
-    """Bristle deflection z [rad] at each sample.
-
-    v: velocity (n,) [rad/s]; g: Stribeck curve (n,) [Nm]; sigma0 [Nm/rad];
-    dt: interval ending at each sample (n,) [s]; z0: state before the first sample
-    (None: start in the steady state of the first sample).
-    """
-    rate = sigma0 * np.abs(v) / g
-    a = np.exp(-np.minimum(rate * dt, 700.0))
-    zss = np.sign(v) * g / sigma0
-    b = (1.0 - a) * zss
-    if z0 is None:
-        z0 = float(zss[0]) if len(zss) else 0.0
-    return linear_recurrence(a, b, z0)
+    def __init__(self, n: int):
+        self.work = [np.empty(n) for _ in range(3)]
+        self.band = np.empty((2, n), order="F")   # dtbsv band storage; row 0 unused (unit diagonal)
+        self.band[0] = 1.0
 
 
 def lugre_friction(v: np.ndarray, g: np.ndarray, fv: np.ndarray | float, sigma0: float, sigma1: float,
-                   dt: np.ndarray, z0: float | None = None) -> tuple[np.ndarray, float]:
-    """Friction torque (n,) [Nm] and the final bristle state, for the extended LuGre model."""
-    z = bristle_state(v, g, sigma0, dt, z0)
-    zdot = v - sigma0 * np.abs(v) / g * z
-    tau = sigma0 * z + sigma1 * zdot + fv * v
-    return tau, (float(z[-1]) if len(z) else (z0 or 0.0))
+                   dt: np.ndarray, z0: float | None = None, *, out: np.ndarray | None = None,
+                   buffers: Buffers | None = None) -> tuple[np.ndarray, float]:
+    """Friction torque (n,) [Nm] and the bristle state z [rad] after the last sample.
+
+    v: velocity (n,) [rad/s]; g: Stribeck curve (n,) [Nm], > 0; fv: viscous coefficient, scalar
+    or (n,); sigma0 [Nm/rad], sigma1 [Nm s/rad]; dt: interval ending at each sample (n,) [s];
+    z0: state before the first sample (None: the steady state of the first sample). ``out``
+    (n,) receives the torque and may be ``g`` itself; ``buffers`` (at least n long) avoid allocating.
+    """
+    n = len(v)
+    out = np.empty(n) if out is None else out
+    if n == 0:
+        return out, (z0 or 0.0)
+    buffers = buffers if buffers is not None else Buffers(n)
+    rate, a, zss = (w[:n] for w in buffers.work)
+    band = buffers.band[:, :n]
+    np.abs(v, out=rate)
+    rate *= sigma0
+    rate /= g                                     # sigma0 |v| / g  [1/s]
+    np.multiply(rate, dt, out=a)
+    np.minimum(a, _RATE_DT_MAX, out=a)
+    np.negative(a, out=a)
+    np.exp(a, out=a)                              # decay over the interval
+    np.sign(v, out=zss)
+    zss *= g
+    zss /= sigma0                                 # steady-state deflection
+    b = np.subtract(1.0, a, out=out)
+    b *= zss
+    if z0 is None:
+        z0 = float(zss[0])
+    b[0] += a[0] * z0
+    # z[k] = a[k] z[k-1] + b[k]: a unit lower bidiagonal system
+    np.negative(a[1:], out=band[1, :-1])
+    band[1, -1] = 0.0
+    z = blas.dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
+    if not np.shares_memory(z, out):
+        out[:] = z
+    z_last = float(out[-1])
+    # tau = sigma0 z + sigma1 dz/dt + fv v, with dz/dt = v - rate z
+    rate *= out
+    np.subtract(v, rate, out=rate)
+    rate *= sigma1
+    np.multiply(out, sigma0, out=a)
+    np.add(a, rate, out=out)
+    np.multiply(fv, v, out=a)
+    out += a
+    return out, z_last
 
 
 def intervals(t: np.ndarray, t_prev: float | None = None) -> np.ndarray:

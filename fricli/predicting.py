@@ -18,18 +18,22 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+import queue
 import sys
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterator
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.compute as pc
-import pyarrow.parquet as pq
 
-from fricli import joints, logs, models
+from fricli import joints, lazy, logs, models
 from fricli.atomic import atomic_open
 from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
+
+pa = lazy.module("pyarrow")
+pc = lazy.module("pyarrow.compute")
+pq = lazy.module("pyarrow.parquet")
 
 DEFAULT_BATCH_ROWS = 262_144
 
@@ -45,13 +49,14 @@ class ErrorSums:
         self.max = 0.0
 
     def add(self, y: np.ndarray, y_pred: np.ndarray) -> None:
-        e = np.asarray(y_pred, dtype=np.float64) - np.asarray(y, dtype=np.float64)
+        e = np.subtract(y_pred, y, dtype=np.float64)
         if e.size == 0:
             return
         self.n += e.size
-        self.abs_sum += float(np.sum(np.abs(e)))
         self.sq_sum += float(np.einsum("i,i->", e, e))
-        self.max = max(self.max, float(np.max(np.abs(e))))
+        np.abs(e, out=e)
+        self.abs_sum += float(np.sum(e))
+        self.max = max(self.max, float(np.max(e)))
 
     def merge(self, other: "ErrorSums") -> None:
         self.n += other.n
@@ -150,6 +155,50 @@ def _batches(pf: pq.ParquetFile, name: str, batch_rows: int, whole: bool) -> Ite
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
 
 
+class _Prefetch:
+    """Iterates over ``items`` one step ahead in a background thread (at most one item waiting)."""
+
+    _END = object()
+
+    def __init__(self, items: Iterator):
+        self._items, self._queue = items, queue.Queue(maxsize=1)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pull, daemon=True)
+        self._thread.start()
+
+    def _pull(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put((item, None)):
+                    return
+        except BaseException as exc:  # handed over to the consumer
+            self._put((None, exc))
+            return
+        self._put((self._END, None))
+
+    def _put(self, entry) -> bool:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def __iter__(self):
+        while True:
+            item, exc = self._queue.get()
+            if exc is not None:
+                raise exc
+            if item is self._END:
+                return
+            yield item
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
 @dataclasses.dataclass
 class _Stream:
     """One joint's model and what carries from one batch to the next."""
@@ -212,10 +261,13 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                                  "older fricli): --flag-extrapolation needs one")
     any_env = any(st.env is not None for st in streams.values())
     with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
-                                            leave=False) as bar:
-        writer = None
+                                            leave=False) as bar, ThreadPoolExecutor(max_workers=1) as io:
+        # the next batch is read and the last one written (pyarrow releases the GIL while it
+        # decompresses and compresses) while this one is checked and predicted
+        writer = pending = None
+        reading = _Prefetch(_batches(pf, name, batch_rows, reason is not None))
         try:
-            for offset, table in _batches(pf, name, batch_rows, reason is not None):
+            for offset, table in reading:
                 bar.update(table.num_rows)
                 if several:
                     table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
@@ -239,12 +291,18 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                     out = out.take(pc.sort_indices(out.column(_ROW))).drop_columns([_ROW])
                 if writer is None:
                     writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
-                writer.write_table(out)
+                if pending is not None:
+                    pending.result()
+                pending = io.submit(writer.write_table, out)
                 rows += out.num_rows
                 batches += 1
             if writer is None:
                 raise LogError(f"{name}: the log is empty")
+            pending.result()
         finally:
+            reading.close()
+            if pending is not None:
+                pending.exception()   # wait: the writer must not close under a write
             if writer is not None:
                 writer.close()
     if warnings and warn:
@@ -278,6 +336,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     jpos = table.schema.get_field_index("joint")
     jfield = table.schema.field(jpos) if jpos >= 0 else None
     if jfield is not None:
+        jcol = table.column(jpos)
         table = table.remove_column(jpos)
     try:
         log = logs.from_table(table, name=name, kt=kt, cutoff_hz=cutoff_hz, drop_invalid=drop_invalid,
@@ -300,7 +359,9 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     unit = log.units["tau"]
     out = log.table
     if jfield is not None:
-        out = out.add_column(jpos, jfield, pa.repeat(pa.scalar(st.joint, jfield.type), out.num_rows))
+        same = len(jcol) == out.num_rows   # the joint column as read, unless rows were dropped
+        out = out.add_column(jpos, jfield, jcol if same else
+                             pa.repeat(pa.scalar(st.joint, jfield.type), out.num_rows))
     out = logs.with_column(out, "tau_f_pred", tau_f, unit)
     st.fric.add(logs.friction_target(sig), tau_f)
     if external:
@@ -336,16 +397,3 @@ def lowpass_external(est: np.ndarray, t: np.ndarray, cutoff_hz: float, warn=None
         warn(f"warning: --lowpass {cutoff_hz:g} Hz not applied (at or above the Nyquist frequency "
              f"{0.5 * fs:g} Hz, or too few rows)")
     return logs.lowpass(est, t, cutoff_hz)
-
-
-def predict_signals(model: FrictionModel, signals: dict[str, np.ndarray], batch_rows: int | None = None) -> np.ndarray:
-    """tau_f_pred (n,) for in-memory signals, optionally in batches with the state carried."""
-    n = len(signals["t"])
-    if not batch_rows or batch_rows >= n:
-        return model.predict(signals)[0]
-    out = np.empty(n)
-    state = None
-    for i in range(0, n, batch_rows):
-        part = {k: v[i:i + batch_rows] for k, v in signals.items()}
-        out[i:i + batch_rows], state = model.predict(part, state)
-    return out

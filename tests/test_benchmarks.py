@@ -32,17 +32,21 @@ def test_quick_run_prints_every_measurement(quick_run):
     res = json.loads(quick_run.stdout)
     names = [r["name"] for r in res["rows"]]
     groups = {r["group"] for r in res["rows"]}
-    assert groups == {"train", "limit", "lugre", "predict", "diagnose", "export"}
-    for kind in ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented"):
+    assert groups == {"train", "startup", "limit", "lugre", "predict", "diagnose", "export"}
+    for kind in ("lugre", "dissipative", "mlp", "selmic", "nnacm", "residual", "augmented"):
         assert any(n.startswith(f"{kind}: model.predict") for n in names), kind
-    assert any(n.startswith("train-base command") for n in names)
+    assert any(n.startswith("train-base default") for n in names)
+    assert any(n.startswith("plain pyarrow") for n in names)
+    for command in ("predict", "estimate-ext"):
+        assert any(n.endswith(f"{command} / plain pyarrow") for n in names), command
+    assert any(n.startswith("fricli --version") for n in names)
     assert any(n.startswith("identify") for n in names)
     assert any(n.startswith("diagnose command") for n in names)
     measured = [r for r in res["rows"] if r["value"] is not None]
     assert all(np.isfinite(r["value"]) and r["value"] > 0 for r in measured)
     skipped = [r for r in res["rows"] if r["value"] is None]
     assert [r["name"] for r in skipped if r["group"] != "export"] == ["PyTorch"] and "skipped" in skipped[0]["note"]
-    for kind in ("lugre", "mlp", "selmic", "nnacm", "residual", "augmented"):
+    for kind in ("lugre", "dissipative", "mlp", "selmic", "nnacm", "residual", "augmented"):
         assert any(n.startswith(f"{kind}: exported C step") for n in names) or "exported C step" in names, kind
     # the table goes to stderr as well
     assert "| group | measurement | value | unit | note |" in quick_run.stderr

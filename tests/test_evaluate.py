@@ -79,7 +79,7 @@ def test_demo_end_to_end_with_few_steps(tmp_path):
     for label in ("LuGre", "NN_base", "Selmic", "NNACM", "NN_base + NN_add", "LuGre + NN_add"):
         assert f"| {label} |" in res.stdout
     summary = json.loads((tmp_path / "d" / "results.json").read_text())
-    assert summary["steps"] == 200
+    assert summary["steps"] == {"nn_base": 200, "baselines": 200}
     assert (tmp_path / "d" / "report" / "index.html").exists()
     # adaptation is model-agnostic: adapting the LuGre model must beat the LuGre model itself
     for load in ("extended_asym", "extended_sym"):

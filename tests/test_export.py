@@ -20,6 +20,7 @@ from fricli.cli import cli
 from fricli.models import terms as T
 from fricli.export import c, check, network
 from fricli.models.augmented import AugmentedModel
+from fricli.models.dissipative import DissipativeFriction
 from fricli.models.lugre import LuGreModel
 from fricli.models.neural import ARCHS
 from fricli.models.residual import ResidualFriction
@@ -42,10 +43,25 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
     out = {"lugre": lugre}
     for arch, cls in ARCHS.items():
         out[arch] = cls(steps=100, velocity_scale="auto").fit(pick, target[rows], rng=rng)
-    out["residual"] = ResidualFriction(lugre, epochs=2).fit(sig, target, rows[::2], rows[1::2], rng=rng)
-    out["residual-mlp"] = ResidualFriction(out["mlp"], epochs=2).fit(sig, target, rows[::2], rows[1::2], rng=rng)
+    moving = rows[sig["qd"][rows] != 0]
+    out["dissipative"] = DissipativeFriction(steps=100).fit({k: v[moving] for k, v in sig.items()}, target[moving],
+                                                           rng=rng)
+    fit_residual = lambda base, **kw: ResidualFriction(base, epochs=2, **kw).fit(  # noqa: E731
+        sig, target, rows[::2], rows[1::2], rng=rng)
+    out["residual"] = fit_residual(lugre)
+    out["residual-mlp"] = fit_residual(out["mlp"])
+    out["residual-dissipative"] = fit_residual(out["dissipative"])
+    out["residual-additive"] = fit_residual(lugre, combine="additive")
     out["augmented"] = AugmentedModel(lugre, terms, rng.normal(size=len(terms)))
     out["augmented-nn"] = AugmentedModel(out["nnacm"], terms[:4], rng.normal(size=4))
+    out["augmented-errors"] = AugmentedModel(lugre, terms[:5], rng.normal(size=5), error_terms=ERROR_TERMS,
+                                             error_coef=rng.normal(size=len(ERROR_TERMS)),
+                                             effects=["a", "gravity", "offset", "acceleration"],
+                                             errors=["gravity", "offset", "acceleration"])
+    out["augmented-gravity"] = AugmentedModel(lugre, [T.term("sign", T.SIGN)], [0.5], error_terms=ERROR_TERMS[:1],
+                                              error_coef=[0.03], effects=["quadrant", "gravity"], errors=["gravity"])
+    out["augmented-dissipative"] = AugmentedModel(out["dissipative"], terms[-4:], rng.normal(size=4),
+                                                  error_terms=ERROR_TERMS[:1], error_coef=[0.03], errors=["gravity"])
     return out
 
 
@@ -54,10 +70,13 @@ SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T
              T.term("tau_l*moving", T.GEAR, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
              T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
              T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
-             T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd"))]
+             T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd")),
+             T.term("tau_l held", T.HELDGEAR), T.term("payload*sign", T.PAYLOADGEAR, T.SIGN)]
 EMPS_TERMS = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd")), T.term("p*pos", T.P, T.POS),
               T.term("sign", T.SIGN), T.term("sat1", {"f": "sat", "scale": 0.01}),
-              T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0})]
+              T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0}), T.term("tau_l held", T.HELDGEAR)]
+# robot-model errors: the logged gravity torque off by a factor, an offset, a missing inertia
+ERROR_TERMS = [T.term("tau_g", T.sig_("tau_g")), T.term("1", T.ONE), T.term("qdd", T.sig_("qdd"))]
 
 
 @pytest.fixture(scope="module")
@@ -118,8 +137,9 @@ def _compare(model_path: str, log_path: str, tmp_path, *, cutoff: float = 50.0, 
     return float(np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))))
 
 
-KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "residual",
-         "residual-mlp", "augmented", "augmented-nn"]
+KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "dissipative", "residual",
+         "residual-mlp", "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
+         "augmented-errors", "augmented-dissipative"]
 
 
 @needs_cc
@@ -130,11 +150,34 @@ def test_export_matches_predict_on_a_held_out_simulated_log(kind, sim_models, tm
 
 
 @needs_cc
-@pytest.mark.parametrize("kind", ["lugre", "mlp", "selmic", "nnacm", "residual", "residual-mlp", "augmented",
-                                  "augmented-nn"])
+@pytest.mark.parametrize("kind", ["lugre", "mlp", "selmic", "nnacm", "dissipative", "residual", "residual-mlp",
+                                  "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
+                                  "augmented-errors", "augmented-dissipative"])
 def test_export_matches_predict_on_emps(kind, emps_models, tmp_path):
     log, paths = emps_models
     assert _compare(paths[kind], log, tmp_path, cutoff=100.0, batch_rows=7000) <= 1.0
+
+
+@needs_cc
+@pytest.mark.parametrize("kind", ["augmented-errors", "augmented-dissipative", "residual"])
+def test_step_parts_gives_friction_and_model_error_apart(kind, sim_models, tmp_path):
+    """PREFIX_step_parts: friction and robot-model error as ``predict_parts`` (friction alone and
+    error 0 for a model without error terms); their sum is what PREFIX_step returns."""
+    model, _ = models.load(sim_models[kind])
+    models.set_precision(model, "double")
+    sig = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet"), cutoff_hz=50.0).signals
+    if hasattr(model, "predict_parts"):
+        friction, error, _ = model.predict_parts(sig)
+        assert np.max(np.abs(error)) > 0.01
+    else:
+        friction, error = model.predict(sig)[0], np.zeros(len(sig["t"]))
+    exe, names = _compiled(sim_models[kind], tmp_path)
+    x = check.signal_matrix(sig, names)
+    got_f, got_e = check.run_parts(exe, x)
+    for got, ref in ((got_f, friction), (got_e, error), (got_f + got_e, check.run(exe, x))):
+        assert np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))) <= 1.0
+    text = c.export(sim_models[kind], "fr")
+    assert f"fr_HAS_MODEL_ERROR = {int(kind.startswith('augmented'))} }}" in text
 
 
 @needs_cc
@@ -151,7 +194,8 @@ def test_single_precision_predict_is_what_differs(sim_models, tmp_path):
 
 
 @needs_cxx
-@pytest.mark.parametrize("kind", ["lugre-asym-thermal", "selmic", "residual", "augmented"])
+@pytest.mark.parametrize("kind", ["lugre-asym-thermal", "selmic", "dissipative", "residual", "augmented",
+                                  "augmented-errors"])
 def test_header_compiles_as_cpp_without_warnings(kind, sim_models, tmp_path):
     header = tmp_path / "fr.h"
     assert invoke("export", sim_models[kind], "-o", header, "--prefix", "fr").exit_code == 0
@@ -232,6 +276,31 @@ def test_softplus_and_tanh_activations_compile_to_the_reference_formulas(tmp_pat
     np.testing.assert_allclose(out[1::2], np.tanh(x), rtol=1e-15, atol=0)
 
 
+@needs_cc
+def test_the_elu_without_library_calls_is_within_rounding_of_numpy(tmp_path):
+    """The exported ELU computes e^u from tables and a polynomial: e^u - 1 within two units in
+    the last place of 1 (e^u <= 1) of numpy's float64 ELU, v itself for v >= 0, past the clamp too."""
+    from fricli.nn import activations as acts
+
+    rng = np.random.default_rng(3)
+    x = np.r_[-1e3, -40.5, -40.0, -39.9, -1e-300, -0.0, 0.0, 1e-300, 2.5, 1e3, -rng.exponential(3.0, 4000),
+              rng.uniform(-1e-3, 0.0, 500), rng.normal(size=500)]
+    lines = ["#include <math.h>", "#include <stdio.h>", "int main(void) {",
+             f"    static const double X[{len(x)}] = {c.array(x)};", "    int i;", *network._exp_tables(),
+             f"    for (i = 0; i < {len(x)}; ++i) {{",
+             f"        double v = X[i]; {network.ACTIVATIONS['elu'](None, 'i')} printf(\"%.17g\\n\", v);",
+             "    }", "    return 0;", "}"]
+    src = tmp_path / "elu.c"
+    src.write_text("\n".join(lines) + "\n")
+    import subprocess
+
+    exe = tmp_path / "elu"
+    subprocess.run([check.compiler(), *check.C_FLAGS, str(src), "-o", str(exe), "-lm"], check=True)
+    out = np.array(subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split(), dtype=float)
+    np.testing.assert_allclose(out, acts.elu(x), rtol=0, atol=2 * np.finfo(float).eps)
+    assert np.array_equal(out[x >= 0], x[x >= 0])
+
+
 def test_errors_are_one_line_with_the_documented_codes(sim_models, tmp_path):
     res = invoke("export", sim_models["mlp"], "--prefix", "9bad", "-o", tmp_path / "x.h")
     assert res.exit_code == 2
@@ -253,8 +322,11 @@ def test_the_examples_in_the_deploy_doc_compile(sim_models, tmp_path):
 
     text = (ROOT / "docs" / "deploy.md").read_text()
     blocks = re.findall(r"```(c|cpp)\n(.*?)```", text, flags=re.S)
-    assert [lang for lang, _ in blocks] == ["c", "cpp"]
+    assert [lang for lang, _ in blocks] == ["c", "c", "cpp"]
     assert invoke("export", sim_models["lugre-loaded"], "-o", tmp_path / "friction.h").exit_code == 0
+    assert invoke("export", sim_models["augmented-gravity"], "--prefix", "j2", "-o",
+                  tmp_path / "j2_friction.h").exit_code == 0
+    assert "j2_HAS_MODEL_ERROR = 1 }" in (tmp_path / "j2_friction.h").read_text()
     for lang, code in blocks:
         cxx = lang == "cpp"
         compiler = check.compiler(cxx=cxx)
@@ -279,3 +351,7 @@ def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
     double = model.predict(sig)[0]
     single = models.set_precision(model, "single").predict(sig)[0]
     assert 0 < np.max(np.abs(double - single)) < 1e-3
+    model, _ = models.load(sim_models["residual-dissipative"])
+    double = models.set_precision(model, "double").predict(sig)[0]
+    assert model.base.precision == "double" and model.base.net_.dtype == np.float32   # the file's weights stay
+    assert 0 < np.max(np.abs(double - models.set_precision(model, "single").predict(sig)[0])) < 1e-3

@@ -453,3 +453,13 @@ def test_emps_coulomb_viscous_fit(tmp_path):
     p = fit["parameters"]
     assert 15 < p["fc"] < 26 and 170 < p["fv"] < 240
     assert p["kc"] == 0 and p["fs"] == p["fc"]
+
+
+@pytest.mark.parametrize("n, before, after", [(1, 1, 1), (5, 3, 1), (37, 1, 4), (1000, 57, 14), (300, 1200, 300)])
+def test_window_extreme_matches_a_direct_window(n, before, after):
+    from fricli.identify import window_extreme
+
+    x = np.random.default_rng(n).standard_normal(n)
+    for op in (np.maximum, np.minimum):
+        ref = np.array([op.reduce(x[max(0, i - before):i + after + 1]) for i in range(n)])
+        np.testing.assert_array_equal(window_extreme(x, before, after, op), ref)

@@ -302,3 +302,39 @@ def test_standardizer(rng):
     np.testing.assert_allclose(s.inverse(z), x, atol=1e-5)
     with pytest.raises(ValueError):
         Standardizer.from_arrays(np.zeros(2), np.array([1.0, 0.0]))
+
+
+def test_cosine_schedule_is_adam_with_a_falling_learning_rate(rng):
+    x, t = toy(rng, 200)
+    nets = [small_net(np.random.default_rng(5)) for _ in range(2)]
+    steps, lr = 6, 0.02
+    Trainer(steps=steps, lr=lr, schedule="cosine", eval_every=steps).fit(nets[0], x, t, rng=rng)
+    net = nets[1]
+    opt = Adam(net.n_params, lr=lr)
+    ws = net.workspace(200)
+    ws.set_inputs(x)
+    grad = np.empty_like(net.theta)
+    thetas = []
+    for s in range(steps):
+        opt.lr = 0.5 * lr * (1.0 + np.cos(np.pi * s / steps))
+        _sse_and_grad(net, ws, t, grad, 2.0 / 200)
+        opt.step(net.theta, grad)
+        thetas.append(net.theta.copy())
+    # the trainer keeps the best weights: one of the steps of the manual run
+    assert any(np.allclose(nets[0].theta, th, rtol=1e-5, atol=1e-6) for th in thetas)
+    assert not np.allclose(thetas[-1], thetas[-2])
+
+
+def test_patience_stops_training_and_keeps_the_best_weights(rng):
+    x, t = toy(rng, 200)
+    xv, tv = toy(rng, 100)
+    net = small_net(rng)
+    tr = Trainer(steps=20_000, lr=0.05, eval_every=10, patience=100).fit(net, x, t, xv, tv, rng=rng)
+    assert tr.steps_ < 20_000 and tr.steps_ % 10 == 0
+    assert tr.history_val_.size == tr.steps_ // 10
+    assert sse(net, xv, tv) / 100 == pytest.approx(tr.history_val_.min(), rel=1e-6)
+
+
+def test_unknown_schedule_refused():
+    with pytest.raises(ValueError, match="schedule"):
+        Trainer(steps=10, schedule="linear")

@@ -294,12 +294,15 @@ def test_bad_inputs(tmp_path, model_file, case, code, needle):
     assert "Traceback" not in res.output
 
 
-def test_predict_signals_helper():
+def test_state_carried_over_batches_matches_one_pass():
     table = make_table(n=1000)
     sig = logs.from_table(table, name="x").signals
     model = LuGreModel(**PARAMS)
-    np.testing.assert_allclose(predicting.predict_signals(model, sig, batch_rows=33), model.predict(sig)[0],
-                               rtol=1e-12, atol=1e-12)
+    parts, state = [], None
+    for i in range(0, 1000, 33):
+        out, state = model.predict({k: v[i:i + 33] for k, v in sig.items()}, state)
+        parts.append(out)
+    np.testing.assert_allclose(np.concatenate(parts), model.predict(sig)[0], rtol=1e-12, atol=1e-12)
 
 
 def test_error_sums_match_metrics():

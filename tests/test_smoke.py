@@ -64,7 +64,13 @@ def test_fricli_never_uses_the_threaded_dataset_reader():
 
 
 def test_every_command_is_smoke_tested():
-    assert sorted(cli.commands) == COMMANDS
+    assert cli.list_commands(None) == COMMANDS
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_every_command_is_in_the_readme_table(command):
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(rf"^\| `fricli {re.escape(command)}[ `]", readme, re.M), command
 
 
 def test_every_command_in_a_process(tmp_path):

@@ -7,9 +7,9 @@ log of the next seed; the MAE over the moving rows (|qd| > 0.002 rad/s) is print
 multiple of the noise MAE (target against tau_f_true over the same rows), together with the
 same ratio for the exact steady-state friction of the simulator (the best any model without a
 bristle state can do), and violations of tau_f qd >= 0. Run from the repository root
-(about 10 minutes on two cores; --steps 5000 for a quick look):
+(a few minutes on two cores; --steps 2000 for a quick look):
 
-    python docs/img/make_neural_figure.py [--steps 50000]
+    python docs/img/make_neural_figure.py [--steps N]
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def steady_state(sig: dict) -> np.ndarray:
 
 def main() -> None:
     parser = argparse.ArgumentParser()
-    parser.add_argument("--steps", type=int, default=50_000)
+    parser.add_argument("--steps", type=int, default=None, help="Adam steps (default: train-base's)")
     steps = parser.parse_args().steps
     shown = {}
     print(f"| train seed | test seed | noise MAE [Nm] | dissipative | mlp | steady state | "

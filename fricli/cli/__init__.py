@@ -5,6 +5,7 @@ the exit code documented in docs/exit-codes.md; click keeps exit code 2 for usag
 
 from __future__ import annotations
 
+import importlib
 import sys
 
 import click
@@ -13,7 +14,42 @@ from fricli import __version__
 from fricli import errors
 
 
+# Every command: name -> "module:function". A command's module is imported only when the
+# command runs or its help is shown, so start-up stays fast; registering a command is one line.
+COMMANDS = {
+    "adapt": "fricli.cli.neural:adapt_cmd",
+    "demo": "fricli.cli.demo:demo_cmd",
+    "diagnose": "fricli.cli.diagnose:diagnose_cmd",
+    "dynamics": "fricli.cli.robot:dynamics_cmd",
+    "estimate-ext": "fricli.cli.predict:estimate_ext_cmd",
+    "evaluate": "fricli.cli.evaluate:evaluate_cmd",
+    "export": "fricli.cli.export:export_cmd",
+    "fleet": "fricli.cli.fleet:fleet_cmd",
+    "identify": "fricli.cli.lugre:identify_cmd",
+    "import": "fricli.cli.robot:import_cmd",
+    "inspect": "fricli.cli.inspect_cmd:inspect_model",
+    "predict": "fricli.cli.predict:predict_cmd",
+    "report": "fricli.cli.evaluate:report_cmd",
+    "simulate": "fricli.cli.simulate:simulate_cmd",
+    "train-base": "fricli.cli.neural:train_base",
+    "trend": "fricli.cli.fleet:trend_cmd",
+}
+
+
 class FricliGroup(click.Group):
+    """Loads each command from ``COMMANDS`` when it is first needed and turns library errors
+    into one line on stderr with their exit code."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(set(COMMANDS) | set(self.commands))
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in self.commands and name in COMMANDS:
+            module, _, attr = COMMANDS[name].partition(":")
+            command = getattr(importlib.import_module(module), attr)
+            self.commands[name] = command
+        return self.commands.get(name)
+
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
@@ -56,16 +92,6 @@ def cli() -> None:
     Use - for stdin/stdout to chain commands in a pipeline.
     """
 
-
-# Each module adds its commands to ``cli``.
-from fricli.cli import demo, evaluate, inspect_cmd  # noqa: E402,F401
-from fricli.cli import neural  # noqa: E402,F401
-from fricli.cli import simulate  # noqa: E402,F401
-from fricli.cli import lugre, predict  # noqa: E402,F401
-from fricli.cli import diagnose  # noqa: E402,F401
-from fricli.cli import robot  # noqa: E402,F401
-from fricli.cli import export  # noqa: E402,F401
-from fricli.cli import fleet  # noqa: E402,F401
 
 
 def main() -> None:

@@ -16,8 +16,8 @@ from fricli.cli.options import common, say
 @click.option("--data", default="sample_data", show_default=True, type=click.Path(file_okay=False),
               help="Folder with the sample logs; missing logs are simulated (same seeds, same data).")
 @click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True)
-@click.option("--steps", type=click.IntRange(min=1), default=50_000, show_default=True,
-              help="Adam steps for each base network (the paper used 50,000).")
+@click.option("--steps", type=click.IntRange(min=1), default=None,
+              help="Adam steps for each base network [default: train-base's, with a cosine learning rate].")
 @click.option("--seed", type=int, default=0, show_default=True)
 @common
 def demo_cmd(output, data, joint, steps, seed, quiet):

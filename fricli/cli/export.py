@@ -18,8 +18,9 @@ def export_cmd(model, output, prefix, quiet):
     """Export MODEL (a model file, or a folder with one .npz per joint) as dependency-free C99.
 
     Writes one header with the parameters baked in: PREFIX_state, PREFIX_init and
-    PREFIX_step (one call per sample, returning the friction torque) per model; for a
-    folder, a set per model file named PREFIX_<file name>_*. The header's comment lists the
+    PREFIX_step (one call per sample, returning the friction torque, as fricli predict)
+    per model, and PREFIX_step_parts (friction alone, and the robot-model error correction
+    of a diagnosed model apart); for a folder, a set per model file named PREFIX_<file name>_*. The header's comment lists the
     signals each step function takes (names, units, order) and the model's provenance.
     It needs only <math.h> and computes in double precision, like `fricli predict
     --precision double` (docs/deploy.md).

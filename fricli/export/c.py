@@ -9,6 +9,9 @@ parts; ``header`` wraps the root part in the public API
     static inline void PREFIX_init(PREFIX_state *s);
     static inline double PREFIX_step(PREFIX_state *s, double <signal>, ...);   [Nm]
     static inline double PREFIX_step_array(PREFIX_state *s, const double *x); x: PREFIX_N_SIGNALS
+    static inline double PREFIX_step_parts(PREFIX_state *s, double <signal>, ..., double *model_error);
+                                           friction [Nm]; *model_error: the robot-model error [Nm]
+    static inline double PREFIX_step_parts_array(PREFIX_state *s, const double *x, double *model_error);
 
 and puts the model file's meta (provenance, units, parameters) in a comment at the top. Numbers
 are written with 17 significant digits, so they read back as the same doubles; the same model
@@ -103,15 +106,22 @@ class Context:
 
 @dataclasses.dataclass
 class Part:
-    """C code of one model node: definitions of ``<name>_step`` (and ``_state``, ``_init``)."""
+    """C code of one model node: definitions of ``<name>_step`` (and ``_state``, ``_init``; with
+    ``parts``, ``<name>_step_parts(..., double *error)`` returning friction and the robot-model
+    error apart, whose sum ``_step`` returns)."""
 
     name: str
     code: str
     stateful: bool
+    parts: bool = False
 
     def step(self, state: str = "") -> str:
         """The call of the step function; ``state`` a pointer expression to its state."""
         return f"{self.name}_step({state + ', ' if self.stateful else ''}in)"
+
+    def step_parts(self, state: str, error: str) -> str:
+        """The call of ``_step_parts``; ``error`` a pointer expression to the error's double."""
+        return f"{self.name}_step_parts({state + ', ' if self.stateful else ''}in, {error})"
 
     def init(self, state: str) -> str:
         return f"{self.name}_init({state});" if self.stateful else ""
@@ -171,11 +181,13 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
         raise ModelFileError("cannot export a model that reads no signal")
     units = meta.get("units", {})
     tau = units.get("tau", "Nm")
+    has_error = bool(root.parts and getattr(model, "error_terms", None))
     args = ", ".join(f"double {ctx.fields[s]}" for s in signals)
     out = [f"/* Signals of {prefix}_step, in this order (pass 0 for a torque the robot does not measure):"]
     out += [f" *   {i}. {comment(_signal_doc(s, units))}" for i, s in enumerate(signals)]
     out += [f" * Returns the friction torque tau_f [{tau}], positive along the motion. */",
             f"enum {{ {prefix}_N_SIGNALS = {len(signals)} }};",
+            f"enum {{ {prefix}_HAS_MODEL_ERROR = {int(has_error)} }};   /* 1: the model corrects robot-model errors */",
             "typedef struct {", *[f"    double {ctx.fields[s]};" for s in signals], f"}} {ctx.in_type};", "",
             root.code.rstrip(), ""]
     if root.stateful:
@@ -190,12 +202,27 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
     body += [f"    in_.{ctx.fields[s]} = {ctx.fields[s]};" for s in signals]
     if not root.stateful:
         body.append("    (void)s;")
+    parts = list(body)
     body.append(f"    return {root.step('s')};")
-    out += ["", f"/* One sample: friction torque [{tau}] for the signals above; updates the state. */",
+    if root.parts:
+        parts.append(f"    return {root.step_parts('s', 'model_error')};")
+    else:
+        parts += ["    *model_error = 0.0;", f"    return {root.step('s')};"]
+    out += ["", f"/* One sample: friction torque [{tau}] for the signals above (with the robot-model error",
+            f" * corrections when {prefix}_HAS_MODEL_ERROR, as fricli predict); updates the state. */",
             f"static inline double {prefix}_step({prefix}_state *s, {args}) {{", *body, "}", "",
             f"/* {prefix}_step with the signals as an array x[{prefix}_N_SIGNALS], in the order above. */",
             f"static inline double {prefix}_step_array({prefix}_state *s, const double *x) {{",
-            f"    return {prefix}_step(s, {', '.join(f'x[{i}]' for i in range(len(signals)))});", "}"]
+            f"    return {prefix}_step(s, {', '.join(f'x[{i}]' for i in range(len(signals)))});", "}", "",
+            f"/* {prefix}_step with its two parts apart: returns the friction torque [{tau}] alone (the part that",
+            f" * resists the motion: use it for friction compensation) and writes to *model_error the correction of the",
+            f" * robot model's errors [{tau}] (0 when {prefix}_HAS_MODEL_ERROR is 0); their sum is {prefix}_step. */",
+            f"static inline double {prefix}_step_parts({prefix}_state *s, {args}, double *model_error) {{", *parts,
+            "}", "",
+            f"/* {prefix}_step_parts with the signals as an array x[{prefix}_N_SIGNALS], in the order above. */",
+            f"static inline double {prefix}_step_parts_array({prefix}_state *s, const double *x, double *model_error) {{",
+            f"    return {prefix}_step_parts(s, {', '.join(f'x[{i}]' for i in range(len(signals)))}, model_error);",
+            "}"]
     return "\n".join(out) + "\n"
 
 

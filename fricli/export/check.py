@@ -24,7 +24,8 @@ DRIVER = r"""#define _POSIX_C_SOURCE 199309L
 #include <time.h>
 #include "HEADER"
 
-/* driver IN OUT: predictions for the rows of IN into OUT; driver IN --bench SECONDS: ns per sample */
+/* driver IN OUT: predictions for the rows of IN into OUT; driver IN OUT --parts: friction and model
+   error per row; driver IN --bench SECONDS: ns per sample */
 int main(int argc, char **argv) {
     const int k = PREFIX_N_SIGNALS;
     FILE *f;
@@ -54,6 +55,18 @@ int main(int argc, char **argv) {
             elapsed = (double)(t1.tv_sec - t0.tv_sec) + 1e-9 * (double)(t1.tv_nsec - t0.tv_nsec);
         }
         printf("%.6g %.17g\n", 1e9 * elapsed / ((double)passes * (double)n), acc);
+        return 0;
+    }
+    if (argc == 4 && strcmp(argv[3], "--parts") == 0) {   /* friction and model error per row */
+        double *pe = (double *)malloc(sizeof(double) * (2 * n + 1));
+        if (!pe) return 3;
+        PREFIX_init(&s);
+        for (i = 0; i < n; ++i) pe[2 * i] = PREFIX_step_parts_array(&s, x + i * (size_t)k, pe + 2 * i + 1);
+        f = fopen(argv[2], "wb");
+        if (!f || fwrite(pe, sizeof(double), 2 * n, f) != 2 * n || fclose(f) != 0) return 4;
+        free(pe);
+        free(x);
+        free(y);
         return 0;
     }
     PREFIX_init(&s);
@@ -102,6 +115,16 @@ def run(exe: str, x: np.ndarray) -> np.ndarray:
         out = os.path.join(tmp, "out.bin")
         subprocess.run([exe, src, out], check=True)
         return np.fromfile(out, dtype=np.float64)
+
+
+def run_parts(exe: str, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``PREFIX_step_parts`` over the rows of ``x``: (friction (n,), model error (n,))."""
+    with tempfile.TemporaryDirectory() as tmp:
+        src = _write_rows(x, tmp)
+        out = os.path.join(tmp, "out.bin")
+        subprocess.run([exe, src, out, "--parts"], check=True)
+        pe = np.fromfile(out, dtype=np.float64).reshape(-1, 2)
+        return pe[:, 0], pe[:, 1]
 
 
 def time_step(exe: str, x: np.ndarray, seconds: float = 0.2) -> float:

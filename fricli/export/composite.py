@@ -1,6 +1,7 @@
-"""C code of the kinds made of other models: ``residual`` (base + NN_add) and ``augmented``
-(base + coefficient-weighted terms of diagnosed effects). Children are emitted with their own
-emitters under ``<name>_<child>``; their states nest in the parent's state struct.
+"""C code of the kinds made of other models: ``residual`` (base and NN_add, added or combined
+against the motion) and ``augmented`` (base + coefficient-weighted terms of diagnosed effects,
+friction apart from robot-model errors). Children are emitted with their own emitters under
+``<name>_<child>``; their states nest in the parent's state struct.
 """
 
 from __future__ import annotations
@@ -10,49 +11,76 @@ from fricli.export.c import Context, Part, comment, emit, emitter, num
 
 
 def _state(name: str, fields: list[str]) -> list[str]:
-    return ["typedef struct {", *[f"    {f};" for f in fields], f"}} {name}_state;", ""]
+    """A state struct; a field "decl  /* note */" keeps its note after the semicolon."""
+    lines = [f"    {f};" if "/*" not in f else "    {0};  /*{1}".format(*f.split("  /*", 1)) for f in fields]
+    return ["typedef struct {", *lines, f"}} {name}_state;", ""]
+
+
+def _signature(name: str, fn: str, ctx: Context, stateful: bool, extra: str = "") -> str:
+    state = f"{name}_state *s, " if stateful else ""
+    return f"static inline double {name}_{fn}({state}const {ctx.in_type} *in{extra}) {{"
 
 
 @emitter("residual")
 def residual(model, name: str, ctx: Context) -> Part:
+    """p = base + NN_add; ``dissipative``: tau_f = w p + (1 - w) s T softplus(s p / T),
+    s = sign(qd), w = (1 - min(|qd| / v_ps, 1)^2)^2, as ``ResidualFriction.on_base``."""
     base = emit(model.base, f"{name}_base", ctx)
     add = emit(model.add, f"{name}_add", ctx)
     code = [base.code, add.code]
     if base.stateful:
         code += _state(name, [f"{base.name}_state base"])
-        code += [f"static inline void {name}_init({name}_state *s) {{ {base.init('&s->base')} }}", "",
-                 f"static inline double {name}_step({name}_state *s, const {ctx.in_type} *in) {{"]
+        code += [f"static inline void {name}_init({name}_state *s) {{ {base.init('&s->base')} }}", ""]
+    code.append(_signature(name, "step", ctx, base.stateful))
+    if model.combine == "additive":
+        code += [f"    return {base.step('&s->base')} + {add.step()};", "}", ""]
     else:
-        code.append(f"static inline double {name}_step(const {ctx.in_type} *in) {{")
-    code += [f"    return {base.step('&s->base')} + {add.step()};", "}", ""]
+        qd, width = ctx.signal("qd"), num(model.width_)
+        code += [f"    const double p = {base.step('&s->base')} + {add.step()};",
+                 f"    const double sg = {ctx.sgn}({qd});",
+                 f"    double w = fabs({qd}) / {num(model.v_ps_)}, x, m;",
+                 "    w = w < 1.0 ? w : 1.0;",
+                 "    w = 1.0 - w * w;",
+                 "    w = w * w;",
+                 f"    x = sg * p / {width};",
+                 f"    m = {width} * ((x > 0.0 ? x : 0.0) + log1p(exp(-fabs(x))));   /* T softplus(s p / T) */",
+                 "    return w * p + (1.0 - w) * sg * m;", "}", ""]
     return Part(name, "\n".join(code), stateful=base.stateful)
 
 
 @emitter("augmented")
 def augmented(model, name: str, ctx: Context) -> Part:
-    """tau_f = p + sum_j coef[j] * term_j, p the base's friction; the held direction of motion
-    (0 before the first motion) is state."""
+    """friction = p + sum_j coef[j] term_j, robot-model error = sum_k error_coef[k] error_term_k,
+    p the base's prediction; ``_step`` returns their sum (as ``predict``), ``_step_parts`` the
+    friction and the error apart. The held direction of motion and gear torque are state."""
     base = emit(model.base, f"{name}_base", ctx)
-    held = T.uses_direction(model.terms)
-    fields = ([f"{base.name}_state base"] if base.stateful else []) + (["double dir"]
-                                                                         if held else [])
+    every = model.terms + model.error_terms
+    held_dir, held_gear = T.uses_direction(every), T.uses_held_gear(every)
+    fields = ([f"{base.name}_state base"] if base.stateful else [])
+    fields += ["double dir  /* direction of the last motion, 0 before any */"] if held_dir else []
+    fields += ["double gear  /* tau_g - tau_ext at the last moving sample [Nm] */"] if held_gear else []
+    stateful = bool(fields)
     code = [base.code]
-    body = [f"    const double p = {base.step('&s->base')};"]
-    if model.terms:
-        body.append("    double v, acc = 0.0;")
-    if held:
+    body = [f"    const double p = {base.step('&s->base')};", "    double v, acc = 0.0, err = 0.0;"]
+    if held_dir or held_gear:
         qd = ctx.signal("qd")
-        body += [f"    if ({qd} != 0.0) s->dir = {ctx.sgn}({qd});", "    const double dir = s->dir;"]
-    for spec, c in zip(model.terms, model.coef):
-        body += [f"    /* {comment(spec['name'])} */", f"    {T.term(spec, ctx)}",
-                 f"    acc += {num(c)} * v;"]
-    body.append("    return p + acc;" if model.terms else "    return p;")
-    if fields:
-        inits = ([base.init("&s->base")] if base.stateful else []) + (["s->dir = 0.0;"] if held else [])
+        updates = ([f"s->dir = {ctx.sgn}({qd});"] if held_dir else []) + (
+            [f"s->gear = {ctx.signal('tau_g')} - {ctx.signal('tau_ext')};"] if held_gear else [])
+        body.append(f"    if ({qd} != 0.0) {{ {' '.join(updates)} }}")
+        body += ["    const double dir = s->dir;"] if held_dir else []
+        body += ["    const double gear = s->gear;"] if held_gear else []
+    for terms, coef, sum_ in ((model.terms, model.coef, "acc"), (model.error_terms, model.error_coef, "err")):
+        for spec, c in zip(terms, coef):
+            body += [f"    /* {comment(spec['name'])} */", f"    {T.term(spec, ctx)}", f"    {sum_} += {num(c)} * v;"]
+    body += ["    (void)v;", "    *error = err;", "    return p + acc;"]
+    if stateful:
+        inits = ([base.init("&s->base")] if base.stateful else []) + (["s->dir = 0.0;"] if held_dir else []) + (
+            ["s->gear = 0.0;"] if held_gear else [])
         code += _state(name, fields)
-        code += [f"static inline void {name}_init({name}_state *s) {{ {' '.join(inits)} }}", "",
-                 f"static inline double {name}_step({name}_state *s, const {ctx.in_type} *in) {{"]
-    else:
-        code.append(f"static inline double {name}_step(const {ctx.in_type} *in) {{")
-    code += [*body, "}", ""]
-    return Part(name, "\n".join(code), stateful=bool(fields))
+        code += [f"static inline void {name}_init({name}_state *s) {{ {' '.join(inits)} }}", ""]
+    part = Part(name, "", stateful=stateful, parts=True)
+    code += [_signature(name, "step_parts", ctx, stateful, ", double *error"), *body, "}", "",
+             _signature(name, "step", ctx, stateful), "    double err;", f"    const double f = {part.step_parts('s', '&err')};",
+             "    return f + err;", "}", ""]
+    part.code = "\n".join(code)
+    return part

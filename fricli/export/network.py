@@ -19,11 +19,12 @@ from fricli.export.c import array, num
 from fricli.nn import activations as acts
 
 
-EXP_TABLE = 32     # e^u = 2^(-m/32) e^r: table of 2^(-j/32) and of 2^-q
+EXP_TABLE = 256    # e^u = 2^(-m/256) e^r: table of 2^(-j/256) and of 2^-q
+EXP_DEGREE = 4     # Taylor polynomial of e^r, |r| <= ln2/512: error below 4e-17
 
 
 def _exp_tables() -> list[str]:
-    """Tables for ``_elu``: 2^(-j/32) for j < 32, and 2^-q for q up to 40 / ln2."""
+    """Tables for ``_elu``: 2^(-j/256) for j < 256, and 2^-q for q up to 40 / ln2."""
     top = int(40.0 / math.log(2.0)) + 2
     fractions = [2.0 ** (-j / EXP_TABLE) for j in range(EXP_TABLE)]
     return [f"    static const double EXP_T[{EXP_TABLE}] = {array(fractions, 4)};",
@@ -33,13 +34,13 @@ def _exp_tables() -> list[str]:
 def _elu(act, unit: str) -> str:
     """max(e^u - 1, v) with u = min(v, 0), as acts.ELU computes it, without a branch (the sign of
     a unit's input is unpredictable) or a library call: u clamped at -40 (below, e^u - 1 rounds
-    to -1 all the same), u = -(m/32) ln2 + r with |r| <= ln2/64, e^u = 2^-(m/32) (tables) times
-    the Taylor polynomial of e^r of degree 6: relative error about 1e-16."""
+    to -1 all the same), u = -(m/256) ln2 + r with |r| <= ln2/512, e^u = 2^-(m/256) (tables) times
+    the Taylor polynomial of e^r of degree 4: relative error about 1e-16."""
     shift = EXP_TABLE.bit_length() - 1
     return ("{ double u_ = v < 0.0 ? v : 0.0; u_ = u_ > -40.0 ? u_ : -40.0; "
             f"const int m_ = (int)(-u_ * {num(EXP_TABLE / math.log(2.0))} + 0.5); "
             f"const double r_ = (u_ + m_ * {num(_LN2_HI)}) + m_ * {num(_LN2_LO)}; "
-            f"const double e = EXP_P[m_ >> {shift}] * (EXP_T[m_ & {EXP_TABLE - 1}] * {_taylor('r_')}) - 1.0; "
+            f"const double e = EXP_P[m_ >> {shift}] * (EXP_T[m_ & {EXP_TABLE - 1}] * {_taylor('r_', EXP_DEGREE)}) - 1.0; "
             "v = e > v ? e : v; }")
 
 
@@ -50,7 +51,7 @@ def _taylor(r: str, degree: int = 6) -> str:
     return poly
 
 
-def _split(x: float, zero_bits: int = 12) -> tuple[float, float]:
+def _split(x: float, zero_bits: int = 16) -> tuple[float, float]:
     """x = hi + lo with the low ``zero_bits`` bits of hi's significand zero (m * hi is exact)."""
     bits = np.array(x, dtype=np.float64).view(np.int64) & ~np.int64((1 << zero_bits) - 1)
     hi = float(bits.view(np.float64))
@@ -83,7 +84,7 @@ def _tanh(act, unit: str) -> str:
     return "v = tanh(v);"
 
 
-BLOCK = 10   # units whose sums a layer accumulates together (in registers)
+BLOCK = 30   # units whose sums a layer accumulates together (in registers: 15 SSE2 pairs)
 
 ACTIVATIONS = {"elu": _elu, "sigmoid": _sigmoid, "jump": _jump, "identity": _identity,
                "softplus": _softplus, "tanh": _tanh}
@@ -140,9 +141,10 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
     return lines
 
 
-def dense(net, name: str) -> str:
-    """C definition of ``static inline double <name>(const double *x)`` for ``net``."""
-    if net.n_out != 1:
+def dense(net, name: str, output: int | None = None) -> str:
+    """C definition of ``static inline double <name>(const double *x)`` for ``net``: its single
+    output, or output number ``output`` of several."""
+    if output is None and net.n_out != 1:
         raise ModelFileError(f"cannot export a network with {net.n_out} outputs")
     weights = [np.asarray(w, dtype=np.float64) for w in net.weights]
     lines = [f"static inline double {name}(const double *x) {{", "    int i, j;", "    double y;"]
@@ -152,13 +154,11 @@ def dense(net, name: str) -> str:
     for i, ((units, act), w) in enumerate(zip(net.hidden, weights)):
         lines += _layer(i, w, act, src, fan_in)
         src, fan_in = f"h{i}", units
-    last = weights[-1][0]
+    last = weights[-1][output or 0]
     lines += [f"    static const double WO[{len(last)}] = {array(last, 6)};",
               f"    y = WO[{fan_in}];",
               f"    for (i = 0; i < {fan_in}; ++i) y += WO[i] * {src}[i];"]
     for k in range(net.n_skip):
         lines.append(f"    y += WO[{fan_in + 1 + k}] * x[{net.n_in + k}];")
-    if not net.hidden:
-        pass
     lines += ["    (void)i; (void)j;", "    return y;", "}", ""]
     return "\n".join(lines)

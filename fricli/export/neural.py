@@ -3,14 +3,19 @@ the dense network, and the output scaling
 
     tau_f = y_mean + y_scale * net((features - x_mean) / x_scale)     [Nm]
 
-with the velocity input asinh(qd / v0) when the model has a velocity scale. Stateless.
+with the velocity input asinh(qd / v0) when the model has a velocity scale; and of the
+dissipative network (``fricli.models.dissipative``), its first output through the head of
+``fricli.nn.heads``. Stateless.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from fricli.errors import ModelFileError
 from fricli.export import network
 from fricli.export.c import Context, Part, emitter, num
+from fricli.nn import activations as acts
 
 
 def feature(model, name: str, ctx: Context) -> str:
@@ -35,4 +40,25 @@ def neural(model, name: str, ctx: Context) -> Part:
     for i, feat in enumerate(names):
         lines.append(f"    x[{i}] = ({feature(model, feat, ctx)} - {num(mean[i])}) * {num(1.0 / scale[i])};")
     lines += [f"    return {name}_net(x) * {num(model.y_std_.scale_[0])} + {num(model.y_std_.mean_[0])};", "}", ""]
+    return Part(name, "\n".join(lines), stateful=False)
+
+
+@emitter("dissipative")
+def dissipative(model, name: str, ctx: Context) -> Part:
+    """tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale), r0 the
+    network's first output for (u, sign(qd)); b1, the bias of its second, is a constant."""
+    if model.net_ is None:
+        raise ModelFileError("cannot export a network that is not fitted")
+    b1 = float(model.net_.weights[-1][1, -1])
+    qd, tau_g = ctx.signal("qd"), ctx.signal("tau_g")
+    lines = [network.dense(model.net_, f"{name}_net", output=0),
+             f"static inline double {name}_step(const {ctx.in_type} *in) {{",
+             f"    const double qd = {qd};",
+             "    double x[2], r0;",
+             f"    x[0] = (asinh(fabs(qd) / {num(model.v0_)}) - {num(model.u_mean_)}) / {num(model.u_scale_)};",
+             f"    x[1] = {ctx.sgn}(qd);",
+             f"    r0 = {name}_net(x);",
+             "    r0 = log1p(exp(-fabs(r0))) + (r0 > 0.0 ? r0 : 0.0);   /* softplus(r0) */",
+             f"    r0 = r0 + {num(acts.softplus(np.float64(b1)))} * (fabs({tau_g}) / {num(model.g_scale_)});",
+             f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
     return Part(name, "\n".join(lines), stateful=False)

@@ -2,7 +2,8 @@
 
 A term is a product of factors; ``FACTORS`` maps each factor kind to a function
 (factor, context) -> C expression. The held direction of motion is the variable ``dir``
-(updated before the terms, as ``Columns.direction``) and the base prediction ``p``.
+(updated before the terms, as ``Columns.direction``), the held gear torque ``gear`` (as
+``Columns.held_gear``) and the base prediction ``p``.
 A new factor kind needs one entry here.
 """
 
@@ -19,6 +20,9 @@ FACTORS = {
     "abs": lambda f, ctx: f"fabs({ctx.signal(f['name'])})",
     "gear": lambda f, ctx: f"({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
     "absgear": lambda f, ctx: f"fabs({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
+    "payloadgear": lambda f, ctx: (f"(fabs({ctx.signal('tau_g')} - {ctx.signal('tau_ext')}) - "
+                                   f"fabs({ctx.signal('tau_g')}))"),
+    "heldgear": lambda f, ctx: "gear",
     "sign": lambda f, ctx: "dir",
     "moving": lambda f, ctx: "fabs(dir)",
     "pos": lambda f, ctx: "(dir > 0.0 ? 1.0 : 0.0)",
@@ -32,6 +36,10 @@ HELD_DIRECTION = ("sign", "moving", "pos")   # factors that read the held direct
 
 def uses_direction(terms: list[dict]) -> bool:
     return any(f["f"] in HELD_DIRECTION for term in terms for f in term["factors"])
+
+
+def uses_held_gear(terms: list[dict]) -> bool:
+    return any(f["f"] == "heldgear" for term in terms for f in term["factors"])
 
 
 def term(spec: dict, ctx: Context) -> str:

@@ -60,8 +60,11 @@ class DissipativeFriction(FrictionModel):
     def __init__(self, *, hidden_sizes=(30, 30), activation: str = "elu", steps: int | None = 50_000,
                  epochs: int | None = None, lr: float = 0.01, batch_size: int = 0, eval_every: int | None = None,
                  units: dict | None = None, velocity_scale: float | str = "auto",
-                 presliding_speed: float | str = "auto"):
+                 presliding_speed: float | str = "auto", schedule: str = "constant", patience: int | None = None,
+                 precision: str = "single"):
+        self.precision = precision
         self.hidden_sizes, self.activation = tuple(hidden_sizes), activation
+        self.schedule, self.patience = schedule, patience
         self.steps, self.epochs, self.lr, self.batch_size = steps, epochs, lr, batch_size
         self.eval_every, self.units = eval_every, dict(units or {})
         self.velocity_scale, self.presliding_speed = velocity_scale, presliding_speed
@@ -123,7 +126,8 @@ class DissipativeFriction(FrictionModel):
             xv = self._rows(val_sig)
             tv = (np.asarray(val_target, dtype=np.float64) / self.y_scale_)[None, :]
         trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
-                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval)
+                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval,
+                          schedule=self.schedule, patience=self.patience)
         trainer.fit(net, x, y, xv, tv, rng=rng)
         self.net_ = net
         self.history_train_, self.history_val_ = trainer.history_train_, trainer.history_val_
@@ -153,8 +157,12 @@ class DissipativeFriction(FrictionModel):
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
         """y_scale * head output (n,) in chunks of PREDICT_CHUNK rows on two threads (one BLAS
-        thread each, so the figures do not depend on the machine); ``sliding``: c = 1."""
+        thread each, so the figures do not depend on the machine); ``sliding``: c = 1. The network
+        runs in float32 (``precision="single"``) or float64 (``"double"``, as exported C code)."""
         n = len(signals["qd"]) if "qd" in signals else 0
+        if self.precision not in ("single", "double"):
+            raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
+        net = self.net_.astype(np.float64) if self.precision == "double" else self.net_
         out = np.empty(n, dtype=np.float64)
         cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
         pieces = list(zip(cuts[:-1], cuts[1:]))
@@ -166,9 +174,9 @@ class DissipativeFriction(FrictionModel):
                 if sliding:
                     x[2] = 1.0
                 if ws is None or ws.n != stop - start:
-                    ws = self.net_.workspace(stop - start)
+                    ws = net.workspace(stop - start)
                 ws.set_inputs(x)
-                np.multiply(self.net_.forward(ws)[0], self.y_scale_, out=out[start:stop])
+                np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
 
         with single_threaded():
             if len(pieces) < 4:
@@ -185,7 +193,8 @@ class DissipativeFriction(FrictionModel):
     def get_params(self) -> dict:
         params = {"hidden_sizes": list(self.hidden_sizes), "activation": self.activation,
                   "training": {"steps": self.steps, "epochs": self.epochs, "lr": self.lr,
-                               "batch_size": self.batch_size, "eval_every": self.eval_every},
+                               "batch_size": self.batch_size, "eval_every": self.eval_every,
+                               "schedule": self.schedule, "patience": self.patience},
                   "velocity_scale": self.velocity_scale, "presliding_speed": self.presliding_speed,
                   "units": self.units}
         if self.net_ is not None:
@@ -210,7 +219,8 @@ class DissipativeFriction(FrictionModel):
                     steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
                     batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"),
                     velocity_scale=params.get("velocity_scale", "auto"),
-                    presliding_speed=params.get("presliding_speed", "auto"))
+                    presliding_speed=params.get("presliding_speed", "auto"),
+                    schedule=tr.get("schedule", "constant"), patience=tr.get("patience"))
         scales = params["scales"]
         for key in cls._SCALARS:
             value = scales[key]

@@ -19,7 +19,6 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg.blas import dtbsv
 
 from fricli import physics
 from fricli.errors import DataError
@@ -28,15 +27,6 @@ from fricli.models.base import FrictionModel
 
 CHUNK = 1 << 16           # rows per internal block: keeps the temporaries in cache
 _G_MIN = 1e-12            # floor on the Stribeck curve g [Nm], so the bristle rate stays finite
-
-
-class _Buffers:
-    """Work arrays reused across the blocks of one ``predict`` call."""
-
-    def __init__(self, n: int):
-        self.work = [np.empty(n) for _ in range(5)]
-        self.band = np.empty((2, n), order="F")   # dtbsv band storage; row 0 unused (unit diagonal)
-        self.band[0] = 1.0
 
 
 STATIC = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")
@@ -183,7 +173,7 @@ class LuGreModel(FrictionModel):
         if n == 0:
             return out, state
         z, t_last = (None, None) if state is None else state
-        buf = _Buffers(min(n, CHUNK))
+        buf = physics.Buffers(min(n, CHUNK))
         for i in range(0, n, CHUNK):
             sl = slice(i, i + CHUNK)
             ts = t[sl]
@@ -194,74 +184,14 @@ class LuGreModel(FrictionModel):
         return out, (z, t_last)
 
     def _chunk(self, v, tau_g, temp, dt, z0, out, buf) -> float:
-        """One block of ``predict``, in place into ``out``; returns the last bristle state.
-
-        Same equations as ``physics.lugre_friction`` (exact zero-order-hold bristle update,
-        solved as a bidiagonal system with BLAS dtbsv), with reused buffers.
-        """
-        n = len(v)
-        w1, w2, w3, w4, w5 = (w[:n] for w in buf.work)
-        band = buf.band[:, :n]
-        absv = np.abs(v, out=w1)
-        with np.errstate(divide="ignore"):
-            np.log(absv, out=w2)                      # |v| = 0 gives -inf, hence E = 1
-        w2 -= math.log(self.vs)
-        w2 *= self.delta
-        np.exp(w2, out=w2)
-        np.negative(w2, out=w2)
-        shape = np.exp(w2, out=w2)                    # E = exp(-|v/vs|^delta)
-        if self.asymmetric or self.thermal:
-            fc, fs, fv = self._levels(v, tau_g, temp)
-            g = np.multiply(np.subtract(fs, fc), shape, out=w3)
-            g += fc
-        elif self.loaded and tau_g is not None:
-            fv = self.fv
-            load = np.abs(tau_g, out=w3)
-            np.multiply(load, self.ks - self.kc, out=w4)
-            w4 += self.fs - self.fc
-            w4 *= shape                               # (Fs(tau_l) - Fc(tau_l)) E
-            load *= self.kc
-            load += self.fc
-            load += w4
-            g = load
-        else:
-            fv = self.fv
-            shape *= self.fs - self.fc
-            shape += self.fc
-            g = shape
+        """One block of ``predict``, in place into ``out``; returns the last bristle state."""
+        fc, fs, fv = self._levels(v, tau_g, temp)
+        g = physics.stribeck_shape(v, self.vs, self.delta, out=out)
+        g *= np.subtract(fs, fc)
+        g += fc
         np.maximum(g, _G_MIN, out=g)
-        rate = np.divide(absv, g, out=w1)
-        rate *= self.sigma0                           # sigma0 |v| / g  [1/s]
-        x = np.multiply(rate, dt, out=w4)
-        np.minimum(x, 700.0, out=x)
-        np.negative(x, out=x)
-        a = np.exp(x, out=x)
-        zss = np.sign(v, out=w5)
-        zss *= g
-        zss *= 1.0 / self.sigma0                      # steady-state deflection
-        b = out
-        np.subtract(1.0, a, out=b)
-        b *= zss
-        if z0 is None:
-            z0 = float(zss[0])
-        b[0] += a[0] * z0
-        np.negative(a[1:], out=band[1, :-1])
-        z = dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
-        if not np.shares_memory(z, out):
-            out[:] = z
-        z_last = float(out[-1])
-        # tau = sigma0 z + sigma1 (v - rate z) + Fv v = (sigma0 - sigma1 rate) z + sigma1 v + Fv v
-        rate *= -self.sigma1
-        rate += self.sigma0
-        rate *= out
-        np.multiply(v, self.sigma1, out=out)
-        out += rate
-        if np.ndim(fv):
-            np.multiply(fv, v, out=w2)
-            out += w2
-        else:
-            out += fv * v
-        return z_last
+        return physics.lugre_friction(v, g, fv, self.sigma0, self.sigma1, dt, z0,
+                                      out=out, buffers=buf)[1]
 
     def required_inputs(self) -> set[str]:
         need = {"t", "qd"}

@@ -76,7 +76,8 @@ class NeuralFriction(FrictionModel):
     def __init__(self, *, inputs=("tau_g", "qd"), hidden=((30, "elu"), (30, "elu")), skip=(),
                  steps: int | None = 50_000, epochs: int | None = None, lr: float = 0.01,
                  batch_size: int = 0, eval_every: int | None = None, units: dict | None = None,
-                 velocity_scale: float | str | None = None, precision: str = "single"):
+                 velocity_scale: float | str | None = None, schedule: str = "constant",
+                 patience: int | None = None, precision: str = "single"):
         self.inputs, self.skip = tuple(inputs), tuple(skip)
         self.precision = precision
         if not (velocity_scale is None or velocity_scale == "auto"
@@ -90,6 +91,7 @@ class NeuralFriction(FrictionModel):
         self.hidden = tuple((int(n), a) for n, a in hidden)
         self.steps, self.epochs, self.lr, self.batch_size = steps, epochs, lr, batch_size
         self.eval_every, self.units = eval_every, dict(units or {})
+        self.schedule, self.patience = schedule, patience
         self.net_: Network | None = None
 
     # ------------------------------------------------------------------ fitting
@@ -137,7 +139,8 @@ class NeuralFriction(FrictionModel):
             xv = self.x_std_.transform(self._features(val_sig))
             tv = self.y_std_.transform(np.asarray(val_target, dtype=np.float64)[None, :])
         trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
-                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval)
+                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval,
+                          schedule=self.schedule, patience=self.patience)
         trainer.fit(net, self.x_std_.transform(x), self.y_std_.transform(y), xv, tv, rng=rng)
         self.net_ = net
         self.history_train_, self.history_val_ = trainer.history_train_, trainer.history_val_
@@ -196,7 +199,8 @@ class NeuralFriction(FrictionModel):
         params = {"inputs": list(self.inputs), "skip": list(self.skip),
                   "hidden": [[n, a if isinstance(a, (str, dict)) else a.spec()] for n, a in self.hidden],
                   "training": {"steps": self.steps, "epochs": self.epochs, "lr": self.lr,
-                               "batch_size": self.batch_size, "eval_every": self.eval_every},
+                               "batch_size": self.batch_size, "eval_every": self.eval_every,
+                               "schedule": self.schedule, "patience": self.patience},
                   "units": self.units}
         if self.velocity_scale is not None:
             # only models with a transformed velocity carry the key (older files read as without)
@@ -222,7 +226,8 @@ class NeuralFriction(FrictionModel):
         tr = params.get("training", {})
         model = cls(inputs=params["inputs"], skip=params.get("skip", ()), hidden=[tuple(h) for h in params["hidden"]],
                     steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
-                    batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"))
+                    batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"),
+                    schedule=tr.get("schedule", "constant"), patience=tr.get("patience"))
         velocity = params.get("velocity")
         if velocity is not None:
             v0 = velocity.get("v0")
@@ -271,7 +276,8 @@ class NeuralFriction(FrictionModel):
         lines.append(f"  {self.net_.n_params} parameters")
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
-        lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
+        lr = f"lr {self.lr:g}" + (", cosine decay to 0" if self.schedule == "cosine" else "")
+        lines.append(f"  trained with Adam ({lr}) for {how} on {self.n_train_} samples "
                      f"({self.n_val_} for validation); weights kept from step {self.best_step_}")
         for i, name in enumerate(self.inputs + self.skip):
             lines.append(f"  input {self._input_label(name)}: mean {self.x_std_.mean_[i]:.4g}, scale {self.x_std_.scale_[i]:.4g}")

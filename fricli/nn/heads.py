@@ -99,6 +99,12 @@ class HeadedNetwork(Network):
         self.theta[self.frozen] = 0
         return self
 
+    def astype(self, dtype) -> "HeadedNetwork":
+        """A copy computing in ``dtype`` (float32 weights are exact in float64)."""
+        net = HeadedNetwork(self.n_in, self.hidden, self.head, dtype=dtype, constant_outputs=self.constant_outputs)
+        net.theta[...] = self.theta
+        return net
+
     def workspace(self, n: int) -> HeadedWorkspace:
         return HeadedWorkspace(self, n)
 

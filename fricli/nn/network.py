@@ -113,20 +113,30 @@ class Network:
 
     def backward(self, ws: "Workspace", dy: np.ndarray, grad: np.ndarray) -> None:
         """Write d(loss)/d(theta) into ``grad`` (flat, like theta), given dy = d(loss)/dy
-        (n_out, n) after ``forward`` on the same workspace. ``dy`` may be ``ws.y``."""
-        gw = self.views(grad)
-        upstream = dy
+        (n_out, n) after ``forward`` on the same workspace. ``dy`` may be ``ws.y``.
+
+        With one output, the last hidden layer's gradient is w * (dy d) for the output weights
+        w: ``g`` holds dy d, and w scales the small products made from it instead of g itself."""
+        gw = ws.grad_views(grad)
+        upstream, row_scale = dy, None
         for i in range(len(self.weights) - 1, -1, -1):
             np.matmul(upstream, ws.a[i].T, out=gw[i])
+            if row_scale is not None:
+                gw[i] *= row_scale[:, None]
             if i == 0:
                 break
             units = self.hidden[i - 1][0]
             g = ws.g[i - 1]
-            if upstream.shape[0] == 1:           # one output: an outer product, cheaper as a broadcast
-                np.multiply(self.weights[i][0, :units, None], upstream, out=g)
+            if upstream.shape[0] == 1 and row_scale is None:
+                np.multiply(ws.d[i - 1], upstream, out=g)
+                row_scale = self.weights[i][0, :units]
             else:
-                np.matmul(self.weights[i][:, :units].T, upstream, out=g)
-            np.multiply(g, ws.d[i - 1], out=g)
+                w = self.weights[i][:, :units]
+                if row_scale is not None:
+                    w = w * row_scale[:, None]
+                    row_scale = None
+                np.matmul(w.T, upstream, out=g)
+                np.multiply(g, ws.d[i - 1], out=g)
             upstream = g
 
     def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
@@ -171,6 +181,13 @@ class Workspace:
         self.x = self.a[0][:net.n_in]
         self.s = self.a[-1][rows[-1] + 1:]
         self.n_in = net.n_in
+        self._net, self._grad, self._grad_views = net, None, None
+
+    def grad_views(self, grad: np.ndarray) -> list[np.ndarray]:
+        """``net.views(grad)``, kept while the same gradient vector comes back."""
+        if grad is not self._grad:
+            self._grad, self._grad_views = grad, self._net.views(grad)
+        return self._grad_views
 
     def set_inputs(self, x: np.ndarray) -> None:
         """Copy inputs (n_in + n_skip, n) into place."""

@@ -18,12 +18,12 @@ import json
 import math
 
 import numpy as np
-import pyarrow as pa
-
-from fricli import logs, physics
+from fricli import lazy, logs, physics
 from fricli.logs import table_from_arrays
 from fricli.sim import effects as fx
 from fricli.sim import joints, trajectories
+
+pa = lazy.module("pyarrow")
 
 SCENARIOS = ("base", "extended", "adapt", "daily")
 LOADS = ("none", "sym", "asym")
