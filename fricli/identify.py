@@ -5,20 +5,24 @@ Two stages, both with ``scipy.optimize.least_squares`` (trf, bounds, ``x_scale='
 1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
    friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
    grid of (vs, delta) the curve is linear in (Fc, Fs, kc, ks, Fv), so each grid point is one
-   linear least-squares solve; the best point starts a bounded nonlinear fit (log-parameters
-   for Fc, Fs, vs, delta; Fv, kc, ks >= 0). Parameters the data cannot determine are fixed and
-   reported in ``notes_``: kc = ks = 0 without a varying tau_g, Fs = Fc with fewer than
+   linear least-squares solve; the best point in the physical order starts a bounded nonlinear
+   fit (log-parameters for Fc, vs, delta; Fs - Fc, Fv, kc, ks >= 0). Parameters the data
+   cannot determine are fixed and reported in ``notes_``: kc = ks = 0 without a varying tau_g, Fs = Fc with fewer than
    ``MIN_STRIBECK_LEVELS`` steady speed levels.
 2. Bristle parameters sigma0, sigma1 by simulating the bristle state over the whole log: a
    coarse grid, then a bounded fit in x = (log sigma0, log sigma1/sigma0) with the micro-damping
    time constant sigma1/sigma0 at most ``TAU1_MAX``. With ``refine`` all parameters are then
-   fitted jointly on the whole log.
+   fitted jointly on the whole log; a refinement that does not converge keeps its best iterate
+   (or the two-stage estimate) with a note.
 
 Steady-state samples (``steady_state_mask``): the velocity has kept its sign and stayed within
 ``rel_tol``*|v| (plus a small absolute tolerance from the velocity noise) from a hold time before
 the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
 at that speed, whichever is longer. This keeps samples away from reversals and accelerations,
-where bristle dynamics and inertia errors would bias the static curve.
+where bristle dynamics and inertia errors would bias the static curve. Logs of continuous
+excitation have few such holds; when the log has tau_dyn (the inertia is out of the target),
+every row far enough past a velocity reversal samples the static curve (``settled_mask``).
+The fit keeps Fs >= Fc > 0 and Fv >= 0 (Fs is carried as the excess Fs - Fc >= 0).
 """
 
 from __future__ import annotations
@@ -59,8 +63,7 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
     speed = np.abs(qd)
     top = float(np.percentile(speed, 99))
     if abs_tol is None:
-        jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
-        abs_tol = max(1e-3 * top, 4 * jitter)
+        abs_tol = _noise_tol(qd, top)
     with np.errstate(divide="ignore"):
         need = np.maximum(hold, travel / speed)            # hold required at each row [s]
     level = np.clip(np.ceil(np.log2(need / hold) - 1e-9), 0, 4).astype(int)
@@ -79,6 +82,38 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
         ok[n - after:] = False
         mask |= rows & ok
     return mask & (speed > max(abs_tol, 1e-3 * top))
+
+
+def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
+                 abs_tol: float | None = None) -> np.ndarray:
+    """Rows (n,) bool where the joint has moved at least ``settle`` [rad or m] since the last
+    velocity reversal (the bristles have reached their steady deflection, so the friction is
+    on the static curve whatever the acceleration) and |qd| exceeds the noise level ``abs_tol``
+    (default as ``steady_state_mask``). For continuous excitation without plateaus."""
+    n = len(qd)
+    if n < 3:
+        return np.zeros(n, dtype=bool)
+    speed = np.abs(qd)
+    top = float(np.percentile(speed, 99))
+    if abs_tol is None:
+        abs_tol = _noise_tol(qd, top)
+    moving = speed > abs_tol
+    sign = np.where(moving, np.sign(qd), 0.0)
+    # sign of the last moving row at or before each row: a reversal is a change of it
+    idx = np.where(moving, np.arange(n), 0)
+    np.maximum.accumulate(idx, out=idx)
+    held = sign[idx]
+    start = np.r_[True, held[1:] != held[:-1]]
+    dist = np.r_[0.0, np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))]
+    seg_start = np.where(start, np.arange(n), 0)
+    np.maximum.accumulate(seg_start, out=seg_start)
+    return moving & (held != 0) & (dist - dist[seg_start] >= settle)
+
+
+def _noise_tol(qd: np.ndarray, top: float) -> float:
+    """Velocity tolerance: 1e-3 of the top speed or four times the sample-to-sample noise."""
+    jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
+    return max(1e-3 * top, 4 * jitter)
 
 
 def window_extreme(x: np.ndarray, before: int, after: int, op=np.maximum) -> np.ndarray:
@@ -126,15 +161,19 @@ class _Layout:
                 out.append("ks")
         return out
 
-    _LOG = ("fc", "fs", "vs", "delta")
+    _LOG = ("fc", "vs", "delta")
 
     def encode(self, p: dict) -> np.ndarray:
-        return np.array([math.log(p[k]) if k in self._LOG else p[k] for k in self.names])
+        """fs is carried as the excess fs - fc >= 0, so that Fs >= Fc >= 0 holds by construction."""
+        q = dict(p, fs=max(p["fs"] - p["fc"], 0.0))
+        return np.array([math.log(q[k]) if k in self._LOG else q[k] for k in self.names])
 
     def decode(self, x: np.ndarray, fixed: dict) -> dict:
         p = dict(fixed)
         for k, xi in zip(self.names, x):
             p[k] = math.exp(xi) if k in self._LOG else float(xi)
+        if self.stribeck:
+            p["fs"] = p["fc"] + p["fs"]
         if not self.stribeck:
             p["fs"] = p["fc"]
             p["ks"] = p.get("kc", 0.0)
@@ -143,7 +182,7 @@ class _Layout:
         return p
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = {"delta": math.log(0.2), "fv": 0.0, "kc": 0.0, "ks": 0.0}
+        lo = {"delta": math.log(0.2), "fs": 0.0, "fv": 0.0, "kc": 0.0, "ks": 0.0}
         hi = {"delta": math.log(5.0)}
         return (np.array([lo.get(k, -np.inf) for k in self.names]),
                 np.array([hi.get(k, np.inf) for k in self.names]))
@@ -154,16 +193,26 @@ class LuGreIdentifier:
 
     hold [s], travel [rad or m], rel_tol [-]: the steady-state sample selection
     (``steady_state_mask``);
+    samples: which rows sample the static curve: "steady" (constant-velocity holds), "settled"
+    (every row at least ``settle`` [rad or m] of travel past the last reversal,
+    ``settled_mask``: for continuous excitation) or "auto" ("settled" when the holds cover
+    less than ``min_steady_share`` of the moving rows and the log has ``tau_dyn``, so that the
+    target away from holds is friction only; else "steady");
     refine: after the two stages, fit all parameters jointly on the whole log;
     max_nfev: evaluations allowed per least-squares stage.
 
-    Fitted attributes: ``model_`` (LuGreModel), ``steady_`` (bool mask of the steady rows),
+    Fitted attributes: ``model_`` (LuGreModel), ``steady_`` (bool mask of the rows used for the
+    static curve), ``samples_`` ("steady" or "settled"),
     ``fit_`` (error figures and stage details), ``notes_`` (what could not be identified).
     """
 
     def __init__(self, *, hold: float = 0.2, travel: float = 0.002, rel_tol: float = 0.05,
-                 refine: bool = False, max_nfev: int = 400):
+                 refine: bool = False, max_nfev: int = 400, samples: str = "auto",
+                 settle: float = 0.01, min_steady_share: float = 0.5):
         self.hold = hold
+        self.samples = samples
+        self.settle = settle
+        self.min_steady_share = min_steady_share
         self.travel = travel
         self.rel_tol = rel_tol
         self.refine = refine
@@ -182,14 +231,27 @@ class LuGreIdentifier:
             raise DataError("no samples with negative velocity: identify needs motion in both directions")
         if not (v[moving] > 0).any():
             raise DataError("no samples with positive velocity: identify needs motion in both directions")
+        if self.samples not in ("auto", "steady", "settled"):
+            raise ValueError(f"samples must be 'auto', 'steady' or 'settled', not {self.samples!r}")
         steady = steady_state_mask(sig["t"], v, hold=self.hold, travel=self.travel, rel_tol=self.rel_tol)
+        self.samples_ = self.samples
+        if self.samples == "auto":
+            share = steady.sum() / max(int(moving.sum()), 1)
+            # away from holds the target is static friction only if the inertia has been removed
+            continuous = share < self.min_steady_share and "tau_dyn" in sig
+            self.samples_ = "settled" if continuous else "steady"
+            if self.samples_ == "settled":
+                self.notes_.append(f"constant-velocity holds cover {100 * share:.0f} % of the moving rows: the "
+                                   f"static curve is fitted on every row {self.settle:g} {units.get('q', '')} past a reversal")
+        if self.samples_ == "settled":
+            steady = settled_mask(sig["t"], v, settle=self.settle)
         for name, side in (("positive", v > 0), ("negative", v < 0)):
             count = int((steady & side).sum())
             if count < MIN_STEADY_PER_DIRECTION:
                 raise DataError(
                     f"too few steady-state samples with {name} velocity ({count}, need at least "
                     f"{MIN_STEADY_PER_DIRECTION}): the log needs constant-velocity motion held for at "
-                    f"least {self.hold:g} s (--hold)")
+                    f"least {self.hold:g} s (--hold) or motion past reversals")
         speeds = np.abs(v[steady])
         lo, hi = np.percentile(speeds, [5, 95])
         if hi < 1.5 * lo:
@@ -220,7 +282,7 @@ class LuGreIdentifier:
                 if load is not None:
                     cols += [load * (1 - e), load * e]
                 coef, sse = _linear_fit(np.array(cols), ya)
-                if coef[0] <= 0 or coef[1] <= 0:
+                if coef[0] <= 0 or coef[1] < coef[0] or coef[2] < 0:   # physical order only
                     continue
                 if best is None or sse < best[0]:
                     best = (sse, vs, delta, coef, float(e.max()))
@@ -325,8 +387,19 @@ class LuGreIdentifier:
         lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
         ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement")
-        return decode(res.x), {"nfev": int(res.nfev), "cost": float(res.cost)}
+        start_cost = 0.5 * _sumsq(residual(x0))
+        try:
+            res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement", partial=True)
+        except FitError as exc:
+            self.notes_.append(f"{exc}: kept the two-stage estimate")
+            return params, {"nfev": self.max_nfev, "cost": start_cost, "kept": "two-stage"}
+        p = decode(res.x)
+        if res.status == 0:
+            self.notes_.append(f"joint refinement stopped at {self.max_nfev} evaluations: kept its best iterate")
+        if not res.cost < start_cost:
+            self.notes_.append("joint refinement did not lower the error: kept the two-stage estimate")
+            return params, {"nfev": int(res.nfev), "cost": start_cost, "kept": "two-stage"}
+        return p, {"nfev": int(res.nfev), "cost": float(res.cost)}
 
     # --------------------------------------------------------------------- fit
 
@@ -393,8 +466,9 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     return coef, _sumsq(r)
 
 
-def _least_squares(fun, x0, bounds, max_nfev: int, what: str):
-    """``least_squares`` (trf, x_scale='jac'); failures become FitError."""
+def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False):
+    """``least_squares`` (trf, x_scale='jac'); failures become FitError. With ``partial``, a fit
+    stopped at ``max_nfev`` returns its last (best accepted) iterate instead."""
     from scipy.optimize import least_squares  # imported here: it costs a noticeable part of start-up
 
     try:
@@ -402,7 +476,7 @@ def _least_squares(fun, x0, bounds, max_nfev: int, what: str):
             res = least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
     except ValueError as exc:
         raise FitError(f"fitting the {what} failed: {str(exc).splitlines()[0]}") from None
-    if res.status == 0:
+    if res.status == 0 and not (partial and np.isfinite(res.x).all() and np.isfinite(res.cost)):
         raise FitError(f"fitting the {what} did not converge within {max_nfev} evaluations")
     if res.status < 0 or not np.isfinite(res.x).all() or not np.isfinite(res.cost):
         raise FitError(f"fitting the {what} failed ({res.message})")

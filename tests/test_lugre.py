@@ -233,6 +233,63 @@ def test_few_speed_levels_give_a_coulomb_viscous_fit():
     assert m.fc == pytest.approx(7.0, rel=0.1) and m.fv == pytest.approx(12.0, rel=0.1)
 
 
+def harmonic_signals(seed=0, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, period=50.0, n_harm=14):
+    """A continuous excitation log (sum of n_harm harmonics of 1/period, no constant-velocity
+    holds) made with fricli.physics, as the sweep: gravity amplitude*sin(q), noise on tau_m."""
+    rng = np.random.default_rng(seed)
+    fs_int = rate * sub
+    t = np.arange(int(2 * period * fs_int)) / fs_int
+    w = 2 * np.pi / period * np.arange(1, n_harm + 1)
+    a, b = rng.normal(0, 1, n_harm), rng.normal(0, 1, n_harm)
+    q = (a[:, None] * np.sin(w[:, None] * t) + b[:, None] * np.cos(w[:, None] * t)).sum(0) / w.sum() * 3
+    v = ((a * w)[:, None] * np.cos(w[:, None] * t) - (b * w)[:, None] * np.sin(w[:, None] * t)).sum(0) / w.sum() * 3
+    qdd = np.gradient(v, t)
+    tau_g = amp * np.sin(q)
+    fc = p["fc"] + p["kc"] * np.abs(tau_g)
+    fs = p["fs"] + p["ks"] * np.abs(tau_g)
+    g = physics.stribeck(v, fc, fs, p["vs"], p["delta"])
+    tau_f, _ = physics.lugre_friction(v, g, p["fv"], p["sigma0"], p["sigma1"], physics.intervals(t))
+    k = slice(None, None, sub)
+    sig = {"t": t[k], "q": q[k], "qd": v[k], "qdd": qdd[k], "tau_g": tau_g[k], "tau_dyn": 2.0 * qdd[k],
+           "tau_f_true": tau_f[k]}
+    sig["tau_m"] = sig["tau_g"] + sig["tau_dyn"] + sig["tau_f_true"] + rng.normal(0, noise, len(sig["t"]))
+    return sig
+
+
+def test_identify_on_a_continuous_excitation_log():
+    sig = harmonic_signals(seed=11)
+    steady = steady_state_mask(sig["t"], sig["qd"])
+    assert steady.sum() < 0.5 * len(steady)           # mostly continuous motion, few holds
+    idf = LuGreIdentifier().fit(sig)
+    m = idf.model_
+    assert idf.samples_ == "settled"
+    assert m.fs >= m.fc >= 0 and m.fv >= 0
+    for name in ("fc", "fv"):
+        assert getattr(m, name) == pytest.approx(TRUE[name], rel=0.10), name
+    pred = m.predict(sig)[0]
+    err = np.sqrt(np.mean((pred - sig["tau_f_true"]) ** 2))
+    assert err <= 1.2 * 0.25
+
+
+def test_continuous_log_without_tau_dyn_keeps_the_holds():
+    sig = harmonic_signals(seed=11)
+    del sig["tau_dyn"]                      # the inertia is then part of the target away from holds
+    sig["tau_m"] = sig["tau_m"] - 2.0 * sig["qdd"]
+    assert LuGreIdentifier().fit(sig).samples_ == "steady"
+
+
+def test_refinement_that_does_not_converge_keeps_its_best_estimate():
+    from fricli.identify import _Layout
+    sig = sweep_signals(seed=3)
+    idf = LuGreIdentifier().fit(sig)
+    start = idf.model_.parameters()
+    idf.max_nfev = 1                                             # the joint stage cannot converge
+    params, info = idf._fit_joint(sig, logs.friction_target(sig), start, _Layout(stribeck=True, load=True))
+    assert any("joint refinement" in note for note in idf.notes_)
+    y = logs.friction_target(sig)
+    assert np.sum((LuGreModel(**params).predict(sig)[0] - y) ** 2) <= np.sum((idf.model_.predict(sig)[0] - y) ** 2)
+
+
 @pytest.mark.parametrize("case,needle", [
     ("positive-only", "no samples with negative velocity"),
     ("sine", "too few steady-state samples"),
@@ -249,7 +306,7 @@ def test_unfittable_data_refused(case, needle):
         qd = np.zeros_like(t) if case == "still" else 0.5 * np.cos(6 * t)
         sig = {"t": t, "qd": qd, "tau_m": np.sign(qd) * 7 + 12 * qd}
     with pytest.raises(DataError, match=needle):
-        LuGreIdentifier().fit(sig)
+        LuGreIdentifier(samples="steady" if case == "sine" else "auto").fit(sig)
 
 
 # ---------------------------------------------------------------------------- the command

@@ -27,12 +27,17 @@ def _figures(errs: dict, unit: str) -> str:
               help="Steady state: the velocity must have been constant for at least this long [s].")
 @click.option("--travel", type=click.FloatRange(min=0), default=0.002, show_default=True,
               help="Steady state: ... and over at least this distance [rad or m] (longer holds at slow speeds).")
+@click.option("--samples", type=click.Choice(["auto", "steady", "settled"]), default="auto", show_default=True,
+              help="Rows for the static curve: constant-velocity holds, every row --settle past a reversal "
+                   "(continuous excitation), or settled when holds cover under half of the motion and the log has tau_dyn.")
+@click.option("--settle", type=click.FloatRange(min=0), default=0.01, show_default=True,
+              help="Settled rows: travel since the last velocity reversal [rad or m].")
 @click.option("--refine", is_flag=True, help="Finally fit all parameters jointly on the whole log.")
 @if_changed_option
 @json_flag
 @common
 def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 refine: bool, if_changed: bool, as_json: bool, quiet: bool) -> None:
+                 samples: str, settle: float, refine: bool, if_changed: bool, as_json: bool, quiet: bool) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -57,7 +62,8 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
         raise OutputError(f"cannot write {output}: folder {folder} does not exist")
 
     def fit_one(data, out, job, _model):
-        idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine).fit(data.signals, units=data.units,
+        idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine, samples=samples,
+                              settle=settle).fit(data.signals, units=data.units,
                                                                            axis=data.axis)
         model, fit = idf.model_, idf.fit_
         models.save_for_log(out, model, data, rows_used=len(data), fit=fit, job=job)
