@@ -86,6 +86,17 @@ def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
 _NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix"}
 
 
+def shaping_defaults(command: str) -> dict:
+    """The options of ``command`` that shape the model it writes, at their defaults: the
+    ``options`` of the job record the command makes when none is given (see ``model_job``)."""
+    from fricli.cli import cli
+
+    ctx = click.Context(cli)
+    cmd = cli.get_command(ctx, command)
+    return {p.name: p.get_default(ctx) for p in cmd.params
+            if isinstance(p, click.Option) and p.expose_value and p.name not in _NOT_SHAPING}
+
+
 def if_changed_option(f):
     """--if-changed, for commands that write a model (see ``model_job``)."""
     return click.option("--if-changed", is_flag=True,

@@ -13,23 +13,18 @@ import time
 from fricli import errors, jobs, learning, logs, models
 from fricli.fleet.manifest import Job
 
-# Every option of each command that shapes the model (the command's defaults), see
-# ``fricli.cli.options.model_job``.
-_READING = {"joint": None, "kt": None, "cutoff": logs.DEFAULT_CUTOFF_HZ, "drop_invalid": False}
-DEFAULTS = {
-    "identify": {"hold": 0.2, "travel": 0.002, "refine": False},
-    "train-base": {"arch": "mlp", "hidden": None, "steps": 50_000, "lr": 0.01, "batch_size": 0, "seed": 0,
-                   "val_fraction": 0.2, "no_balance": False, "max_samples": learning.DEFAULT_MAX_SAMPLES,
-                   "velocity_input": "asinh", "velocity_scale": None},
-    "adapt": {"hidden": 30, "epochs": 200, "batch_size": 64, "lr": 0.01, "seed": 0, "val_fraction": 0.2,
-              "max_seconds": None, "min_speed": None},
-}
+
+def defaults(pipeline: str) -> dict:
+    """Every option of the command of the same name that shapes the model, at its default (read
+    from the command itself, so the job records cannot drift apart)."""
+    from fricli.cli.options import shaping_defaults
+
+    return shaping_defaults(pipeline)
 
 
 def options_of(job: Job) -> dict:
     """The job's options over the command's defaults; FricliError for an unknown option."""
-    own = DEFAULTS[job.pipeline]
-    out = {**_READING, **own}
+    out = defaults(job.pipeline)
     for name, value in job.options:
         if name not in out or name == "joint":
             known = ", ".join(sorted(set(out) - {"joint"}))
@@ -48,10 +43,10 @@ def _figures(fit: dict) -> dict:
 def _identify(data, opts: dict, job: dict, output: str) -> dict:
     from fricli.identify import LuGreIdentifier
 
-    idf = LuGreIdentifier(hold=opts["hold"], travel=opts["travel"], refine=opts["refine"])
+    idf = LuGreIdentifier(hold=opts["hold"], travel=opts["travel"], refine=opts["refine"], samples=opts["samples"],
+                          settle=opts["settle"])
     idf.fit(data.signals, units=data.units, axis=data.axis)
-    options = {k: opts[k] for k in ("hold", "travel", "refine")}
-    models.save_for_log(output, idf.model_, data, rows_used=len(data), fit=idf.fit_, identify=options, job=job)
+    models.save_for_log(output, idf.model_, data, rows_used=len(data), fit=idf.fit_, job=job)
     return {"kind": idf.model_.kind, "parameters": idf.model_.parameters(), "errors": _figures(idf.fit_),
             "model": idf.model_}
 
@@ -60,26 +55,20 @@ def _train_base(data, opts: dict, job: dict, output: str) -> dict:
     arch = opts["arch"]
     hidden = tuple(opts["hidden"]) if opts["hidden"] else None
     model, summary = learning.train_base(
-        data, arch=arch, hidden=hidden, steps=opts["steps"], lr=opts["lr"], batch_size=opts["batch_size"],
+        data, arch=arch, hidden=hidden, steps=opts["steps"], schedule=opts["schedule"], patience=opts["patience"],
+        lr=opts["lr"], batch_size=opts["batch_size"],
         seed=opts["seed"], val_fraction=opts["val_fraction"], balance=not opts["no_balance"],
         max_samples=opts["max_samples"], velocity_input=opts["velocity_input"],
         velocity_scale=opts["velocity_scale"])
-    options = {"arch": arch, "hidden": list(hidden or learning.DEFAULT_HIDDEN[arch]), "steps": opts["steps"],
-               "lr": opts["lr"], "batch_size": opts["batch_size"], "val_fraction": opts["val_fraction"],
-               "balance": not opts["no_balance"], "max_samples": opts["max_samples"],
-               "velocity_input": opts["velocity_input"]}
-    if opts["velocity_scale"] is not None:
-        options["velocity_scale"] = opts["velocity_scale"]
     models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
-                        seed=opts["seed"], fit=summary, options=options, job=job)
+                        seed=opts["seed"], fit=summary, job=job)
     return {"kind": arch, "parameters": {}, "errors": _figures(summary.get("log", {})), "model": model}
 
 
 def _adapt(data, opts: dict, job: dict, output: str, base_model, base_meta: dict, base: str) -> dict:
     keys = ("hidden", "epochs", "batch_size", "lr", "val_fraction", "max_seconds", "min_speed")
     model, summary = learning.adapt(base_model, data, **{k: opts[k] for k in keys}, seed=opts["seed"])
-    models.save_for_log(output, model, data, rows_used=summary["rows_used"], seed=opts["seed"], fit=summary,
-                        options={k: opts[k] for k in keys}, job=job,
+    models.save_for_log(output, model, data, rows_used=summary["rows_used"], seed=opts["seed"], fit=summary, job=job,
                         base={"path": base, "kind": base_meta.get("kind"),
                               "provenance": base_meta.get("provenance", {})})
     return {"kind": "residual", "parameters": {}, "errors": _figures(summary.get("moving", {})), "model": model}
