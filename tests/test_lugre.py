@@ -19,6 +19,22 @@ TRUE = dict(fc=7.0, fs=9.0, vs=0.04, delta=1.2, fv=12.0, kc=0.04, ks=0.05, sigma
 STATIC = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")
 
 
+
+def _friction_log(t, q, v, p, amp, sub, noise, rng) -> dict:
+    """Signals of a joint with the extended LuGre friction ``p`` moving as (t, q, v), gravity
+    torque amp sin(q), inertia 2 kg m^2, every ``sub``-th sample, noise [Nm] on tau_m."""
+    qdd = np.gradient(v, t)
+    tau_g = amp * np.sin(q)
+    fc = p["fc"] + p["kc"] * np.abs(tau_g)
+    fs = p["fs"] + p["ks"] * np.abs(tau_g)
+    g = physics.stribeck(v, fc, fs, p["vs"], p["delta"])
+    tau_f, _ = physics.lugre_friction(v, g, p["fv"], p["sigma0"], p["sigma1"], physics.intervals(t))
+    k = slice(None, None, sub)
+    sig = {"t": t[k], "q": q[k], "qd": v[k], "qdd": qdd[k], "tau_g": tau_g[k], "tau_dyn": 2.0 * qdd[k],
+           "tau_f_true": tau_f[k]}
+    sig["tau_m"] = sig["tau_g"] + sig["tau_dyn"] + sig["tau_f_true"] + rng.normal(0, noise, len(sig["t"]))
+    return sig
+
 def sweep_signals(seed=0, levels=None, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, both=True,
                   q_start=-1.2):
     """A constant-velocity sweep log made with fricli.physics (not with the model under test):
@@ -38,17 +54,7 @@ def sweep_signals(seed=0, levels=None, rate=100.0, sub=10, noise=0.25, amp=43.0,
     t = np.arange(len(v)) / fs_int
     # slow levels travel little: shift the position every 7 s so they meet other gravity loads
     q = q_start + np.cumsum(v) / fs_int + (0.4 * np.floor(t / 7.0)) % 2.4
-    qdd = np.gradient(v, t)
-    tau_g = amp * np.sin(q)
-    fc = p["fc"] + p["kc"] * np.abs(tau_g)
-    fs = p["fs"] + p["ks"] * np.abs(tau_g)
-    g = physics.stribeck(v, fc, fs, p["vs"], p["delta"])
-    tau_f, _ = physics.lugre_friction(v, g, p["fv"], p["sigma0"], p["sigma1"], physics.intervals(t))
-    k = slice(None, None, sub)
-    sig = {"t": t[k], "q": q[k], "qd": v[k], "qdd": qdd[k], "tau_g": tau_g[k], "tau_dyn": 2.0 * qdd[k],
-           "tau_f_true": tau_f[k]}
-    sig["tau_m"] = sig["tau_g"] + sig["tau_dyn"] + sig["tau_f_true"] + rng.normal(0, noise, len(sig["t"]))
-    return sig
+    return _friction_log(t, q, v, p, amp, sub, noise, rng)
 
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm",
@@ -243,17 +249,7 @@ def harmonic_signals(seed=0, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, p
     a, b = rng.normal(0, 1, n_harm), rng.normal(0, 1, n_harm)
     q = (a[:, None] * np.sin(w[:, None] * t) + b[:, None] * np.cos(w[:, None] * t)).sum(0) / w.sum() * 3
     v = ((a * w)[:, None] * np.cos(w[:, None] * t) - (b * w)[:, None] * np.sin(w[:, None] * t)).sum(0) / w.sum() * 3
-    qdd = np.gradient(v, t)
-    tau_g = amp * np.sin(q)
-    fc = p["fc"] + p["kc"] * np.abs(tau_g)
-    fs = p["fs"] + p["ks"] * np.abs(tau_g)
-    g = physics.stribeck(v, fc, fs, p["vs"], p["delta"])
-    tau_f, _ = physics.lugre_friction(v, g, p["fv"], p["sigma0"], p["sigma1"], physics.intervals(t))
-    k = slice(None, None, sub)
-    sig = {"t": t[k], "q": q[k], "qd": v[k], "qdd": qdd[k], "tau_g": tau_g[k], "tau_dyn": 2.0 * qdd[k],
-           "tau_f_true": tau_f[k]}
-    sig["tau_m"] = sig["tau_g"] + sig["tau_dyn"] + sig["tau_f_true"] + rng.normal(0, noise, len(sig["t"]))
-    return sig
+    return _friction_log(t, q, v, p, amp, sub, noise, rng)
 
 
 def test_identify_on_a_continuous_excitation_log():

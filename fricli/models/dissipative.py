@@ -38,7 +38,8 @@ import numpy as np
 from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
-from fricli.models.neural import VELOCITY_QUANTILE, _describe_activation
+from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
+                                  training_arrays, training_params)
 from fricli.nn import activations as acts
 from fricli.nn.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
@@ -130,9 +131,7 @@ class DissipativeFriction(FrictionModel):
                           schedule=self.schedule, patience=self.patience)
         trainer.fit(net, x, y, xv, tv, rng=rng)
         self.net_ = net
-        self.history_train_, self.history_val_ = trainer.history_train_, trainer.history_val_
-        self.best_step_, self.steps_, self.eval_every_ = trainer.best_step_, trainer.steps_, trainer.eval_every_
-        self.n_train_, self.n_val_ = x.shape[1], 0 if xv is None else xv.shape[1]
+        record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])
         return self
 
     # ------------------------------------------------------------------ predicting
@@ -200,16 +199,14 @@ class DissipativeFriction(FrictionModel):
         if self.net_ is not None:
             params["network"] = self.net_.spec()
             params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
-            params["fitted"] = {key: int(getattr(self, f"{key}_", 0))
-                                for key in ("steps", "best_step", "eval_every", "n_train", "n_val")}
+            params["fitted"] = training_params(self)
         return params
 
     def get_arrays(self) -> dict[str, np.ndarray]:
         if self.net_ is None:
             return {}
         arrays = {f"W{i}": w.copy() for i, w in enumerate(self.net_.weights)}
-        arrays.update(history_train=np.asarray(self.history_train_, dtype=np.float64),
-                      history_val=np.asarray(self.history_val_, dtype=np.float64))
+        arrays.update(training_arrays(self))
         return arrays
 
     @classmethod
@@ -236,12 +233,7 @@ class DissipativeFriction(FrictionModel):
         if net.theta[net.frozen].any():
             raise ValueError("the load slope depends on the speed")
         model.net_ = net
-        model.history_train_ = arrays.get("history_train", np.empty(0))
-        model.history_val_ = arrays.get("history_val", np.empty(0))
-        fitted = params.get("fitted", {})
-        model.steps_, model.best_step_ = fitted.get("steps", 0), fitted.get("best_step", 0)
-        model.eval_every_ = fitted.get("eval_every", 0)
-        model.n_train_, model.n_val_ = fitted.get("n_train", 0), fitted.get("n_val", 0)
+        load_training(model, params, arrays)
         return model
 
     # ------------------------------------------------------------------ people

@@ -64,6 +64,37 @@ def _source(name: str) -> str:
     return "qd" if name.endswith("(qd)") else name
 
 
+# What a trained network model records about its training (both neural model kinds).
+_FITTED = ("steps", "best_step", "eval_every", "n_train", "n_val")
+
+
+def record_training(model, trainer: Trainer, n_train: int, n_val: int) -> None:
+    """Set the fitted training attributes of ``model`` from a finished ``trainer``."""
+    model.history_train_, model.history_val_ = trainer.history_train_, trainer.history_val_
+    model.best_step_, model.steps_, model.eval_every_ = trainer.best_step_, trainer.steps_, trainer.eval_every_
+    model.n_train_, model.n_val_ = n_train, n_val
+
+
+def training_params(model) -> dict:
+    """The ``fitted`` entry of a trained model's params."""
+    return {key: int(getattr(model, f"{key}_", 0)) for key in _FITTED}
+
+
+def training_arrays(model) -> dict[str, np.ndarray]:
+    """The loss histories (float64) of a trained model, for its arrays."""
+    return {name: np.asarray(getattr(model, f"{name}_", np.empty(0)), dtype=np.float64)
+            for name in ("history_train", "history_val")}
+
+
+def load_training(model, params: dict, arrays: dict) -> None:
+    """Set the fitted training attributes of ``model`` from a model file's params and arrays."""
+    model.history_train_ = arrays.get("history_train", np.empty(0))
+    model.history_val_ = arrays.get("history_val", np.empty(0))
+    fitted = params.get("fitted", {})
+    for key in _FITTED:
+        setattr(model, f"{key}_", fitted.get(key, 0))
+
+
 class NeuralFriction(FrictionModel):
     """A friction model tau_f = y_mean + y_scale * net((inputs - x_mean) / x_scale, skip).
 
@@ -143,9 +174,7 @@ class NeuralFriction(FrictionModel):
                           schedule=self.schedule, patience=self.patience)
         trainer.fit(net, self.x_std_.transform(x), self.y_std_.transform(y), xv, tv, rng=rng)
         self.net_ = net
-        self.history_train_, self.history_val_ = trainer.history_train_, trainer.history_val_
-        self.best_step_, self.steps_, self.eval_every_ = trainer.best_step_, trainer.steps_, trainer.eval_every_
-        self.n_train_, self.n_val_ = x.shape[1], 0 if xv is None else xv.shape[1]
+        record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])
         return self
 
     # ------------------------------------------------------------------ predicting
@@ -207,8 +236,7 @@ class NeuralFriction(FrictionModel):
             params["velocity"] = {"transform": "asinh", "scale": self.velocity_scale, "v0": self.v0_}
         if self.net_ is not None:
             params["network"] = self.net_.spec()
-            params["fitted"] = {key: int(getattr(self, f"{key}_", 0))
-                                for key in ("steps", "best_step", "eval_every", "n_train", "n_val")}
+            params["fitted"] = training_params(self)
         return params
 
     def get_arrays(self) -> dict[str, np.ndarray]:
@@ -216,9 +244,7 @@ class NeuralFriction(FrictionModel):
             return {}
         arrays = {f"W{i}": w.copy() for i, w in enumerate(self.net_.weights)}
         arrays.update(x_mean=self.x_std_.mean_, x_scale=self.x_std_.scale_,
-                      y_mean=self.y_std_.mean_, y_scale=self.y_std_.scale_,
-                      history_train=np.asarray(getattr(self, "history_train_", np.empty(0)), dtype=np.float64),
-                      history_val=np.asarray(getattr(self, "history_val_", np.empty(0)), dtype=np.float64))
+                      y_mean=self.y_std_.mean_, y_scale=self.y_std_.scale_, **training_arrays(self))
         return arrays
 
     @classmethod
@@ -243,12 +269,7 @@ class NeuralFriction(FrictionModel):
         model.y_std_ = Standardizer.from_arrays(arrays["y_mean"], arrays["y_scale"])
         if model.x_std_.mean_.size != len(model.inputs) + len(model.skip) or model.y_std_.mean_.size != 1:
             raise ValueError("standardisation arrays do not match the inputs")
-        model.history_train_ = arrays.get("history_train", np.empty(0))
-        model.history_val_ = arrays.get("history_val", np.empty(0))
-        fitted = params.get("fitted", {})
-        model.steps_, model.best_step_ = fitted.get("steps", 0), fitted.get("best_step", 0)
-        model.eval_every_ = fitted.get("eval_every", 0)
-        model.n_train_, model.n_val_ = fitted.get("n_train", 0), fitted.get("n_val", 0)
+        load_training(model, params, arrays)
         return model
 
     # ------------------------------------------------------------------ people

@@ -120,18 +120,10 @@ class HeadedNetwork(Network):
         if self.constant_outputs:
             grad[self.frozen] = 0
 
-    def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
-        """y (1, n) for inputs and aux rows ``x`` (n_in + n_aux, n)."""
-        n = x.shape[1]
-        out = np.empty((1, n), dtype=self.dtype)
-        ws = None
-        for start in range(0, n, chunk):
-            stop = min(start + chunk, n)
-            if ws is None or ws.n != stop - start:
-                ws = self.workspace(stop - start)
-            ws.set_inputs(x[:, start:stop])
-            out[:, start:stop] = self.forward(ws)
-        return out
+    @property
+    def predict_rows(self) -> int:
+        """The head returns one row, y (1, n); inputs and aux rows are (n_in + n_aux, n)."""
+        return 1
 
     def spec(self) -> dict:
         return {**super().spec(), "head": self.head.spec(), "constant_outputs": list(self.constant_outputs)}

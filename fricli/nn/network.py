@@ -142,7 +142,7 @@ class Network:
     def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
         """Outputs (n_out, n) for inputs ``x`` (n_in + n_skip, n), in chunks of ``chunk`` columns."""
         n = x.shape[1]
-        out = np.empty((self.n_out, n), dtype=self.dtype)
+        out = np.empty((self.predict_rows, n), dtype=self.dtype)
         ws = None
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
@@ -151,6 +151,11 @@ class Network:
             ws.set_inputs(x[:, start:stop])
             out[:, start:stop] = self.forward(ws)
         return out
+
+    @property
+    def predict_rows(self) -> int:
+        """Rows of what ``forward`` returns."""
+        return self.n_out
 
 
 class Workspace:
