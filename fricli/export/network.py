@@ -4,13 +4,15 @@
 single output for the standardised inputs x (n_in inputs, then n_skip inputs that go straight
 to the output layer), in double precision. Weights are function-local const tables (flat), stored
 input-major so the compiler can vectorise over a layer's units. Activations are written by
-the functions in ``ACTIVATIONS`` (C statements turning ``v`` into the unit's output), one per
-activation name, mirroring ``fricli.nn.activations``.
+the functions in ``ACTIVATIONS``, one per activation name, mirroring ``fricli.nn.activations``:
+C statements turning ``v`` into the unit's output, or a list of statements run as successive
+passes over the layer's units, carrying a scratch value ``t`` per unit from pass to pass; only
+the last pass changes ``v``.
 """
 
 from __future__ import annotations
 
-import math
+import re
 
 import numpy as np
 
@@ -19,46 +21,28 @@ from fricli.export.c import array, num
 from fricli.nn import activations as acts
 
 
-EXP_TABLE = 256    # e^u = 2^(-m/256) e^r: table of 2^(-j/256) and of 2^-q
-EXP_DEGREE = 4     # Taylor polynomial of e^r, |r| <= ln2/512: error below 4e-17
+EXP_SQUARINGS = 5   # e^-y = R(y / 2^5)^(2^5), R the (4, 4) Pade approximant of e^-x
 
 
-def _exp_tables() -> list[str]:
-    """Tables for ``_elu``: 2^(-j/256) for j < 256, and 2^-q for q up to 40 / ln2."""
-    top = int(40.0 / math.log(2.0)) + 2
-    fractions = [2.0 ** (-j / EXP_TABLE) for j in range(EXP_TABLE)]
-    return [f"    static const double EXP_T[{EXP_TABLE}] = {array(fractions, 4)};",
-            f"    static const double EXP_P[{top}] = {array([2.0 ** -q for q in range(top)], 4)};"]
+def _elu(act, unit: str) -> list[str]:
+    """max(v, 0) + e^min(v, 0) - 1, as acts.ELU computes it, in three passes of operations a
+    compiler vectorises at -O2 (no branch, table, library call or comparison, any of which keeps
+    it from doing so; short passes keep many units in flight):
 
+    1. z = |v| - v = -2 min(v, 0); w = (z + 80) - |z - 80| = 4 min(-min(v, 0), 40) (below
+       e^-40, e^u - 1 rounds to -1 all the same);
+    2. R = N(-y) / N(y) = e^-y, the (4, 4) Pade approximant, N(x) = 1 + x/2 + 3x^2/28 + x^3/84
+       + x^4/1680, at y = w / 2^7, its powers of two folded into the coefficients;
+    3. e^min(v, 0) = R^(2^5) by squaring; max(v, 0) = v + z / 2.
 
-def _elu(act, unit: str) -> str:
-    """max(e^u - 1, v) with u = min(v, 0), as acts.ELU computes it, without a branch (the sign of
-    a unit's input is unpredictable) or a library call: u clamped at -40 (below, e^u - 1 rounds
-    to -1 all the same), u = -(m/256) ln2 + r with |r| <= ln2/512, e^u = 2^-(m/256) (tables) times
-    the Taylor polynomial of e^r of degree 4: relative error about 1e-16."""
-    shift = EXP_TABLE.bit_length() - 1
-    return ("{ double u_ = v < 0.0 ? v : 0.0; u_ = u_ > -40.0 ? u_ : -40.0; "
-            f"const int m_ = (int)(-u_ * {num(EXP_TABLE / math.log(2.0))} + 0.5); "
-            f"const double r_ = (u_ + m_ * {num(_LN2_HI)}) + m_ * {num(_LN2_LO)}; "
-            f"const double e = EXP_P[m_ >> {shift}] * (EXP_T[m_ & {EXP_TABLE - 1}] * {_taylor('r_', EXP_DEGREE)}) - 1.0; "
-            "v = e > v ? e : v; }")
-
-
-def _taylor(r: str, degree: int = 6) -> str:
-    poly = num(1.0 / math.factorial(degree))
-    for k in range(degree - 1, -1, -1):
-        poly = f"({poly} * {r} + {num(1.0 / math.factorial(k))})"
-    return poly
-
-
-def _split(x: float, zero_bits: int = 16) -> tuple[float, float]:
-    """x = hi + lo with the low ``zero_bits`` bits of hi's significand zero (m * hi is exact)."""
-    bits = np.array(x, dtype=np.float64).view(np.int64) & ~np.int64((1 << zero_bits) - 1)
-    hi = float(bits.view(np.float64))
-    return hi, x - hi
-
-
-_LN2_HI, _LN2_LO = _split(math.log(2.0) / EXP_TABLE)
+    Absolute error below 1e-14 for finite v, and exactly v for v >= 0; NaN stays NaN."""
+    k = 4 * 2 ** EXP_SQUARINGS                     # w = k y
+    a, b = num(3 / 28 / k ** 2), num(1 / 1680 / k ** 4)
+    c, d = num(1 / 84 / k ** 3), num(0.5 / k)
+    return ["{ const double z_ = fabs(v) - v; t = (z_ + 80.0) - fabs(z_ - 80.0); }",
+            f"{{ const double s_ = t * t, e_ = (s_ * {b} + {a}) * s_ + 1.0, o_ = (s_ * {c} + {d}) * t; "
+            "t = (e_ - o_) / (e_ + o_); }",
+            " ".join(["t *= t;"] * EXP_SQUARINGS) + " v = (v + 0.5 * (fabs(v) - v)) + (t - 1.0);"]
 
 
 def _sigmoid(act, unit: str) -> str:
@@ -84,15 +68,10 @@ def _tanh(act, unit: str) -> str:
     return "v = tanh(v);"
 
 
-BLOCK = 30   # units whose sums a layer accumulates together (in registers: 15 SSE2 pairs)
+BLOCK = 16   # most units whose sums a layer accumulates together (8 SSE2 pairs: no spill)
 
 ACTIVATIONS = {"elu": _elu, "sigmoid": _sigmoid, "jump": _jump, "identity": _identity,
                "softplus": _softplus, "tanh": _tanh}
-
-
-def _uses(act, name: str) -> bool:
-    parts = act.parts if isinstance(act, acts.Mixed) else [(0, act)]
-    return any((p.spec() if isinstance(p.spec(), str) else p.spec()["name"]) == name for _, p in parts)
 
 
 def _parts(act, units: int) -> list[tuple[int, int, object]]:
@@ -105,14 +84,20 @@ def _parts(act, units: int) -> list[tuple[int, int, object]]:
     return out
 
 
+def _blocks(units: int) -> list[tuple[int, int]]:
+    """(first unit, count) blocks of at most BLOCK units, of even sizes where possible."""
+    n = -(-units // BLOCK)
+    size = min(BLOCK, -(-units // n) + (-(-units // n) % 2))
+    return [(b, min(size, units - b)) for b in range(0, units, size)]
+
+
 def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
     """C statements of hidden layer i: h<i>[units] from src[fan_in]; w (units, fan_in + 1)."""
     units = w.shape[0]
     table = np.vstack([w[:, :fan_in].T, w[:, fan_in]])   # input-major, bias last
     lines = [f"    static const double W{i}[{(fan_in + 1) * units}] = {array(table, 6)};",
              f"    double h{i}[{units}];"]
-    for b in range(0, units, BLOCK):          # BLOCK units at a time, their sums in registers
-        m = min(BLOCK, units - b)
+    for b, m in _blocks(units):               # a block of units at a time, their sums in registers
         acc = [f"a{k}" for k in range(m)]
         lines += ["    {",
                   "        double " + ", ".join(f"{a} = W{i}[{fan_in * units + b + k}]"
@@ -131,14 +116,44 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
         code = ACTIVATIONS[name](part, f"j - {start}")
         if not code:
             continue
+        lines.append("    {")
         if name == "jump":
-            ks = np.broadcast_to(part.ks, (n,))
-            lines.append(f"    {{ static const double K[{n}] = {array(ks, 10)};")
-        else:
-            lines.append("    {")
-        lines += [f"    for (j = {start}; j < {start + n}; ++j) {{",
-                  f"        double v = h{i}[j];", f"        {code}", f"        h{i}[j] = v;", "    } }"]
+            lines.append(f"    static const double K[{n}] = {array(np.broadcast_to(part.ks, (n,)), 10)};")
+        if isinstance(code, str):
+            lines += [f"    for (j = {start}; j < {start + n}; ++j) {{",
+                      f"        double v = h{i}[j];", f"        {code}", f"        h{i}[j] = v;", "    }"]
+        else:                                 # passes over the units, with a scratch value t per unit
+            lines.append(f"    double t_[{n}];")
+            for k, step in enumerate(code):
+                last = k == len(code) - 1
+                lines += [f"    for (j = {start}; j < {start + n}; ++j) {{",
+                          *([f"        {'double' if last else 'const double'} v = h{i}[j];"]
+                            if re.search(r"\bv\b", step) else []),
+                          f"        double t{'' if k == 0 else f' = t_[j - {start}]'};",
+                          f"        {step}", f"        h{i}[j] = v;" if last else f"        t_[j - {start}] = t;", "    }"]
+        lines.append("    }")
     return lines
+
+
+SUMS = 6   # partial sums of the output layer's dot product (a short chain of additions)
+
+
+def _dot(w: str, x: str, n: int) -> list[str]:
+    """C statements adding the dot product of w[:n] and x[:n] to y, in SUMS partial sums."""
+    k = min(SUMS, n)
+    full = n - n % k
+    acc = [f"s{j}" for j in range(k)]
+    total = acc
+    while len(total) > 1:
+        total = [f"({a} + {b})" for a, b in zip(total[::2], total[1::2])] + total[len(total) - len(total) % 2:]
+    return ["    {",
+            "        double " + ", ".join(f"{a} = 0.0" for a in acc) + ";",
+            f"        for (i = 0; i < {full}; i += {k}) {{",
+            *[f"            {a} += {w}[i + {j}] * {x}[i + {j}];" for j, a in enumerate(acc)],
+            "        }",
+            f"        y += {total[0]};",
+            *[f"        y += {w}[{i}] * {x}[{i}];" for i in range(full, n)],
+            "    }"]
 
 
 def dense(net, name: str, output: int | None = None) -> str:
@@ -148,16 +163,13 @@ def dense(net, name: str, output: int | None = None) -> str:
         raise ModelFileError(f"cannot export a network with {net.n_out} outputs")
     weights = [np.asarray(w, dtype=np.float64) for w in net.weights]
     lines = [f"static inline double {name}(const double *x) {{", "    int i, j;", "    double y;"]
-    if any(_uses(act, "elu") for _, act in net.hidden):
-        lines += _exp_tables()
     src, fan_in = "x", net.n_in
     for i, ((units, act), w) in enumerate(zip(net.hidden, weights)):
         lines += _layer(i, w, act, src, fan_in)
         src, fan_in = f"h{i}", units
     last = weights[-1][output or 0]
     lines += [f"    static const double WO[{len(last)}] = {array(last, 6)};",
-              f"    y = WO[{fan_in}];",
-              f"    for (i = 0; i < {fan_in}; ++i) y += WO[i] * {src}[i];"]
+              f"    y = WO[{fan_in}];", *_dot("WO", src, fan_in)]
     for k in range(net.n_skip):
         lines.append(f"    y += WO[{fan_in + 1 + k}] * x[{net.n_in + k}];")
     lines += ["    (void)i; (void)j;", "    return y;", "}", ""]

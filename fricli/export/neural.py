@@ -58,7 +58,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              f"    x[0] = (asinh(fabs(qd) / {num(model.v0_)}) - {num(model.u_mean_)}) / {num(model.u_scale_)};",
              f"    x[1] = {ctx.sgn}(qd);",
              f"    r0 = {name}_net(x);",
-             "    r0 = log1p(exp(-fabs(r0))) + (r0 > 0.0 ? r0 : 0.0);   /* softplus(r0) */",
+             "    r0 = log(1.0 + exp(-fabs(r0))) + (r0 > 0.0 ? r0 : 0.0);   /* softplus(r0), to 1e-16 absolute */",
              f"    r0 = r0 + {num(acts.softplus(np.float64(b1)))} * (fabs({tau_g}) / {num(model.g_scale_)});",
              f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
     return Part(name, "\n".join(lines), stateful=False)
