@@ -176,12 +176,14 @@ def torch_steps(steps: int) -> int:
 
 
 def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int, width: int,
-                 whole: int = 0) -> None:
+                 whole: int = 0, arch: str = "mlp") -> None:
     """Print the PyTorch steps per second (median over repeats) of the usual training loop.
 
     whole = k > 0: instead, print the wall time [s] of one whole training as train-base runs it:
     Adam with a cosine learning rate from 0.01 to 0 over ``steps`` full-batch steps, the
-    validation loss (xv.npy, tv.npy) every k steps and a copy of the best weights."""
+    validation loss (xv.npy, tv.npy) every k steps and a copy of the best weights; ``arch`` mlp
+    (inputs tau_g, qd) or dissipative (rows u, sign qd, c, g: y = c (softplus(r0) + softplus(b1) g),
+    r0 the network's output, b1 one more parameter, as fricli.nn.heads)."""
     import torch
 
     torch.set_num_threads(threads)
@@ -192,10 +194,27 @@ def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int
         XV = torch.from_numpy(np.ascontiguousarray(np.load(os.path.join(folder, "xv.npy")).T))
         TV = torch.from_numpy(np.ascontiguousarray(np.load(os.path.join(folder, "tv.npy")).T))
 
+        def network():
+            nn = torch.nn
+            body = nn.Sequential(nn.Linear(2, width), nn.ELU(), nn.Linear(width, width), nn.ELU(), nn.Linear(width, 1))
+            if arch == "mlp":
+                return body
+
+            class Dissipative(nn.Module):
+                def __init__(self):
+                    super().__init__()
+                    self.body, self.b1 = body, nn.Parameter(torch.zeros(1))
+
+                def forward(self, x):
+                    r0 = self.body(x[:, :2])
+                    sp = nn.functional.softplus
+                    return x[:, 2:3] * (sp(r0) + sp(self.b1) * x[:, 3:4])
+            return Dissipative()
+
         def train():
             torch.manual_seed(0)
             nn = torch.nn
-            net = nn.Sequential(nn.Linear(2, width), nn.ELU(), nn.Linear(width, width), nn.ELU(), nn.Linear(width, 1))
+            net = network()
             opt = torch.optim.Adam(net.parameters(), lr=0.01)
             loss_fn = nn.MSELoss()
             best, best_state = math.inf, None
@@ -321,26 +340,51 @@ def lugre_loop(v, g, fv, sigma0, sigma1, dt, z0):
 # ---------------------------------------------------------------------------- whole jobs against references
 
 
-def torch_whole_training_s(x, t, xv, tv, steps: int, every: int, threads: int) -> float:
+def torch_whole_training_s(x, t, xv, tv, steps: int, every: int, threads: int, arch: str) -> float:
     """Wall time [s] of one whole train-base-like training in PyTorch (see ``torch_worker``)."""
     with tempfile.TemporaryDirectory() as tmp:
         for name, arr in (("x", x), ("t", t), ("xv", xv), ("tv", tv)):
-            np.save(os.path.join(tmp, f"{name}.npy"), arr)
+            np.save(os.path.join(tmp, f"{name}.npy"), np.asarray(arr, dtype=np.float32))
         cmd = [sys.executable, os.path.abspath(__file__), "--torch-worker", tmp, str(steps), "0", "1", str(threads),
-               "30", str(every)]
+               "30", str(every), arch]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
             raise RuntimeError(f"the PyTorch measurement failed: {proc.stderr.strip()}")
         return float(proc.stdout.split()[-1])
 
 
+def training_rows(log: logs.Log, arch: str, steps: int) -> tuple[np.ndarray, ...]:
+    """(x, t, x_val, t_val): the arrays ``train-base --arch arch`` hands its trainer for ``log``
+    (same row selection, scaling and inputs), caught at the trainer's door."""
+
+    caught = {}
+
+    class Caught(Exception):
+        pass
+
+    def catch(self, net, x, t, x_val=None, t_val=None, rng=None):
+        caught.update(x=net_input(x), t=t, xv=net_input(x_val), tv=t_val)
+        raise Caught
+
+    def net_input(x):
+        return np.ascontiguousarray(x, dtype=np.float32)
+
+    original = Trainer.fit
+    Trainer.fit = catch
+    try:
+        learning.train_base(log, arch=arch, steps=steps)
+    except Caught:
+        pass
+    finally:
+        Trainer.fit = original
+    return caught["x"], caught["t"], caught["xv"], caught["tv"]
+
+
 def bench_train_base(add, tmp: str, size: dict, reps: int, torch, threads: int) -> None:
     """The default ``fricli train-base`` (training time as the command reports it, and the wall
     time of the whole command), against the same training in PyTorch: the same training and
-    validation rows, steps actually run, full batch, learning-rate schedule, validation checks
-    and thread count."""
-    from fricli import training_data
-
+    validation rows, network, head, steps actually run, full batch, learning-rate schedule,
+    validation checks; PyTorch on 1 and on ``threads`` threads (fricli runs one thread at this size)."""
     log = logs.load_log(BASE_LOG)
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
@@ -357,33 +401,27 @@ def bench_train_base(add, tmp: str, size: dict, reps: int, torch, threads: int) 
         wall = statistics.median(r[0] for r in runs)
         return wall, sorted((r[1] for r in runs), key=lambda s: s["seconds"])[len(runs) // 2]
 
-    wall, summary = train()
-    add("train", f"train-base default ({summary['arch']}, {summary['schedule']}, {summary['steps']:,} steps), "
-        "training time", summary["seconds"], "s", "target <= 10")
-    add("train", "train-base default, whole command (wall)", wall, "s")
-    add("train", "train-base default, validation MAE", summary["val"]["mae"], log.units["tau"])
-    if torch is None:
-        return
-    # PyTorch runs the paper's network (tau_g, qd) -> 2 x 30 ELU -> 1: compared with --arch mlp
-    _, summary = train("--arch", "mlp")
-    train_s, steps = summary["seconds"], summary["steps"]
-    add("train", f"train-base --arch mlp ({summary['schedule']}, {steps:,} steps), training time", train_s, "s")
-    sig = log.signals
-    speed = np.abs(sig["qd"])
-    sel = training_data.select(sig["qd"], val_fraction=0.2, max_samples=learning.DEFAULT_MAX_SAMPLES, balance=True,
-                               rng=np.random.default_rng(0), keep=speed > training_data.LOW * float(speed.max()))
-    target = logs.friction_target(sig)
-    xs = Standardizer().fit(np.stack([sig["tau_g"][sel.train], sig["qd"][sel.train]]))
-    ys = Standardizer().fit(target[sel.train][None, :])
-
-    def arrays(rows):
-        return xs.transform(np.stack([sig["tau_g"][rows], sig["qd"][rows]])), ys.transform(target[rows][None, :])
-    (x, t), (xv, tv) = arrays(sel.train), arrays(sel.val)
-    every = max(1, math.ceil(steps / 2000))
-    secs = statistics.median(torch_whole_training_s(x, t, xv, tv, steps, every, threads) for _ in range(reps))
-    add("train", f"same training in PyTorch ({threads} threads, {x.shape[1]} rows, {steps:,} steps)", secs, "s")
-    add("train", "ratio PyTorch time / fricli train-base --arch mlp training time", secs / train_s, "x",
-        "target >= 6")
+    for extra in ((), ("--arch", "mlp")):
+        wall, summary = train(*extra)
+        arch, steps, train_s = summary["arch"], summary["steps"], summary["seconds"]
+        label = f"train-base{' ' + ' '.join(extra) if extra else ' default'} ({arch}, {summary['schedule']}, {steps:,} steps)"
+        add("train", f"{label}, training time", train_s, "s", "target <= 10" if not extra else "")
+        if not extra:
+            add("train", f"{label}, whole command (wall)", wall, "s")
+            add("train", f"{label}, validation MAE", summary["val"]["mae"], log.units["tau"])
+        if torch is None:
+            continue
+        x, t, xv, tv = training_rows(log, arch, steps)
+        every = max(1, math.ceil(steps / 2000))
+        best = math.inf
+        for n_threads in dict.fromkeys((1, threads)):
+            secs = statistics.median(torch_whole_training_s(x, t, xv, tv, steps, every, n_threads, arch)
+                                     for _ in range(reps))
+            add("train", f"same training in PyTorch, {arch} ({n_threads} thread{'s' * (n_threads > 1)}, "
+                f"{x.shape[1]} rows, {steps:,} steps)", secs, "s")
+            best = min(best, secs)
+        add("train", f"ratio PyTorch (faster thread count) / fricli, {arch}", best / train_s, "x",
+            "target >= 6" if not extra else "")
 
 
 def bench_startup(add, reps: int) -> None:
@@ -455,7 +493,8 @@ def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--torch-worker"]:
         folder, *numbers = argv[1:]
-        torch_worker(folder, *(int(v) for v in numbers))
+        arch = numbers.pop() if not numbers[-1].isdigit() else "mlp"
+        torch_worker(folder, *(int(v) for v in numbers), arch=arch)
         return {}
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="tiny sizes: checks that everything runs")

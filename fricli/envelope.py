@@ -53,14 +53,22 @@ class Envelope:
         return np.arcsinh(x / self.qd_scale) if self.inputs[i] == "qd" else x
 
     def _cells(self, cols: list[np.ndarray]) -> np.ndarray:
-        """Flat cell index (n,) of rows inside the ranges."""
+        """Flat cell index (n,) of rows, each input's bin clipped into the grid (rows outside
+        the ranges get the nearest cell: ``outside`` flags them by their ranges)."""
         flat = np.zeros(len(cols[0]), dtype=np.int64)
         for i, x in enumerate(cols):
             a, b = self._axis(i, np.array([self.lo[i], self.hi[i]]))
             width = b - a
-            k = np.zeros(len(x), dtype=np.int64) if not width > 0 else \
-                np.clip(((self._axis(i, x) - a) / width * self.bins).astype(np.int64), 0, self.bins - 1)
-            flat = flat * self.bins + k
+            if not width > 0:
+                flat *= self.bins
+                continue
+            pos = np.subtract(self._axis(i, x), a)
+            pos *= self.bins / width
+            with np.errstate(invalid="ignore"):
+                k = pos.astype(np.int64)      # NaN rows get any bin: their range check fails
+            np.clip(k, 0, self.bins - 1, out=k)
+            flat *= self.bins
+            flat += k
         return flat
 
     def outside(self, signals: dict[str, np.ndarray]) -> np.ndarray:
@@ -71,13 +79,10 @@ class Envelope:
             return np.zeros(n, dtype=bool)
         cols = [np.asarray(signals[name], dtype=np.float64) if name in signals else np.zeros(n)
                 for name in self.inputs]
-        out = np.zeros(n, dtype=bool)
+        out = ~self.covered[self._cells(cols)]
         for i, x in enumerate(cols):
             with np.errstate(invalid="ignore"):
                 out |= ~((x >= self.lo[i]) & (x <= self.hi[i]))
-        inside = ~out
-        if inside.any():
-            out[inside] = ~self.covered[self._cells([x[inside] for x in cols])]
         return out
 
     def covered_grid(self, name: str, values: np.ndarray, other: str, other_values: np.ndarray) -> np.ndarray:

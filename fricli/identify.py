@@ -274,14 +274,17 @@ class LuGreIdentifier:
         coef0, sse0 = _linear_fit(np.array(base_cols), ya)
         best = None
         vlo, vhi = float(speed.min()), float(speed.max())
+        rows = np.empty((3 if load is None else 5, len(speed)))
+        rows[2] = speed
         for vs in np.geomspace(vlo / 3, vhi, 25):
-            lv = logv - math.log(vs)
-            for delta in _DELTAS:
-                e = physics.stribeck_shape_log(lv, delta)
-                cols = [1 - e, e, speed]
+            root = np.exp(0.25 * (logv - math.log(vs)))             # |v/vs|^(1/4)
+            for delta, power in _powers(root):                      # |v/vs|^delta
+                e = np.exp(np.negative(power, out=rows[1]), out=rows[1])   # E = exp(-|v/vs|^delta)
+                np.subtract(1.0, e, out=rows[0])
                 if load is not None:
-                    cols += [load * (1 - e), load * e]
-                coef, sse = _linear_fit(np.array(cols), ya)
+                    np.multiply(load, rows[0], out=rows[3])
+                    np.multiply(load, e, out=rows[4])
+                coef, sse = _linear_fit(rows, ya)
                 if coef[0] <= 0 or coef[1] < coef[0] or coef[2] < 0:   # physical order only
                     continue
                 if best is None or sse < best[0]:
@@ -343,28 +346,31 @@ class LuGreIdentifier:
     def _fit_dynamic(self, sig: dict, y: np.ndarray, static: dict) -> tuple[dict, dict]:
         """sigma0, sigma1 on the whole log, as x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
         g_typ = static["fc"] + static["kc"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
+        response = LuGreModel(**dict(static, sigma0=1.0, sigma1=0.0)).bristle_response(sig)
 
-        def model(x):
+        def bristles(x):
             s0 = math.exp(x[0])
-            return LuGreModel(**dict(static, sigma0=s0, sigma1=s0 * math.exp(x[1])))
+            return s0, s0 * math.exp(x[1])
+
+        def residual(x):
+            return response(*bristles(x)) - y
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
-        costs = [_sumsq(model(x).predict(sig)[0] - y) for x in grid]
+        costs = [_sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        res = _least_squares(lambda x: model(x).predict(sig)[0] - y, x0, (lb, ub), self.max_nfev,
-                             "bristle parameters")
-        m = model(res.x)
+        res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
+        sigma0, sigma1 = bristles(res.x)
         names = ("bristle deflection g/sigma0", "micro-damping time constant sigma1/sigma0")
         for i, what in enumerate(names):
             for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
                 if abs(res.x[i] - bound) < 1e-3:
                     self.notes_.append(f"{what} at its {side} bound: the log does not determine it")
-        return dict(static, sigma0=m.sigma0, sigma1=m.sigma1), {"nfev": int(res.nfev) + len(grid),
+        return dict(static, sigma0=sigma0, sigma1=sigma1), {"nfev": int(res.nfev) + len(grid),
                                                                 "cost": float(res.cost)}
 
     def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout) -> tuple[dict, dict]:
@@ -444,6 +450,15 @@ class LuGreIdentifier:
         return self
 
 
+def _powers(root: np.ndarray):
+    """(delta, x^delta) for delta in _DELTAS from root = x^(1/4) (n,), by multiplication: one
+    exp for the whole grid of exponents instead of one each."""
+    p = {1: root}
+    for k in (2, 3, 4, 5, 6, 8, 12):
+        p[k] = p[k // 2] * p[k - k // 2] if k % 2 == 0 else p[k - 1] * root
+    return [(delta, p[int(round(4 * delta))]) for delta in _DELTAS]
+
+
 def _sumsq(r: np.ndarray) -> float:
     # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
     return float(np.einsum("i,i->", r, r))
@@ -451,19 +466,19 @@ def _sumsq(r: np.ndarray) -> float:
 
 def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     """Least-squares coefficients (k,) for regressors stored as rows (k, n) and y (n,), and the
-    sum of squared residuals. Normal equations on unit-norm rows (k is small)."""
+    sum of squared residuals. Normal equations on unit-norm rows (k is small); the sum from them
+    too, y.y - 2 c.(rows y) + c.G.c, without forming the residuals (it ranks start points)."""
     gram = rows @ rows.T
+    ry = rows @ y
     scale = np.sqrt(np.diag(gram)).copy()
     scale[scale == 0] = 1.0
-    gram = gram / np.outer(scale, scale)
-    rhs = (rows @ y) / scale
     try:
-        coef = np.linalg.solve(gram, rhs)
+        coef = np.linalg.solve(gram / np.outer(scale, scale), ry / scale)
     except np.linalg.LinAlgError:
-        coef = np.linalg.lstsq(gram, rhs, rcond=None)[0]
+        coef = np.linalg.lstsq(gram / np.outer(scale, scale), ry / scale, rcond=None)[0]
     coef = coef / scale
-    r = coef @ rows - y
-    return coef, _sumsq(r)
+    sse = _sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
+    return coef, max(sse, 0.0)
 
 
 def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False):

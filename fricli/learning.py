@@ -27,7 +27,7 @@ DEFAULT_MAX_SAMPLES = 2500
 SCHEDULES = {"cosine": ("cosine", 30_000), "paper": ("constant", 50_000)}   # name -> (Trainer schedule, steps)
 # The dissipative network reaches its held-out error in fewer cosine steps than the paper's
 # (docs/neural-models.md, "Schedule"; python benchmarks/schedules.py).
-COSINE_STEPS = {"dissipative": 20_000}
+COSINE_STEPS = {"dissipative": 7_000}
 
 
 def default_steps(arch: str, schedule: str = "cosine") -> int:

@@ -435,12 +435,17 @@ def with_column(table: pa.Table, name: str, values: np.ndarray, unit: str | None
     return table.append_column(field, array)
 
 
+def parquet_options(schema: pa.Schema) -> dict:
+    """How fricli writes a log: zstd, no dictionaries (signals rarely repeat a value), float
+    columns byte-stream-split (about 40 % smaller for smooth signals, and faster to write)."""
+    floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+    return {"compression": "zstd", "use_dictionary": False, "use_byte_stream_split": floats}
+
+
 def write_table(table: pa.Table, path: str) -> None:
-    """Write Parquet atomically (``-`` for stdout): zstd, float columns byte-stream-split
-    (about 40 % smaller for smooth signals). Same table, same bytes."""
-    floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
+    """Write Parquet atomically (``-`` for stdout) with ``parquet_options``. Same table, same bytes."""
     with atomic_open(path) as fh:
-        pq.write_table(table, fh, compression="zstd", use_dictionary=False, use_byte_stream_split=floats)
+        pq.write_table(table, fh, **parquet_options(table.schema))
 
 
 def table_from_arrays(columns: dict[str, np.ndarray], units: dict[str, str]) -> pa.Table:

@@ -290,7 +290,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                 if several:
                     out = out.take(pc.sort_indices(out.column(_ROW))).drop_columns([_ROW])
                 if writer is None:
-                    writer = pq.ParquetWriter(fh, out.schema, compression="zstd")
+                    writer = pq.ParquetWriter(fh, out.schema, **logs.parquet_options(out.schema))
                 if pending is not None:
                     pending.result()
                 pending = io.submit(writer.write_table, out)

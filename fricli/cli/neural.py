@@ -79,7 +79,8 @@ def _wrote(output: str) -> str:
               help="cosine: Adam's learning rate falls from --lr to 0 along a cosine over the steps; "
                    "paper: the paper's constant learning rate for 50,000 steps.")
 @click.option("--steps", type=click.IntRange(min=1), default=None,
-              help="Adam steps [default: cosine 20,000 for dissipative, 30,000 for the others; paper 50,000].")
+              help=f"Adam steps [default: cosine {learning.COSINE_STEPS['dissipative']:,} for dissipative, "
+                   f"{learning.SCHEDULES['cosine'][1]:,} for the others; paper {learning.SCHEDULES['paper'][1]:,}].")
 @click.option("--patience", type=click.IntRange(min=1), default=None, metavar="STEPS",
               help="Stop early when the validation loss has not improved by 0.1 % for STEPS steps.")
 @click.option("--lr", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,

@@ -173,7 +173,7 @@ class DissipativeFriction(FrictionModel):
                 if sliding:
                     x[2] = 1.0
                 if ws is None or ws.n != stop - start:
-                    ws = net.workspace(stop - start)
+                    ws = net.workspace(stop - start, backward=False)
                 ws.set_inputs(x)
                 np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
 

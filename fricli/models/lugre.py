@@ -16,7 +16,7 @@ axis uses the same equations in m, m/s and N.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -192,6 +192,25 @@ class LuGreModel(FrictionModel):
         np.maximum(g, _G_MIN, out=g)
         return physics.lugre_friction(v, g, fv, self.sigma0, self.sigma1, dt, z0,
                                       out=out, buffers=buf)[1]
+
+    def bristle_response(self, signals: dict[str, np.ndarray]) -> Callable[[float, float], np.ndarray]:
+        """f(sigma0, sigma1): ``predict(signals)[0]`` of this model with those bristle parameters,
+        from the start's steady state. The Stribeck curve, which they do not change, is computed
+        once: for fitting them. The array f returns is reused by the next call."""
+        t = np.asarray(signals["t"], dtype=np.float64)
+        v, tau_g, temp = self._inputs(signals)
+        v = np.asarray(v, dtype=np.float64)
+        fc, fs, fv = self._levels(v, tau_g, temp)
+        g = physics.stribeck_shape(v, self.vs, self.delta)
+        g *= np.subtract(fs, fc)
+        g += fc
+        np.maximum(g, _G_MIN, out=g)
+        dt = physics.intervals(t)
+        out, buf = np.empty(len(v)), physics.Buffers(len(v))
+
+        def friction(sigma0: float, sigma1: float) -> np.ndarray:
+            return physics.lugre_friction(v, g, fv, sigma0, sigma1, dt, out=out, buffers=buf)[0]
+        return friction
 
     def required_inputs(self) -> set[str]:
         need = {"t", "qd"}

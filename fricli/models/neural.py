@@ -205,7 +205,7 @@ class NeuralFriction(FrictionModel):
             ws = None
             for start, stop in part:
                 if ws is None or ws.n != stop - start:
-                    ws = net.workspace(stop - start)
+                    ws = net.workspace(stop - start, backward=False)
                 for i, name in enumerate(names):
                     dest = ws.x[i] if i < len(self.inputs) else ws.s[i - len(self.inputs)]
                     np.subtract(self._input(signals, name, start, stop), mean_x[i], out=dest, casting="same_kind")

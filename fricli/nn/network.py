@@ -100,7 +100,9 @@ class Network:
 
     # ------------------------------------------------------------------ computing
 
-    def workspace(self, n: int) -> "Workspace":
+    def workspace(self, n: int, backward: bool = True) -> "Workspace":
+        """Buffers for ``n`` samples (``backward``: also for ``backward``; a plain network's
+        forward pass needs them all the same)."""
         return Workspace(self, n)
 
     def forward(self, ws: "Workspace") -> np.ndarray:
@@ -147,7 +149,7 @@ class Network:
         for start in range(0, n, chunk):
             stop = min(start + chunk, n)
             if ws is None or ws.n != stop - start:
-                ws = self.workspace(stop - start)
+                ws = self.workspace(stop - start, backward=False)
             ws.set_inputs(x[:, start:stop])
             out[:, start:stop] = self.forward(ws)
         return out

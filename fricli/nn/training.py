@@ -147,7 +147,7 @@ class Evaluator:
         self.net, self.x, self.t = net, x, t
         n = x.shape[1]
         self.cuts = list(range(0, n, chunk)) + [n]
-        self.ws = {size: net.workspace(size) for size in {b - a for a, b in zip(self.cuts[:-1], self.cuts[1:])}}
+        self.ws = {size: net.workspace(size, backward=False) for size in {b - a for a, b in zip(self.cuts[:-1], self.cuts[1:])}}
         self.filled = len(self.cuts) == 2
         if self.filled:
             self.ws[n].set_inputs(x)
