@@ -49,26 +49,25 @@ class Envelope:
             env.covered[np.unique(env._cells([x[finite] for x in raw]))] = True
         return env
 
-    def _axis(self, i: int, x: np.ndarray) -> np.ndarray:
-        return np.arcsinh(x / self.qd_scale) if self.inputs[i] == "qd" else x
+    def _edges(self, i: int) -> np.ndarray:
+        """The inner bin edges (bins - 1,) of input i in its own units: equal steps in
+        asinh(qd / qd_scale) for qd, in the value for the others."""
+        lo, hi = self.lo[i], self.hi[i]
+        steps = np.arange(1, self.bins) / self.bins
+        if self.inputs[i] != "qd":
+            return lo + steps * (hi - lo)
+        a, b = np.arcsinh(np.array([lo, hi]) / self.qd_scale)
+        return self.qd_scale * np.sinh(a + steps * (b - a))
 
     def _cells(self, cols: list[np.ndarray]) -> np.ndarray:
-        """Flat cell index (n,) of rows, each input's bin clipped into the grid (rows outside
-        the ranges get the nearest cell: ``outside`` flags them by their ranges)."""
+        """Flat cell index (n,) of rows: each input's bin is the number of inner edges at or
+        below the value (rows outside the ranges get the nearest cell, and NaN the last:
+        ``outside`` flags them by their ranges)."""
         flat = np.zeros(len(cols[0]), dtype=np.int64)
         for i, x in enumerate(cols):
-            a, b = self._axis(i, np.array([self.lo[i], self.hi[i]]))
-            width = b - a
-            if not width > 0:
-                flat *= self.bins
-                continue
-            pos = np.subtract(self._axis(i, x), a)
-            pos *= self.bins / width
-            with np.errstate(invalid="ignore"):
-                k = pos.astype(np.int64)      # NaN rows get any bin: their range check fails
-            np.clip(k, 0, self.bins - 1, out=k)
             flat *= self.bins
-            flat += k
+            if self.hi[i] > self.lo[i]:
+                flat += np.searchsorted(self._edges(i), x, side="right")
         return flat
 
     def outside(self, signals: dict[str, np.ndarray]) -> np.ndarray:

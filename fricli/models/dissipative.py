@@ -77,8 +77,9 @@ class DissipativeFriction(FrictionModel):
         hidden = [(int(n), acts.from_spec(self.activation)) for n in self.hidden_sizes]
         return HeadedNetwork(2, hidden, DissipativeHead(), constant_outputs=(1,))
 
-    def _rows(self, sig: dict[str, np.ndarray]) -> np.ndarray:
-        """Network inputs and aux rows (4, n) float64: u, sign(qd), tanh(qd / v_ps), |tau_g| / g_scale."""
+    def _rows(self, sig: dict[str, np.ndarray], dtype=np.float64) -> np.ndarray:
+        """Network inputs and aux rows (4, n) float64: u, sign(qd), tanh(qd / v_ps), |tau_g| / g_scale;
+        the tanh computed in ``dtype``, the precision of the network that reads the rows."""
         if "qd" not in sig:
             raise DataError("the log has no column 'qd'")
         qd = np.asarray(sig["qd"], dtype=np.float64)
@@ -89,7 +90,7 @@ class DissipativeFriction(FrictionModel):
         out[0] -= self.u_mean_
         out[0] /= self.u_scale_
         np.sign(qd, out=out[1])
-        np.tanh(qd / self.v_ps_, out=out[2])
+        np.tanh(qd / self.v_ps_, out=out[2], dtype=dtype)
         np.abs(g, out=out[3])
         out[3] /= self.g_scale_
         return out
@@ -169,7 +170,7 @@ class DissipativeFriction(FrictionModel):
         def run(part: list[tuple[int, int]]) -> None:
             ws = None
             for start, stop in part:
-                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")})
+                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, net.dtype)
                 if sliding:
                     x[2] = 1.0
                 if ws is None or ws.n != stop - start:
