@@ -431,9 +431,10 @@ def bench_startup(add, reps: int) -> None:
         add("startup", f"fricli {' '.join(args)} (wall)", secs, "s", "target <= 0.3")
 
 
-def plain_pyarrow_s(src: str, dst: str, batch_rows: int = 1 << 20) -> float:
-    """Read ``src`` in record batches, append one float64 column, write with zstd: the Parquet
-    I/O a file-to-file prediction cannot avoid. Wall time [s]."""
+def plain_pyarrow_s(src: str, dst: str, batch_rows: int = 1 << 20, fricli_options: bool = False) -> float:
+    """Read ``src`` in record batches, append one float64 column, write with zstd (pyarrow's
+    defaults, or with ``fricli_options`` as fricli writes logs, ``logs.parquet_options``): the
+    Parquet I/O a file-to-file prediction cannot avoid. Wall time [s]."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -444,7 +445,8 @@ def plain_pyarrow_s(src: str, dst: str, batch_rows: int = 1 << 20) -> float:
         table = pa.Table.from_batches([batch])
         table = table.append_column("tau_f_pred", pa.array(np.asarray(table.column("qd")) * 0.5))
         if writer is None:
-            writer = pq.ParquetWriter(dst, table.schema, compression="zstd")
+            options = logs.parquet_options(table.schema) if fricli_options else {"compression": "zstd"}
+            writer = pq.ParquetWriter(dst, table.schema, **options)
         writer.write_table(table)
     writer.close()
     return time.perf_counter() - start
@@ -456,11 +458,15 @@ def bench_predict_files(add, tmp: str, paths: dict, big_path: str, rows: int, re
     out = os.path.join(tmp, "pred.parquet")
     plain = statistics.median(plain_pyarrow_s(big_path, out) for _ in range(reps))
     add("predict", f"plain pyarrow read + append a column + write (zstd), {rows:,} rows", rows / plain, "rows/s")
+    same = statistics.median(plain_pyarrow_s(big_path, out, fricli_options=True) for _ in range(reps))
+    add("predict", f"the same, written with fricli's options (no dictionaries, floats split), {rows:,} rows",
+        rows / same, "rows/s")
     for command in ("predict", "estimate-ext"):
         for kind in kinds:
             secs = run_cli([command, paths[kind], big_path, "-o", out], reps)
             add("predict", f"{kind}: {command} file to file (wall), {rows:,} rows", rows / secs, "rows/s")
             add("predict", f"{kind}: {command} / plain pyarrow", plain / secs, "x", "target >= 0.7")
+            add("predict", f"{kind}: {command} / plain pyarrow with fricli's options", same / secs, "x")
 
 
 # ---------------------------------------------------------------------------- main
