@@ -15,16 +15,16 @@ import argparse
 import json
 import os
 import pathlib
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from run import median_time  # noqa: E402  (benchmarks/run.py, beside this script)
+
 URDF = ROOT.parent / "shared" / "data" / "ur10e" / "ur10e.urdf"
 MAPPING = ROOT / "docs" / "ur10e-mapping.toml"
 
@@ -43,15 +43,6 @@ def recording(rows: int, bad: int, rng: np.random.Generator) -> bytes:
     for k in rng.choice(rows, size=bad, replace=False):
         lines[k] = lines[k][: len(lines[k]) // 2]
     return ("\n".join(lines) + "\n").encode()
-
-
-def median_time(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def main() -> None:
