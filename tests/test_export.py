@@ -8,6 +8,7 @@ agree with `fricli predict` to 1e-9 Nm + 1e-9 relative. Compiling tests skip wit
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -202,6 +203,25 @@ def test_header_compiles_as_cpp_without_warnings(kind, sim_models, tmp_path):
     assert check.build(str(header), "fr", str(tmp_path / "drv"), cxx=True) == ""
 
 
+@pytest.mark.parametrize("cxx", [False, True], ids=["c", "c++"])
+@pytest.mark.parametrize("kind", ["dissipative", "residual", "augmented-nn"])
+def test_the_avx2_copy_of_a_network_gives_the_portable_bits(kind, cxx, sim_models, tmp_path):
+    """With GCC or Clang on x86-64 a CPU with AVX2 runs the networks' AVX2 copy: bit for bit
+    what the portable copy (FRICLI_PORTABLE) gives, also as C++, where gcc would contract
+    multiply-adds if the copy allowed them."""
+    if check.compiler(cxx) is None:
+        pytest.skip("no C++ compiler" if cxx else "no C compiler")
+    header = tmp_path / "fr.h"
+    assert invoke("export", sim_models[kind], "-o", header, "--prefix", "fr", "-q").exit_code == 0
+    assert "#define FRICLI_AVX2 1" in header.read_text()
+    fast, portable = str(tmp_path / "fast"), str(tmp_path / "portable")
+    assert check.build(str(header), "fr", fast, cxx=cxx) == ""
+    assert check.build(str(header), "fr", portable, cxx=cxx, flags=("-DFRICLI_PORTABLE",)) == ""
+    model, _ = models.load(sim_models[kind])
+    x = check.signal_matrix(logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet")).signals, c.signals_of(model))
+    assert np.array_equal(check.run(fast, x), check.run(portable, x))
+
+
 def test_export_is_byte_identical_and_carries_the_meta(sim_models, tmp_path):
     a, b = tmp_path / "a.h", tmp_path / "b.h"
     assert invoke("export", sim_models["augmented"], "-o", a).exit_code == 0
@@ -233,7 +253,7 @@ def test_a_folder_gives_one_function_set_per_joint(sim_models, tmp_path):
     folder = tmp_path / "arm"
     folder.mkdir()
     for joint, kind in (("joint2", "lugre-loaded"), ("joint4", "mlp")):
-        (folder / f"{joint}.npz").write_bytes(open(sim_models[kind], "rb").read())
+        (folder / f"{joint}.npz").write_bytes(Path(sim_models[kind]).read_bytes())
     header = tmp_path / "arm.h"
     res = invoke("export", folder, "--prefix", "arm", "-o", header)
     assert res.exit_code == 0, res.output

@@ -1,6 +1,7 @@
 """The joint rule (docs/joints.md) in every command, model folders and whole-arm runs."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
@@ -208,7 +209,7 @@ def test_train_base_adapt_and_diagnose_fix_into_folders(files, tmp_path):
 def modelfile_sha(path):
     import hashlib
 
-    return hashlib.sha256(open(path, "rb").read()).hexdigest()
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 @pytest.mark.parametrize("batch_rows", [7, 1000, 1_000_000])

@@ -44,6 +44,25 @@ inline int long register restrict return short signed sizeof static struct switc
 volatile while bool class delete new operator private protected public template this throw try virtual""".split())
 
 
+AVX2 = "FRICLI_AVX2"   # macro: 1 when the networks' AVX2 copies are built (see PRELUDE)
+
+PRELUDE = f"""\
+/* With GCC or Clang on x86-64, each network is also compiled for AVX2 (a GNU target attribute)
+ * and that copy runs when the CPU has AVX2 (__builtin_cpu_supports): the same operations in the
+ * same order, without fused multiply-adds, so the same results to the bit, sooner. Define
+ * FRICLI_PORTABLE to build the portable C99 copy only. */
+#ifndef {AVX2}
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(__AVX2__) && !defined(FRICLI_PORTABLE)
+#define {AVX2} 1
+#define FRICLI_NET_INLINE __attribute__((always_inline)) static inline
+#else
+#define {AVX2} 0
+#define FRICLI_NET_INLINE static inline
+#endif
+#endif
+"""
+
+
 def num(x: float) -> str:
     """A C double literal that reads back as exactly ``x`` ("%.17g")."""
     x = float(x)
@@ -264,9 +283,12 @@ def header(entries: list[Entry], guard: str) -> str:
     out = top + [f"#ifndef FRICLI_{guard.upper()}_H", f"#define FRICLI_{guard.upper()}_H", "", "#include <math.h>", "",
                  "/* sign(v): -1, 0 or 1 */",
                  f"static inline double {sgn}(double v) {{ return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }}", ""]
-    for entry in entries:
+    codes = [model_code(entry.model, entry.meta, entry.prefix, sgn) for entry in entries]
+    if any(AVX2 in code for code in codes):
+        out.append(PRELUDE)
+    for entry, code in zip(entries, codes):
         out.append(f"/* ---------------------------------------------------------------- {entry.prefix} */")
-        out.append(model_code(entry.model, entry.meta, entry.prefix, sgn))
+        out.append(code)
     out += [f"#endif /* FRICLI_{guard.upper()}_H */", ""]
     return "\n".join(out)
 

@@ -86,16 +86,17 @@ def compiler(cxx: bool = False) -> str | None:
     return shutil.which(name)
 
 
-def build(header_path: str, prefix: str, exe: str, *, cxx: bool = False) -> str:
-    """Compile the driver for ``header_path`` into ``exe`` with warnings as errors; returns the
-    compiler's messages. Raises RuntimeError when the compile fails."""
+def build(header_path: str, prefix: str, exe: str, *, cxx: bool = False, flags: tuple[str, ...] = ()) -> str:
+    """Compile the driver for ``header_path`` into ``exe`` with warnings as errors (and ``flags``
+    after the standard ones); returns the compiler's messages. Raises RuntimeError when the
+    compile fails."""
     cc = compiler(cxx)
     if cc is None:
         raise RuntimeError("no C compiler")
     src = os.path.join(os.path.dirname(os.path.abspath(exe)), f"{os.path.basename(exe)}_driver.c")
     with open(src, "w") as fh:
         fh.write(DRIVER.replace("HEADER", os.path.abspath(header_path)).replace("PREFIX", prefix))
-    cmd = [cc, *(CXX_FLAGS if cxx else C_FLAGS), src, "-o", exe, "-lm"]
+    cmd = [cc, *(CXX_FLAGS if cxx else C_FLAGS), *flags, src, "-o", exe, "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)} failed:\n{proc.stderr}")

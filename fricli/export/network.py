@@ -7,7 +7,9 @@ input-major so the compiler can vectorise over a layer's units. Activations are 
 the functions in ``ACTIVATIONS``, one per activation name, mirroring ``fricli.nn.activations``:
 C statements turning ``v`` into the unit's output, or a list of statements run as successive
 passes over the layer's units, carrying a scratch value ``t`` per unit from pass to pass; only
-the last pass changes ``v``.
+the last pass changes ``v``. The body is written once, as ``<name>_body``; ``<name>`` calls its
+AVX2 copy when the header's ``FRICLI_AVX2`` says there is one and the CPU has AVX2
+(``c.PRELUDE``), else the body itself.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import re
 import numpy as np
 
 from fricli.errors import ModelFileError
-from fricli.export.c import array, num
+from fricli.export.c import AVX2, array, num
 from fricli.nn import activations as acts
 
 
@@ -84,6 +86,11 @@ def _parts(act, units: int) -> list[tuple[int, int, object]]:
     return out
 
 
+def _name(act) -> str:
+    spec = act.spec()
+    return spec if isinstance(spec, str) else spec["name"]
+
+
 def _blocks(units: int) -> list[tuple[int, int]]:
     """(first unit, count) blocks of at most BLOCK units, of even sizes where possible."""
     n = -(-units // BLOCK)
@@ -91,12 +98,21 @@ def _blocks(units: int) -> list[tuple[int, int]]:
     return [(b, min(size, units - b)) for b in range(0, units, size)]
 
 
+LANES = 4   # doubles in an AVX2 register: gcc -O2 vectorises a loop whose count is a multiple of it
+
+
 def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
-    """C statements of hidden layer i: h<i>[units] from src[fan_in]; w (units, fan_in + 1)."""
+    """C statements of hidden layer i: h<i>[units] from src[fan_in]; w (units, fan_in + 1). An
+    activation in passes runs over the units padded to a multiple of LANES with zeros (its
+    value at 0 is 0; nothing reads the padding)."""
     units = w.shape[0]
+    parts = _parts(act, units)
+    only = parts[0][2] if len(parts) == 1 else None
+    in_passes = only is not None and isinstance(ACTIVATIONS.get(_name(only), _identity)(only, "j"), list)
+    padded = units + (-units) % LANES if in_passes else units
     table = np.vstack([w[:, :fan_in].T, w[:, fan_in]])   # input-major, bias last
     lines = [f"    static const double W{i}[{(fan_in + 1) * units}] = {array(table, 6)};",
-             f"    double h{i}[{units}];"]
+             f"    double h{i}[{padded}];"]
     for b, m in _blocks(units):               # a block of units at a time, their sums in registers
         acc = [f"a{k}" for k in range(m)]
         lines += ["    {",
@@ -109,8 +125,11 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int) -> list[str]:
                   "        }",
                   *[f"        h{i}[{b + k}] = {a};" for k, a in enumerate(acc)],
                   "    }"]
-    for start, n, part in _parts(act, units):
-        name = part.spec() if isinstance(part.spec(), str) else part.spec()["name"]
+    if padded > units:
+        lines.append("    " + " ".join(f"h{i}[{k}] = 0.0;" for k in range(units, padded)))
+    for start, n, part in parts:
+        n = padded if padded > units else n
+        name = _name(part)
         if name not in ACTIVATIONS:
             raise ModelFileError(f"cannot export the activation {name!r} to C")
         code = ACTIVATIONS[name](part, f"j - {start}")
@@ -158,11 +177,11 @@ def _dot(w: str, x: str, n: int) -> list[str]:
 
 def dense(net, name: str, output: int | None = None) -> str:
     """C definition of ``static inline double <name>(const double *x)`` for ``net``: its single
-    output, or output number ``output`` of several."""
+    output, or output number ``output`` of several. The header puts ``c.PRELUDE`` before it."""
     if output is None and net.n_out != 1:
         raise ModelFileError(f"cannot export a network with {net.n_out} outputs")
     weights = [np.asarray(w, dtype=np.float64) for w in net.weights]
-    lines = [f"static inline double {name}(const double *x) {{", "    int i, j;", "    double y;"]
+    lines = [f"FRICLI_NET_INLINE double {name}_body(const double *x) {{", "    int i, j;", "    double y;"]
     src, fan_in = "x", net.n_in
     for i, ((units, act), w) in enumerate(zip(net.hidden, weights)):
         lines += _layer(i, w, act, src, fan_in)
@@ -172,5 +191,13 @@ def dense(net, name: str, output: int | None = None) -> str:
               f"    y = WO[{fan_in}];", *_dot("WO", src, fan_in)]
     for k in range(net.n_skip):
         lines.append(f"    y += WO[{fan_in + 1 + k}] * x[{net.n_in + k}];")
-    lines += ["    (void)i; (void)j;", "    return y;", "}", ""]
+    lines += ["    (void)i; (void)j;", "    return y;", "}",
+              f"#if {AVX2}",
+              f"__attribute__((target(\"avx2\"))) static double {name}_avx2(const double *x) {{ return {name}_body(x); }}",
+              "#endif",
+              f"static inline double {name}(const double *x) {{",
+              f"#if {AVX2}",
+              f"    if (__builtin_cpu_supports(\"avx2\")) return {name}_avx2(x);",
+              "#endif",
+              f"    return {name}_body(x);", "}", ""]
     return "\n".join(lines)
