@@ -687,13 +687,12 @@ def export_rows(add, paths: dict[str, str], log: logs.Log, reps: int, quick: boo
         for kind in KINDS:
             model, _ = models.load(paths[kind])
             header, exe = os.path.join(tmp, f"{kind}.h"), os.path.join(tmp, kind)
+            text = c.export(paths[kind], "fr")
             with open(header, "w") as fh:
-                fh.write(c.export(paths[kind], "fr"))
+                fh.write(text)
             check.build(header, "fr", exe)
             builds = [(exe, "-O2", targets.get(kind, ""))]
-            with open(header) as fh:
-                has_network = f"#define {c.AVX2} 1" in fh.read()
-            if has_network:                             # its portable copy too
+            if c.AVX2 in text:                          # a network: its portable copy too
                 check.build(header, "fr", exe + "_portable", flags=("-DFRICLI_PORTABLE",))
                 builds.append((exe + "_portable", "-O2 -DFRICLI_PORTABLE", "portable copy only"))
             x = check.signal_matrix(log.signals, c.signals_of(model))
