@@ -43,7 +43,8 @@ from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_
 from fricli.nn import activations as acts
 from fricli.nn.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.training import PREDICT_CHUNK, Trainer
+from fricli.nn.network import PREDICT_CHUNK
+from fricli.nn.training import Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
 

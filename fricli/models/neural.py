@@ -33,8 +33,8 @@ from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.nn import activations as acts
 from fricli.nn.blas import single_threaded
-from fricli.nn.network import Network
-from fricli.nn.training import PREDICT_CHUNK, Standardizer, Trainer
+from fricli.nn.network import PREDICT_CHUNK, Network
+from fricli.nn.training import Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
 VELOCITY_QUANTILE = 0.05   # velocity_scale="auto": v0 = this quantile of |qd| over the training rows

@@ -22,6 +22,8 @@ import numpy as np
 from fricli.nn import activations as acts
 from fricli.nn.activations import Activation
 
+PREDICT_CHUNK = 16384   # columns per forward pass when predicting many samples
+
 
 def _check_units(n: int, act: Activation) -> None:
     """ValueError unless ``act`` fits a layer of ``n`` units (mixed parts, jump exponents):
@@ -141,7 +143,7 @@ class Network:
                 np.multiply(g, ws.d[i - 1], out=g)
             upstream = g
 
-    def predict(self, x: np.ndarray, chunk: int = 16384) -> np.ndarray:
+    def predict(self, x: np.ndarray, chunk: int = PREDICT_CHUNK) -> np.ndarray:
         """Outputs (n_out, n) for inputs ``x`` (n_in + n_skip, n), in chunks of ``chunk`` columns."""
         n = x.shape[1]
         out = np.empty((self.predict_rows, n), dtype=self.dtype)

@@ -23,11 +23,10 @@ import numpy as np
 from fricli.errors import FitError
 from fricli.nn.adam import Adam
 from fricli.nn.blas import single_threaded
-from fricli.nn.network import Network
+from fricli.nn.network import PREDICT_CHUNK, Network
 
 CHUNK_MIN = 8192          # full batches this large are split over two threads
 EVAL_POINTS = 2000        # default number of loss records over a run given in steps
-PREDICT_CHUNK = 16384
 SCHEDULES = ("constant", "cosine")
 
 
