@@ -38,7 +38,7 @@ import numpy as np  # noqa: E402
 from fricli import learning, logs, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.nn import activations as acts  # noqa: E402
-from fricli.nn.blas import _openblas, single_threaded  # noqa: E402
+from fricli.blas import _openblas, single_threaded  # noqa: E402
 from fricli.nn.network import Network  # noqa: E402
 from fricli.nn.training import Standardizer, Trainer  # noqa: E402
 

@@ -342,9 +342,12 @@ def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
 def _joint_values(table: pa.Table) -> np.ndarray:
     col = table.column("joint")
     if pa.types.is_integer(col.type) and not col.null_count:
-        col = col.cast(pa.int64())
-        return np.concatenate([np.frombuffer(c.buffers()[1], dtype=np.int64, count=len(c), offset=8 * c.offset)
-                               for c in col.chunks] or [np.empty(0, dtype=np.int64)])
+        # from the buffers: a cast would load pyarrow.compute and to_numpy pandas (0.1 s of start-up)
+        kind = "u" if pa.types.is_unsigned_integer(col.type) else "i"
+        dtype = np.dtype(f"{kind}{col.type.bit_width // 8}")
+        parts = [np.frombuffer(c.buffers()[1], dtype=dtype, count=len(c), offset=dtype.itemsize * c.offset)
+                 for c in col.chunks if len(c)]
+        return np.concatenate(parts + [np.empty(0, dtype=dtype)]).astype(np.int64)
     return np.array(col.to_pylist(), dtype=object)
 
 

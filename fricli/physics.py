@@ -13,8 +13,9 @@ interval (zero-order hold), which is stable at any stiffness:
     z_ss = sign(v) * g / sigma0.
 
 That is a linear recurrence z[k] = a[k] z[k-1] + b[k], solved in one call as a unit lower
-bidiagonal system (BLAS ``dtbsv``), with no Python loop over samples. These functions are the
-one implementation of the equations: the LuGre model, the simulator and identification call them.
+bidiagonal system (BLAS ``dtbsv``, ``fricli.blas.recurrence``), with no Python loop over
+samples. These functions are the one implementation of the equations: the LuGre model, the
+simulator and identification call them.
 """
 
 from __future__ import annotations
@@ -23,9 +24,7 @@ import math
 
 import numpy as np
 
-from fricli import lazy
-
-blas = lazy.module("scipy.linalg.blas")
+from fricli import blas
 
 _RATE_DT_MAX = 700.0   # exp(-700) is the smallest decay used: the state has reached z_ss
 
@@ -98,9 +97,7 @@ def lugre_friction(v: np.ndarray, g: np.ndarray, fv: np.ndarray | float, sigma0:
     # z[k] = a[k] z[k-1] + b[k]: a unit lower bidiagonal system
     np.negative(a[1:], out=band[1, :-1])
     band[1, -1] = 0.0
-    z = blas.dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
-    if not np.shares_memory(z, out):
-        out[:] = z
+    blas.recurrence(band, b)
     z_last = float(out[-1])
     # tau = sigma0 z + sigma1 dz/dt + fv v, with dz/dt = v - rate z
     rate *= out

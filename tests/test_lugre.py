@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE, shared_data
-from fricli import errors, logs, models, physics
+from fricli import blas, errors, least_squares, logs, models, physics
 from fricli.cli import cli
 from fricli.errors import DataError, FitError, ModelFileError
 from fricli.identify import LuGreIdentifier, speed_levels, steady_state_mask
@@ -136,6 +136,22 @@ def test_constant_velocity_reaches_the_static_curve():
         assert model.steady_state(np.array([v]), np.array([20.0]))[0] == pytest.approx(expected, rel=1e-12)
 
 
+@pytest.mark.parametrize("path", ["openblas", "scipy"])
+@pytest.mark.parametrize("n", [1, 2, 7, 3000])
+def test_recurrence_solve_matches_a_loop(n, path, monkeypatch):
+    if path == "scipy":
+        monkeypatch.setattr(blas, "_tbsv", ())
+    rng = np.random.default_rng(n)
+    a, b = rng.uniform(0, 1, n), rng.normal(size=n)
+    band = np.empty((2, n), order="F")
+    band[1, :-1] = -a[1:]
+    z = blas.recurrence(band, b.copy())
+    ref, prev = np.empty(n), 0.0
+    for k in range(n):
+        ref[k] = prev = a[k] * prev + b[k] if k else b[k]
+    np.testing.assert_allclose(z, ref, rtol=1e-13, atol=1e-13)
+
+
 def test_stiff_bristles_stay_stable():
     # explicit Euler would diverge here (sigma0*|v|/g*dt = 1e4)
     model = LuGreModel(**dict(TRUE, sigma0=1e8))
@@ -219,6 +235,25 @@ def test_identify_joint_refinement(sweep, fitted):
     assert refined.fit_["rmse"] <= fitted.fit_["rmse"] * (1 + 1e-9)
     for name in STATIC:
         assert refined.model_.parameters()[name] == pytest.approx(TRUE[name], rel=0.10), name
+
+
+@pytest.mark.parametrize("refine", [False, True])
+def test_identify_reaches_the_fit_of_scipys_solver(sweep, refine, monkeypatch):
+    from scipy.optimize import least_squares as scipy_least_squares
+
+    ours = LuGreIdentifier(refine=refine).fit(sweep)
+
+    def trf(fun, x0, bounds, *, max_nfev):
+        x0 = np.clip(x0, bounds[0] + 1e-9, bounds[1] - 1e-9)   # trf wants a strictly feasible start
+        return scipy_least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
+
+    monkeypatch.setattr(least_squares, "solve", trf)
+    ref = LuGreIdentifier(refine=refine).fit(sweep)
+    for stage, info in ref.fit_["stages"].items():
+        assert ours.fit_["stages"][stage]["cost"] <= info["cost"] * (1 + 1e-5), stage
+    theirs = ref.model_.parameters()
+    for name, value in ours.model_.parameters().items():
+        assert value == pytest.approx(theirs[name], rel=1e-3, abs=1e-9), name
 
 
 def test_identify_without_gravity_and_on_a_linear_axis():
@@ -354,10 +389,8 @@ def test_failed_fit_keeps_the_previous_model(tmp_path, sweep_file, monkeypatch):
     out = tmp_path / "lugre.npz"
     out.write_bytes(b"previous model")
 
-    class Failed:
-        status, x, cost, nfev, message = 0, np.zeros(1), 0.0, 1, "max evaluations"
-
-    monkeypatch.setattr("scipy.optimize.least_squares", lambda *a, **k: Failed())
+    failed = least_squares.Result(np.zeros(1), 0.0, 1, 1, 0, "max evaluations")
+    monkeypatch.setattr(least_squares, "solve", lambda *a, **k: failed)
     res = CliRunner().invoke(cli, ["identify", sweep_file, "-o", str(out)])
     assert res.exit_code == errors.FIT
     assert "did not converge" in res.stderr
@@ -366,10 +399,10 @@ def test_failed_fit_keeps_the_previous_model(tmp_path, sweep_file, monkeypatch):
 
 
 def test_non_finite_fit_is_a_fit_error(sweep, monkeypatch):
-    def broken(fun, x0, **kwargs):
-        raise ValueError("Residuals are not finite in the initial point.")
+    def broken(fun, x0, bounds, **kwargs):
+        raise ValueError("the residuals are not finite at the start point")
 
-    monkeypatch.setattr("scipy.optimize.least_squares", broken)
+    monkeypatch.setattr(least_squares, "solve", broken)
     with pytest.raises(FitError, match="not finite"):
         LuGreIdentifier().fit(sweep)
 

@@ -22,7 +22,7 @@ from conftest import ROOT, SAMPLE
 SCRIPT = r"""
 import contextlib, io, os, sys
 from fricli.cli import cli
-from fricli.nn import blas
+from fricli import blas
 
 sample = sys.argv[1]
 funcs = blas._openblas()

@@ -41,7 +41,7 @@ from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
                                   training_arrays, training_params)
 from fricli.nn import activations as acts
-from fricli.nn.blas import single_threaded
+from fricli.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
 from fricli.nn.network import PREDICT_CHUNK
 from fricli.nn.training import Trainer

@@ -32,7 +32,7 @@ from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.nn import activations as acts
-from fricli.nn.blas import single_threaded
+from fricli.blas import single_threaded
 from fricli.nn.network import PREDICT_CHUNK, Network
 from fricli.nn.training import Standardizer, Trainer
 
