@@ -6,7 +6,7 @@ more than they bring at these shapes and would compete with the training loop's 
 threads; and a fit must give the same bytes whatever OMP_NUM_THREADS says. Results do not
 otherwise depend on it: OpenBLAS does not split the reduction dimension.
 
-``recurrence(a, b)`` solves z[k] = a[k] z[k-1] + b[k] as a unit lower bidiagonal system with
+``recurrence(band, b)`` solves z[k] = a[k] z[k-1] + b[k] as a unit lower bidiagonal system with
 BLAS ``dtbsv``, the same routine scipy.linalg.blas wraps, without importing scipy.linalg
 (about a quarter of a second). With a numpy that bundles no OpenBLAS both fall back: one does
 nothing, the other calls scipy.

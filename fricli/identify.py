@@ -357,7 +357,7 @@ class LuGreIdentifier:
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
-        costs = [_sumsq(residual(x)) for x in grid]
+        costs = [least_squares.sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
@@ -393,7 +393,7 @@ class LuGreIdentifier:
         lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
         ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        start_cost = 0.5 * _sumsq(residual(x0))
+        start_cost = 0.5 * least_squares.sumsq(residual(x0))
         try:
             res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement", partial=True)
         except FitError as exc:
@@ -459,11 +459,6 @@ def _powers(root: np.ndarray):
     return [(delta, p[int(round(4 * delta))]) for delta in _DELTAS]
 
 
-def _sumsq(r: np.ndarray) -> float:
-    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
-    return float(np.einsum("i,i->", r, r))
-
-
 def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     """Least-squares coefficients (k,) for regressors stored as rows (k, n) and y (n,), and the
     sum of squared residuals. Normal equations on unit-norm rows (k is small); the sum from them
@@ -477,7 +472,7 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     except np.linalg.LinAlgError:
         coef = np.linalg.lstsq(gram / np.outer(scale, scale), ry / scale, rcond=None)[0]
     coef = coef / scale
-    sse = _sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
+    sse = least_squares.sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
     return coef, max(sse, 0.0)
 
 

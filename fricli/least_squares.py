@@ -51,7 +51,7 @@ def solve(fun, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], *, max_nfe
     x = np.clip(np.asarray(x0, dtype=float), lb, ub)
     r = np.asarray(fun(x), dtype=float)
     nfev, njev = 1, 0
-    cost = 0.5 * _dot(r, r)
+    cost = 0.5 * sumsq(r)
     if not math.isfinite(cost):
         raise ValueError("the residuals are not finite at the start point")
     diag = np.zeros(len(x))
@@ -88,7 +88,7 @@ def solve(fun, x0: np.ndarray, bounds: tuple[np.ndarray, np.ndarray], *, max_nfe
             step = x_new - x
             r_new = np.asarray(fun(x_new), dtype=float)
             nfev += 1
-            cost_new = 0.5 * _dot(r_new, r_new)
+            cost_new = 0.5 * sumsq(r_new)
             predicted = -(grad @ step + 0.5 * step @ jtj @ step)
             ratio = (cost - cost_new) / predicted if predicted > 0 and math.isfinite(cost_new) else -1.0
             small_step = np.linalg.norm(step) <= xtol * (xtol + np.linalg.norm(x))
@@ -120,6 +120,7 @@ def _jacobian(fun, x: np.ndarray, r: np.ndarray, lb: np.ndarray, ub: np.ndarray)
     return jac
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> float:
-    # einsum, not a @ b: a threaded BLAS dot is erratic on a busy 2-core machine
-    return float(np.einsum("i,i->", a, b))
+def sumsq(r: np.ndarray) -> float:
+    """Sum of squares of r (n,)."""
+    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
+    return float(np.einsum("i,i->", r, r))
