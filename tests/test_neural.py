@@ -12,6 +12,7 @@ from fricli.cli import cli
 from fricli.logs import table_from_arrays
 from fricli.models.neural import MLPFriction, NNACMFriction, SelmicFriction, feature
 from fricli.models.residual import ResidualFriction
+from fricli.nn.network import PREDICT_CHUNK, predict_in_chunks, prediction_threads
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_f_true": "Nm"}
 LEVELS = (0.02, 0.05, 0.1, 0.2, 0.4)
@@ -223,6 +224,24 @@ def test_predict_is_chunked_and_threaded_consistently(files):
     whole = model.predict(sig)[0]
     part = model.predict({k: v[12345:23456] for k, v in sig.items()})[0]
     np.testing.assert_allclose(part, whole[12345:23456], rtol=1e-6, atol=1e-6)
+    for threads in (1, 3):   # every row once, whichever thread computes it: the same bits
+        with prediction_threads(threads):
+            assert np.array_equal(model.predict(sig)[0], whole)
+
+
+def test_predict_in_chunks_covers_every_row_once():
+    for n in (0, 1, PREDICT_CHUNK - 1, 5 * PREDICT_CHUNK + 3):
+        for threads in (1, 2, 3):
+            seen = np.zeros(n, dtype=int)
+
+            def run(part):
+                for start, stop in part:
+                    assert 0 < stop - start <= PREDICT_CHUNK
+                    seen[start:stop] += 1
+
+            with prediction_threads(threads):
+                predict_in_chunks(n, run)
+            assert (seen == 1).all()
 
 
 # ---------------------------------------------------------------------------- train-base CLI

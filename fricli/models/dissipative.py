@@ -30,7 +30,6 @@ trainer of ``fricli.nn.training`` (the head is part of the network, ``fricli.nn.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -41,9 +40,8 @@ from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
                                   training_arrays, training_params)
 from fricli.nn import activations as acts
-from fricli.blas import single_threaded
 from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.network import PREDICT_CHUNK
+from fricli.nn.network import predict_in_chunks
 from fricli.nn.training import Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
@@ -157,16 +155,13 @@ class DissipativeFriction(FrictionModel):
         return self._run(signals, sliding=False), None
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
-        """y_scale * head output (n,) in chunks of PREDICT_CHUNK rows on two threads (one BLAS
-        thread each, so the figures do not depend on the machine); ``sliding``: c = 1. The network
+        """y_scale * head output (n,), in chunks (``predict_in_chunks``); ``sliding``: c = 1. The network
         runs in float32 (``precision="single"``) or float64 (``"double"``, as exported C code)."""
         n = len(signals["qd"]) if "qd" in signals else 0
         if self.precision not in ("single", "double"):
             raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
         net = self.net_.astype(np.float64) if self.precision == "double" else self.net_
         out = np.empty(n, dtype=np.float64)
-        cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
-        pieces = list(zip(cuts[:-1], cuts[1:]))
 
         def run(part: list[tuple[int, int]]) -> None:
             ws = None
@@ -179,12 +174,7 @@ class DissipativeFriction(FrictionModel):
                 ws.set_inputs(x)
                 np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
 
-        with single_threaded():
-            if len(pieces) < 4:
-                run(pieces)
-            else:
-                with ThreadPoolExecutor(max_workers=2) as pool:
-                    list(pool.map(run, [pieces[0::2], pieces[1::2]]))
+        predict_in_chunks(n, run)
         return out
 
     # ------------------------------------------------------------------ files

@@ -22,7 +22,6 @@ data; these are stored with the weights. Losses are mean squared errors on stand
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -32,8 +31,7 @@ from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.nn import activations as acts
-from fricli.blas import single_threaded
-from fricli.nn.network import PREDICT_CHUNK, Network
+from fricli.nn.network import Network, predict_in_chunks
 from fricli.nn.training import Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
@@ -192,8 +190,6 @@ class NeuralFriction(FrictionModel):
         out = np.empty(n, dtype=np.float64)
         if n == 0:
             return out, None
-        cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
-        pieces = list(zip(cuts[:-1], cuts[1:]))
         net, mean_x, scale_x = self.net_, self.x_std_.mean_, self.x_std_.scale_
         if self.precision == "double":
             net = net.astype(np.float64)
@@ -214,12 +210,7 @@ class NeuralFriction(FrictionModel):
                 np.multiply(y, y_scale, out=out[start:stop])
                 out[start:stop] += y_mean
 
-        with single_threaded():
-            if len(pieces) < 4:
-                run(pieces)
-            else:
-                with ThreadPoolExecutor(max_workers=2) as pool:
-                    list(pool.map(run, [pieces[0::2], pieces[1::2]]))
+        predict_in_chunks(n, run)
         return out, None
 
     # ------------------------------------------------------------------ files

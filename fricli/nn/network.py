@@ -17,12 +17,44 @@ allocated once and reused with ``out=``.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+from concurrent.futures import ThreadPoolExecutor
+from typing import Callable, Iterator
+
 import numpy as np
 
+from fricli.blas import single_threaded
 from fricli.nn import activations as acts
 from fricli.nn.activations import Activation
 
-PREDICT_CHUNK = 16384   # columns per forward pass when predicting many samples
+PREDICT_CHUNK = 4096    # columns per forward pass when predicting: the layers stay in the cache
+_PREDICT_THREADS = contextvars.ContextVar("predict_threads", default=2)
+
+
+@contextlib.contextmanager
+def prediction_threads(n: int) -> Iterator[None]:
+    """Within the block, ``predict_in_chunks`` runs on ``n`` threads (2 otherwise)."""
+    token = _PREDICT_THREADS.set(int(n))
+    try:
+        yield
+    finally:
+        _PREDICT_THREADS.reset(token)
+
+
+def predict_in_chunks(n: int, run: Callable[[list[tuple[int, int]]], None]) -> None:
+    """Call ``run(part)`` over the (start, stop) pieces of PREDICT_CHUNK rows covering ``n`` rows,
+    the pieces dealt alternately to ``prediction_threads`` threads (each with one BLAS thread, so
+    results do not depend on the machine); ``run`` writes its pieces' results in place."""
+    cuts = list(range(0, n, PREDICT_CHUNK)) + [n]
+    pieces = list(zip(cuts[:-1], cuts[1:]))
+    threads = max(1, _PREDICT_THREADS.get())
+    with single_threaded():
+        if threads == 1 or len(pieces) < 2 * threads:
+            run(pieces)
+        else:
+            with ThreadPoolExecutor(max_workers=threads) as pool:
+                list(pool.map(run, [pieces[i::threads] for i in range(threads)]))
 
 
 def _check_units(n: int, act: Activation) -> None:
