@@ -6,7 +6,9 @@ import pytest
 from fricli.errors import FitError
 from fricli.nn import activations as acts
 from fricli.nn.adam import Adam
-from fricli.nn.network import Network
+from fricli.nn import network as network_module
+from fricli.nn.heads import DissipativeHead, HeadedNetwork
+from fricli.nn.network import Groups, Network
 from fricli.nn.training import CHUNK_MIN, Standardizer, Trainer, _sse_and_grad, sse
 
 
@@ -126,6 +128,78 @@ def test_network_gradient_matches_finite_differences(name, net, rng):
         e[i] = eps
         numeric[i] = (loss(net.theta + e) - loss(net.theta - e)) / (2 * eps)
     np.testing.assert_allclose(grad, numeric, rtol=1e-4, atol=1e-8)
+
+
+def repeated_inputs(net, rng, distinct=7, n=60):
+    """Inputs (rows as set_inputs, n) whose layer rows take ``distinct`` values in shuffled order;
+    the rows after them (a head's aux rows) differ from sample to sample."""
+    base = rng.normal(size=(net.layer_rows, distinct))
+    if net.n_skip:
+        base[net.n_in:] = rng.integers(0, 2, size=(net.n_skip, distinct))
+    x = base[:, rng.integers(0, distinct, size=n)]
+    aux = rng.uniform(0.1, 2.0, size=(getattr(getattr(net, "head", None), "n_aux", 0), n))
+    return np.vstack([x, aux])
+
+
+def grouped_networks():
+    yield from networks()
+    yield "dissipative", HeadedNetwork(2, [(6, acts.ELU()), (5, acts.ELU())], DissipativeHead(), dtype=np.float64,
+                                       constant_outputs=(1,))
+
+
+@pytest.mark.parametrize("name,net", list(grouped_networks()), ids=[n for n, _ in grouped_networks()])
+def test_repeated_inputs_are_computed_once_with_the_same_loss_and_gradient(name, net, rng):
+    net.init(rng)
+    x = repeated_inputs(net, rng)
+    n = x.shape[1]
+    t = rng.normal(size=(1 if isinstance(net, HeadedNetwork) else net.n_out, n))
+    plain = net.workspace(n)
+    plain.set_inputs(x)
+    grouped = net.workspace_for(x)
+    assert plain.groups is None and grouped.groups.m == 7 and grouped.a[0].shape[1] == 7
+    results = []
+    for ws in (plain, grouped):
+        grad = np.empty_like(net.theta)
+        loss = _sse_and_grad(net, ws, t, grad, 2.0 / n)
+        results.append((loss, grad))
+    assert results[1][0] == pytest.approx(results[0][0], rel=1e-12)
+    np.testing.assert_allclose(results[1][1], results[0][1], rtol=1e-10, atol=1e-13)
+
+
+def test_groups_are_bit_for_bit(rng):
+    key = np.array([[0.0, -0.0, 1.0, np.nan, 0.0, 1.0, np.nan],
+                    [2.0, 2.0, 3.0, 4.0, 2.0, 3.0, 4.0]], dtype=np.float32)
+    g = Groups.of(key)
+    assert g.m == 4            # -0.0 is not 0.0 to the bits; the NaN columns are one bit pattern
+    rebuilt = key[:, g.first][:, g.index]
+    assert rebuilt.tobytes() == key.tobytes()
+    assert (g.index[g.order] == np.sort(g.index)).all() and (g.index[g.order][g.starts] == np.arange(g.m)).all()
+
+
+def test_distinct_inputs_get_a_plain_workspace(rng):
+    net = Network(2, [(5, acts.ELU())]).init(rng)
+    x = rng.normal(size=(2, 50))
+    assert net.workspace_for(x).groups is None
+    x[:, 26:] = x[:, :24]          # 26 distinct columns of 50: more than half, not worth grouping
+    assert net.workspace_for(x).groups is None
+    x[:, 25] = x[:, 0]             # 25 of 50
+    assert net.workspace_for(x).groups.m == 25
+
+
+def test_training_on_repeated_inputs_follows_the_plain_path(monkeypatch):
+    rng = np.random.default_rng(4)
+    net0 = HeadedNetwork(2, [(8, acts.ELU()), (8, acts.ELU())], DissipativeHead(), dtype=np.float64,
+                         constant_outputs=(1,)).init(rng)
+    x = repeated_inputs(net0, rng, distinct=20, n=400)
+    t = rng.normal(size=(1, 400))
+    runs = []
+    for share in (network_module.REPEATS_WORTHWHILE, 0.0):          # 0: never group
+        monkeypatch.setattr(network_module, "REPEATS_WORTHWHILE", share)
+        net = net0.astype(np.float64)
+        tr = Trainer(steps=40).fit(net, x, t, x[:, :100], t[:, :100], rng=np.random.default_rng(0))
+        runs.append((net.theta.copy(), tr.history_val_))
+    np.testing.assert_allclose(runs[0][0], runs[1][0], rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(runs[0][1], runs[1][1], rtol=1e-9)
 
 
 def test_bias_is_folded_into_the_last_column(rng):

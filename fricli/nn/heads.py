@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fricli.nn.network import Network, Workspace
+from fricli.nn.network import Groups, Network, Workspace
 
 _CLIP = 60.0
 
@@ -76,8 +76,8 @@ class HeadedWorkspace(Workspace):
     """A ``Workspace`` plus the head's buffers: aux (n_aux, n), out (1, n), fac, draw, tmp (n_raw, n);
     without ``backward`` (prediction) no fac: the head computes values only."""
 
-    def __init__(self, net: "HeadedNetwork", n: int, backward: bool = True):
-        super().__init__(net, n)
+    def __init__(self, net: "HeadedNetwork", n: int, backward: bool = True, groups: Groups | None = None):
+        super().__init__(net, n, groups)
         dt = net.dtype
         self.aux = np.empty((net.head.n_aux, n), dtype=dt)
         self.out = np.empty((1, n), dtype=dt)
@@ -87,7 +87,7 @@ class HeadedWorkspace(Workspace):
 
     def set_inputs(self, x: np.ndarray) -> None:
         """Copy inputs and aux rows (n_in + n_aux, n) into place."""
-        self.x[...] = x[:self.n_in]
+        self.x[...] = self.layer_columns(x[:self.n_in])
         self.aux[...] = x[self.n_in:]
 
     def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
@@ -120,8 +120,13 @@ class HeadedNetwork(Network):
         net.theta[...] = self.theta
         return net
 
-    def workspace(self, n: int, backward: bool = True) -> HeadedWorkspace:
-        return HeadedWorkspace(self, n, backward)
+    @property
+    def layer_rows(self) -> int:
+        """The layers read the inputs; the aux rows after them go to the head, sample by sample."""
+        return self.n_in
+
+    def workspace(self, n: int, backward: bool = True, groups: Groups | None = None) -> HeadedWorkspace:
+        return HeadedWorkspace(self, n, backward, groups)
 
     def forward(self, ws: HeadedWorkspace) -> np.ndarray:
         """y (1, n) for the inputs and aux rows already in ``ws``."""

@@ -13,6 +13,13 @@ direction terms). All weight matrices are views into one flat parameter vector `
 so an optimiser updates them all with a handful of vector operations, and the gradient
 has the same layout. All buffers for a given number of samples live in a ``Workspace``,
 allocated once and reused with ``out=``.
+
+A workspace for fixed inputs (``Network.workspace_for``, as the trainer uses for a full batch)
+computes samples whose layer inputs are bit-for-bit identical once: a log of constant-velocity
+sweeps holds thousands of samples but only as many network inputs as speeds. The layers run on
+the distinct columns, the outputs are copied out to every sample, and in ``backward`` the
+samples' output gradients are summed per distinct column first; the loss and gradient are the
+same sums, added in another order.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ from fricli.nn import activations as acts
 from fricli.nn.activations import Activation
 
 PREDICT_CHUNK = 4096    # columns per forward pass when predicting: the layers stay in the cache
+REPEATS_WORTHWHILE = 0.5  # a fixed-input workspace groups samples when at most this share of columns is distinct
 _PREDICT_THREADS = contextvars.ContextVar("predict_threads", default=2)
 
 
@@ -134,17 +142,35 @@ class Network:
 
     # ------------------------------------------------------------------ computing
 
-    def workspace(self, n: int, backward: bool = True) -> "Workspace":
+    @property
+    def layer_rows(self) -> int:
+        """Leading rows of the inputs ``set_inputs`` takes that the layers read (the rest, if any,
+        are per-sample values for what follows the layers)."""
+        return self.n_in + self.n_skip
+
+    def workspace(self, n: int, backward: bool = True, groups: "Groups | None" = None) -> "Workspace":
         """Buffers for ``n`` samples (``backward``: also for ``backward``; a plain network's
-        forward pass needs them all the same)."""
-        return Workspace(self, n)
+        forward pass needs them all the same); ``groups``: the layers run once per group."""
+        return Workspace(self, n, groups)
+
+    def workspace_for(self, x: np.ndarray, backward: bool = True) -> "Workspace":
+        """A workspace holding the fixed inputs x (rows as ``set_inputs``, n), its layers run once
+        per distinct column of x[:layer_rows] when that spares at least half of the columns."""
+        groups = Groups.of(x[:self.layer_rows])
+        if not 0 < groups.m <= REPEATS_WORTHWHILE * x.shape[1]:
+            groups = None
+        ws = self.workspace(x.shape[1], backward, groups)
+        ws.set_inputs(x)
+        return ws
 
     def forward(self, ws: "Workspace") -> np.ndarray:
         """Outputs (n_out, n) for the inputs already in ``ws.x`` (and ``ws.s``)."""
         for (_, act), w, a, h, d, a_next in zip(self.hidden, self.weights, ws.a, ws.h, ws.d, ws.a[1:]):
             np.matmul(w, a, out=h)
             act.forward(h, a_next[:h.shape[0]], d)
-        np.matmul(self.weights[-1], ws.a[-1], out=ws.y)
+        np.matmul(self.weights[-1], ws.a[-1], out=ws.y_cols)
+        if ws.groups is not None:
+            np.take(ws.y_cols, ws.groups.index, axis=1, out=ws.y)
         return ws.y
 
     def backward(self, ws: "Workspace", dy: np.ndarray, grad: np.ndarray) -> None:
@@ -154,6 +180,10 @@ class Network:
         With one output, the last hidden layer's gradient is w * (dy d) for the output weights
         w: ``g`` holds dy d, and w scales the small products made from it instead of g itself."""
         gw = ws.grad_views(grad)
+        if ws.groups is not None:
+            np.take(dy, ws.groups.order, axis=1, out=ws.dy_sorted)
+            np.add.reduceat(ws.dy_sorted, ws.groups.starts, axis=1, out=ws.dy_cols)
+            dy = ws.dy_cols
         upstream, row_scale = dy, None
         for i in range(len(self.weights) - 1, -1, -1):
             np.matmul(upstream, ws.a[i].T, out=gw[i])
@@ -194,31 +224,56 @@ class Network:
         return self.n_out
 
 
-class Workspace:
-    """Every buffer a forward and backward pass over ``n`` samples needs.
+class Groups:
+    """Samples grouped by identical columns of a (k, n) array, bit for bit: ``m`` groups,
+    ``index`` (n,) each sample's group, ``first`` (m,) one sample of each group, ``order`` (n,)
+    the samples sorted by group and ``starts`` (m,) where each group begins in that order."""
 
-    a[l]  (units_l + 1 [+ n_skip], n)  layer inputs, with the row of ones (skip rows last)
-    h[l]  (units, n)                   pre-activations of hidden layer l
-    d[l]  (units, n)                   activation derivatives of hidden layer l
-    g[l]  (units, n)                   back-propagated gradients of hidden layer l
-    y     (n_out, n)                   outputs
+    def __init__(self, index: np.ndarray, first: np.ndarray):
+        self.index, self.first, self.m = index, first, first.size
+        self.order = np.argsort(index, kind="stable")
+        self.starts = np.searchsorted(index[self.order], np.arange(self.m))
+
+    @classmethod
+    def of(cls, key: np.ndarray) -> "Groups":
+        rows = np.ascontiguousarray(np.asarray(key).T)
+        as_bytes = rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).reshape(-1)
+        _, first, index = np.unique(as_bytes, return_index=True, return_inverse=True)
+        return cls(index.reshape(-1).astype(np.intp), first)
+
+
+class Workspace:
+    """Every buffer a forward and backward pass over ``n`` samples needs; the layers work on
+    ``cols`` columns: n, or one per group with ``groups``.
+
+    a[l]  (units_l + 1 [+ n_skip], cols)  layer inputs, with the row of ones (skip rows last)
+    h[l]  (units, cols)                   pre-activations of hidden layer l
+    d[l]  (units, cols)                   activation derivatives of hidden layer l
+    g[l]  (units, cols)                   back-propagated gradients of hidden layer l
+    y     (n_out, n)                      outputs (``y_cols`` (n_out, cols) before the copy-out)
     x, s  views of a[0] and of the skip rows, where inputs are written
     """
 
-    def __init__(self, net: Network, n: int):
-        self.n = int(n)
+    def __init__(self, net: Network, n: int, groups: Groups | None = None):
+        self.n, self.groups = int(n), groups
+        cols = self.n if groups is None else groups.m
         dt = net.dtype
         rows = [net.n_in] + [units for units, _ in net.hidden]
         self.a = []
         for i, r in enumerate(rows):
             extra = net.n_skip if i == len(rows) - 1 else 0
-            a = np.empty((r + 1 + extra, n), dtype=dt)
+            a = np.empty((r + 1 + extra, cols), dtype=dt)
             a[r] = 1
             self.a.append(a)
-        self.h = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
-        self.d = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
-        self.g = [np.empty((units, n), dtype=dt) for units, _ in net.hidden]
+        self.h = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
+        self.d = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
+        self.g = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
         self.y = np.empty((net.n_out, n), dtype=dt)
+        self.y_cols = self.y
+        if groups is not None:
+            self.y_cols = np.empty((net.n_out, cols), dtype=dt)
+            self.dy_cols = np.empty((net.n_out, cols), dtype=dt)
+            self.dy_sorted = np.empty((net.n_out, n), dtype=dt)
         self.x = self.a[0][:net.n_in]
         self.s = self.a[-1][rows[-1] + 1:]
         self.n_in = net.n_in
@@ -230,11 +285,16 @@ class Workspace:
             self._grad, self._grad_views = grad, self._net.views(grad)
         return self._grad_views
 
+    def layer_columns(self, x: np.ndarray) -> np.ndarray:
+        """The columns of x (rows, n) the layers see: all, or one per group."""
+        return x if self.groups is None else x[:, self.groups.first]
+
     def set_inputs(self, x: np.ndarray) -> None:
         """Copy inputs (n_in + n_skip, n) into place."""
-        self.x[...] = x[:self.n_in]
+        cols = self.layer_columns(x)
+        self.x[...] = cols[:self.n_in]
         if self.s.shape[0]:
-            self.s[...] = x[self.n_in:]
+            self.s[...] = cols[self.n_in:]
 
     def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
         """Gather the columns ``idx`` (length n) of ``x`` (n_in + n_skip, N) into place."""

@@ -77,8 +77,7 @@ class _Chunk:
     """One block of columns of a full batch, with its own buffers and gradient."""
 
     def __init__(self, net: Network, x: np.ndarray, t: np.ndarray):
-        self.ws = net.workspace(x.shape[1])
-        self.ws.set_inputs(x)
+        self.ws = net.workspace_for(x)
         self.t = np.ascontiguousarray(t, dtype=net.dtype)
         self.grad = np.empty_like(net.theta)
 
@@ -146,10 +145,12 @@ class Evaluator:
         self.net, self.x, self.t = net, x, t
         n = x.shape[1]
         self.cuts = list(range(0, n, chunk)) + [n]
-        self.ws = {size: net.workspace(size, backward=False) for size in {b - a for a, b in zip(self.cuts[:-1], self.cuts[1:])}}
         self.filled = len(self.cuts) == 2
         if self.filled:
-            self.ws[n].set_inputs(x)
+            self.ws = {n: net.workspace_for(x, backward=False)}
+        else:
+            self.ws = {size: net.workspace(size, backward=False)
+                       for size in {b - a for a, b in zip(self.cuts[:-1], self.cuts[1:])}}
 
     def sse(self) -> float:
         total = 0.0
