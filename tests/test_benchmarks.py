@@ -74,3 +74,13 @@ def test_matmul_flops_counts_the_products():
     # back-propagation through the last two layers 2*(30*30 + 1*30)
     per_sample = 2 * 2 * (90 + 930 + 31) + 2 * (900 + 30)
     assert bench.matmul_flops(net, 10) == pytest.approx(10 * per_sample)
+
+
+def test_predict_pairs_runs_end_to_end():
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "predict_pairs.py"), "--rows", "2000",
+                           "--pairs", "2", "--kind", "mlp", "--command", "estimate-ext"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.splitlines()
+    assert [line.split(":")[0] for line in lines[:2]] == ["pair 1", "pair 2"]
+    assert lines[2].startswith("mlp estimate-ext / plain pyarrow over 2 pairs, 2,000 rows: median")

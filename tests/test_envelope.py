@@ -130,9 +130,11 @@ def test_evaluate_reports_the_share(files):
     result = run("evaluate", "--model", f"nn={files['model']}", "--log", f"in={files['inside']}",
                  "--log", f"fast={files['fast']}", "--json")
     assert result.exit_code == 0, result.stderr
-    shares = {r["log"]: r["extrapolation"]["share"] for r in json.loads(result.stdout)["results"]}
-    assert shares["in"] == 0.0 and shares["fast"] > 0.3
-    assert "nn on fast:" in result.stderr
+    found = {r["log"]: r["extrapolation"] for r in json.loads(result.stdout)["results"]}
+    assert found["in"]["share"] == 0.0 and found["fast"]["share"] > 0.3
+    fast = found["fast"]
+    assert (f"nn on fast: {100 * fast['share']:.1f} % of the rows ({fast['rows']:,} of {fast['of']:,}) lie outside"
+            in result.stderr)
 
 
 def test_adapt_reports_the_share_outside_the_base(files, tmp_path):

@@ -8,7 +8,8 @@ import click
 
 from fricli import evaluation, logs
 from fricli.cli import cli
-from fricli.cli.options import common, emit_json, json_flag, log_reading, reading_kwargs, say
+from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, reading_kwargs,
+                                say)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -59,8 +60,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
     for r in results:
         if r.extrapolation is not None and not quiet:
-            say(f"{r.model} on {r.log}: {100 * r.extrapolation['share']:.1f} % of the rows outside the model's "
-                "training envelope")
+            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation)}")
 
 
 @cli.command("report")

@@ -58,6 +58,14 @@ def warn(message: str) -> None:
     click.echo(message, err=True)
 
 
+def extrapolation_line(extrapolation: dict | None) -> str | None:
+    """The stderr line for the rows outside a model's training envelope (None without one)."""
+    if extrapolation is None:
+        return None
+    return (f"{100 * extrapolation['share']:.1f} % of the rows ({extrapolation['rows']:,} of {extrapolation['of']:,}) "
+            "lie outside the model's training envelope")
+
+
 def _json_safe(obj):
     """``obj`` with NaN and infinite floats as None (JSON null): e.g. the MAE over no rows."""
     if isinstance(obj, float) and not math.isfinite(obj):

@@ -6,8 +6,8 @@ import click
 
 from fricli import modelset, predicting
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, json_flag, log_reading, output_option, progress_enabled,
-                                say, warn)
+from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, output_option,
+                                progress_enabled, say, warn)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -29,14 +29,6 @@ def precision_option(f):
     return click.option("--precision", type=click.Choice(["single", "double"]), default="single", show_default=True,
                         help="Arithmetic of the networks: single (float32, fastest) or double (float64, "
                              "as the code of fricli export).")(f)
-
-
-def extrapolation_line(extrapolation: dict | None) -> str | None:
-    """The stderr line for the rows outside a model's training envelope (None without one)."""
-    if extrapolation is None:
-        return None
-    return (f"{100 * extrapolation['share']:.1f} % of the rows ({extrapolation['rows']:,} of {extrapolation['of']:,}) "
-            "lie outside the model's training envelope")
 
 
 def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
