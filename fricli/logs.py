@@ -19,6 +19,7 @@ import os
 import shutil
 import sys
 import tempfile
+import weakref
 
 import numpy as np
 from fricli import joints, lazy
@@ -132,13 +133,16 @@ def stdin_parquet() -> pq.ParquetFile:
     except OSError as exc:
         raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
     if spool.tell() == 0:
+        spool.close()
         raise LogError("stdin: empty input, not a Parquet log")
     spool.seek(0)
     try:
-        return pq.ParquetFile(spool, **STREAMING)
+        pf = pq.ParquetFile(spool, **STREAMING)
     except Exception:
         spool.close()
         raise LogError("stdin: not a Parquet file") from None
+    weakref.finalize(pf, spool.close)   # the ParquetFile reads the spool but does not own it
+    return pf
 
 
 def read_table(path: str) -> tuple[pa.Table, str]:

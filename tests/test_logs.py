@@ -2,6 +2,7 @@
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 import pytest
 
 from conftest import make_table
@@ -169,3 +170,28 @@ def test_too_short_to_derive():
     table = logs.table_from_arrays({"t": np.arange(2.0), "q": np.zeros(2), "tau_m": np.zeros(2)}, {})
     with pytest.raises(DataError):
         logs.from_table(table, name="x")
+
+
+@pytest.mark.parametrize("data", [b"", b"not parquet", None])
+def test_stdin_spool_is_closed(monkeypatch, data):
+    """The temporary file stdin is spooled to closes with its ParquetFile, or at once on bad input."""
+    import gc
+    import io
+    import types
+    import warnings
+
+    if data is None:
+        sink = io.BytesIO()
+        pq.write_table(make_table(100), sink)
+        data = sink.getvalue()
+    monkeypatch.setattr("sys.stdin", types.SimpleNamespace(buffer=io.BytesIO(data)))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ResourceWarning)
+        try:
+            pf = logs.stdin_parquet()
+            assert pf.read().num_rows == 100
+            del pf
+        except LogError:
+            pass
+        gc.collect()
+    assert not [w for w in caught if issubclass(w.category, ResourceWarning)]

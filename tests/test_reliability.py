@@ -9,6 +9,7 @@ Also: --drop-invalid, failed fits, a missing output folder, the output lock, --i
 
 import json
 import os
+import pathlib
 
 import numpy as np
 import pyarrow as pa
@@ -97,7 +98,7 @@ class Evil:
 
 
 def _bad_models(folder, good):
-    data = open(good, "rb").read()
+    data = pathlib.Path(good).read_bytes()
     meta, arrays = modelfile.loads(data)
     out = {"missing": str(folder / "no-such-model.npz"), "folder": str(folder)}
 
@@ -420,7 +421,7 @@ def test_exit_codes_are_distinct_and_documented():
              ("OK", "FAILURE", "USAGE", "INPUT", "MODEL", "FIT", "DATA", "OUTPUT", "LOCKED", "UNCHANGED",
               "DEPENDENCY")}
     assert len(set(codes.values())) == len(codes)
-    doc = (open(os.path.join(os.path.dirname(__file__), os.pardir, "docs", "exit-codes.md")).read())
+    doc = pathlib.Path(__file__).resolve().parents[1].joinpath("docs", "exit-codes.md").read_text()
     for name, code in codes.items():
         assert f"| {code} | {name} |" in doc
     for cls in (errors.LogError, errors.ModelFileError, errors.FitError, errors.DataError, errors.OutputError,
