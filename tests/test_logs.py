@@ -185,6 +185,7 @@ def test_stdin_spool_is_closed(monkeypatch, data):
         pq.write_table(make_table(100), sink)
         data = sink.getvalue()
     monkeypatch.setattr("sys.stdin", types.SimpleNamespace(buffer=io.BytesIO(data)))
+    gc.collect()   # what earlier tests left behind is not this test's to report
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ResourceWarning)
         try:
