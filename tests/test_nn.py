@@ -412,3 +412,15 @@ def test_patience_stops_training_and_keeps_the_best_weights(rng):
 def test_unknown_schedule_refused():
     with pytest.raises(ValueError, match="schedule"):
         Trainer(steps=10, schedule="linear")
+
+
+def test_a_grouped_workspace_refuses_gathered_inputs():
+    from fricli.models.dissipative import DissipativeFriction
+
+    # ten equal columns: (3 inputs) for the plain network, (2 inputs + 2 aux rows) for the headed one
+    x = np.tile(np.array([[0.5], [1.0], [0.3], [0.2]], dtype=np.float32), (1, 10))
+    for net, rows in ((Network(3, [(4, acts.ELU())]), 3), (DissipativeFriction().new_network(), 4)):
+        ws = net.workspace_for(x[:rows])
+        assert ws.groups is not None
+        with pytest.raises(ValueError, match="grouped"):
+            ws.take_inputs(x[:rows], np.arange(10))

@@ -91,6 +91,7 @@ class HeadedWorkspace(Workspace):
         self.aux[...] = x[self.n_in:]
 
     def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
+        self._check_ungrouped()
         np.take(x[:self.n_in], idx, axis=1, out=self.x, mode="clip")
         np.take(x[self.n_in:], idx, axis=1, out=self.aux, mode="clip")
 

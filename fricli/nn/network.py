@@ -285,6 +285,10 @@ class Workspace:
             self._grad, self._grad_views = grad, self._net.views(grad)
         return self._grad_views
 
+    def _check_ungrouped(self) -> None:
+        if self.groups is not None:
+            raise ValueError("a workspace of grouped inputs holds fixed inputs: use a plain workspace")
+
     def layer_columns(self, x: np.ndarray) -> np.ndarray:
         """The columns of x (rows, n) the layers see: all, or one per group."""
         return x if self.groups is None else x[:, self.groups.first]
@@ -297,7 +301,9 @@ class Workspace:
             self.s[...] = cols[self.n_in:]
 
     def take_inputs(self, x: np.ndarray, idx: np.ndarray) -> None:
-        """Gather the columns ``idx`` (length n) of ``x`` (n_in + n_skip, N) into place."""
+        """Gather the columns ``idx`` (length n) of ``x`` (n_in + n_skip, N) into place (not for a
+        workspace of fixed, grouped inputs)."""
+        self._check_ungrouped()
         np.take(x[:self.n_in], idx, axis=1, out=self.x, mode="clip")
         if self.s.shape[0]:
             np.take(x[self.n_in:], idx, axis=1, out=self.s, mode="clip")
