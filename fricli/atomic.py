@@ -11,7 +11,8 @@ waiting, i.e. when the process that made the file is gone (the kernel releases a
 locks). A leftover is taken between its creation and its creator's ``flock`` only in an instant;
 the creator then finds its file gone (it waits for the lock, then compares the inode) and starts
 again under a new name. Each writer renames its own complete file, so the output ends as the
-complete file of the writer that renamed last.
+complete file of the writer that renamed last. ``flock`` is local: writers on different machines
+sharing a network file system without it are not kept apart.
 
 The temporary file is created with mode 0o666 and the kernel applies the umask, so the output
 gets the usual permissions without the process umask being read or changed.
