@@ -1,9 +1,10 @@
 """Exit codes and the exceptions that map onto them.
 
 Library code raises a ``FricliError`` subclass; the CLI turns it into one line on
-stderr and its exit code. ``TABLE`` is the one list of exit codes: the constants below, the
+stderr and its exit code. ``TABLE`` is the one list of exit codes (code, name, meaning): the
 ``--help`` texts and docs/exit-codes.md (written by docs/make_exit_codes.py) come from it, and
-tests/test_exit_codes.py checks every code the docs and ``--help`` texts mention against it.
+tests/test_exit_codes.py checks every code the docs and ``--help`` texts mention against it, and
+each row against the constant of its name.
 """
 
 from __future__ import annotations
@@ -11,21 +12,22 @@ from __future__ import annotations
 import dataclasses
 import re
 
+# The codes; TABLE below says what each means.
 OK = 0
-FAILURE = 1          # unexpected internal error (a bug): reported with --debug
-USAGE = 2            # click's own: bad options or arguments
-INPUT = 3            # a log that cannot be read or breaks the log contract
-MODEL = 4            # a model file that cannot be loaded or does not fit the log
-FIT = 5              # a fit or training run that failed (non-finite loss, no convergence)
-DATA = 6             # a valid log that holds too little to do the job (no motion, too short)
-OUTPUT = 7           # an output that could not be written (disk full, permissions)
-LOCKED = 8           # another job holds the lock on the output
-UNCHANGED = 9        # --if-changed: the input is unchanged, nothing was done (not an error)
-DEPENDENCY = 10      # an optional dependency (an extra such as fricli[robot]) is not installed
-SOME_FAILED = 11     # fleet: some jobs failed, the others succeeded or were unchanged
-NOTHING_RAN = 12     # fleet: no job could run (unusable manifest, no logs, cluster unreachable, all failed)
-WEAR = 13            # trend: at least one joint is flagged for wear
-INTERRUPTED = 130    # Ctrl-C (SIGINT), as a shell reports a process it interrupted
+FAILURE = 1
+USAGE = 2
+INPUT = 3
+MODEL = 4
+FIT = 5
+DATA = 6
+OUTPUT = 7
+LOCKED = 8
+UNCHANGED = 9
+DEPENDENCY = 10
+SOME_FAILED = 11
+NOTHING_RAN = 12
+WEAR = 13
+INTERRUPTED = 130
 
 
 @dataclasses.dataclass(frozen=True)
