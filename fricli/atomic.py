@@ -1,24 +1,94 @@
 """Atomic output: write to a temporary file beside the target, fsync, then ``os.replace``.
 
-A killed or failed job leaves the previous file untouched and no temporary file behind
-(except after SIGKILL, where the ``.NAME.*.tmp`` file is removed by the next run).
+A killed or failed job leaves the previous file untouched and no temporary file behind, except
+after SIGKILL: then its ``.NAME.XXXXXXXX.tmp`` is left, and the next write to NAME removes it.
+
+Several writers of one output (outputs without an output lock: ``predict``, ``import``,
+``export -o``) never remove each other's temporary files. A writer creates its temporary file
+with ``O_EXCL`` and holds an exclusive ``flock`` on it until the file is renamed or removed; a
+writer looking for leftovers removes a ``.NAME.*.tmp`` only when it can take that lock without
+waiting, i.e. when the process that made the file is gone (the kernel releases a dead process's
+locks). A leftover is taken between its creation and its creator's ``flock`` only in an instant;
+the creator then finds its file gone (it waits for the lock, then compares the inode) and starts
+again under a new name. Each writer renames its own complete file, so the output ends as the
+complete file of the writer that renamed last. ``flock`` is local: writers on different machines
+sharing a network file system without it are not kept apart.
+
+The temporary file is created with mode 0o666 and the kernel applies the umask, so the output
+gets the usual permissions without the process umask being read or changed.
 """
 
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import glob
 import os
+import secrets
 import sys
-import tempfile
 from typing import BinaryIO, Callable, Iterator
 
 from fricli.errors import OutputError
 
+_CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
+_PROBE = os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOFOLLOW
 
-def _stale_temps(path: str) -> list[str]:
+
+def _same_file(path: str, fd: int) -> bool:
+    """Whether ``path`` still names the file open as ``fd``."""
+    try:
+        current = os.stat(path, follow_symlinks=False)
+    except FileNotFoundError:
+        return False
+    held = os.fstat(fd)
+    return (current.st_dev, current.st_ino) == (held.st_dev, held.st_ino)
+
+
+def _temp_names(path: str) -> list[str]:
     folder, name = os.path.split(os.path.abspath(path))
     return glob.glob(os.path.join(folder, f".{glob.escape(name)}.*.tmp"))
+
+
+def remove_stale_temps(path: str) -> list[str]:
+    """Remove the temporary files of ``path`` whose writer is gone (no lock held on them);
+    returns their names. A live writer's file is left alone."""
+    removed = []
+    for temp in _temp_names(path):
+        try:
+            fd = os.open(temp, _PROBE)
+        except OSError:  # gone meanwhile, or not a regular file we may open
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # held: its writer is alive
+            os.close(fd)
+            continue
+        try:
+            if _same_file(temp, fd):
+                os.unlink(temp)
+                removed.append(temp)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+def _create_temp(path: str, folder: str, name: str) -> tuple[int, str]:
+    """A new ``.NAME.XXXXXXXX.tmp`` in ``folder``, open for writing and locked: (fd, its path)."""
+    for _ in range(100):
+        temp = os.path.join(folder, f".{name}.{secrets.token_hex(4)}.tmp")
+        try:
+            fd = os.open(temp, _CREATE, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise OutputError(f"cannot write {path}: {exc.strerror}") from exc
+        fcntl.flock(fd, fcntl.LOCK_EX)  # waits only while another writer checks whether it is stale
+        if _same_file(temp, fd):
+            return fd, temp
+        os.close(fd)  # taken for a leftover before we locked it: start again
+    raise OutputError(f"cannot write {path}: no free temporary name in {folder}")
 
 
 @contextlib.contextmanager
@@ -34,30 +104,25 @@ def atomic_open(path: str) -> Iterator[BinaryIO]:
     folder, name = os.path.split(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise OutputError(f"cannot write {path}: folder {folder} does not exist")
-    for stale in _stale_temps(path):  # left by a job killed with SIGKILL
-        with contextlib.suppress(OSError):
-            os.unlink(stale)
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=".tmp", dir=folder)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror}") from exc
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; outputs get the usual permissions
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            yield fh
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
+    remove_stale_temps(path)  # left by a job killed with SIGKILL
+    fd, temp = _create_temp(path, folder, name)
+    fh = os.fdopen(fd, "wb")
+    try:  # the lock on the temporary file is held until fh is closed, after the rename
+        yield fh
+        fh.flush()
+        os.fsync(fh.fileno())
+        os.replace(temp, path)
     except OSError as exc:
         with contextlib.suppress(OSError):
-            os.unlink(tmp)
+            os.unlink(temp)
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
     except BaseException:
         with contextlib.suppress(OSError):
-            os.unlink(tmp)
+            os.unlink(temp)
         raise
+    finally:
+        with contextlib.suppress(OSError):  # after a failure, what is left in the buffer is lost anyway
+            fh.close()
     with contextlib.suppress(OSError):  # make the rename itself durable
         dfd = os.open(folder, os.O_RDONLY)
         try:

@@ -417,10 +417,8 @@ def test_debug_shows_the_exception(inputs):
 
 
 def test_exit_codes_are_distinct_and_documented():
-    codes = {name: getattr(errors, name) for name in
-             ("OK", "FAILURE", "USAGE", "INPUT", "MODEL", "FIT", "DATA", "OUTPUT", "LOCKED", "UNCHANGED",
-              "DEPENDENCY")}
-    assert len(set(codes.values())) == len(codes)
+    codes = {row.name: row.code for row in errors.TABLE}
+    assert len(set(codes.values())) == len(codes) == len(errors.TABLE)
     doc = pathlib.Path(__file__).resolve().parents[1].joinpath("docs", "exit-codes.md").read_text()
     for name, code in codes.items():
         assert f"| {code} | {name} |" in doc

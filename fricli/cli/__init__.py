@@ -60,7 +60,7 @@ class FricliGroup(click.Group):
             ctx.exit(exc.exit_code)
         except KeyboardInterrupt:
             click.echo("fricli: interrupted", err=True)
-            ctx.exit(130)
+            ctx.exit(errors.INTERRUPTED)
         except BrokenPipeError:
             sys.stderr.close()  # the reader went away: nothing more to say
             ctx.exit(errors.OUTPUT)
@@ -77,7 +77,7 @@ class FricliGroup(click.Group):
             ctx.exit(errors.FAILURE)
 
 
-@click.group(cls=FricliGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=FricliGroup, context_settings={"help_option_names": ["-h", "--help"]}, epilog=errors.help_table())
 @click.version_option(__version__, "--version", prog_name="fricli")
 def cli() -> None:
     """Friction models for robot joints: identify, train, adapt, predict, diagnose.

@@ -103,7 +103,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     physical parameters, the held-out MAE before and after with an interval over the folds,
     and the structure left that no candidate explains go to stdout (a table, or JSON with
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
-    self-contained model file. Exit 0 whether or not something was found. MODEL may be a
+    self-contained model file. Exit 0 (OK) whether or not something was found. MODEL may be a
     model folder: every joint of the log is diagnosed with its own model (a result per joint)
     and --fix -o DIR writes one fixed model per joint (docs/joints.md).
 

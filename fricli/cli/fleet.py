@@ -21,13 +21,15 @@ from fricli.cli.options import common, emit_json, json_flag, progress_enabled, s
 @click.option("--list", "list_only", is_flag=True, help="List the jobs and run nothing.")
 @json_flag
 @common
+@errors.cite_codes
 def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
     """Run every job of MANIFEST (robots, logs, joints, pipeline: see docs/fleet.md) on Dask.
 
     A job is one (robot, joint, log): its model is refreshed unless it was made from the same log
     bytes with the same options (as --if-changed). Every job that ran adds a row to the history
     dataset. The run ends with a table of every job (ok, unchanged, or failed with its reason).
-    Exit code 0 when every job is ok or unchanged, 10 when some failed, 11 when nothing could run.
+    Exit code {OK} when every job is ok or unchanged, {SOME_FAILED} when some failed,
+    {NOTHING_RAN} when nothing could run.
 
     \b
     Example:
@@ -87,12 +89,13 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
 @click.option("--figures", metavar="DIR", default=None, help="Write a PNG per flagged joint into DIR.")
 @json_flag
 @common
+@errors.cite_codes
 def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth, figures, as_json, quiet):
     """Friction of every joint over time from a fleet HISTORY, and wear flags.
 
     A joint is flagged when a watched parameter has risen beyond --max-level over its own first
     --baseline-days days, or grows faster than --max-growth per day (see docs/fleet.md).
-    Exit code 0 when no joint is flagged, 12 when at least one is (for alerting).
+    Exit code {OK} when no joint is flagged, {WEAR} when at least one is (for alerting).
 
     \b
     Example:

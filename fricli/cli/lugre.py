@@ -52,7 +52,7 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
     Example:
       fricli identify sample_data/joint2_base.parquet -o lugre.npz
       fricli identify emps.parquet -o emps.npz --cutoff 100 --json
-      fricli identify nightly.parquet -o lugre.npz --if-changed   # cron: exit 9 when up to date
+      fricli identify nightly.parquet -o lugre.npz --if-changed   # cron: exit 9 (UNCHANGED) when up to date
       fricli identify arm.parquet -o lugre-arm/                    # every joint of the arm
     """
     if output == "-":

@@ -108,7 +108,8 @@ def shaping_defaults(command: str) -> dict:
 def if_changed_option(f):
     """--if-changed, for commands that write a model (see ``model_job``)."""
     return click.option("--if-changed", is_flag=True,
-                        help="Do nothing and exit with code 9 when the output model was made from the same log "
+                        help=f"Do nothing and exit with code {errors.cite(errors.UNCHANGED)} when the output model was "
+                             "made from the same log "
                              "bytes (sha256) with the same options and input models (for cron jobs).")(f)
 
 
