@@ -25,6 +25,8 @@ from fricli.robot.mapping import Mapping
 
 KINDS = {
     "field_count": "wrong number of fields",
+    "malformed": "arrays of another length than its joint names",
+    "missing_joints": "joints missing",
     "non_numeric": "non-numeric or non-finite value",
     "truncated": "truncated last line",
     "implausible": "a value of implausible magnitude",
