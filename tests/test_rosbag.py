@@ -51,8 +51,9 @@ def write_bag(path, msgs, kind="mcap", topic="/joint_states", extra_topics=()):
         for k, (stamp, names, q, qd, tau) in enumerate(msgs):
             stamp_time = Time(sec=stamp // 10**9, nanosec=stamp % 10**9)
             header = Header(seq=k, stamp=stamp_time, frame_id="") if ros1 else Header(stamp=stamp_time, frame_id="")
-            msg = JointState(header=header, name=names, position=np.asarray(q, dtype=np.float64),
-                             velocity=np.asarray(qd, dtype=np.float64), effort=np.asarray(tau, dtype=np.float64))
+            msg = JointState(header=header, name=names, position=np.ascontiguousarray(q, dtype=np.float64),
+                             velocity=np.ascontiguousarray(qd, dtype=np.float64),
+                             effort=np.ascontiguousarray(tau, dtype=np.float64))
             data = store.serialize_ros1(msg, msgtype) if ros1 else store.serialize_cdr(msg, msgtype)
             received = START_NS + 1_000_000 + k * STEP_NS
             for conn in conns:
@@ -203,3 +204,26 @@ def test_missing_rosbags_is_a_dependency_error(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "rosbags.highlevel", None)
     with pytest.raises(errors.MissingDependencyError, match=r"pip install 'fricli\[ros\]'"):
         read_bag(str(path))
+
+
+def test_urdf_terms_of_a_bag_match_joints_by_their_names(tmp_path):
+    pytest.importorskip("pinocchio")
+    from test_urdf import URDF, analytic
+
+    rng = np.random.default_rng(3)
+    n = 60
+    q = rng.uniform(-np.pi, np.pi, (n, 2))
+    msgs = [[START_NS + k * STEP_NS, ["elbow", "shoulder"], q[k, ::-1], [], rng.normal(size=2)] for k in range(n)]
+    write_bag(tmp_path / "run", msgs)
+    (tmp_path / "two_link.urdf").write_text(URDF)
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--urdf", "two_link.urdf", "-o",
+                          "out.parquet"], cwd=tmp_path, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0, res.stderr
+    assert "joints matched by name, derived qd and qdd" in res.stderr
+    table = pq.read_table(tmp_path / "out.parquet")
+    assert table.column("joint").to_pylist()[::n] == ["elbow", "shoulder"]
+    tau_g = table.column("tau_g").to_numpy().reshape(2, n).T[:, ::-1]        # shoulder, elbow
+    expected, _ = analytic(q, np.zeros_like(q), np.zeros_like(q), (0.0, 0.0, -9.81))
+    np.testing.assert_allclose(tau_g, expected, atol=1e-9)
+    assert np.isfinite(table.column("tau_dyn").to_numpy()).all()
