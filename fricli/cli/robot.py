@@ -3,10 +3,13 @@ fricli dynamics: the URDF terms for a log that exists."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from fricli.cli import cli
 from fricli.cli.options import common, output_option, say, warn
+from fricli.errors import LogError
 
 
 def urdf_options(f):
@@ -98,6 +101,8 @@ def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pa
 
     bag = rosbag.is_bag(recording)
     if mapping_path is None and not bag:
+        if recording != "-" and not Path(recording).exists():
+            raise LogError(f"{recording}: no such file, folder or bag")
         raise click.UsageError("a text recording needs --mapping MAP.toml (docs/robot-import.md)")
     if topic is not None and not bag:
         raise click.UsageError("--topic applies to a ROS bag")

@@ -112,7 +112,7 @@ def _messages(path: str, topic: str | None):
                 stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
                 out.append((received, stamp, tuple(msg.name),
                             *(np.asarray(getattr(msg, f), dtype=np.float64) for f in FIELDS)))
-    except AnyReaderError as exc:
+    except (AnyReaderError, OSError) as exc:
         raise LogError(f"{path}: not a readable ROS bag ({exc})") from None
     return topic, out, p
 
