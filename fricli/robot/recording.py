@@ -127,8 +127,13 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     kinds = np.full(n, "", dtype=object)
     for kind, mask in garbage.items():
         kinds[mask] = kind
+    same = np.r_[False, t[rest][1:] == t[rest][:-1]]      # a sample written twice: the first is kept
+    kinds[rest[same]] = "duplicate_time"
+    rest = rest[~same]
     steps = np.diff(t[rest])
-    if len(rest) > 1 and (steps > 0).any():
+    if len(rest) > 1 and not (steps > 0).any():
+        raise LogError(f"{name}: time never increases from one {unit} to the next")
+    if len(rest) > 1:
         limit = STEP_FACTOR * float(np.median(steps[steps > 0]))
         chained = _chain(t[rest], limit)
         kept, dropped = rest[chained], rest[~chained]
@@ -138,8 +143,6 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
         kinds[dropped] = np.select(
             [t[dropped] == before, ~inside, (t[dropped] < before) & (before - t[dropped] <= limit)],
             ["duplicate_time", "time_outside", "backward_time"], "time_jump")
-    elif len(rest) > 1:       # every time the same
-        kinds[rest[1:]] = "duplicate_time"
     defects = {}
     for kind in KINDS:
         where = np.flatnonzero(kinds == kind)
