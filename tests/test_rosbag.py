@@ -143,6 +143,16 @@ def test_each_defect_of_a_bag_is_reported_by_message(tmp_path):
     q = log.table.column("q").to_numpy().reshape(6, -1)
     kept = [k for k in range(100) if k not in (11, 20, 30)]
     np.testing.assert_array_equal(q, np.array([clean[k][2] for k in kept]).T)   # reordered back by name
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--drop-backward", "-o", "out.parquet"],
+                         cwd=tmp_path, capture_output=True, text=True,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.splitlines() == [
+        "warning: run: dropped 1 message with joints missing (message 21)",
+        "warning: run: dropped 1 message with non-numeric or non-finite value (message 31)",
+        "warning: run: dropped 1 message with time going back (message 12)",
+        "warning: run: 2 messages list the joints in another order than the first (messages 41-42): reordered by name",
+        "imported 97 messages x 6 joints from /joint_states in run -> out.parquet"]
 
 
 def test_garbage_messages_at_the_start_are_dropped(tmp_path):
