@@ -9,7 +9,7 @@ are numbered from 1 in the order the bag holds them, and defects are reported by
     a joint of the log missing from a message       -> message dropped (reported)
     arrays of another length than the joint names   -> message dropped (reported)
     a non-finite value                              -> message dropped (reported)
-    joints in another order than the first message's -> reordered by name (reported)
+    joints in another order than the first kept message -> reordered by name (reported)
     empty velocity arrays                           -> no qd (derived like a CSV's missing qd)
     then as for a CSV: garbage, duplicate and backward times (``recording.consistent_rows``)
 """
@@ -120,20 +120,21 @@ def _messages(path: str, topic: str | None):
 def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None, *,
              drop_backward: bool = False) -> Bag:
     """Read the JointState topic of the bag at ``path``. ``mapping`` (``parse_bag_mapping``) names
-    the joints to import and what their effort is; without it every joint of the first message,
+    the joints to import and what their effort is; without it the joints that the most messages name,
     effort as joint-side torque [Nm]. LogError (exit 3) when nothing is usable."""
     topic, msgs, p = _messages(path, topic)
     if not msgs:
         raise LogError(f"{path}: topic {topic} holds no messages")
-    first_names = msgs[0][2]
     if mapping is None or not mapping.joints:
-        if not first_names:
-            raise LogError(f"{path}: the first message on {topic} names no joints")
+        sets = collections.Counter(frozenset(m[2]) for m in msgs)
+        common = max(sets, key=sets.get)           # the first of the most frequent
+        names = next(m[2] for m in msgs if frozenset(m[2]) == common)
+        if not names:
+            raise LogError(f"{path}: the messages on {topic} name no joints")
         base = mapping or Mapping(time=None, joints=[])
-        mapping = dataclasses.replace(base, joints=[JointMap(name=n, columns=effort_column("tau_m"))
-                                                    for n in first_names])
-    if mapping.match is None:
-        mapping.match = "name"      # JointState names are the robot description's joint names
+        mapping = dataclasses.replace(base, joints=[JointMap(name=n, columns=effort_column("tau_m")) for n in names])
+    # JointState names are the robot description's joint names
+    mapping = dataclasses.replace(mapping, match=mapping.match or "name")
     names = [jm.name for jm in mapping.joints]
     n = len(msgs)
     values = {f: np.full((n, len(names)), np.nan) for f in FIELDS}
