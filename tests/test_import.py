@@ -1,6 +1,7 @@
 """fricli import: a delimited text recording + a TOML mapping -> a long-format log."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -272,3 +273,103 @@ def test_every_ur10e_recording_imports(tmp_path):
         log = from_table(result.table, name=path.name, joint="2")
         assert np.isfinite(friction_target(log.signals)).all()
     assert unterminated == ["ur-20_02_19_14harm50sec.csv"]
+
+
+# ---------------------------------------------------------------------- controller dumps with garbage rows
+
+# what a controller's dump holds before (or after) the recording proper: t, q1, q2, qd1, qd2, i1, i2, status
+GARBAGE = [
+    "0,0,0,0,0,0,0,ok",                              # rows of zeros
+    "0,0,0,0,0,0,0,ok",
+    "8.5e+150,1e150,-3e150,0,7e149,0,0,ok",          # uninitialised memory
+    "-3.2,0.5,0.5,0.1,0.1,0.2,0.2,ok",               # time far before the recording
+    "1e9,0.5,0.5,0.1,0.1,0.2,0.2,ok",                # and far after it
+]
+
+
+@pytest.fixture
+def dump():
+    """A recording of 60 rows after the five garbage rows of a controller's dump (lines 1-5)."""
+    return GARBAGE + rows(60)
+
+
+def dropped(result):
+    return {k: d["lines"] for k, d in result.meta["dropped"].items()}
+
+
+@pytest.mark.parametrize("drop_backward", [False, True])
+def test_garbage_rows_before_a_recording_are_dropped_and_reported(dump, drop_backward):
+    result = parse(dump, drop_backward=drop_backward)
+    assert dropped(result) == {"implausible": [[3, 3]], "zero_row": [[1, 2]], "time_outside": [[4, 5]]}
+    assert list(result.recording.lines) == list(range(6, 66))
+    clean = parse(rows(60)).table
+    assert result.table.replace_schema_metadata(None).equals(clean.replace_schema_metadata(None))
+
+
+def test_garbage_rows_inside_and_after_a_recording_are_dropped_and_reported():
+    lines = rows(80)
+    lines[29] = "1e9" + lines[29][6:]                      # line 30: time far ahead
+    lines[49] = "0,0,0,0,0,0,0,ok"                         # line 50: zeros
+    lines[59] = lines[59].replace(",0.", ",1e+200", 1)     # line 60: an absurd position
+    lines[69] = "-5" + lines[69][6:]                       # line 70: time far back
+    lines += ["3.0,0.1,0.1,0.1,0.1,0.1,0.1,ok", "0,0,0,0,0,0,0,ok", "1e300,1,1,1,1,1,1,ok"]   # lines 81-83
+    result = parse(lines)
+    assert dropped(result) == {"implausible": [[60, 60]], "zero_row": [[50, 50], [82, 82]],
+                               "time_outside": [[81, 81], [83, 83]], "time_jump": [[30, 30], [70, 70]]}
+    kept = [k for k in range(1, 81) if k not in (30, 50, 60, 70)]
+    assert list(result.recording.lines) == kept
+    t = result.table.column("t").to_numpy()[:len(kept)]
+    np.testing.assert_array_equal(t, [float(lines[k - 1].split(",")[0]) for k in kept])
+
+
+def test_the_longest_consistent_stretch_wins_over_a_shorter_one():
+    lines = rows(30) + [ln.replace("100.", "500.", 1) for ln in rows(50)]     # a jump of 400 s at line 31
+    result = parse(lines)
+    assert dropped(result) == {"time_outside": [[1, 30]]}
+    assert list(result.recording.lines) == list(range(31, 81))
+
+
+def test_the_command_reports_garbage_rows_with_their_lines(tmp_path, dump):
+    (tmp_path / "rec.csv").write_text("\n".join(dump) + "\n")
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.splitlines() == [
+        "warning: rec.csv: dropped 1 row with a value of implausible magnitude (line 3)",
+        "warning: rec.csv: dropped 2 rows with all values zero (lines 1-2)",
+        "warning: rec.csv: dropped 2 rows with time not continuing the recording (before or after its longest "
+        "consistent stretch) (lines 4-5)",
+        "imported 60 rows x 2 joints from rec.csv -> out.parquet"]
+    meta = json.loads(pq.read_table(tmp_path / "out.parquet").schema.metadata[b"fricli.import"])
+    assert meta["dropped"]["zero_row"] == {"count": 2, "first_line": 1, "what": "all values zero", "lines": [[1, 2]]}
+
+
+@pytest.mark.parametrize("mark, spelled", [(";", ";"), ("\t", "\\t")])
+def test_another_delimiter_than_the_mappings_is_named(mark, spelled):
+    data = ("\n".join(ln.replace(",", mark) for ln in rows()) + "\n").encode()
+    with pytest.raises(errors.LogError, match=re.escape(f'they hold {mark!r}: set delimiter = "{spelled}" in the '
+                                                         "mapping")):
+        import_recording(data, mapping(), "rec.csv")
+    text = MAPPING.replace("time =", f'delimiter = "{spelled}"\ntime =')
+    table = import_recording(data, mapping(text), "rec.csv").table
+    assert table.replace_schema_metadata(None).equals(parse(rows()).table.replace_schema_metadata(None))
+
+
+def test_a_ur10e_recording_keeps_every_row_with_or_without_a_garbage_head():
+    path = shared_data("ur10e") / "identification" / "ur-20_02_12-50sec_12harm.csv"
+    from fricli.robot.mapping import load_mapping
+
+    mp = load_mapping(str(ROOT / "docs" / "ur10e-mapping.toml"))
+    data = path.read_bytes()
+    every = np.loadtxt(path, delimiter=",")
+    result = import_recording(data, mp, path.name)
+    assert result.meta["dropped"] == {} and result.meta["rows"] == len(every)
+    n = len(every)
+    np.testing.assert_array_equal(result.table.column("t").to_numpy()[:n], every[:, 0])
+    np.testing.assert_array_equal(result.table.column("q").to_numpy().reshape(6, n).T, every[:, 1:7])
+    np.testing.assert_array_equal(result.table.column("i_m").to_numpy().reshape(6, n).T, every[:, 13:19])
+    head = [",".join(["0"] * 31), ",".join(["1e150"] * 31), ",".join(["-7.5"] + ["0.1"] * 30)]
+    dirty = import_recording(("\n".join(head) + "\n").encode() + data, mp, path.name)
+    assert {k: d["lines"] for k, d in dirty.meta["dropped"].items()} == {
+        "implausible": [[2, 2]], "zero_row": [[1, 1]], "time_outside": [[3, 3]]}
+    assert dirty.table.replace_schema_metadata(None).equals(result.table.replace_schema_metadata(None))

@@ -3,10 +3,13 @@ fricli dynamics: the URDF terms for a log that exists."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
 
 from fricli.cli import cli
 from fricli.cli.options import common, output_option, say, warn
+from fricli.errors import LogError
 
 
 def urdf_options(f):
@@ -44,27 +47,44 @@ def _derived_text(record: dict) -> str:
     return f", derived {' and '.join(derived['columns'])} ({lowpass}, central differences)"
 
 
+def _where(entry: dict, unit: str) -> str:
+    """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known."""
+    runs = entry.get(f"{unit}s")
+    if runs is None:
+        return f"first at {unit} {entry[f'first_{unit}']}"
+    shown = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs[:5])
+    more = f", ... ({len(runs)} runs)" if len(runs) > 5 else ""
+    return f"{unit}{'s' if entry['count'] != 1 else ''} {shown}{more}"
+
+
 @cli.command("import")
 @click.argument("recording")
-@click.option("--mapping", "mapping_path", required=True, metavar="MAP.toml",
-              help="Which column holds what (docs/robot-import.md; docs/ur10e-mapping.toml is an example).")
+@click.option("--mapping", "mapping_path", default=None, metavar="MAP.toml",
+              help="Which column holds what (docs/robot-import.md; docs/ur10e-mapping.toml is an example). "
+                   "Required for a text recording; for a ROS bag it says what the effort is and which joints.")
+@click.option("--topic", default=None, metavar="TOPIC",
+              help="ROS bag: the sensor_msgs/JointState topic (default: the bag's only one).")
 @click.option("--kt", "kt_pairs", multiple=True, metavar="JOINT=VALUE",
               help="Drive gain [Nm/A] of a joint (torque constant x gear ratio); overrides the mapping. Repeatable.")
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="Add tau_g and tau_dyn from this robot description (needs Pinocchio: pip install 'fricli[robot]').")
 @urdf_options
 @click.option("--drop-backward", is_flag=True,
-              help="Drop rows whose time goes back (reported) instead of refusing the recording.")
+              help="Drop rows whose time goes back a little (reported) instead of refusing the recording.")
 @output_option(help="Output Parquet log (- for stdout).")
 @common
-def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass, payload_com,
-               payload_frame, cutoff, drop_backward, output, quiet):
-    """Import a robot's delimited text recording as one long-format log.
+def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass,
+               payload_com, payload_frame, cutoff, drop_backward, output, quiet):
+    """Import a robot's delimited text recording or ROS bag as one long-format log.
 
-    RECORDING is a CSV (or other delimited) text file, - for stdin. The mapping says which
-    column is the time and, per joint, which are q, qd, i_m or tau_m, with units and drive
-    gains. Malformed rows, a truncated last line and repeated time steps are dropped and
-    reported on stderr; time going back is refused unless --drop-backward.
+    RECORDING is a CSV (or other delimited) text file, - for stdin, or a ROS bag (a rosbag2
+    folder in MCAP or sqlite3 storage, or a ROS 1 .bag file: needs pip install 'fricli[ros]').
+    For a text file the mapping says which column is the time and, per joint, which are q, qd,
+    i_m or tau_m, with units and drive gains; a bag's sensor_msgs/JointState messages name their
+    joints and give position, velocity and effort. Malformed rows, garbage rows (implausible
+    magnitudes, rows of zeros, time outside the longest consistent stretch), a truncated last line
+    and repeated time steps are dropped and reported on stderr; time going back a little inside
+    the recording is refused unless --drop-backward.
 
     \b
     Example:
@@ -72,12 +92,26 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
       fricli import run.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf -o run.parquet
       fricli import load.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf \\
           --payload-mass 2.805 --payload-com 0 0 0.05 --payload-frame tool0 -o load.parquet
+      fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
     """
     from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
     from fricli.robot import mapping as mp
-    from fricli.robot.importing import import_recording
+    from fricli.robot import rosbag
+    from fricli.robot.importing import build_log, import_recording
 
-    mapping = mp.load_mapping(mapping_path)
+    bag = rosbag.is_bag(recording)
+    if mapping_path is None and not bag:
+        if recording != "-" and not Path(recording).exists():
+            raise LogError(f"{recording}: no such file, folder or bag")
+        raise click.UsageError("a text recording needs --mapping MAP.toml (docs/robot-import.md)")
+    if topic is not None and not bag:
+        raise click.UsageError("--topic applies to a ROS bag")
+    mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
+    cutoff_hz = DEFAULT_CUTOFF_HZ if cutoff is None else cutoff
+    name = "stdin" if recording == "-" else recording
+    if bag:
+        read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward)
+        mapping = read.mapping
     payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
     mp.apply_overrides(mapping, kt=mp.parse_overrides(kt_pairs, "--kt"),
@@ -88,13 +122,27 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
         from fricli.robot.dynamics import load_model
 
         model = load_model(urdf, mapping)
-    name = "stdin" if recording == "-" else recording
-    result = import_recording(read_bytes(recording), mapping, name, model=model,
-                              cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff,
-                              drop_backward=drop_backward)
+    if bag:
+        extra = {"topic": read.topic, "stamps": read.stamps, "time_origin_ns": read.origin_ns,
+                 "reordered": None if read.reordered is None else
+                 {"count": read.reordered.count, "messages": read.reordered.ranges}}
+        result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff_hz,
+                           unit="message", extra=extra)
+        if read.stamps == "receive":
+            say(f"note: {name}: the messages on {read.topic} have zero header stamps: t is the time the bag "
+                "received them", quiet)
+    else:
+        result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff_hz,
+                                  drop_backward=drop_backward)
+    unit = result.meta["counted_in"]
     for kind, d in result.meta["dropped"].items():
-        warn(f"warning: {name}: dropped {d['count']} row{'s' if d['count'] != 1 else ''} with {d['what']} "
-             f"(first at line {d['first_line']})")
+        rows = unit if unit == "message" else "row"
+        warn(f"warning: {name}: dropped {d['count']} {rows}{'s' if d['count'] != 1 else ''} with {d['what']} "
+             f"({_where(d, unit)})")
+    if bag and read.reordered is not None:
+        d = read.reordered
+        warn(f"warning: {name}: {d.count} message{'s' if d.count != 1 else ''} list the joints in another order "
+             f"than the first ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
     if result.meta["unterminated_last_line"]:
         say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
             "complete and kept", quiet)
@@ -104,7 +152,9 @@ def import_cmd(recording, mapping_path, kt_pairs, urdf, match, inertia_pairs, gr
     if robot:
         extra = f", tau_g and tau_dyn from {urdf} (joints matched by {robot['match']}{_derived_text(robot)})"
     where = "stdout" if output == "-" else output
-    say(f"imported {result.meta['rows']:,} rows x {len(mapping.joints)} joints from {name}{extra} -> {where}", quiet)
+    rows = f"{result.meta['rows']:,} {'messages' if bag else 'rows'}"
+    source = f"{read.topic} in {name}" if bag else name
+    say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
 
 
 @cli.command("dynamics")

@@ -89,6 +89,24 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
     """Parse ``data`` with ``mapping`` into a long-format table; with ``model`` (a
     ``fricli.robot.dynamics.RobotModel``) add tau_g and tau_dyn."""
     rec = read_recording(data, mapping, name, drop_backward=drop_backward)
+    return build_log(rec, mapping, name, hashlib.sha256(data).hexdigest(), model=model, cutoff_hz=cutoff_hz)
+
+
+def dropped_record(defects: dict, unit: str = "line") -> dict:
+    """The metadata record of dropped rows: per kind its count, first line (or message), what it is
+    and, when known, the [first, last] runs of lines."""
+    out = {}
+    for kind, d in defects.items():
+        out[kind] = {"count": d.count, f"first_{unit}": d.first_line, "what": KINDS[kind]}
+        if d.ranges is not None:
+            out[kind][f"{unit}s"] = d.ranges
+    return out
+
+
+def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *, model=None,
+              cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, unit: str = "line", extra: dict | None = None) -> Imported:
+    """The long-format table of ``rec`` (read with ``mapping``), its metadata recording the source
+    (``extra`` added), the dropped rows (numbered by ``unit``) and, with ``model``, the robot terms."""
     t, per_joint, axis = _signals(mapping, rec, name)
     robot = robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
     units = dict(logs.CANONICAL[axis])
@@ -110,8 +128,8 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
             columns[c] = np.concatenate([sig[c] for sig in per_joint])
     table = logs.table_from_arrays(columns, {c: units[c] for c in present if c in units})
     meta = {
-        "source": name, "source_sha256": hashlib.sha256(data).hexdigest(), "rows": n,
-        "dropped": {k: {"count": d.count, "first_line": d.first_line, "what": KINDS[k]} for k, d in rec.defects.items()},
+        "source": name, "source_sha256": source_sha256, **(extra or {}), "rows": n, "counted_in": unit,
+        "dropped": dropped_record(rec.defects, unit),
         "unterminated_last_line": int(rec.unterminated) if rec.unterminated else None,
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
         "robot": robot,

@@ -30,6 +30,11 @@ _TOP_KEYS = {"header", "delimiter", "time", "joints", "robot"}
 _JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS}
 _ROBOT_KEYS = {"match", "gravity", "payload"}
 _PAYLOAD_KEYS = {"mass", "com", "frame"}
+# a ROS bag's mapping: what a JointState's effort is, per joint (docs/robot-import.md)
+EFFORTS = {"tau_m": "joint-side torque [Nm]", "i_m": "motor current [A], with kt [Nm/A]",
+           "motor_torque": "motor-side torque [Nm], with gear_ratio"}
+_BAG_TOP_KEYS = {"joints", "robot"}
+_BAG_JOINT_KEYS = {"name", "urdf", "effort", "kt", "gear_ratio", "rotor_inertia"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,6 +191,11 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     kinds = {c.kind for j in joints for c in j.columns.values()} - {None}
     if len(kinds) > 1:
         _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately)")
+    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, **_robot(doc, name))
+
+
+def _robot(doc: dict, name: str) -> dict:
+    """match, gravity and payload from the mapping's [robot] table."""
     robot = doc.get("robot", {})
     if not isinstance(robot, dict):
         _fail(f"{name}: robot", "expected a table")
@@ -195,12 +205,61 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
         _fail(f"{name}: robot.match", f"expected 'name' or 'order', got {match!r}")
     gravity = _vector3(robot["gravity"], f"{name}: robot.gravity") if "gravity" in robot else (0.0, 0.0, -9.81)
     payload = _payload(robot["payload"], f"{name}: robot.payload") if "payload" in robot else None
-    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, match=match,
-                   gravity=gravity, payload=payload)
+    return {"match": match, "gravity": gravity, "payload": payload}
 
 
-def load_mapping(path: str) -> Mapping:
-    """Read a TOML mapping file; LogError (exit 3) when it is missing or wrong."""
+def effort_column(effort: str, gear_ratio: float = 1.0) -> dict[str, Column]:
+    """The signal a JointState's effort becomes: ``{"tau_m": ...}`` (joint-side, or motor-side
+    times ``gear_ratio``) or ``{"i_m": ...}``; its ``ref`` is ``"effort"``."""
+    if effort == "i_m":
+        return {"i_m": Column(ref="effort", unit="A", factor=1.0, kind=None)}
+    return {"tau_m": Column(ref="effort", unit="Nm", factor=gear_ratio if effort == "motor_torque" else 1.0,
+                            kind="rotary")}
+
+
+def parse_bag_mapping(doc: dict, name: str = "mapping") -> Mapping:
+    """A ROS bag's ``Mapping`` (time None; each joint's columns hold only its effort, see
+    ``effort_column``) from a parsed TOML document; LogError (exit 3) on any mistake."""
+    _unknown(doc, _BAG_TOP_KEYS, f"{name} (a ROS bag's mapping)")
+    joints_doc = doc.get("joints", [])
+    if not isinstance(joints_doc, list):
+        _fail(name, "'joints' must be [[joints]] tables")
+    joints: list[JointMap] = []
+    for i, spec in enumerate(joints_doc, start=1):
+        where = f"{name}: joints #{i}"
+        if not isinstance(spec, dict):
+            _fail(where, "expected a table")
+        _unknown(spec, _BAG_JOINT_KEYS, where)
+        jname = spec.get("name")
+        if not isinstance(jname, str) or not jname:
+            _fail(where, f"'name' (the joint's name in the JointState messages) is required, got {jname!r}")
+        effort = spec.get("effort", "tau_m")
+        if effort not in EFFORTS:
+            _fail(f"{where}.effort", f"expected one of {', '.join(repr(e) for e in EFFORTS)}, got {effort!r}")
+        if "kt" in spec and effort != "i_m":
+            _fail(where, "kt applies to effort = \"i_m\" (a current)")
+        if "gear_ratio" in spec and effort != "motor_torque":
+            _fail(where, "gear_ratio applies to effort = \"motor_torque\"")
+        if effort == "motor_torque" and "gear_ratio" not in spec:
+            _fail(where, "effort = \"motor_torque\" needs gear_ratio (joint-side torque = gear_ratio x effort)")
+        ratio = _number(spec["gear_ratio"], f"{where}.gear_ratio", positive=True) if "gear_ratio" in spec else 1.0
+        urdf = spec.get("urdf")
+        if urdf is not None and (not isinstance(urdf, str) or not urdf):
+            _fail(f"{where}.urdf", "expected a URDF joint name")
+        joints.append(JointMap(name=jname, columns=effort_column(effort, ratio), urdf=urdf,
+                               kt=_number(spec["kt"], f"{where}.kt", positive=True) if "kt" in spec else None,
+                               rotor_inertia=_number(spec.get("rotor_inertia", 0.0), f"{where}.rotor_inertia",
+                                                     nonnegative=True)))
+    names = [j.name for j in joints]
+    dup = next((n for n in names if names.count(n) > 1), None)
+    if dup is not None:
+        _fail(name, f"joint {dup} appears twice")
+    return Mapping(time=None, joints=joints, **_robot(doc, name))
+
+
+def load_mapping(path: str, *, bag: bool = False) -> Mapping:
+    """Read a TOML mapping file (of a ROS bag with ``bag``); LogError (exit 3) when it is missing
+    or wrong."""
     try:
         with open(path, "rb") as fh:
             doc = tomllib.load(fh)
@@ -212,7 +271,7 @@ def load_mapping(path: str) -> Mapping:
         raise LogError(f"{path}: cannot read ({exc.strerror})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise LogError(f"{path}: not a valid TOML mapping ({str(exc).splitlines()[0]})") from None
-    return parse_mapping(doc, path)
+    return parse_bag_mapping(doc, path) if bag else parse_mapping(doc, path)
 
 
 def parse_overrides(pairs, what: str, *, nonnegative: bool = False) -> dict[str, float]:

@@ -5,8 +5,10 @@ row to find each one. Fields are split at the delimiter (no quoting: numbers nee
 
     wrong field count, non-numeric or non-finite value  -> row dropped (reported)
     unterminated last line that does not parse          -> dropped as truncated (reported)
+    a value of absurd magnitude, a row of zeros         -> row dropped (reported)
+    rows outside the longest consistent stretch of time -> dropped (reported; ``consistent_rows``)
     time equal to the previous kept row                 -> row dropped (reported)
-    time going back                                     -> refused, or dropped with drop_backward
+    time going back a little                            -> refused, or dropped with drop_backward
 """
 
 from __future__ import annotations
@@ -23,17 +25,27 @@ from fricli.robot.mapping import Mapping
 
 KINDS = {
     "field_count": "wrong number of fields",
+    "malformed": "arrays of another length than its joint names",
+    "missing_joints": "joints missing",
     "non_numeric": "non-numeric or non-finite value",
     "truncated": "truncated last line",
+    "implausible": "a value of implausible magnitude",
+    "zero_row": "all values zero",
+    "time_outside": "time not continuing the recording (before or after its longest consistent stretch)",
+    "time_jump": "time far from its neighbours'",
     "duplicate_time": "same time as the previous row",
     "backward_time": "time going back",
 }
+STEP_FACTOR = 100.0        # a time step beyond this many median steps breaks the recording
+MAGNITUDE_FACTOR = 1e6     # |value| beyond this many times its column's median |value| (at least 1) is garbage
+LINK_WINDOW = 64           # stretches of consistent time looked back over when chaining them
 
 
 @dataclasses.dataclass
 class Defect:
     count: int
-    first_line: int        # 1-based line number in the file
+    first_line: int        # 1-based line number in the file (message number in a bag)
+    ranges: list | None = None   # [[first, last], ...] of the dropped lines, when known
 
 
 @dataclasses.dataclass
@@ -51,6 +63,99 @@ class Recording:
 def _refs(mapping: Mapping) -> list[int | str]:
     refs = [mapping.time.ref] + [c.ref for jm in mapping.joints for c in jm.columns.values()]
     return list(dict.fromkeys(refs))
+
+
+def _signal_columns(mapping: Mapping) -> list:
+    """The mapped columns other than time, each once."""
+    seen = {}
+    for jm in mapping.joints:
+        for c in jm.columns.values():
+            if c.ref != mapping.time.ref:
+                seen.setdefault(c.ref, c)
+    return list(seen.values())
+
+
+def ranges(numbers: np.ndarray) -> list[list[int]]:
+    """Sorted line numbers as [[first, last], ...] runs of consecutive numbers."""
+    if len(numbers) == 0:
+        return []
+    cut = np.flatnonzero(np.diff(numbers) != 1) + 1
+    firsts, lasts = numbers[np.r_[0, cut]], numbers[np.r_[cut - 1, len(numbers) - 1]]
+    return [[int(a), int(b)] for a, b in zip(firsts, lasts)]
+
+
+def _chain(t: np.ndarray, limit: float) -> np.ndarray:
+    """Mask of the longest chain of stretches of ``t`` (shape (m,)) in which time increases by at
+    most ``limit`` a step: a stretch follows another when its first time after the other's end is
+    at most ``limit`` per row skipped (+1) later; its rows at or before that end are left out."""
+    ok = (np.diff(t) > 0) & (np.diff(t) <= limit)
+    cut = np.flatnonzero(~ok) + 1
+    starts, ends = np.r_[0, cut], np.r_[cut, len(t)] - 1
+    best = ends - starts + 1
+    head, prev = starts.copy(), np.full(len(starts), -1)
+    for j in range(1, len(starts)):
+        part = t[starts[j]:ends[j] + 1]
+        for i in range(max(0, j - LINK_WINDOW), j):
+            r = starts[j] + int(np.searchsorted(part, t[ends[i]], side="right"))
+            if r > ends[j] or t[r] - t[ends[i]] > limit * (r - ends[i]):
+                continue
+            if best[i] + ends[j] - r + 1 > best[j]:
+                best[j], head[j], prev[j] = best[i] + ends[j] - r + 1, r, i
+    keep = np.zeros(len(t), dtype=bool)
+    j = int(np.argmax(best))
+    while j >= 0:
+        keep[head[j]:ends[j] + 1] = True
+        j = prev[j]
+    return keep
+
+
+def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarray, *, name: str,
+                    drop_backward: bool = False, unit: str = "line") -> tuple[np.ndarray, dict[str, Defect]]:
+    """Which rows to keep: not of implausible magnitude, not all zero, and in the longest chain of
+    consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR median steps).
+    ``t`` [s] and each of ``signals`` (canonical units) have shape (n,); ``numbers`` are the rows'
+    line (or message) numbers. Returns the mask of shape (n,) and the defects found; LogError when
+    time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``."""
+    n = len(t)
+    garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool)}
+    if signals:
+        values = np.abs(np.column_stack(signals))
+        bound = MAGNITUDE_FACTOR * np.maximum(1.0, np.median(values, axis=0))
+        garbage["implausible"] = (values > bound).any(axis=1)
+        garbage["zero_row"] = (values == 0).all(axis=1) & ~garbage["implausible"]
+    rest = np.flatnonzero(~(garbage["implausible"] | garbage["zero_row"]))
+    kinds = np.full(n, "", dtype=object)
+    for kind, mask in garbage.items():
+        kinds[mask] = kind
+    same = np.r_[False, t[rest][1:] == t[rest][:-1]]      # a sample written twice: the first is kept
+    kinds[rest[same]] = "duplicate_time"
+    rest = rest[~same]
+    steps = np.diff(t[rest])
+    if len(rest) > 1 and not (steps > 0).any():
+        raise LogError(f"{name}: time never increases from one {unit} to the next")
+    if len(rest) > 1:
+        limit = STEP_FACTOR * float(np.median(steps[steps > 0]))
+        chained = _chain(t[rest], limit)
+        kept, dropped = rest[chained], rest[~chained]
+        at = np.searchsorted(kept, dropped) - 1            # the kept row before each dropped one
+        before = np.where(at >= 0, t[kept[np.maximum(at, 0)]], np.nan)
+        inside = (at >= 0) & (at < len(kept) - 1)
+        kinds[dropped] = np.select(
+            [t[dropped] == before, ~inside, (t[dropped] < before) & (before - t[dropped] <= limit)],
+            ["duplicate_time", "time_outside", "backward_time"], "time_jump")
+    defects = {}
+    for kind in KINDS:
+        where = np.flatnonzero(kinds == kind)
+        if len(where):
+            defects[kind] = Defect(len(where), int(numbers[where[0]]), ranges(numbers[where]))
+    back = defects.get("backward_time")
+    if back and not drop_backward:
+        at = int(np.flatnonzero(kinds == "backward_time")[0])
+        latest = t[:at][kinds[:at] == ""].max()
+        raise LogError(f"{name}: time goes back at {unit} {numbers[at]} (t = {t[at]:g} after {latest:g}; "
+                       f"{back.count} {unit}{'s' if back.count != 1 else ''} before the latest time): use "
+                       "--drop-backward to drop them")
+    return kinds == "", defects
 
 
 def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -71,6 +176,17 @@ def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, bool]:
 def _fields(line: bytes, delimiter: str) -> list[bytes]:
     """Fields of one line: plain splitting (no quoting; numbers need none)."""
     return line.split(delimiter.encode())
+
+
+_DELIMITERS = {",": ",", ";": ";", "\t": "\\t", "|": "|"}
+
+
+def _delimiter_hint(sample: bytes, delimiter: str, name: str) -> None:
+    """LogError naming the delimiter the lines hold when they hold no ``delimiter`` but another."""
+    for mark, spelled in _DELIMITERS.items():
+        if mark != delimiter and mark.encode() in sample:
+            raise LogError(f"{name}: rows have 1 field when split at {delimiter!r}, and they hold {mark!r}: "
+                           f'set delimiter = "{spelled}" in the mapping')
 
 
 def _indices(refs, header: list[str] | None, n_fields: int, name: str) -> dict[int | str, int]:
@@ -201,6 +317,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         sample = (line(i) for i in range(start, min(start + 200, n_lines)))
         counts = collections.Counter(len(_fields(ln, mapping.delimiter)) for ln in sample if ln.strip())
         n_fields = counts.most_common(1)[0][0]
+    if n_fields == 1:
+        _delimiter_hint(line(int(first)), mapping.delimiter, name)
     index = _indices(_refs(mapping), header, n_fields, name)
     wanted = sorted(set(index.values()))
 
@@ -236,24 +354,12 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         found = "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
         raise LogError(f"{name}: no usable rows" + (f" ({found})" if found else ""))
 
-    # time order: a row must come after every row kept before it
-    t = cols[index[mapping.time.ref]]
-    before = np.maximum.accumulate(t)
-    late = np.zeros(len(t), dtype=bool)
-    late[1:] = t[1:] <= before[:-1]
-    if late.any():
-        same = np.zeros(len(t), dtype=bool)
-        same[1:] = late[1:] & (t[1:] == before[:-1])
-        back = late & ~same
-        if back.any():
-            at = int(np.flatnonzero(back)[0])
-            if not drop_backward:
-                raise LogError(f"{name}: time goes back at line {numbers[at]} (t = {t[at]:g} after {before[at - 1]:g}; "
-                               f"{int(back.sum())} rows before the latest time): use --drop-backward to drop them")
-            defect("backward_time", int(numbers[at]), int(back.sum()))
-        if same.any():
-            defect("duplicate_time", int(numbers[np.flatnonzero(same)[0]]), int(same.sum()))
-        keep = ~late
+    signals = [cols[index[c.ref]] * c.factor for c in _signal_columns(mapping)]
+    keep, found = consistent_rows(cols[index[mapping.time.ref]] * mapping.time.factor, signals, numbers,
+                                  name=name, drop_backward=drop_backward)
+    for kind, d in found.items():
+        defects[kind] = d
+    if not keep.all():
         cols = {c: v[keep] for c, v in cols.items()}
         numbers = numbers[keep]
     defects = dict(sorted(defects.items(), key=lambda kv: list(KINDS).index(kv[0])))

@@ -1,0 +1,225 @@
+"""A ROS bag's sensor_msgs/JointState topic -> the Recording and Mapping a CSV import makes.
+
+Reads rosbag2 (MCAP or sqlite3 storage: the bag's folder) and ROS 1 ``.bag`` files with
+``rosbags`` (pure Python, extra ``fricli[ros]``). ``position``, ``velocity`` and ``effort`` of
+each joint become ``q``, ``qd`` and ``tau_m`` (or what the mapping says the effort is); messages
+are numbered from 1 in the order the bag holds them, and defects are reported by message number
+(docs/robot-import.md):
+
+    a joint of the log missing from a message       -> message dropped (reported)
+    arrays of another length than the joint names   -> message dropped (reported)
+    a non-finite value                              -> message dropped (reported)
+    joints in another order than the first kept message -> reordered by name (reported)
+    empty velocity arrays                           -> no qd (derived like a CSV's missing qd)
+    then as for a CSV: garbage, duplicate and backward times (``recording.consistent_rows``)
+"""
+
+from __future__ import annotations
+
+import collections
+import dataclasses
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from fricli.errors import LogError, MissingDependencyError
+from fricli.robot.mapping import Column, JointMap, Mapping, effort_column
+from fricli.robot.recording import KINDS, Defect, Recording, consistent_rows, ranges
+
+JOINT_STATE = "sensor_msgs/msg/JointState"
+INSTALL = "pip install 'fricli[ros]'"
+SUFFIXES = (".bag", ".mcap", ".db3")
+FIELDS = {"position": "q", "velocity": "qd", "effort": "effort"}
+
+
+def is_bag(path: str) -> bool:
+    """Whether ``path`` names a ROS bag: a folder, or a .bag, .mcap or .db3 file."""
+    return path != "-" and (Path(path).is_dir() or Path(path).suffix in SUFFIXES)
+
+
+@dataclasses.dataclass
+class Bag:
+    """What was read: the recording (values keyed by ``"<joint>/<field>"``), its mapping, the
+    topic, where ``t`` came from (``header`` stamps or ``receive`` times), the time [ns] that is
+    t = 0, and the messages whose joints came in another order than the first kept one's."""
+
+    recording: Recording
+    mapping: Mapping
+    topic: str
+    stamps: str
+    origin_ns: int
+    reordered: Defect | None
+    sha256: str
+
+
+def _rosbags():
+    try:
+        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise MissingDependencyError(f"reading a ROS bag needs rosbags: {INSTALL}") from None
+    return AnyReader, AnyReaderError, get_typestore(Stores.ROS2_HUMBLE)
+
+
+def _bag_path(path: str) -> Path:
+    """The path rosbags opens: a ROS 1 file, or a rosbag2 folder (a storage file's folder)."""
+    p = Path(path)
+    if not p.exists():
+        raise LogError(f"{path}: no such bag")
+    if p.is_file() and p.suffix in (".mcap", ".db3"):
+        if not (p.parent / "metadata.yaml").exists():
+            raise LogError(f"{path}: a rosbag2 storage file without the bag's metadata.yaml beside it: give the "
+                           "bag's folder")
+        return p.parent
+    return p
+
+
+def _sha256(p: Path) -> str:
+    """sha256 of the bag's bytes: the file's, or a folder's files' in name order."""
+    h = hashlib.sha256()
+    for f in sorted(x for x in ([p] if p.is_file() else p.rglob("*")) if x.is_file()):
+        with open(f, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def _messages(path: str, topic: str | None):
+    """(topic, [(receive time [ns], stamp [ns], names, position, velocity, effort)]) of the
+    JointState topic ``topic`` (or the bag's only one)."""
+    AnyReader, AnyReaderError, default = _rosbags()
+    p = _bag_path(path)
+    try:
+        with AnyReader([p], default_typestore=default) as reader:
+            states = sorted({c.topic for c in reader.connections if c.msgtype == JOINT_STATE})
+            if topic is None:
+                if not states:
+                    raise LogError(f"{path}: no {JOINT_STATE} topic in the bag (topics: "
+                                   f"{', '.join(sorted(reader.topics)) or 'none'})")
+                if len(states) > 1:
+                    raise LogError(f"{path}: {len(states)} JointState topics ({', '.join(states)}): choose one "
+                                   "with --topic")
+                topic = states[0]
+            elif topic not in states:
+                kind = reader.topics[topic].msgtype if topic in reader.topics else None
+                raise LogError(f"{path}: topic {topic} " + (f"is {kind}, not {JOINT_STATE}" if kind else
+                               "is not in the bag") + f" (JointState topics: {', '.join(states) or 'none'})")
+            connections = [c for c in reader.connections if c.topic == topic]
+            out = []
+            for conn, received, raw in reader.messages(connections=connections):
+                msg = reader.deserialize(raw, conn.msgtype)
+                stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+                out.append((received, stamp, tuple(msg.name),
+                            *(np.asarray(getattr(msg, f), dtype=np.float64) for f in FIELDS)))
+    except (AnyReaderError, OSError) as exc:
+        raise LogError(f"{path}: not a readable ROS bag ({exc})") from None
+    return topic, out, p
+
+
+def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None, *,
+             drop_backward: bool = False) -> Bag:
+    """Read the JointState topic of the bag at ``path``. ``mapping`` (``parse_bag_mapping``) names
+    the joints to import and what their effort is; without it the joints that the most messages name,
+    effort as joint-side torque [Nm]. LogError (exit 3) when nothing is usable."""
+    topic, msgs, p = _messages(path, topic)
+    if not msgs:
+        raise LogError(f"{path}: topic {topic} holds no messages")
+    if mapping is None or not mapping.joints:
+        sets = collections.Counter(frozenset(m[2]) for m in msgs)
+        common = max(sets, key=sets.get)           # the first of the most frequent
+        names = next(m[2] for m in msgs if frozenset(m[2]) == common)
+        if not names:
+            raise LogError(f"{path}: the messages on {topic} name no joints")
+        base = mapping or Mapping(time=None, joints=[])
+        mapping = dataclasses.replace(base, joints=[JointMap(name=n, columns=effort_column("tau_m")) for n in names])
+    # JointState names are the robot description's joint names
+    mapping = dataclasses.replace(mapping, match=mapping.match or "name")
+    names = [jm.name for jm in mapping.joints]
+    n = len(msgs)
+    values = {f: np.full((n, len(names)), np.nan) for f in FIELDS}
+    empty = {f: np.zeros(n, dtype=bool) for f in FIELDS}
+    kinds = np.full(n, "", dtype=object)
+    ranks = np.full(n, -1)               # which order the joints come in, per message
+    orders: dict[tuple, tuple] = {}      # names of a message -> (indices of the log's joints, rank)
+    keys: dict[tuple | None, int] = {}   # order of the log's joints in a message -> rank
+    for k, (_, _, msg_names, *arrays) in enumerate(msgs):
+        if msg_names not in orders:
+            where = {m: i for i, m in enumerate(msg_names)}
+            index = np.array([where[m] for m in names]) if all(m in where for m in names) else None
+            key = tuple(np.argsort(index)) if index is not None else None
+            orders[msg_names] = (index, keys.setdefault(key, len(keys)))
+        index, rank = orders[msg_names]
+        if index is None or len(set(msg_names)) != len(msg_names):
+            kinds[k] = "missing_joints"
+            continue
+        if any(len(a) not in (0, len(msg_names)) for a in arrays):
+            kinds[k] = "malformed"
+            continue
+        ranks[k] = rank
+        for f, a in zip(FIELDS, arrays):
+            if len(a):
+                values[f][k] = a[index]
+            else:
+                empty[f][k] = True
+    ok = kinds == ""
+    if not ok.any():
+        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds)})")
+    present = {f: not empty[f][ok].any() for f in FIELDS}     # a field empty in any message is not used
+    if not present["position"] and not present["velocity"]:
+        raise LogError(f"{path}: the messages on {topic} hold neither positions nor velocities")
+    if not present["effort"]:
+        raise LogError(f"{path}: the messages on {topic} hold no efforts: a log needs a motor torque or current")
+    used = [f for f in FIELDS if present[f]]
+    finite = np.all([np.isfinite(values[f]).all(axis=1) for f in used], axis=0)
+    kinds[ok & ~finite] = "non_numeric"
+    keep = kinds == ""
+    if not keep.any():
+        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds)})")
+    stamps = np.array([m[1] for m in msgs], dtype=np.int64)
+    source = "receive" if (stamps[keep] == 0).all() else "header"
+    t_ns = stamps if source == "header" else np.array([m[0] for m in msgs], dtype=np.int64)
+    numbers = np.arange(1, n + 1)
+
+    cols: dict[str, np.ndarray] = {}
+    joints, signals = [], []
+    for j, jm in enumerate(mapping.joints):
+        columns = {}
+        for f in used:
+            ref = f"{jm.name}/{f}"
+            cols[ref] = values[f][:, j]
+            if f == "effort":
+                (signal, c), = jm.columns.items()
+                columns[signal] = dataclasses.replace(c, ref=ref)
+            else:
+                columns[FIELDS[f]] = Column(ref=ref, unit="rad" if f == "position" else "rad/s", factor=1.0,
+                                            kind="rotary")
+        signals += [cols[c.ref] * c.factor for c in columns.values()]
+        joints.append(dataclasses.replace(jm, columns=columns))
+    mapping = dataclasses.replace(mapping, time=Column(ref="t", unit="s", factor=1.0, kind=None), joints=joints)
+
+    idx = np.flatnonzero(keep)
+    mid = int(np.median(t_ns[idx]))        # differences of integer ns keep the stamps' resolution
+    good, found = consistent_rows((t_ns[idx] - mid) / 1e9, [s[idx] for s in signals], numbers[idx], name=path,
+                                  drop_backward=drop_backward, unit="message")
+    keep[idx[~good]] = False
+    origin = int(t_ns[keep][0])
+    cols["t"] = (t_ns - origin) / 1e9
+    defects = {}
+    for kind in KINDS:
+        at = np.flatnonzero(kinds == kind)
+        if len(at):
+            defects[kind] = Defect(len(at), int(numbers[at[0]]), ranges(numbers[at]))
+        elif kind in found:
+            defects[kind] = found[kind]
+    rec = Recording(values={ref: v[keep] for ref, v in cols.items()}, lines=numbers[keep], defects=defects,
+                    n_fields=0)
+    turned = keep & (ranks != ranks[keep][0])
+    moved = Defect(int(turned.sum()), int(numbers[turned][0]), ranges(numbers[turned])) if turned.any() else None
+    return Bag(recording=rec, mapping=mapping, topic=topic, stamps=source, origin_ns=origin, reordered=moved,
+               sha256=_sha256(p))
+
+
+def _found(kinds: np.ndarray) -> str:
+    counts = collections.Counter(k for k in kinds if k)
+    return "; ".join(f"{c} with {KINDS[k]}" for k, c in counts.items())
