@@ -60,7 +60,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
     for r in results:
         if r.extrapolation is not None and not quiet:
-            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation)}")
+            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation, r.joint)}")
 
 
 @cli.command("report")

@@ -191,7 +191,8 @@ class Direction(Effect):
 
     def applicable(self, ctx):
         qd = ctx.signals["qd"]
-        if (qd > 0).sum() < 10 or (qd < 0).sum() < 10:
+        moving = ctx.moving()
+        if (moving & (qd > 0)).sum() < 10 or (moving & (qd < 0)).sum() < 10:
             return "needs motion in both directions"
         return None
 
@@ -346,6 +347,14 @@ def _ratio_reach(effect: Effect, ctx: Context, what: str) -> str | None:
             f"explain {share} of the residual, under the {100 * ctx.min_gain:g} % an effect must remove")
 
 
+def _ratio_text(name: str, par: dict) -> str:
+    """``"kc 0.01 Nm/Nm"``; beyond the physical bound only the side it lies on (the figure means nothing)."""
+    v = par["value"]
+    if v is not None and abs(v) > RATIO_BOUND:
+        return f"{name} {'>' if v > 0 else '<'} {RATIO_BOUND if v > 0 else -RATIO_BOUND:g} {par['unit']} (not physical)"
+    return f"{name} {_fmt(v)} {par['unit']}"
+
+
 def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
     if value is None or abs(value) <= RATIO_BOUND:
         return None
@@ -370,6 +379,9 @@ class Load(Effect):
     def implausible(self, params, ctx):
         return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
 
+    def summary(self, params):
+        return _ratio_text("kc", params["kc"])
+
 
 class Payload(Effect):
     """A payload measured by tau_ext loads the gear: the friction's load dependence follows the
@@ -391,6 +403,9 @@ class Payload(Effect):
 
     def implausible(self, params, ctx):
         return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
+
+    def summary(self, params):
+        return _ratio_text("kc", params["kc"])
 
 
 class Gravity(Effect):
@@ -452,8 +467,7 @@ class Quadrant(Effect):
         return {"kq": _par(coef["tau_l held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def summary(self, params):
-        kq = params["kq"]["value"]
-        return f"kq {_fmt(kq)} {params['kq']['unit']}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
+        return f"{_ratio_text('kq', params['kq'])}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
 
 
 class Velocity(Effect):
