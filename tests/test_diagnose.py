@@ -620,10 +620,12 @@ def test_a_ratio_beyond_one_is_not_printed_as_a_coefficient():
     assert E.Load().implausible(E.Load().params({"|tau_l|*sign": 0.02}, ctx), ctx) is None
 
 
-@pytest.mark.parametrize("inertia, flagged", [(0.5, False), (-0.05, False), (-1.0, True), (30.0, True)])
+@pytest.mark.parametrize("inertia, flagged", [(0.5, False), (2.4, False), (-0.05, False), (-1.0, True), (3.0, True)])
 def test_an_implausible_inertia_is_flagged(inertia, flagged):
+    # robot model 2 kg m^2, motor torque 2.5 x qdd: a negative 50 % or a term above the motor's torque is implausible
     qdd = np.sin(np.arange(1000) / 50)
-    ctx = E.Context({"qd": np.cos(np.arange(1000) / 50), "qdd": qdd, "tau_dyn": 2.0 * qdd}, np.zeros(1000))
+    ctx = E.Context({"qd": np.cos(np.arange(1000) / 50), "qdd": qdd, "tau_dyn": 2.0 * qdd, "tau_m": 2.5 * qdd},
+                    np.zeros(1000))
     reason = E.Acceleration().implausible(E.Acceleration().params({"qdd": inertia}, ctx), ctx)
     assert (reason is not None) == flagged
     no_model = E.Context({"qd": ctx.signals["qd"], "qdd": qdd}, np.zeros(1000))

@@ -15,7 +15,7 @@ PATTERNS = {
     "its own rest share": re.compile(r"\bREST_SHARE\s*="),
     "its own in-motion function": re.compile(r"\bdef\s+(in_motion|_moving|_?at_rest|_?is_moving)\s*\("),
     "a share of the top speed": re.compile(r"[<>]=?[^<>\n]*\*\s*(float\()?[\w.]*\b(top|vmax|max\(\))"),
-    "exact zero velocity": re.compile(r"\bqd["']?\]?\s*(!=|==)\s*0(\.0*)?\b(?!\.\d)|\bspeed\s*>\s*0(\.0*)?\b(?!\.\d)"),
+    "exact zero velocity": re.compile(r"\bqd[\"']?\]?\s*(!=|==)\s*0(\.0*)?\b(?!\.\d)|\bspeed\s*>\s*0(\.0*)?\b(?!\.\d)"),
     "a speed threshold": re.compile(r"\b(speed|np\.abs\(\s*\w*qd\w*\s*\))\s*>=?\s*(?!0\b)[\w(]"),
 }
 #: lines that state a threshold the user gave (adapt --min-speed), not a rule of their own
@@ -47,7 +47,8 @@ def hits() -> list[str]:
 def test_patterns_catch_the_ways_in_motion_was_decided():
     caught = ["REST_SHARE = 0.02", "def _moving(qd):", "return mask & (speed > max(abs_tol, 1e-3 * top))",
               "moving = np.abs(v) > 1e-3 * top", "moving = speed > training_data.LOW * float(speed.max())",
-              "moving = qd != 0", "m = self.signals[\"qd\"] != 0", "rest = qd == 0.0", "moving = speed[speed > 0]", "moving = speed > abs_tol",
+              "moving = qd != 0", "m = self.signals[\"qd\"] != 0", "rest = qd == 0.0", "moving = speed[speed > 0]",
+              "moving = speed > abs_tol",
               "moving = speed >= lo", "mask = np.abs(qd) > tol"]
     for line in caught:
         assert any(p.search(line) for p in PATTERNS.values()), line

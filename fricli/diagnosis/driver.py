@@ -194,7 +194,8 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     left = r - design.heldout_prediction(sel.terms) if sel.terms else r
     mae_before = float(np.mean(np.abs(r)))
     mae_after = float(np.mean(np.abs(left))) if sel.terms else mae_before
-    return Diagnosis(effects=results + list(suspects.values()) + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
+    return Diagnosis(effects=results + list(suspects.values()) + others, added=list(sel.added),
+                     mae_before=mae_before, mae_after=mae_after,
                      terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
                      alone={name: max(sc.gain, WORST_GAIN) for name, sc in sel.first.items()},

@@ -302,9 +302,13 @@ class Acceleration(Effect):
             seen = f" ({_fmt(100 * -j / ref)} % of the {_fmt(ref)} {u} the robot model's tau_dyn shows)" if ref else ""
             return (f"a negative inertia{seen}; more likely a delay between the torque and the filtered "
                     f"acceleration, or a friction lag, than a robot model that heavy")
-        if ref and j > INERTIA_FACTOR * ref:
-            return (f"{_fmt(j / ref)} times the {_fmt(ref)} {u} the robot model's tau_dyn shows; more than a "
-                    f"drive's rotor inertia, more likely a wrong acceleration (its unit or filter) or tau_dyn")
+        sig = ctx.signals
+        if j > 0 and "tau_m" in sig:
+            need = j * float(np.sqrt(np.mean(np.square(sig["qdd"]))))
+            have = float(np.sqrt(np.mean(np.square(sig["tau_m"]))))
+            if need > have:
+                return (f"its torque alone (rms {_fmt(need)} {ctx.tau_unit}) would exceed all the motor gave "
+                        f"(rms {_fmt(have)} {ctx.tau_unit}); more likely a wrong acceleration (its unit or filter)")
         return None
 
     def summary(self, params):
@@ -313,8 +317,6 @@ class Acceleration(Effect):
 
 #: a robot-model correction beyond this share (a gravity scale, a negative inertia) is suspicious
 ROBOT_MODEL_TOLERANCE = 0.3
-#: an added inertia beyond this many times the robot model's is more than a drive's rotor inertia
-INERTIA_FACTOR = 10.0
 #: a ratio of torques [Nm/Nm] beyond this magnitude is not physical (kc, kq)
 RATIO_BOUND = 1.0
 
