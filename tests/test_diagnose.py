@@ -631,3 +631,12 @@ def test_an_implausible_inertia_is_flagged(inertia, flagged):
     no_model = E.Context({"qd": ctx.signals["qd"], "qdd": qdd}, np.zeros(1000))
     assert (E.Acceleration().implausible(E.Acceleration().params({"qdd": -0.05}, no_model), no_model)
             is not None)
+
+
+def test_envelope_lines_name_the_joint():
+    from fricli.cli.options import extrapolation_line
+
+    share = {"share": 0.025, "rows": 304, "of": 12001}
+    assert extrapolation_line(share) == "2.5 % of the rows (304 of 12,001) lie outside the model's training envelope"
+    assert extrapolation_line(share, "3").startswith("2.5 % of the rows of joint 3 (304 of 12,001)")
+    assert extrapolation_line(None, "3") is None
