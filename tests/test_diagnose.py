@@ -640,3 +640,14 @@ def test_envelope_lines_name_the_joint():
     assert extrapolation_line(share) == "2.5 % of the rows (304 of 12,001) lie outside the model's training envelope"
     assert extrapolation_line(share, "3").startswith("2.5 % of the rows of joint 3 (304 of 12,001)")
     assert extrapolation_line(None, "3") is None
+
+
+def test_a_position_range_of_a_few_samples_is_not_tested():
+    t = np.arange(2000) / 100.0
+    qd = 0.3 * np.sin(t)
+    wide = E.Context({"t": t, "q": np.cumsum(qd) / 100.0, "qd": qd}, np.zeros(2000))
+    assert E.Position().applicable(wide) is None
+    few = dict(wide.signals, q=np.round(wide.signals["q"] / 0.5) * 1e-4)      # one step of 1e-4 rad
+    reason = E.Position().applicable(E.Context(few, np.zeros(2000)))
+    # three harmonics at two samples per period, two periods: 12 steps
+    assert reason.startswith("the position range 0.0001 rad is under two periods") and "(0.0012 rad)" in reason

@@ -282,7 +282,7 @@ class Acceleration(Effect):
     part = "model"
 
     def applicable(self, ctx):
-        if np.ptp(ctx.signals["qdd"]) <= 0:
+        if _constant(ctx.signals["qdd"]):
             return "the log has no acceleration"
         return None
 
