@@ -370,7 +370,7 @@ class Load(Effect):
                    "(its normal force)")
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_l|")
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_l|*sign(qd)")
 
     def terms(self, ctx, residual):
         return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN)]
@@ -395,7 +395,7 @@ class Payload(Effect):
     def applicable(self, ctx):
         if "tau_ext" not in ctx.signals or np.ptp(ctx.signals["tau_ext"]) <= 0:
             return "the log has no varying 'tau_ext'"
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_g - tau_ext| - |tau_g|")
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "(|tau_g - tau_ext| - |tau_g|)*sign(qd)")
 
     def terms(self, ctx, residual):
         return [T.term("(|tau_l|-|tau_g|)*sign", T.PAYLOADGEAR, T.SIGN)]
