@@ -87,7 +87,8 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
         head.append(f"{ln} friction MAE")
         if has_ext[ln]:
             head.append(f"{ln} ext. torque MAE")
-    lines = ["MAE over all rows (in brackets: rows in motion, |qd| > 2 % of the top speed)", "",
+    motion = f"rows in motion, |qd| > {100 * metrics.REST_SHARE:g} % of the top speed"
+    lines = [f"MAE over all rows (in brackets: {motion})", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for mn, joint in rows:
         row = [f"{mn} (joint {joint})" if labelled else mn]

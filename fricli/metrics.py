@@ -19,15 +19,19 @@ def relative_error(y: np.ndarray, y_pred: np.ndarray) -> float:
     return float(100.0 * np.linalg.norm(y - y_pred) / np.linalg.norm(y))
 
 
+#: a row is in motion when |qd| exceeds this share of the log's top speed (docs/log-format.md, "In motion")
 REST_SHARE = 0.02
 
 
 def in_motion(qd: np.ndarray, share: float = REST_SHARE) -> np.ndarray:
-    """Rows moving faster than ``share`` of the top speed, (n,) bool.
+    """Rows moving faster than ``share`` of the top speed max|qd|, (n,) bool; none when the
+    joint never moves. The one rule for "in motion" in fricli.
 
     At standstill the friction is statically indeterminate (stiction holds any torque up to the
     breakaway level, set by the motion before), so friction figures are also given over the rows
-    in motion.
+    in motion, and fits of a friction curve over velocity use only those rows. Relative to the
+    top speed, the rule does not depend on the unit of qd, and the velocity noise at rest (a
+    small share of any real motion) falls below it.
     """
     speed = np.abs(qd)
     top = float(speed.max()) if speed.size else 0.0

@@ -13,7 +13,8 @@ from fricli import logs, metrics, models
 from fricli.cli import cli
 from fricli.diagnosis import diagnose
 from fricli.diagnosis import effects as E
-from fricli.diagnosis import selection
+from fricli.diagnosis import driver, selection, structure
+from fricli.cli.diagnose import table
 from fricli.models import terms as T
 from fricli.diagnosis.fix import augment
 from fricli.models.augmented import AugmentedModel
@@ -178,9 +179,9 @@ def test_clean_log_adds_nothing_and_json_schema(rng):
     assert d.mae_after == d.mae_before
     out = d.to_json()
     assert set(out) == {"mae_before", "mae_after", "cut", "intervals", "effects", "added", "model_errors",
-                        "notes", "unexplained_share", "unexplained"}
+                        "suspected", "skipped", "notes", "unexplained_share", "unexplained"}
     for e in out["effects"]:
-        assert set(e) == {"name", "significant", "gain", "params", "part"}
+        assert set(e) == {"name", "significant", "gain", "params", "part", "implausible"}
         assert e["part"] in ("friction", "model")
         for par in e["params"].values():
             assert set(par) == {"value", "unit"}
@@ -498,3 +499,155 @@ def test_cli_effects_option_limits_the_candidates(files):
     out = json.loads(res.stdout)
     assert {e["name"] for e in out["effects"]} <= {"offset", "level"}
     assert "direction" not in out["added"]
+
+
+# --------------------------------------------------------------------------- no meaningless numbers
+
+
+def _with_tau_g(rng, tau_g, friction=None, noise=0.2, n=6000, **extra):
+    """``synthetic`` with its tau_g replaced by ``tau_g(sig)`` (the friction sees the new one)."""
+    log = synthetic(rng, n=n, noise=noise, **extra)
+    sig = dict(log.signals)
+    sig["tau_g"] = tau_g(sig)
+    f = (friction or (lambda s: CoulombViscous().predict(s)[0]))(sig)
+    cols = {k: v for k, v in sig.items() if k not in ("tau_m",)}
+    cols["tau_m"] = sig["tau_g"] + f + noise * rng.standard_normal(n)
+    units = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_dyn": "Nm"}
+    return logs.from_table(logs.table_from_arrays(cols, units), name="synthetic")
+
+
+@pytest.mark.parametrize("spread", [1e-15, 0.02])
+def test_a_tau_g_that_barely_varies_leaves_its_effects_untested(rng, spread):
+    # a vertical first axis (rounding noise) or a wrist joint whose tau_g varies far less than the
+    # residual: no coefficient up to 1 Nm/Nm could explain the residual, so none is reported
+    log = _with_tau_g(rng, lambda s: spread * np.sin(3 * s["q"]), noise=0.5)
+    d = diagnose(CoulombViscous(), log)
+    for name in ("gravity", "load", "quadrant"):
+        assert "varies too little" in d.skipped[name], name
+        assert name not in {e.name for e in d.effects}
+    text = table(d)
+    assert "not tested: tau_g varies too little" in text and "Nm/Nm" in text
+
+
+def test_the_same_spread_is_tested_when_the_residual_is_small(rng):
+    log = _with_tau_g(rng, lambda s: 2.0 * np.sin(3 * s["q"]), noise=0.2)
+    d = diagnose(CoulombViscous(), log)
+    assert not {"gravity", "load", "quadrant"} & set(d.skipped)
+
+
+def test_a_constant_column_is_not_tested(rng):
+    log = synthetic(rng, humidity=np.full(6000, 40.0) + 40.0 * np.finfo(float).eps * (np.arange(6000) % 2))
+    d = diagnose(CoulombViscous(), log)
+    assert d.skipped["column:humidity"] == "the column 'humidity' is constant"
+
+
+def test_gains_below_minus_100_percent_read_worse(rng):
+    # a column that is a thousandth of the residual on nine folds and +-0.5 on the last: its
+    # coefficient, fitted on the nine, predicts the last wildly wrong
+    n = 6000
+    log = synthetic(rng, n=n)
+    h = 1e-3 * (logs.friction_target(log.signals) - CoulombViscous().predict(log.signals)[0])
+    h[-n // 10:] = 0.5 * (-1.0) ** np.arange(n // 10)
+    table_ = log.table.append_column("humidity", logs.table_from_arrays({"humidity": h}, {}).column(0))
+    d = diagnose(CoulombViscous(), logs.from_table(table_, name="synthetic"))
+    col = next(e for e in d.effects if e.name == "column:humidity")
+    assert col.gain == driver.WORST_GAIN and col.step_gain >= driver.WORST_GAIN
+    assert all(e.gain >= driver.WORST_GAIN for e in d.effects) and min(d.alone.values()) >= driver.WORST_GAIN
+    row = next(line for line in table(d).splitlines() if "column:humidity" in line)
+    assert "worse" in row and "%" not in row.split("column:humidity")[1].split("no")[0]
+
+
+@pytest.mark.parametrize("lo, hi, shown", [
+    (0.011130, 0.011180, "0.01113 .. 0.01118"),
+    (1234.51, 1234.57, "1234.51 .. 1234.57"),
+    (-0.034, 0.0, "-0.034 .. 0"),
+    (1.2, 3.4, "1.2 .. 3.4"),
+])
+def test_ranges_print_with_the_precision_that_shows_them(lo, hi, shown):
+    assert structure.span(lo, hi) == shown
+
+
+def test_structure_at_rest_reads_at_rest():
+    s = structure.Structure(time=structure.View(0.0, False, {"frequency_hz": None}),
+                            velocity=structure.View(0.4, True, {"range": [0.0, 0.0]}),
+                            position=structure.View(0.1, True, {"range": [0.0111301, 0.0111802]}))
+    assert "at rest (velocity 0 rad/s)" in s.line("Nm", "rad/s", "rad")
+    s.velocity = structure.View(0.0, False, {"range": None})
+    assert "over position 0.01113 .. 0.01118 rad" in s.line("Nm", "rad/s", "rad")
+
+
+# --------------------------------------------------------------------------- implausible corrections
+
+
+def _gravity_off(rng, scale):
+    """The true gravity torque is ``scale`` times the logged one."""
+    return _with_tau_g(rng, lambda s: 10.0 * np.sin(s["q"] + 0.3 * np.sin(0.1 * s["t"])),
+                       friction=lambda s: CoulombViscous().predict(s)[0] + (scale - 1.0) * s["tau_g"])
+
+
+def test_a_plausible_gravity_scale_is_added():
+    d = diagnose(CoulombViscous(), _gravity_off(np.random.default_rng(3), 1.15))
+    assert d.added == ["gravity"] and d.suspected == []
+    assert d.effects[0].params["scale"]["value"] == pytest.approx(1.15, abs=0.01)
+    assert d.effects[0].implausible is None
+
+
+def test_an_implausible_gravity_scale_is_flagged_and_not_applied(tmp_path):
+    log = _gravity_off(np.random.default_rng(4), 2.0)
+    d = diagnose(CoulombViscous(), log)
+    assert "gravity" not in d.added and d.suspected == ["gravity"]
+    g = next(e for e in d.effects if e.name == "gravity")
+    assert g.params["scale"]["value"] == pytest.approx(2.0, abs=0.02) and not g.added
+    for cause in ("drive gain", "cable", "counterbalance spring", "payload"):
+        assert cause in g.implausible
+    text = table(d)
+    assert "suspicious, not added: gravity" in text and "--accept-implausible" in text
+    fixed = augment(CoulombViscous(), d, log)
+    assert fixed.errors == [] and "gravity" not in fixed.effects
+    # asked explicitly: added, and still named implausible
+    d = diagnose(CoulombViscous(), log, accept_implausible=True)
+    assert d.added[0] == "gravity" and d.suspected == []
+    assert "implausible, applied as asked" in table(d)
+    assert augment(CoulombViscous(), d, log).errors == ["gravity"]
+
+
+def test_a_ratio_beyond_one_is_not_printed_as_a_coefficient():
+    ctx = E.Context({"qd": np.ones(3)}, np.zeros(3))
+    params = E.Quadrant().params({"tau_l held": -4.7}, ctx)
+    assert E.Quadrant().summary(params).startswith("kq < -1 Nm/Nm (not physical)")
+    assert "not physical" in E.Quadrant().implausible(params, ctx)
+    assert E.Load().summary(E.Load().params({"|tau_l|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
+    assert E.Load().implausible(E.Load().params({"|tau_l|*sign": 0.02}, ctx), ctx) is None
+
+
+@pytest.mark.parametrize("inertia, flagged", [(0.5, False), (2.4, False), (-0.05, False), (-1.0, True), (3.0, True)])
+def test_an_implausible_inertia_is_flagged(inertia, flagged):
+    # robot model 2 kg m^2, motor torque 2.5 x qdd: a negative 50 % or a term above the motor's torque is implausible
+    qdd = np.sin(np.arange(1000) / 50)
+    ctx = E.Context({"qd": np.cos(np.arange(1000) / 50), "qdd": qdd, "tau_dyn": 2.0 * qdd, "tau_m": 2.5 * qdd},
+                    np.zeros(1000))
+    reason = E.Acceleration().implausible(E.Acceleration().params({"qdd": inertia}, ctx), ctx)
+    assert (reason is not None) == flagged
+    no_model = E.Context({"qd": ctx.signals["qd"], "qdd": qdd}, np.zeros(1000))
+    assert (E.Acceleration().implausible(E.Acceleration().params({"qdd": -0.05}, no_model), no_model)
+            is not None)
+
+
+def test_envelope_lines_name_the_joint():
+    from fricli.cli.options import extrapolation_line
+
+    share = {"share": 0.025, "rows": 304, "of": 12001}
+    assert extrapolation_line(share) == "2.5 % of the rows (304 of 12,001) lie outside the model's training envelope"
+    assert extrapolation_line(share, "3").startswith("2.5 % of the rows of joint 3 (304 of 12,001)")
+    assert extrapolation_line(None, "3") is None
+
+
+def test_a_position_range_of_a_few_samples_is_not_tested():
+    t = np.arange(2000) / 100.0
+    qd = 0.3 * np.sin(t)
+    wide = E.Context({"t": t, "q": np.cumsum(qd) / 100.0, "qd": qd}, np.zeros(2000))
+    assert E.Position().applicable(wide) is None
+    few = dict(wide.signals, q=np.round(wide.signals["q"] / 0.5) * 1e-4)      # one step of 1e-4 rad
+    reason = E.Position().applicable(E.Context(few, np.zeros(2000)))
+    # three harmonics at two samples per period, two periods: 12 steps
+    assert reason.startswith("the position range 0.0001 rad is under two periods") and "(0.0012 rad)" in reason

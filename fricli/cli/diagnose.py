@@ -26,10 +26,17 @@ def _effect_names(ctx, param, value):
     return names
 
 
-def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> str:
-    """The readable report printed on stdout without --json."""
+def _gain(g: float, width: int) -> str:
+    """A gain as a percentage, or "worse" at the clipped bottom (the effect at least doubles the residual)."""
+    return f"{'worse':>{width + 1}}" if g <= driver.WORST_GAIN else f"{100 * g:>{width}.1f}%"
+
+
+def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint=None) -> str:
+    """The readable report printed on stdout without --json; ``joint`` (a multi-joint log's
+    joint) names the joint on every summary line."""
     u = d.tau_unit
     lines = []
+    who = f"joint {joint}: " if joint is not None else ""
     level = round(100 * driver.INTERVAL_LEVEL)
     if d.added:
         lo, hi = d.intervals["cut"]
@@ -44,9 +51,15 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
     for e in d.effects:
         if e.added and e.part == "model":
             lines.append(f"robot-model error, not friction: {e.name}: {e.summary}")
+        if e.added and e.implausible:
+            lines.append(f"implausible, applied as asked (--accept-implausible): {e.name}: {e.implausible}")
+        if e.name in d.suspected:
+            lines.append(f"suspicious, not added: {e.name}: {e.summary}: {e.implausible} "
+                         f"(--accept-implausible adds it)")
     lines.extend(f"note: {n}" for n in d.notes)
     if d.unexplained is not None:
         lines.append(d.unexplained.line(u, v_unit, q_unit))
+    lines = [who + line for line in lines]
     lines.append("")
     head = (f"{'rank':>4}  {'effect':<18} {'part':<8} {'gain':>7} {'of rest':>8}  {'signif.':<7}  {'added':<5}  "
             f"parameters")
@@ -55,14 +68,16 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
     for rank, e in enumerate(d.effects, 1):
         added = str(order[e.name]) if e.name in order else "-"
         sig = "yes" if e.significant else "no"
-        lines.append(f"{rank:>4}  {e.name:<18} {e.part:<8} {100 * e.gain:>6.1f}% {100 * e.step_gain:>7.1f}%  "
-                     f"{sig:<7}  {added:<5}  {e.summary}")
+        flag = " (implausible)" if e.implausible and e.name not in d.suspected and not e.added else ""
+        lines.append(f"{rank:>4}  {e.name:<18} {e.part:<8} {_gain(e.gain, 6)} {_gain(e.step_gain, 7)}  "
+                     f"{sig:<7}  {added:<5}  {e.summary}{flag}")
     for name, reason in d.skipped.items():
         lines.append(f"   -  {name:<18} not tested: {reason}")
     lines.append("")
     lines.append(f"gain: share of the model's squared residual an effect explains on held-out data ({d.folds} "
                  f"blocks over time); of rest: share of what the effects added before it left; part: friction, "
-                 f"or model (an error of the robot model or the measurement)")
+                 f"or model (an error of the robot model or the measurement); worse: the effect at least doubles "
+                 f"the held-out residual")
     return "\n".join(lines)
 
 
@@ -83,12 +98,15 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad") -> st
 @click.option("--max-effects", type=click.IntRange(min=0), default=None, help="Add at most this many effects.")
 @click.option("--no-carry", is_flag=True,
               help="With --fix, keep every effect as an added term even when a LuGre base could carry it.")
+@click.option("--accept-implausible", is_flag=True,
+              help="Add effects whose fitted parameters are out of plausible range (e.g. a gravity scale "
+                   "beyond +-30 %) instead of reporting them as suspicious.")
 @log_reading
 @if_changed_option
 @json_flag
 @common
-def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, joint, kt, cutoff,
-                 drop_invalid, if_changed, as_json, quiet):
+def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
+                 joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -99,7 +117,10 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     other numeric column. Gravity, acceleration and offset are errors of the robot model or
     the measurement, not friction, and are reported as such. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
-    still removes enough of the residual (docs/diagnose.md). The ranked effects, their
+    still removes enough of the residual (docs/diagnose.md). An effect the log cannot identify
+    (e.g. tau_g nearly constant) is not tested; one chosen with implausible parameters (a gravity
+    scale beyond +-30 %, kc or kq beyond 1 Nm/Nm, a negative or huge inertia) is reported as
+    suspicious and not added unless --accept-implausible. The ranked effects, their
     physical parameters, the held-out MAE before and after with an interval over the folds,
     and the structure left that no candidate explains go to stdout (a table, or JSON with
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
@@ -137,11 +158,12 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         base, meta = models.load(model_path)
         models.check_log(meta, data, model_path)
         result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                                 max_effects=max_effects)
+                                 max_effects=max_effects, accept_implausible=accept_implausible)
         if not as_json:
             if several:
                 click.echo(f"joint {data.joint} ({model_path}):")
-            click.echo(table(result, data.units["qd"], data.units["q"]) + ("\n" if several else ""))
+            click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
+                       + ("\n" if several else ""))
         if fix:
             _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
         return result.to_json()
@@ -178,7 +200,10 @@ def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -
             carried += f"; robot-model error terms, kept apart from friction: {', '.join(fixed.errors)}"
         if fixed.refitted:
             carried += f"; refitted with them: {', '.join(fixed.refitted)}"
+        if result.suspected:
+            carried += f"; not added, implausible: {', '.join(result.suspected)}"
         say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
             f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
     else:
-        say(f"wrote {output}: nothing added, same predictions as {model_path}")
+        held = f" (not added, implausible: {', '.join(result.suspected)})" if result.suspected else ""
+        say(f"wrote {output}: nothing added{held}, same predictions as {model_path}")

@@ -58,9 +58,10 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+    several = len({str(r.joint) for r in results}) > 1
     for r in results:
         if r.extrapolation is not None and not quiet:
-            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation)}")
+            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation, r.joint if several else None)}")
 
 
 @cli.command("report")

@@ -58,12 +58,14 @@ def warn(message: str) -> None:
     click.echo(message, err=True)
 
 
-def extrapolation_line(extrapolation: dict | None) -> str | None:
-    """The stderr line for the rows outside a model's training envelope (None without one)."""
+def extrapolation_line(extrapolation: dict | None, joint=None) -> str | None:
+    """The stderr line for the rows outside a model's training envelope (None without one);
+    ``joint``: the log's joint it is about (named when given)."""
     if extrapolation is None:
         return None
-    return (f"{100 * extrapolation['share']:.1f} % of the rows ({extrapolation['rows']:,} of {extrapolation['of']:,}) "
-            "lie outside the model's training envelope")
+    rows = "rows" if joint is None else f"rows of joint {joint}"
+    return (f"{100 * extrapolation['share']:.1f} % of the {rows} ({extrapolation['rows']:,} of "
+            f"{extrapolation['of']:,}) lie outside the model's training envelope")
 
 
 def _json_safe(obj):

@@ -18,6 +18,7 @@ DEFAULT_MIN_GAIN = 0.1
 DEFAULT_ALPHA = 0.01
 MIN_ROWS_PER_FOLD = 20
 INTERVAL_LEVEL = 0.95
+WORST_GAIN = -1.0                  # gains are clipped here: an effect that doubles the residual or worse is "worse"
 #: effects that the same log may explain about equally, and what tells them apart
 TWINS = {("gravity", "quadrant"): "rests with a varying tau_g, or a measured payload (tau_ext)"}
 
@@ -33,6 +34,7 @@ class EffectResult:
     terms: list[dict]
     step_gain: float = 0.0         # share of what was left of it when scored (when added, or at the end)
     part: str = "friction"         # or "model": an error of the robot model or the measurement
+    implausible: str | None = None  # why the fitted parameters are out of plausible range (None: plausible)
 
 
 @dataclasses.dataclass
@@ -56,6 +58,7 @@ class Diagnosis:
     intervals: dict[str, list[float]] = dataclasses.field(default_factory=dict)  # mae_before, mae_after, cut
     unexplained: structure.Structure | None = None    # structure left in the held-out residual
     notes: list[str] = dataclasses.field(default_factory=list)   # for people: what the log cannot decide
+    suspected: list[str] = dataclasses.field(default_factory=list)  # chosen, but implausible: not added
 
     @property
     def cut(self) -> float:
@@ -75,8 +78,9 @@ class Diagnosis:
         out = {"mae_before": self.mae_before, "mae_after": self.mae_after, "cut": self.cut,
                "intervals": {"level": INTERVAL_LEVEL, **self.intervals},
                "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params,
-                            "part": e.part} for e in self.effects],
-               "added": list(self.added), "model_errors": self.errors, "notes": list(self.notes)}
+                            "part": e.part, "implausible": e.implausible} for e in self.effects],
+               "added": list(self.added), "model_errors": self.errors, "suspected": list(self.suspected),
+               "skipped": dict(self.skipped), "notes": list(self.notes)}
         if self.unexplained is not None:
             out["unexplained_share"] = self.unexplained.share
             out["unexplained"] = self.unexplained.to_json()
@@ -103,13 +107,15 @@ def residual(model, log: logs.Log) -> tuple[np.ndarray, np.ndarray]:
 
 def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: float = DEFAULT_MIN_GAIN,
              alpha: float = DEFAULT_ALPHA, only: list[str] | None = None,
-             max_effects: int | None = None) -> Diagnosis:
+             max_effects: int | None = None, accept_implausible: bool = False) -> Diagnosis:
     """Test the residual of ``model`` on ``log`` against the candidate effects.
 
     folds: contiguous folds of the blocked cross-validation over time; min_gain: share of the
     remaining held-out squared residual an effect must remove to be added; alpha: significance
     level; only: effect names to test (``column`` = every column effect); max_effects: stop
-    after adding this many.
+    after adding this many. An effect chosen with parameters out of plausible range
+    (``Effect.implausible``, e.g. a gravity scale beyond +-30 %) is a suspicion: reported, not
+    added, and the selection runs again without it, unless ``accept_implausible``.
     """
     n = len(log)
     if folds < 3:
@@ -119,7 +125,8 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
                         f"for {folds} folds)")
     sig = log.signals
     p, r = residual(model, log)
-    ctx = E.Context(sig, p, log.axis, column_units(log.table))
+    ctx = E.Context(sig, p, log.axis, column_units(log.table), residual_ms=float(np.mean(r * r)),
+                    min_gain=min_gain)
     lib = E.library(sig, only)
     skipped = {}
     usable = []
@@ -147,6 +154,8 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     def candidates(chosen_terms, current):
         out = []
         for effect in usable:
+            if effect.name in suspects:
+                continue
             if effect.name in cache:
                 names = cache[effect.name]
             else:
@@ -156,36 +165,43 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
             out.append(selection.Candidate(effect.name, names, effect.rivals))
         return out
 
-    sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects,
-                            twins=tuple(TWINS))
-    coef = design.fit(sel.terms)
     by_name = {e.name: e for e in usable}
-    results = []
-    for step in sel.steps:
-        effect = by_name[step.name]
-        names = step.terms
-        own = {t: coef[t] for t in names}
-        params = effect.params(own, ctx)
-        results.append(EffectResult(step.name, True, step.gain, params, True, effect.summary(params),
-                                    [registry[t] for t in names], step.step_gain, effect.part))
+
+    def result(name, significant, gain, step_gain, params, names, added):
+        effect = by_name[name]
+        return EffectResult(name, significant, max(gain, WORST_GAIN), params, added, effect.summary(params),
+                            [registry[t] for t in names], max(step_gain, WORST_GAIN), effect.part,
+                            effect.implausible(params, ctx))
+
+    suspects: dict[str, EffectResult] = {}
+    while True:
+        sel = selection.forward(design, candidates, alpha=alpha, min_gain=min_gain, max_effects=max_effects,
+                                twins=tuple(TWINS))
+        coef = design.fit(sel.terms)
+        results = [result(step.name, True, step.gain, step.step_gain,
+                          by_name[step.name].params({t: coef[t] for t in step.terms}, ctx), step.terms, True)
+                   for step in sel.steps]
+        bad = [e for e in results if e.implausible]
+        if accept_implausible or not bad:
+            break
+        for e in bad:
+            suspects[e.name] = dataclasses.replace(e, added=False)
     others = []
     for name, sc in sel.final.items():
-        effect = by_name[name]
-        names = sc.terms
-        params = effect.params(_marginal_fit(design, sel.terms, names), ctx)
-        others.append(EffectResult(name, sc.significant, sc.gain, params, False, effect.summary(params),
-                                   [registry[t] for t in names], sc.step_gain, effect.part))
+        params = by_name[name].params(_marginal_fit(design, sel.terms, sc.terms), ctx)
+        others.append(result(name, sc.significant, sc.gain, sc.step_gain, params, sc.terms, False))
     others.sort(key=lambda e: -e.gain)
     left = r - design.heldout_prediction(sel.terms) if sel.terms else r
     mae_before = float(np.mean(np.abs(r)))
     mae_after = float(np.mean(np.abs(left))) if sel.terms else mae_before
-    return Diagnosis(effects=results + others, added=list(sel.added), mae_before=mae_before, mae_after=mae_after,
+    return Diagnosis(effects=results + list(suspects.values()) + others, added=list(sel.added),
+                     mae_before=mae_before, mae_after=mae_after,
                      terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
-                     alone={name: sc.gain for name, sc in sel.first.items()},
+                     alone={name: max(sc.gain, WORST_GAIN) for name, sc in sel.first.items()},
                      intervals=fold_intervals(r, left, folds),
                      unexplained=structure.analyse(left, sig, alpha),
-                     notes=_twin_notes(design, sel, cache, alpha, min_gain))
+                     notes=_twin_notes(design, sel, cache, alpha, min_gain), suspected=list(suspects))
 
 
 def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float) -> list[str]:

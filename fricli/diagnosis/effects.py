@@ -11,6 +11,13 @@ Parameters are reported as ``{name: {"value": float, "unit": str}}``. Coulomb an
 levels of a model that is not a plain Coulomb + viscous law are its *equivalent* levels: the
 least-squares fit of tau = Fc*sign(qd) + Fv*qd to its prediction on the log's moving samples,
 per direction where it matters.
+
+An effect is tested only when the log can identify it (``applicable``): a coefficient that is a
+torque ratio [Nm/Nm] (gravity, load, payload, quadrant) is physical up to 1 in magnitude, so
+such an effect is tested only when its column, at that coefficient, could remove ``min_gain``
+of the residual's mean square; otherwise the log cannot tell it from noise and any coefficient
+fitted to it is meaningless. A fitted parameter out of its plausible range (``implausible``)
+makes the effect a suspicion, reported but not added (docs/diagnose.md).
 """
 
 from __future__ import annotations
@@ -19,6 +26,7 @@ import dataclasses
 
 import numpy as np
 
+from fricli import metrics
 from fricli.models import terms as T
 from fricli.logs import KNOWN
 
@@ -33,6 +41,8 @@ class Context:
     p: np.ndarray
     axis: str = "rotary"
     column_units: dict[str, str] = dataclasses.field(default_factory=dict)
+    residual_ms: float = 0.0       # mean square of the model's residual [Nm^2] (0: not known)
+    min_gain: float = 0.1          # share of it an effect must be able to remove to be tested
 
     @property
     def tau_unit(self) -> str:
@@ -54,11 +64,20 @@ class Context:
     def inertia_unit(self) -> str:
         return "kg m^2" if self.axis == "rotary" else "kg"
 
+    def model_inertia(self) -> float | None:
+        """The joint's inertia as the robot model sees it: rms(tau_dyn) / rms(qdd) [kg m^2 or kg],
+        None without tau_dyn or acceleration."""
+        sig = self.signals
+        if "tau_dyn" not in sig or "qdd" not in sig:
+            return None
+        a = float(np.sqrt(np.mean(np.square(sig["qdd"]))))
+        return float(np.sqrt(np.mean(np.square(sig["tau_dyn"])))) / a if a > 0 else None
+
     def moving(self) -> np.ndarray:
-        return self.signals["qd"] != 0
+        return metrics.in_motion(self.signals["qd"])
 
     def v_scale(self) -> float:
-        """A typical high speed: the 95th percentile of |qd| over moving samples [rad/s]."""
+        """A typical high speed: the 95th percentile of |qd| over the rows in motion [rad/s]."""
         v = np.abs(self.signals["qd"][self.moving()])
         return float(np.percentile(v, 95)) if len(v) else 0.0
 
@@ -66,10 +85,11 @@ class Context:
 def equivalent_levels(y: np.ndarray, qd: np.ndarray) -> dict[str, float]:
     """Coulomb and viscous levels of a friction curve y (n,) over velocity qd (n,):
     ``Fc``, ``Fv`` (both directions) and ``Fc+``, ``Fv+``, ``Fc-``, ``Fv-`` (one each), with
-    tau = Fc*sign(qd) + Fv*qd, i.e. Fc- is the magnitude of the Coulomb level for qd < 0."""
+    tau = Fc*sign(qd) + Fv*qd, i.e. Fc- is the magnitude of the Coulomb level for qd < 0. Only
+    the rows in motion (``metrics.in_motion``) count."""
     out = {}
-    moving = qd != 0
-    for key, mask in (("", moving), ("+", qd > 0), ("-", qd < 0)):
+    moving = metrics.in_motion(qd)
+    for key, mask in (("", moving), ("+", moving & (qd > 0)), ("-", moving & (qd < 0))):
         if mask.sum() < 3:
             out["Fc" + key], out["Fv" + key] = float("nan"), float("nan")
             continue
@@ -100,6 +120,11 @@ class Effect:
 
     def applicable(self, ctx: Context) -> str | None:
         """None when the log supports the effect, else the reason it does not."""
+        return None
+
+    def implausible(self, params: dict[str, dict], ctx: Context) -> str | None:
+        """None when the fitted parameters are physically plausible, else why not (and what
+        else produces the same shape)."""
         return None
 
     def terms(self, ctx: Context, residual: np.ndarray) -> list[dict]:
@@ -166,7 +191,8 @@ class Direction(Effect):
 
     def applicable(self, ctx):
         qd = ctx.signals["qd"]
-        if (qd > 0).sum() < 10 or (qd < 0).sum() < 10:
+        moving = ctx.moving()
+        if (moving & (qd > 0)).sum() < 10 or (moving & (qd < 0)).sum() < 10:
             return "needs motion in both directions"
         return None
 
@@ -256,7 +282,7 @@ class Acceleration(Effect):
     part = "model"
 
     def applicable(self, ctx):
-        if np.ptp(ctx.signals["qdd"]) <= 0:
+        if _constant(ctx.signals["qdd"]):
             return "the log has no acceleration"
         return None
 
@@ -266,14 +292,76 @@ class Acceleration(Effect):
     def params(self, coef, ctx):
         return {"inertia": _par(coef["qdd"], ctx.inertia_unit)}
 
+    def implausible(self, params, ctx):
+        j = params["inertia"]["value"]
+        if j is None:
+            return None
+        ref = ctx.model_inertia()
+        u = ctx.inertia_unit
+        if j < 0 and (ref is None or -j > ROBOT_MODEL_TOLERANCE * ref):
+            seen = f" ({_fmt(100 * -j / ref)} % of the {_fmt(ref)} {u} the robot model's tau_dyn shows)" if ref else ""
+            return (f"a negative inertia{seen}; more likely a delay between the torque and the filtered "
+                    f"acceleration, or a friction lag, than a robot model that heavy")
+        sig = ctx.signals
+        if j > 0 and "tau_m" in sig:
+            need = j * float(np.sqrt(np.mean(np.square(sig["qdd"]))))
+            have = float(np.sqrt(np.mean(np.square(sig["tau_m"]))))
+            if need > have:
+                return (f"its torque alone (rms {_fmt(need)} {ctx.tau_unit}) would exceed all the motor gave "
+                        f"(rms {_fmt(have)} {ctx.tau_unit}); more likely a wrong acceleration (its unit or filter)")
+        return None
+
     def summary(self, params):
         return f"missing inertia {_fmt(params['inertia']['value'])} {params['inertia']['unit']}"
 
 
+#: a robot-model correction beyond this share (a gravity scale, a negative inertia) is suspicious
+ROBOT_MODEL_TOLERANCE = 0.3
+#: a ratio of torques [Nm/Nm] beyond this magnitude is not physical (kc, kq)
+RATIO_BOUND = 1.0
+
+
 def _needs_tau_g(ctx) -> str | None:
-    if "tau_g" not in ctx.signals or np.ptp(ctx.signals["tau_g"]) <= 0:
+    if "tau_g" not in ctx.signals or _constant(ctx.signals["tau_g"]):
         return "the log has no varying 'tau_g'"
     return None
+
+
+def _constant(x: np.ndarray) -> bool:
+    """x (n,) is constant up to rounding: its spread is below sqrt(eps) of its magnitude."""
+    return not np.ptp(x) > np.sqrt(np.finfo(np.float64).eps) * float(np.max(np.abs(x)))
+
+
+def _ratio_reach(effect: Effect, ctx: Context, what: str) -> str | None:
+    """None when ``effect``'s single term, a torque times a coefficient in Nm/Nm, could remove
+    ``ctx.min_gain`` of the residual's mean square at the physical bound of that coefficient
+    (``RATIO_BOUND``); else why the log cannot identify it."""
+    if ctx.residual_ms <= 0:
+        return None
+    col = T.matrix(effect.terms(ctx, None), ctx.signals, ctx.p)[:, 0]
+    spread = float(np.std(col))
+    reach = RATIO_BOUND ** 2 * spread ** 2 / ctx.residual_ms
+    if reach >= ctx.min_gain:
+        return None
+    u = ctx.tau_unit
+    share = f"{100 * reach:.2g} %" if reach >= 1e-4 else "under 0.01 %"
+    return (f"{what} varies too little on this log (std {spread:.2g} {u}): even {RATIO_BOUND:g} {u}/{u} would "
+            f"explain {share} of the residual, under the {100 * ctx.min_gain:g} % an effect must remove")
+
+
+def _ratio_text(name: str, par: dict) -> str:
+    """``"kc 0.01 Nm/Nm"``; beyond the physical bound only the side it lies on (the figure means nothing)."""
+    v = par["value"]
+    if v is not None and abs(v) > RATIO_BOUND:
+        return f"{name} {'>' if v > 0 else '<'} {RATIO_BOUND if v > 0 else -RATIO_BOUND:g} {par['unit']} (not physical)"
+    return f"{name} {_fmt(v)} {par['unit']}"
+
+
+def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
+    if value is None or abs(value) <= RATIO_BOUND:
+        return None
+    return (f"|{name}| > {RATIO_BOUND:g} {unit} is not physical (the friction would exceed the torque through "
+            f"the gear); the shape more likely comes from tau_g (a gravity or payload error) than from friction")
 
 
 class Load(Effect):
@@ -282,13 +370,19 @@ class Load(Effect):
                    "(its normal force)")
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx)
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_l|*sign(qd)")
 
     def terms(self, ctx, residual):
         return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN)]
 
     def params(self, coef, ctx):
         return {"kc": _par(coef["|tau_l|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+    def implausible(self, params, ctx):
+        return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
+
+    def summary(self, params):
+        return _ratio_text("kc", params["kc"])
 
 
 class Payload(Effect):
@@ -301,13 +395,19 @@ class Payload(Effect):
     def applicable(self, ctx):
         if "tau_ext" not in ctx.signals or np.ptp(ctx.signals["tau_ext"]) <= 0:
             return "the log has no varying 'tau_ext'"
-        return _needs_tau_g(ctx)
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "(|tau_g - tau_ext| - |tau_g|)*sign(qd)")
 
     def terms(self, ctx, residual):
         return [T.term("(|tau_l|-|tau_g|)*sign", T.PAYLOADGEAR, T.SIGN)]
 
     def params(self, coef, ctx):
         return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+
+    def implausible(self, params, ctx):
+        return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
+
+    def summary(self, params):
+        return _ratio_text("kc", params["kc"])
 
 
 class Gravity(Effect):
@@ -319,10 +419,18 @@ class Gravity(Effect):
     part = "model"
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx)
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_g")
 
     def terms(self, ctx, residual):
         return [T.term("tau_g", T.sig_("tau_g"))]
+
+    def implausible(self, params, ctx):
+        scale = params["scale"]["value"]
+        if scale is None or abs(scale - 1.0) <= ROBOT_MODEL_TOLERANCE:
+            return None
+        return (f"a gravity scale of {_fmt(scale)} is outside 1 +- {100 * ROBOT_MODEL_TOLERANCE:g} %: no CAD "
+                f"model is that far off; a torque proportional to tau_g also comes from a drive gain or torque "
+                f"constant error, a cable or hose, a counterbalance spring, or a wrong payload")
 
     def params(self, coef, ctx):
         k = coef["tau_g"]
@@ -349,17 +457,19 @@ class Quadrant(Effect):
     description = "friction kq*|tau_l| higher when the joint drives against tau_l than when back-driven"
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx)
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_l")
 
     def terms(self, ctx, residual):
         return [T.term("tau_l held", T.HELDGEAR)]
+
+    def implausible(self, params, ctx):
+        return _ratio_implausible("kq", params["kq"]["value"], params["kq"]["unit"])
 
     def params(self, coef, ctx):
         return {"kq": _par(coef["tau_l held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def summary(self, params):
-        kq = params["kq"]["value"]
-        return f"kq {_fmt(kq)} {params['kq']['unit']}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
+        return f"{_ratio_text('kq', params['kq'])}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
 
 
 class Velocity(Effect):
@@ -402,9 +512,21 @@ class Position(Effect):
 
     def applicable(self, ctx):
         q = ctx.signals.get("q")
-        if q is None or np.ptp(q) <= 0:
+        if q is None or _constant(q):
             return "the log has no position range"
+        step = self.step(ctx)
+        need = 2 * 2 * self.harmonics * step      # two periods of the shortest ripple the sampling resolves
+        if np.ptp(q) < need:
+            return (f"the position range {np.ptp(q):.2g} {ctx.q_unit} is under two periods of the shortest ripple "
+                    f"its sampling resolves ({need:.2g} {ctx.q_unit})")
         return None
+
+    def step(self, ctx) -> float:
+        """The median position step between rows in motion [rad or m] (0 when none moves)."""
+        q = ctx.signals["q"]
+        dq = np.abs(np.diff(q))[ctx.moving()[1:]]
+        dq = dq[dq > 0]
+        return float(np.median(dq)) if len(dq) else 0.0
 
     def frequency(self, ctx, residual) -> float:
         """Spatial angular frequency w [rad per q unit] with the largest periodogram power.
@@ -414,11 +536,9 @@ class Position(Effect):
         the non-empty bins (unevenly spaced) refines it around that peak.
         """
         q = ctx.signals["q"]
-        moving = ctx.moving()
-        dq = np.abs(np.diff(q))[moving[1:]]
-        dq = dq[dq > 0]
+        step = self.step(ctx)
         span = float(np.ptp(q))
-        h = max(float(np.median(dq)) / 2 if len(dq) else span / 1000, span / self.max_bins)
+        h = max(step / 2 if step > 0 else span / 1000, span / self.max_bins)
         nb = int(span / h) + 1
         idx = np.minimum(((q - q.min()) / h).astype(np.int64), nb - 1)
         count = np.bincount(idx, minlength=nb)
@@ -474,7 +594,7 @@ class Column(Effect):
     def applicable(self, ctx):
         if self.column not in ctx.signals:
             return f"the log has no column {self.column!r}"
-        if np.ptp(ctx.signals[self.column]) <= 0:
+        if _constant(ctx.signals[self.column]):
             return f"the column {self.column!r} is constant"
         return None
 

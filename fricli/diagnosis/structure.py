@@ -72,12 +72,27 @@ class Structure:
         else:
             lo, hi = view.where["range"]
             unit = v_unit if self.main == "velocity" else q_unit
-            at = f"over {self.main} {lo:.3g} .. {hi:.3g} {unit}"
+            at = f"at rest (velocity 0 {unit})" if self.main == "velocity" and lo == hi == 0 else \
+                f"over {self.main} {span(lo, hi)} {unit}"
         return (f"unexplained structure: {100 * self.share:.0f} % of what is left is not noise, {at}; "
                 f"no candidate effect describes it")
 
 
 SMALL_SHARE = 0.1
+
+
+def span(lo: float, hi: float, digits: int = 2) -> str:
+    """``"lo .. hi"`` with as many decimals as show the width hi - lo to ``digits`` significant
+    digits (and each bound to at least ``digits + 1``): 0.01113 .. 0.01118, not 0.0111 .. 0.0112."""
+    width = abs(hi - lo)
+    big = max(abs(lo), abs(hi))
+    if big == 0:
+        return "0 .. 0"
+    if width == 0:
+        return f"{lo:.{digits + 1}g} .. {hi:.{digits + 1}g}"
+    top = int(np.floor(np.log10(big)))
+    sig = max(digits + 1, top - int(np.floor(np.log10(width))) + digits)
+    return f"{lo:.{sig}g} .. {hi:.{sig}g}"
 
 
 def over_time(e: np.ndarray, t: np.ndarray, alpha: float) -> View:

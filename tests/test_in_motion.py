@@ -1,0 +1,70 @@
+"""One rule decides which rows are in motion: ``fricli.metrics.in_motion`` (docs/log-format.md,
+"In motion"). These tests grep the package for other in-motion thresholds."""
+
+import pathlib
+import re
+
+import numpy as np
+
+from fricli import metrics
+
+PACKAGE = pathlib.Path(__file__).resolve().parent.parent / "fricli"
+
+#: ways code decides "in motion" on its own
+PATTERNS = {
+    "its own rest share": re.compile(r"\bREST_SHARE\s*="),
+    "its own in-motion function": re.compile(r"\bdef\s+(in_motion|_moving|_?at_rest|_?is_moving)\s*\("),
+    "a share of the top speed": re.compile(r"[<>]=?[^<>\n]*\*\s*(float\()?[\w.]*\b(top|vmax|max\(\))"),
+    "exact zero velocity": re.compile(r"\bqd[\"']?\]?\s*(!=|==)\s*0(\.0*)?\b(?!\.\d)|\bspeed\s*>\s*0(\.0*)?\b(?!\.\d)"),
+    "a speed threshold": re.compile(r"\b(speed|np\.abs\(\s*\w*qd\w*\s*\))\s*>=?\s*(?!0\b)[\w(]"),
+}
+#: lines that state a threshold the user gave (adapt --min-speed), not a rule of their own
+USER_GIVEN = re.compile(r"\bmin_speed\b")
+#: (file, pattern name): why it is not an in-motion rule over a log
+ALLOWED = {
+    ("models/terms.py", "exact zero velocity"):
+        "a model's held state at run time (the held direction and torque at the last sample with qd != 0): "
+        "a controller knows no top speed of a log",
+}
+
+
+def hits() -> list[str]:
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        if rel == "metrics.py":
+            continue
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            code = line.split("#", 1)[0]
+            if not code.strip() or code.lstrip().startswith(('"""', "'''")) or USER_GIVEN.search(code):
+                continue
+            for name, pattern in PATTERNS.items():
+                if pattern.search(code) and (rel, name) not in ALLOWED:
+                    out.append(f"fricli/{rel}:{number}: {name}: {line.strip()}")
+    return out
+
+
+def test_patterns_catch_the_ways_in_motion_was_decided():
+    caught = ["REST_SHARE = 0.02", "def _moving(qd):", "return mask & (speed > max(abs_tol, 1e-3 * top))",
+              "moving = np.abs(v) > 1e-3 * top", "moving = speed > training_data.LOW * float(speed.max())",
+              "moving = qd != 0", "m = self.signals[\"qd\"] != 0", "rest = qd == 0.0", "moving = speed[speed > 0]",
+              "moving = speed > abs_tol",
+              "moving = speed >= lo", "mask = np.abs(qd) > tol"]
+    for line in caught:
+        assert any(p.search(line) for p in PATTERNS.values()), line
+    fine = ["moving = metrics.in_motion(qd)", "if abs(v) > RATIO_BOUND:", "top = float(speed.max())",
+            "pos = (qd > 0).astype(float)", "if ctx.v_scale() <= 0:", "x = 0.5 * vmax", "qd = 0.5"]
+    for line in fine:
+        assert not any(p.search(line) for p in PATTERNS.values()), line
+
+
+def test_no_other_in_motion_threshold_in_the_package():
+    found = hits()
+    assert not found, "in-motion thresholds other than fricli.metrics.in_motion:\n" + "\n".join(found)
+
+
+def test_in_motion_is_a_share_of_the_top_speed():
+    qd = np.array([0.0, -0.01, 0.021, -1.0, 0.5, 0.02])
+    assert metrics.in_motion(qd).tolist() == [False, False, True, True, True, False]
+    assert metrics.in_motion(1000 * qd).tolist() == metrics.in_motion(qd).tolist()    # no unit in the rule
+    assert not metrics.in_motion(np.zeros(5)).any() and metrics.in_motion(np.zeros(0)).shape == (0,)
