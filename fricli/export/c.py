@@ -167,7 +167,7 @@ def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     return fn(model, name, ctx)
 
 
-EMITTER_MODULES = ("lugre", "neural", "composite")   # modules under fricli.export that register emitters
+EMITTER_MODULES = ("lugre", "linear", "neural", "composite")   # modules under fricli.export that register emitters
 
 
 def _load_emitters() -> None:
