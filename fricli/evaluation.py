@@ -21,6 +21,7 @@ class Result:
     external_moving: dict | None
     joint: object = None           # the log's joint the row is for (None: no joint column)
     extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
+    unit: str = "Nm"               # of the errors: Nm, or N on a linear axis
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
@@ -37,7 +38,7 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
         external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
     return Result(model_name, log_name, metrics.errors(target, pred), external,
                   metrics.errors(target[moving], pred[moving]), external_moving,
-                  extrapolation=share_outside(models.envelope(meta, model_name), sig))
+                  extrapolation=share_outside(models.envelope(meta, model_name), sig), unit=log.units["tau"])
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
@@ -77,25 +78,29 @@ def to_json(results: list[Result], model_paths: dict, log_paths: dict, lowpass_h
 
 def markdown_table(results: list[Result], model_names: list[str], log_names: list[str]) -> str:
     """Rows: models (a row per joint when the results cover several joints); columns: logs; cells:
-    friction MAE (and external-torque MAE) in Nm, all rows and, in brackets, rows in motion."""
+    friction MAE and RMS (and external-torque MAE and RMS) in the torque unit, all rows and, in
+    brackets, rows in motion."""
     by = {(r.model, str(r.joint), r.log): r for r in results}
     rows = list(dict.fromkeys((r.model, r.joint) for r in results))
     labelled = len({str(r.joint) for r in results}) > 1
     has_ext = {ln: any(r.external for r in results if r.log == ln) for ln in log_names}
+    figures = (("mae", "MAE"), ("rmse", "RMS"))
+    unit = next((r.unit for r in results), "Nm")
     head = ["model"]
     for ln in log_names:
-        head.append(f"{ln} friction MAE")
+        head += [f"{ln} friction {label} [{unit}]" for _, label in figures]
         if has_ext[ln]:
-            head.append(f"{ln} ext. torque MAE")
-    lines = ["MAE over all rows (in brackets: rows in motion, |qd| > 2 % of the top speed)", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+            head += [f"{ln} ext. torque {label} [{unit}]" for _, label in figures]
+    lines = ["Error over all rows (in brackets: rows in motion, |qd| > 2 % of the top speed); "
+             "RMS: root mean square", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for mn, joint in rows:
         row = [f"{mn} (joint {joint})" if labelled else mn]
         for ln in log_names:
             r = by.get((mn, str(joint), ln))
-            row.append(f"{r.friction['mae']:.3f} ({r.friction_moving['mae']:.3f})" if r else "–")
+            row += [f"{r.friction[k]:.3f} ({r.friction_moving[k]:.3f})" if r else "–" for k, _ in figures]
             if has_ext[ln]:
-                row.append(f"{r.external['mae']:.3f} ({r.external_moving['mae']:.3f})" if r and r.external else "–")
+                row += [f"{r.external[k]:.3f} ({r.external_moving[k]:.3f})" if r and r.external else "–"
+                        for k, _ in figures]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 

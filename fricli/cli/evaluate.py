@@ -37,13 +37,14 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 @json_flag
 @common
 def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invalid, as_json, quiet):
-    """Friction (and external-torque) MAE of every model on every log, as a table.
+    """Friction (and external-torque) MAE and RMS of every model on every log, as a table.
 
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
     external-torque error is against the log's sensor column tau_ext, when it has one.
     A model folder (one model per joint) is evaluated on every joint of a log, one row per
     joint; a model fitted on another joint than the log's is refused (docs/joints.md).
     The share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
+    The JSON gives each error's mae, rmse (the RMS) and max, in the log's torque unit ("unit").
 
     \b
     Example:
