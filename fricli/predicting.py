@@ -108,7 +108,8 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     except PermissionError:
         raise LogError(f"{path}: cannot read (permission denied)") from None
     except Exception:
-        raise LogError(f"{path}: not a Parquet file") from None
+        with open(path, "rb") as fh:
+            raise LogError(logs.not_parquet(path, fh.read(4))) from None
 
 
 def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
