@@ -42,13 +42,14 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
-             read_kwargs: dict | None = None) -> list[Result]:
+             read_kwargs: dict | None = None, read=logs.read_table) -> list[Result]:
     """Every model on every log. A model is a file or a model set folder; which model applies to
-    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint."""
+    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint.
+    ``read``: path -> (table, sha256) of a log (e.g. with a time window)."""
     from fricli import joints, modelset
 
     sources = {name: modelset.source(path) for name, path in model_paths.items()}
-    tables = {name: logs.read_table(path) for name, path in log_paths.items()}
+    tables = {name: read(path) for name, path in log_paths.items()}
     read_kwargs = dict(read_kwargs or {})
     requested = read_kwargs.pop("joint", None)
     results = []

@@ -8,8 +8,8 @@ import click
 
 from fricli import evaluation, logs
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, reading_kwargs,
-                                say)
+from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
+                                reading_kwargs, say)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -54,7 +54,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     model_paths = _named(model_specs, "model")
     log_paths = _named(log_specs, "log")
     results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
-                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid))
+                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid), read=read_log)
     if as_json:
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
@@ -87,7 +87,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     from fricli import joints, modelset, report  # matplotlib loads only for this command
 
     source = modelset.source(model)
-    table, digest = logs.read_table(log)
+    table, digest = read_log(log)
     name = "stdin" if log == "-" else log
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
