@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import test_report
 from conftest import SAMPLE
 from fricli import metrics
 from fricli.cli import cli
@@ -80,7 +81,7 @@ def test_demo_end_to_end_with_few_steps(tmp_path):
         assert f"| {label} |" in res.stdout
     summary = json.loads((tmp_path / "d" / "results.json").read_text())
     assert summary["steps"] == {"nn_base": 200, "baselines": 200}
-    assert (tmp_path / "d" / "report" / "index.html").exists()
+    test_report.check_demo_page(tmp_path / "d")
     # adaptation is model-agnostic: adapting the LuGre model must beat the LuGre model itself
     for load in ("extended_asym", "extended_sym"):
         r = summary["results"]

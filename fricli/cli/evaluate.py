@@ -97,7 +97,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))
         say(f"wrote {len(summary['figures'])} figures and index.html to {output} "
-            f"(friction MAE {summary['friction']['mae']:.3f})", quiet)
+            f"(friction MAE {summary['friction']['mae']:.3f} {summary['unit']})", quiet)
     else:
-        maes = ", ".join(f"joint {j} {r['friction']['mae']:.3f}" for j, r in summaries.items())
+        maes = ", ".join(f"joint {j} {r['friction']['mae']:.3f} {r['unit']}" for j, r in summaries.items())
         say(f"wrote a report per joint and index.html to {output} (friction MAE: {maes})", quiet)
