@@ -73,7 +73,8 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @log_reading
 @common
 def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, quiet):
-    """PNG figures of MODEL on LOG and an index.html that shows them.
+    """PNG figures of MODEL on LOG and an index.html that shows them, each with a caption
+    saying what it shows and how to read it, and the errors with their units (MAE, RMS, max).
 
     Figures: training/validation loss, friction against velocity, a heat map over velocity and
     gravity torque, friction over time, the four quadrants, and the external torque against the
