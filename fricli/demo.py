@@ -71,8 +71,6 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int | None 
     table = logs.with_column(table, "tau_ext_pred", external_estimate(asym.signals, pred, LOWPASS_HZ),
                              asym.units["tau"])
     logs.write_table(table, os.path.join(out, "extended_asym_estimate.parquet"))
-    say("report: figures of NN_base + NN_add on the asymmetric-load log")
-    report.write_report(paths["adapted"], asym, os.path.join(out, "report"), lowpass_hz=LOWPASS_HZ)
 
     improvement = {sub: {lkey: {kind: 100.0 * (1.0 - results["adapted"][lkey][sub][kind]
                                                / results["lugre"][lkey][sub][kind])
@@ -86,7 +84,45 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int | None 
                        (json.dumps(summary, indent=2, sort_keys=True) + "\n").encode())
     text = format_table(summary)
     atomic_write_bytes(os.path.join(out, "table.md"), (text + "\n").encode())
+    say("report: figures of NN_base + NN_add on the asymmetric-load log")
+    folder = os.path.join(out, "report")
+    report.make_folder(folder)
+    fits = {label: loaded[key][0] for label, key in ROWS if key in ("lugre", "nn_base", "selmic", "nnacm")}
+    sections = [report.Section("Comparison (the paper's Table 2)", html_tables(summary),
+                               [_bars(summary, folder)]),
+                report.Section("The fits", "", [report.fig_fits(fits, base_log, folder, seed=seed)])]
+    report.write_report(paths["adapted"], asym, folder, lowpass_hz=LOWPASS_HZ, seed=seed, sections=sections)
     return summary
+
+
+def html_tables(summary: dict) -> str:
+    """``format_table``'s tables as HTML, with their units, for the report page."""
+    import html
+
+    res, parts = summary["results"], []
+    head = ["method"] + [f"{label}: {what} MAE [Nm]" for label, _ in LOADS for what in ("friction", "ext. torque")]
+    for sub, title in SUBSETS:
+        rows = [[html.escape(label)] + [cell for _, lkey in LOADS for cell in (
+            f"{res[key][lkey][sub]['friction_mae']:.2f}",
+            "–" if res[key][lkey][sub]["external_mae"] is None else f"{res[key][lkey][sub]['external_mae']:.2f}")]
+            for label, key in ROWS]
+        parts.append(report.html_table(head, rows, html.escape(
+            f"Joint {summary['joint']}, {title}: mean absolute error on the extended logs (external torque "
+            f"low-passed at {summary['lowpass_hz']:g} Hz); lower is better.")))
+    steps = summary["steps"]
+    parts.append(f"<p>NN_base trained for {steps['nn_base']:,} steps, the baselines for {steps['baselines']:,} steps "
+                 f"(seed {summary['seed']}); NN_add adapted on {summary['adapt_seconds']:.1f} s of load-free data.</p>")
+    return "\n".join(parts)
+
+
+def _bars(summary: dict, folder: str):
+    res = summary["results"]
+    values = {label: [res[key][lkey]["moving"]["friction_mae"] for _, lkey in LOADS] for label, key in ROWS}
+    return report.fig_bars(values, [label for label, _ in LOADS], "Nm", folder, "comparison.png",
+                           "friction MAE, rows in motion",
+                           "The table's friction errors [Nm] over the rows in motion as bars: one group per "
+                           "evaluation log (its load case), one bar per method; lower is better. NN_base + NN_add "
+                           "and LuGre + NN_add are the adapted models.")
 
 
 def format_table(summary: dict) -> str:

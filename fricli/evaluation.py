@@ -21,6 +21,7 @@ class Result:
     external_moving: dict | None
     joint: object = None           # the log's joint the row is for (None: no joint column)
     extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
+    unit: str = "Nm"               # of the errors: Nm, or N on a linear axis
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
@@ -37,17 +38,18 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
         external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
     return Result(model_name, log_name, metrics.errors(target, pred), external,
                   metrics.errors(target[moving], pred[moving]), external_moving,
-                  extrapolation=share_outside(models.envelope(meta, model_name), sig))
+                  extrapolation=share_outside(models.envelope(meta, model_name), sig), unit=log.units["tau"])
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
-             read_kwargs: dict | None = None) -> list[Result]:
+             read_kwargs: dict | None = None, read=logs.read_table) -> list[Result]:
     """Every model on every log. A model is a file or a model set folder; which model applies to
-    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint."""
+    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint.
+    ``read``: path -> (table, sha256) of a log (e.g. with a time window)."""
     from fricli import joints, modelset
 
     sources = {name: modelset.source(path) for name, path in model_paths.items()}
-    tables = {name: logs.read_table(path) for name, path in log_paths.items()}
+    tables = {name: read(path) for name, path in log_paths.items()}
     read_kwargs = dict(read_kwargs or {})
     requested = read_kwargs.pop("joint", None)
     results = []
@@ -77,26 +79,30 @@ def to_json(results: list[Result], model_paths: dict, log_paths: dict, lowpass_h
 
 def markdown_table(results: list[Result], model_names: list[str], log_names: list[str]) -> str:
     """Rows: models (a row per joint when the results cover several joints); columns: logs; cells:
-    friction MAE (and external-torque MAE) in Nm, all rows and, in brackets, rows in motion."""
+    friction MAE and RMS (and external-torque MAE and RMS) in the torque unit, all rows and, in
+    brackets, rows in motion."""
     by = {(r.model, str(r.joint), r.log): r for r in results}
     rows = list(dict.fromkeys((r.model, r.joint) for r in results))
     labelled = len({str(r.joint) for r in results}) > 1
     has_ext = {ln: any(r.external for r in results if r.log == ln) for ln in log_names}
+    figures = (("mae", "MAE"), ("rmse", "RMS"))
+    unit = next((r.unit for r in results), "Nm")
     head = ["model"]
     for ln in log_names:
-        head.append(f"{ln} friction MAE")
+        head += [f"{ln} friction {label} [{unit}]" for _, label in figures]
         if has_ext[ln]:
-            head.append(f"{ln} ext. torque MAE")
+            head += [f"{ln} ext. torque {label} [{unit}]" for _, label in figures]
     motion = f"rows in motion, |qd| > {100 * metrics.REST_SHARE:g} % of the top speed"
-    lines = [f"MAE over all rows (in brackets: {motion})", "",
+    lines = [f"Error over all rows (in brackets: {motion}); RMS: root mean square", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for mn, joint in rows:
         row = [f"{mn} (joint {joint})" if labelled else mn]
         for ln in log_names:
             r = by.get((mn, str(joint), ln))
-            row.append(f"{r.friction['mae']:.3f} ({r.friction_moving['mae']:.3f})" if r else "–")
+            row += [f"{r.friction[k]:.3f} ({r.friction_moving[k]:.3f})" if r else "–" for k, _ in figures]
             if has_ext[ln]:
-                row.append(f"{r.external['mae']:.3f} ({r.external_moving['mae']:.3f})" if r and r.external else "–")
+                row += [f"{r.external[k]:.3f} ({r.external_moving[k]:.3f})" if r and r.external else "–"
+                        for k, _ in figures]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 

@@ -114,7 +114,14 @@ def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
     try:
         return pq.ParquetFile(io.BytesIO(data), pre_buffer=False)  # pre_buffer would keep a second copy
     except Exception:  # pyarrow raises several types for corrupt input
-        raise LogError(f"{name}: not a Parquet file") from None
+        raise LogError(not_parquet(name, data[:4])) from None
+
+
+def not_parquet(name: str, head: bytes) -> str:
+    """The message for input that is not Parquet; ``head``: its first bytes."""
+    if head == b"PAR1":   # a damaged Parquet file, not another format
+        return f"{name}: not a Parquet file"
+    return f"{name}: not a Parquet file (convert a CSV or other text recording with fricli import, docs/robot-import.md)"
 
 
 # Reading a large log in record batches: pyarrow's default pre_buffer keeps every column chunk
@@ -139,8 +146,10 @@ def stdin_parquet() -> pq.ParquetFile:
     try:
         pf = pq.ParquetFile(spool, **STREAMING)
     except Exception:
+        spool.seek(0)
+        message = not_parquet("stdin", spool.read(4))
         spool.close()
-        raise LogError("stdin: not a Parquet file") from None
+        raise LogError(message) from None
     weakref.finalize(pf, spool.close)   # the ParquetFile reads the spool but does not own it
     return pf
 

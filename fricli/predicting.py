@@ -26,7 +26,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from fricli import joints, lazy, logs, models
+from fricli import joints, lazy, logs, models, timewindow
 from fricli.atomic import atomic_open
 from fricli.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
@@ -108,7 +108,8 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     except PermissionError:
         raise LogError(f"{path}: cannot read (permission denied)") from None
     except Exception:
-        raise LogError(f"{path}: not a Parquet file") from None
+        with open(path, "rb") as fh:
+            raise LogError(logs.not_parquet(path, fh.read(4))) from None
 
 
 def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
@@ -232,16 +233,18 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
                warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
                progress: bool = False, load: Callable[[str], tuple] = models.load,
-               flag_extrapolation: bool = False) -> Result:
+               flag_extrapolation: bool = False, window: timewindow.Window | None = None) -> Result:
     """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
     file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` added to
     ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
     ``extrapolating`` (the row lies outside its model's training envelope) when ``flag_extrapolation``.
     Rows keep their order;
-    rows of joints the run does not cover are left out. Returns the figures."""
+    rows of joints the run does not cover are left out, and rows outside ``window`` (the time
+    window, fricli.timewindow). Returns the figures."""
     from tqdm import tqdm
 
     pf, name = open_log(log_path)
+    limits = timewindow.limits_of_file(pf, window, name) if window else None
     found = file_joints(pf, name)
     streams = {}
     for j, path in joints.pair(source, found, joint, name):
@@ -270,6 +273,8 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
         try:
             for offset, table in reading:
                 bar.update(table.num_rows)
+                if limits is not None:
+                    table = timewindow.slice_batch(table, *limits)
                 if several:
                     table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
                 outs = []

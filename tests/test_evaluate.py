@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+import test_report
 from conftest import SAMPLE
 from fricli import metrics
 from fricli.cli import cli
@@ -80,8 +81,31 @@ def test_demo_end_to_end_with_few_steps(tmp_path):
         assert f"| {label} |" in res.stdout
     summary = json.loads((tmp_path / "d" / "results.json").read_text())
     assert summary["steps"] == {"nn_base": 200, "baselines": 200}
-    assert (tmp_path / "d" / "report" / "index.html").exists()
+    test_report.check_demo_page(tmp_path / "d")
     # adaptation is model-agnostic: adapting the LuGre model must beat the LuGre model itself
     for load in ("extended_asym", "extended_sym"):
         r = summary["results"]
         assert r["lugre_adapted"][load]["all"]["friction_mae"] < r["lugre"][load]["all"]["friction_mae"]
+
+
+def test_evaluate_reports_rms_beside_mae(fitted, tmp_path):
+    """The table's RMS cells are the JSON's rmse, which is the root mean square of predict's error."""
+    import pyarrow.parquet as pq
+
+    from fricli import logs
+
+    runner = CliRunner()
+    args = ["evaluate", "--model", f"lugre={fitted['lugre']}", "--log", f"asym={ASYM}"]
+    table, out = runner.invoke(cli, args), json.loads(runner.invoke(cli, args + ["--json"]).stdout)
+    r = out["results"][0]
+    assert r["unit"] == "Nm"
+    head, _, row = [line for line in table.stdout.splitlines() if line.startswith("|")]
+    cells = dict(zip([c.strip() for c in head.split("|")[1:-1]], [c.strip() for c in row.split("|")[1:-1]]))
+    assert cells["asym friction RMS [Nm]"] == f"{r['friction']['rmse']:.3f} ({r['friction_moving']['rmse']:.3f})"
+    assert cells["asym friction MAE [Nm]"] == f"{r['friction']['mae']:.3f} ({r['friction_moving']['mae']:.3f})"
+    assert cells["asym ext. torque RMS [Nm]"] == f"{r['external']['rmse']:.3f} ({r['external_moving']['rmse']:.3f})"
+    pred = tmp_path / "p.parquet"
+    assert runner.invoke(cli, ["predict", fitted["lugre"], ASYM, "-o", str(pred), "-q"]).exit_code == 0
+    err = pq.read_table(pred).column("tau_f_pred").to_numpy() - logs.friction_target(logs.load_log(ASYM).signals)
+    assert r["friction"]["rmse"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-6)
+    assert r["friction"]["rmse"] > r["friction"]["mae"]

@@ -136,3 +136,89 @@ def test_stdin_to_stdout_in_processes(tmp_path):
 def test_help_has_an_example(command):
     res = CliRunner().invoke(cli, [command, "-h"])
     assert res.exit_code == 0 and "Example:" in res.stdout and res.stderr == ""
+
+
+# ------------------------------------------------------------- what a newcomer runs into first
+
+
+def test_a_csv_log_points_to_fricli_import(tmp_path):
+    """Every log reader (whole-table, streaming, stdin) names the command that converts text."""
+    csv = tmp_path / "run.csv"
+    csv.write_text("t,q,tau_m\n0,0,1\n0.01,0.1,1\n")
+    model = str(tmp_path / "lugre.npz")
+    models.save(model, LuGreModel(**PARAMS), joint=None, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    runner = CliRunner()
+    for args, stdin in ((["identify", str(csv), "-o", str(tmp_path / "m.npz")], None),
+                        (["predict", model, str(csv), "-o", str(tmp_path / "p.parquet")], None),
+                        (["evaluate", "--model", model, "--log", str(csv)], None),
+                        (["predict", model, "-", "-o", str(tmp_path / "p.parquet")], csv.read_bytes())):
+        res = runner.invoke(cli, args, input=stdin)
+        assert res.exit_code == errors.INPUT, (args, res.output)
+        assert "not a Parquet file" in res.stderr and "fricli import" in res.stderr, res.stderr
+    damaged = tmp_path / "damaged.parquet"
+    damaged.write_bytes(b"PAR1 cut short")
+    res = runner.invoke(cli, ["identify", str(damaged), "-o", str(tmp_path / "m.npz")])
+    assert res.exit_code == errors.INPUT and "fricli import" not in res.stderr   # Parquet, only damaged
+
+
+def test_an_unknown_payload_frame_lists_the_frames():
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+    from fricli.robot.mapping import Payload
+
+    with pytest.raises(errors.ModelFileError, match="no frame 'tool0'") as caught:
+        RobotModel(test_urdf.URDF, "two_link.urdf", payload=Payload(1.0, (0, 0, 0), "tool0"))
+    listed = str(caught.value).split("the frames are:")[1]
+    assert {"flange", "link2", "elbow", "base"} <= {f.strip() for f in listed.split(",")}
+
+
+def test_trend_figures_creates_its_folder(tmp_path, rng):
+    import test_fleet
+
+    test_fleet.synthetic_history(tmp_path / "h", rng)
+    res = CliRunner().invoke(cli, ["trend", str(tmp_path / "h"), "--figures", str(tmp_path / "wear" / "today"), "-q"])
+    assert res.exit_code == errors.WEAR, res.output
+    assert [p.name for p in (tmp_path / "wear" / "today").iterdir()] == ["r1-joint2.png"]
+    (tmp_path / "file").write_text("")
+    res = CliRunner().invoke(cli, ["trend", str(tmp_path / "h"), "--figures", str(tmp_path / "file" / "x"), "-q"])
+    assert res.exit_code == errors.OUTPUT and "cannot create the folder" in res.stderr
+
+
+def _model_folder(folder):
+    from fricli import modelset
+
+    folder.mkdir()
+    for joint in (1, 2):
+        models.save(modelset.path_for(str(folder), joint), LuGreModel(**PARAMS), joint=joint, axis="rotary",
+                    units=logs.CANONICAL["rotary"], provenance={})
+    return folder
+
+
+def test_inspect_reads_a_model_folder_as_export_does(tmp_path):
+    import json
+
+    folder = _model_folder(tmp_path / "arm")
+    res = CliRunner().invoke(cli, ["inspect", str(folder)])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert sorted(out["joints"]) == ["1", "2"] and out["joints"]["2"]["joint"] == 2
+    assert CliRunner().invoke(cli, ["export", str(folder), "-o", str(tmp_path / "arm.h"), "-q"]).exit_code == 0
+
+
+def test_deploy_doc_names_the_files_and_symbols_the_code_writes(tmp_path):
+    """The per-joint file names and C symbols docs/deploy.md quotes are those of fricli's own model
+    folder and export, and the header and the doc say that linking needs -lm."""
+    from fricli import modelset
+    from fricli.export import c
+
+    doc = (ROOT / "docs" / "deploy.md").read_text()
+    folder = _model_folder(tmp_path / "models")
+    names = {modelset.file_name(j) for j in (1, 2)}
+    quoted_files = set(re.findall(r"`(joint[^`]*\.npz)`", doc))
+    assert quoted_files and quoted_files <= names, quoted_files
+    arm, default = c.export(str(folder), "arm"), c.export(str(folder))
+    quoted_steps = set(re.findall(r"`((?:arm|friction)_joint[A-Za-z0-9_]*_step)`", doc))
+    assert {"arm_joint_1_step", "friction_joint_1_step"} <= quoted_steps
+    for symbol in quoted_steps:
+        assert f"double {symbol}(" in (arm if symbol.startswith("arm") else default), symbol
+    assert "Link with -lm" in arm.split("*/")[0] and "Link with `-lm`" in doc

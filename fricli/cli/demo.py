@@ -23,7 +23,8 @@ from fricli.cli.options import common, say
 def demo_cmd(output, data, joint, steps, seed, quiet):
     """The whole method on the sample data: identify LuGre, train NN_base and the Selmic and
     NNACM baselines, adapt NN_base with NN_add on under a minute of load-free data, evaluate
-    friction and external torque on the extended logs, and write a report.
+    friction and external torque on the extended logs, and write a report page (report/index.html:
+    the comparison table, the fitted models' curves and the adapted model's figures, captioned).
 
     Prints the comparison in the layout of the paper's Table 2 on stdout.
 

@@ -9,7 +9,7 @@ import click
 from fricli import joints, logs, metrics, modelset, models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                reading_kwargs, say)
+                                read_log, reading_kwargs, say)
 from fricli.diagnosis import driver
 from fricli.diagnosis import effects as E
 from fricli.errors import OutputError
@@ -149,7 +149,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     source = modelset.source(model)
     reading = reading_kwargs(None, kt, cutoff, drop_invalid)
     del reading["joint"]
-    table_, digest = logs.read_table(log)
+    table_, digest = read_log(log)
     name = "stdin" if log == "-" else log
     pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
     several = len(pairs) > 1

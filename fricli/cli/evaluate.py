@@ -8,8 +8,8 @@ import click
 
 from fricli import evaluation, logs
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, reading_kwargs,
-                                say)
+from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
+                                reading_kwargs, say)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -37,13 +37,14 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 @json_flag
 @common
 def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invalid, as_json, quiet):
-    """Friction (and external-torque) MAE of every model on every log, as a table.
+    """Friction (and external-torque) MAE and RMS of every model on every log, as a table.
 
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
     external-torque error is against the log's sensor column tau_ext, when it has one.
     A model folder (one model per joint) is evaluated on every joint of a log, one row per
     joint; a model fitted on another joint than the log's is refused (docs/joints.md).
     The share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
+    The JSON gives each error's mae, rmse (the RMS) and max, in the log's torque unit ("unit").
 
     \b
     Example:
@@ -53,7 +54,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     model_paths = _named(model_specs, "model")
     log_paths = _named(log_specs, "log")
     results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
-                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid))
+                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid), read=read_log)
     if as_json:
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
@@ -73,7 +74,8 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @log_reading
 @common
 def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, quiet):
-    """PNG figures of MODEL on LOG and an index.html that shows them.
+    """PNG figures of MODEL on LOG and an index.html that shows them, each with a caption
+    saying what it shows and how to read it, and the errors with their units (MAE, RMS, max).
 
     Figures: training/validation loss, friction against velocity, a heat map over velocity and
     gravity torque, friction over time, the four quadrants, and the external torque against the
@@ -87,7 +89,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     from fricli import joints, modelset, report  # matplotlib loads only for this command
 
     source = modelset.source(model)
-    table, digest = logs.read_table(log)
+    table, digest = read_log(log)
     name = "stdin" if log == "-" else log
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
@@ -97,7 +99,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))
         say(f"wrote {len(summary['figures'])} figures and index.html to {output} "
-            f"(friction MAE {summary['friction']['mae']:.3f})", quiet)
+            f"(friction MAE {summary['friction']['mae']:.3f} {summary['unit']})", quiet)
     else:
-        maes = ", ".join(f"joint {j} {r['friction']['mae']:.3f}" for j, r in summaries.items())
+        maes = ", ".join(f"joint {j} {r['friction']['mae']:.3f} {r['unit']}" for j, r in summaries.items())
         say(f"wrote a report per joint and index.html to {output} (friction MAE: {maes})", quiet)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 
 import click
 
@@ -86,7 +85,8 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
               help="Flag a parameter above its baseline by more than this share.")
 @click.option("--max-growth", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,
               help="Flag a parameter growing faster than this share of its baseline per day.")
-@click.option("--figures", metavar="DIR", default=None, help="Write a PNG per flagged joint into DIR.")
+@click.option("--figures", metavar="DIR", default=None,
+              help="Write a PNG per flagged joint into DIR (created when missing).")
 @json_flag
 @common
 @errors.cite_codes
@@ -115,10 +115,7 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
     result = trend.trends(hist.read(history), rule)
     flagged = [t for t in result if t.flagged]
     if figures:
-        if not os.path.isdir(figures):
-            raise errors.OutputError(f"cannot write figures: folder {figures} does not exist")
-        for t in flagged:
-            trend.figure(t, rule, os.path.join(figures, f"{t.robot}-joint{t.joint}.png"))
+        trend.figures(result, rule, figures)
     if as_json:
         emit_json({"rule": {k: list(v) if isinstance(v, tuple) else v for k, v in vars(rule).items()},
                    "flagged": [f"{t.robot}/{t.joint}" for t in flagged],

@@ -4,20 +4,25 @@ from __future__ import annotations
 
 import click
 
-from fricli import models
+from fricli import models, modelset
 from fricli.cli import cli
 from fricli.cli.options import common, emit_json
 
 
 @cli.command("inspect")
-@click.argument("model", type=click.Path(dir_okay=False))
+@click.argument("model", type=click.Path())
 @common
 def inspect_model(model: str, quiet: bool) -> None:
     """Print a model file's meta (kind, units, parameters, provenance) as JSON.
 
+    MODEL may be a model folder (one model per joint, docs/joints.md): then
+    {"joints": {joint: meta}}, in the folder's order.
+
     \b
     Example:
       fricli inspect lugre.npz
+      fricli inspect lugre-arm/
     """
-    _, meta = models.load(model)
-    emit_json(meta)
+    source = modelset.source(model)
+    metas = {str(joint): models.load(path)[1] for joint, path in source.paths.items()}
+    emit_json({"joints": metas} if source.folder else next(iter(metas.values())))

@@ -33,16 +33,20 @@ def _figures(errs: dict, unit: str) -> str:
 @click.option("--settle", type=click.FloatRange(min=0), default=0.01, show_default=True,
               help="Settled rows: travel since the last velocity reversal [rad or m].")
 @click.option("--refine", is_flag=True, help="Finally fit all parameters jointly on the whole log.")
+@click.option("--kind", type=click.Choice(["lugre", "linear", "linear-asymmetric"]), default="lugre", show_default=True,
+              help="lugre, or the linear model Fv*qd + Fc*sign(qd) + offset (linear-asymmetric: Fv, Fc per "
+                   "direction) fitted by least squares on the rows in motion (docs/tutorial.md).")
 @if_changed_option
 @json_flag
 @common
 def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 samples: str, settle: float, refine: bool, if_changed: bool, as_json: bool, quiet: bool) -> None:
+                 samples: str, settle: float, refine: bool, kind: str, if_changed: bool, as_json: bool, quiet: bool) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
     steady-state samples, then the bristle parameters sigma0, sigma1 by simulating the whole
-    log (see docs/lugre.md). Parameters and fit errors go to stderr, or as JSON to stdout with
+    log (see docs/lugre.md). With --kind linear, the model Fv*qd + Fc*sign(qd) + offset by least
+    squares on the rows in motion instead. Parameters and fit errors go to stderr, or as JSON to stdout with
     --json. On failure the previous model file is left untouched.
 
     A log of several joints without --joint gives one model per joint in the folder -o DIR
@@ -62,6 +66,8 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
         raise OutputError(f"cannot write {output}: folder {folder} does not exist")
 
     def fit_one(data, out, job, _model):
+        if kind != "lugre":
+            return _fit_linear(data, out, job, kind == "linear-asymmetric", quiet)
         idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine, samples=samples,
                               settle=settle).fit(data.signals, units=data.units,
                                                                            axis=data.axis)
@@ -77,6 +83,18 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
                                      if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)
+
+
+def _fit_linear(data, out, job, asymmetric: bool, quiet: bool) -> dict:
+    from fricli.models import linear
+
+    model, fit = linear.fit(data.signals, asymmetric=asymmetric, axis=data.axis)
+    models.save_for_log(out, model, data, rows_used=fit["moving"]["n"], fit=fit, job=job)
+    unit, params = data.units["tau"], model.parameters()
+    say(f"{model.describe()}\nfit error, all rows: {_figures(fit, unit)}\n"
+        f"fit error, {fit['moving_rows']:,} rows in motion: {_figures(fit['moving'], unit)}\nwrote {out}", quiet)
+    return {"model": out, "log": data.name, "joint": data.joint, "axis": data.axis, "units": data.units,
+            "parameters": params, "parameter_units": {k: linear.unit_of(k, data.axis) for k in params}, "fit": fit}
 
 
 def _report(data, model, fit, output, quiet) -> None:

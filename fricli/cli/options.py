@@ -10,7 +10,7 @@ from typing import Iterator
 
 import click
 
-from fricli import errors, jobs
+from fricli import errors, jobs, timewindow
 from fricli.logs import DEFAULT_CUTOFF_HZ
 
 
@@ -28,8 +28,23 @@ def common(f):
     return f
 
 
+def _window_bound(ctx: click.Context, param, value: str | None) -> None:
+    if value is not None:
+        try:
+            ctx.meta.setdefault("fricli.window", {})[param.name] = timewindow.Bound.parse(value)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+
+
 def log_reading(f):
-    """--joint, --kt, --cutoff, --drop-invalid: how a log is read (see docs/log-format.md)."""
+    """--joint, --kt, --cutoff, --drop-invalid: how a log is read (see docs/log-format.md); --from,
+    --until: the rows read (``time_window``, ``read_log``; fricli.timewindow)."""
+    for name in ("until", "from"):
+        f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
+                         callback=_window_bound,
+                         help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
+                              "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
+                              "log in two (docs/tutorial.md).")(f)
     f = click.option("--drop-invalid", is_flag=True,
                      help="Drop rows with NaN or infinite values (with a warning) instead of refusing the log.")(f)
     f = click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=DEFAULT_CUTOFF_HZ,
@@ -87,6 +102,21 @@ def progress_enabled(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
+def time_window() -> timewindow.Window:
+    """The window --from/--until give (an open window without them)."""
+    bounds = click.get_current_context().meta.get("fricli.window", {})
+    return timewindow.Window(bounds.get("time_from"), bounds.get("time_until"))
+
+
+def read_log(log: str):
+    """(table, sha256) of LOG (- for stdin) with the rows of --from/--until; the sha256 is the
+    whole file's (the window is recorded with the options, ``model_job``)."""
+    from fricli import logs
+
+    table, digest = logs.read_table(log)
+    return timewindow.slice_table(table, time_window(), "stdin" if log == "-" else log), digest
+
+
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
     return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn}
 
@@ -127,6 +157,8 @@ def model_job(output: str, log, *, if_changed: bool, quiet: bool,
     ctx = click.get_current_context()
     arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
     options = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING and k not in arguments}
+    if time_window():
+        options["window"] = time_window().to_json()
     job = jobs.job_record(ctx.command.name, options, inputs)
     with jobs.output_lock(output):
         if if_changed and jobs.up_to_date(output, log.sha256, job):
@@ -151,7 +183,7 @@ def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_chang
     UNCHANGED (9) when --if-changed finds every output up to date."""
     from fricli import logs, modelset
 
-    table, digest = read or logs.read_table(log)
+    table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
     pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
     results: dict = {}

@@ -167,7 +167,7 @@ def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     return fn(model, name, ctx)
 
 
-EMITTER_MODULES = ("lugre", "neural", "composite")   # modules under fricli.export that register emitters
+EMITTER_MODULES = ("lugre", "linear", "neural", "composite")   # modules under fricli.export that register emitters
 
 
 def _load_emitters() -> None:
@@ -273,6 +273,7 @@ def header(entries: list[Entry], guard: str) -> str:
            " * no heap, no global state. Include it wherever it is needed; every function is static inline.",
            " * Usage (see docs/deploy.md): PREFIX_state s; PREFIX_init(&s); then once per sample, in time order,",
            " *   tau_f = PREFIX_step(&s, signals...);",
+           " * Link with -lm (the math library: exp, log, fabs), e.g. cc -std=c99 -O2 main.c -o main -lm",
            " *"]
     for entry in entries:
         top += [" * " + line for line in _meta_block(entry.meta, entry.model, entry.prefix, entry.source,

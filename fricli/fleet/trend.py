@@ -124,24 +124,47 @@ def trends(table, rule: WearRule | None = None) -> list[JointTrend]:
     return [joint_trend(robot, joint, rows, rule) for (robot, joint), rows in sorted(groups.items())]
 
 
-def figure(t: JointTrend, rule: WearRule, path: str) -> None:
-    """A PNG of one joint's parameters relative to their baseline over the days, with the level limit."""
-    import matplotlib
+PARAM_NAMES = {"fc": "Coulomb friction Fc", "fs": "static friction Fs", "fv": "viscous friction Fv",
+               "mae": "fit MAE"}
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def figure(t: JointTrend, rule: WearRule, path: str) -> None:
+    """A PNG of one joint's parameters, each divided by its baseline, over the days, with the
+    level limit (matplotlib's object API: no pyplot state)."""
+    from matplotlib.figure import Figure
 
     from fricli import atomic
 
     dates = [dt.date.fromisoformat(d) for d in t.dates]
-    fig, ax = plt.subplots(figsize=(7, 3.5), layout="constrained")
+    fig = Figure(figsize=(7, 3.8), layout="constrained")
+    ax = fig.add_subplot()
     for p, b in t.baseline.items():
-        ax.plot(dates, np.asarray(t.series[p], dtype=float) / b, marker=".", label=p)
+        ax.plot(dates, np.asarray(t.series[p], dtype=float) / b, marker=".",
+                label=f"{PARAM_NAMES.get(p, p)} (baseline {b:.4g})")
     ax.axhline(1 + rule.max_level, color="0.4", ls="--", lw=1, label=f"level limit +{100 * rule.max_level:g} %")
     ax.axhline(1.0, color="0.7", lw=1)
-    ax.set_ylabel("relative to the first days")
-    ax.set_title(f"{t.robot} joint {t.joint}: {'; '.join(t.reasons)}", fontsize=8)
+    ax.set_xlabel("date of the run [day]")
+    ax.set_ylabel(f"value / median of the first {rule.baseline_days} days [-]")
+    ax.set_title(f"{t.robot} joint {t.joint}: {'; '.join(t.reasons) or 'not flagged'}\n"
+                 "1.0 = as new; above the dashed line the joint is flagged for wear", fontsize=8)
     ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
     fig.autofmt_xdate()
-    atomic.atomic_write_with(path, lambda fh: fig.savefig(fh, format="png", dpi=90))
-    plt.close(fig)
+    atomic.atomic_write_with(path, lambda fh: fig.savefig(fh, format="png", dpi=90, metadata={"Software": None}))
+
+
+def figures(result: list[JointTrend], rule: WearRule, folder: str) -> list[str]:
+    """``figure`` of every flagged joint into ``folder`` (created when missing) as
+    ``<robot>-joint<joint>.png``; returns the paths written."""
+    import os
+
+    from fricli.errors import OutputError
+
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot write figures: cannot create the folder {folder} ({exc.strerror})") from None
+    paths = [os.path.join(folder, f"{t.robot}-joint{t.joint}.png") for t in result if t.flagged]
+    for t, path in zip([t for t in result if t.flagged], paths):
+        figure(t, rule, path)
+    return paths

@@ -53,7 +53,8 @@ class RobotModel:
             self._unbounded.append(joint.nq == 2)
         if payload is not None and payload.mass > 0:
             if not model.existFrame(payload.frame):
-                raise ModelFileError(f"{name}: no frame {payload.frame!r} for the payload")
+                frames = ", ".join(dict.fromkeys(f.name for f in model.frames if f.name != "universe"))
+                raise ModelFileError(f"{name}: no frame {payload.frame!r} for the payload; the frames are: {frames}")
             frame = model.frames[model.getFrameId(payload.frame)]
             point = pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3)))
             model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(point)

@@ -1,0 +1,133 @@
+"""A time window on a log: the rows whose time ``t`` lies in [from, until).
+
+Each bound is either seconds on the log's own time axis (the values of its ``t`` column, in
+seconds whatever unit the column is stored in: ``--from 12.5``) or a percentage of the log's
+time span, from its first to its last ``t`` (``--from 60%``). ``from`` is inclusive and
+``until`` exclusive, so ``--until 60%`` and ``--from 60%`` split a log into two parts with no
+row in both. The rows are chosen before anything is derived from them: velocity and
+acceleration derived from ``q`` are computed on the window's rows alone.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from fricli import lazy, logs
+from fricli.errors import DataError
+
+pa = lazy.module("pyarrow")
+
+
+@dataclasses.dataclass(frozen=True)
+class Bound:
+    """One end of a window: ``value`` seconds of ``t``, or ``value`` percent of the time span."""
+
+    value: float
+    percent: bool = False
+
+    @classmethod
+    def parse(cls, text: str) -> "Bound":
+        """``"12.5"`` (seconds) or ``"60%"`` (of the time span, 0 to 100); ValueError otherwise."""
+        s = text.strip()
+        percent = s.endswith("%")
+        try:
+            value = float(s[:-1] if percent else s)
+        except ValueError:
+            raise ValueError(f"expected seconds (12.5) or a share of the log's time span (60%), got {text!r}") from None
+        if not np.isfinite(value) or (percent and not 0.0 <= value <= 100.0):
+            raise ValueError(f"{text!r} is not a finite time or a percentage from 0 to 100")
+        return cls(value, percent)
+
+    def seconds(self, first: float, last: float) -> float:
+        """The bound in seconds of ``t`` for a log spanning ``first`` to ``last`` [s]."""
+        return first + self.value / 100.0 * (last - first) if self.percent else self.value
+
+    def __str__(self) -> str:
+        return f"{self.value:g}%" if self.percent else f"{self.value:g} s"
+
+
+@dataclasses.dataclass(frozen=True)
+class Window:
+    """[start, stop) over ``t``; an absent bound leaves that end open."""
+
+    start: Bound | None = None
+    stop: Bound | None = None
+
+    def __bool__(self) -> bool:
+        return self.start is not None or self.stop is not None
+
+    def to_json(self) -> dict:
+        """As recorded in a model's provenance: the bounds as given ("60%", "12.5 s") or None."""
+        return {"from": None if self.start is None else str(self.start),
+                "until": None if self.stop is None else str(self.stop)}
+
+    def limits(self, t: np.ndarray) -> tuple[float, float]:
+        """(lo, hi) [s] for a log whose times are ``t`` (n,) [s]: the rows lo <= t < hi."""
+        finite = t[np.isfinite(t)]
+        first, last = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 0.0)
+        lo = -np.inf if self.start is None else self.start.seconds(first, last)
+        hi = np.inf if self.stop is None else self.stop.seconds(first, last)
+        if self.stop is not None and self.stop.percent and self.stop.value == 100.0:
+            hi = np.inf   # --until 100% keeps the last row
+        return lo, hi
+
+
+def times(table: pa.Table) -> np.ndarray | None:
+    """The ``t`` column [s] (n,) of a log table, NaN where missing; None when the table has no
+    numeric ``t`` (the log check reports it)."""
+    if "t" not in table.column_names:
+        return None
+    field, col = table.schema.field("t"), table.column("t")
+    if not (pa.types.is_floating(col.type) or pa.types.is_integer(col.type)):
+        return None
+    t = np.array(logs.float64_values(col), dtype=np.float64)
+    if col.null_count:
+        t[np.asarray(col.is_null())] = np.nan
+    unit = logs.field_unit(field)
+    return t * logs.column_unit("t", unit)[1] if unit is not None else t
+
+
+def rows(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """The rows (n,) bool in [lo, hi); rows without a finite time are kept, for the log check
+    to report them."""
+    return ~((t < lo) | (t >= hi))
+
+
+def slice_table(table: pa.Table, window: Window | None, name: str = "log") -> pa.Table:
+    """The rows of a log table in ``window`` (the whole table for None or an open window).
+    DataError when the window holds no row."""
+    if not window:
+        return table
+    t = times(table)
+    if t is None:
+        return table
+    lo, hi = window.limits(t)
+    keep = rows(t, lo, hi)
+    if not (keep & np.isfinite(t)).any():
+        span = f"{np.nanmin(t):g} to {np.nanmax(t):g} s" if np.isfinite(t).any() else "no times"
+        raise DataError(f"{name}: no rows from {window.start or 'the start'} until {window.stop or 'the end'} "
+                        f"(the log's t runs {span})")
+    return table if keep.all() else logs.take_rows(table, keep)
+
+
+def limits_of_file(pf, window: Window, name: str = "log") -> tuple[float, float]:
+    """(lo, hi) [s] of ``window`` over a Parquet file read in batches (``pq.ParquetFile``): its
+    ``t`` column alone is read for the time span. DataError when the window holds no row."""
+    t = times(pf.read(columns=["t"])) if "t" in pf.schema_arrow.names else None
+    if t is None:
+        return -np.inf, np.inf
+    lo, hi = window.limits(t)
+    if not (rows(t, lo, hi) & np.isfinite(t)).any():
+        slice_table(pa.table({"t": t}), window, name)   # raises the same DataError
+    return lo, hi
+
+
+def slice_batch(table: pa.Table, lo: float, hi: float) -> pa.Table:
+    """The rows of one batch of a log in [lo, hi) (``limits_of_file``)."""
+    t = times(table)
+    if t is None or (lo == -np.inf and hi == np.inf):
+        return table
+    keep = rows(t, lo, hi)
+    return table if keep.all() else logs.take_rows(table, keep)
