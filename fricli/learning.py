@@ -66,8 +66,11 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
-    Rows at rest (|qd| under 0.1 % of the top speed) are left out: the friction there is held
-    by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
+    A log of constant-velocity sweeps trains on its velocity levels (``training_data``), rows
+    slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
+    trains on its rows in motion (``metrics.in_motion``) and validates on whole blocks of time
+    (summary "velocity_groups": "moving"). At rest the friction is held by the bristles and
+    depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
     always sees asinh(|qd| / v0)). Returns (model,
@@ -90,13 +93,17 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     sig = log.signals
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
-    speed = np.abs(sig["qd"])
-    moving = speed > training_data.LOW * float(speed.max())
-    if not moving.any():
+    # velocity levels are looked for down to LOW of the top speed (a sweep's slowest levels lie
+    # below the in-motion share); without levels the rows in motion are the training rows
+    sweeping = metrics.in_motion(sig["qd"], training_data.LOW)
+    moving = metrics.in_motion(sig["qd"])
+    if not sweeping.any():
         raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
-    check_motion(log.name, sig["qd"], moving, "train-base")
+    check_motion(log.name, sig["qd"], sweeping, "train-base")
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
-                               rng=rng, keep=moving)
+                               rng=rng, keep=sweeping, moving=moving)
+    if sel.mode == "moving":
+        check_motion(log.name, sig["qd"], moving, "train-base")
     model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
                         batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
                         velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))

@@ -397,7 +397,7 @@ def test_train_base_on_emps(tmp_path):
     out = json.loads(result.stdout)
     model, meta = models.load(str(tmp_path / "emps.npz"))
     assert meta["axis"] == "linear" and meta["units"]["tau"] == "N"
-    assert out["velocity_groups"] in ("levels", "bins")
+    assert out["velocity_groups"] in ("levels", "moving")
     # better than the best constant (the EMPS target also holds the inertial force: no tau_dyn)
     target = logs.friction_target(load(path).signals)
     assert out["log"]["mae"] < np.mean(np.abs(target - np.median(target)))

@@ -6,7 +6,7 @@ import time
 
 import click
 
-from fricli import learning, models
+from fricli import learning, models, training_data
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 output_option, progress_enabled, reading_kwargs, say)
@@ -57,6 +57,15 @@ def _mae(summary: dict, key: str) -> str:
 def _check_outputs(output: str, as_json: bool) -> None:
     if output == "-" and as_json:
         raise click.UsageError("-o - and --json both write to stdout: choose one")
+
+
+def _rows_used(summary: dict) -> str:
+    """How train-base chose its rows, for its message."""
+    mode, val = summary["velocity_groups"], summary["val_rows"]
+    if mode == "moving":
+        return (f"rows in motion ({val} for validation in {summary['groups']} of "
+                f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
+    return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
 
 
 def _wrote(output: str) -> str:
@@ -153,9 +162,8 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
         rows = summary["train_rows"] + summary["val_rows"]
         models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
-            f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
-            f"of {the_log.name}{where} in {seconds:.1f} s; weights from step {summary['best_step']} of "
+        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary)} of {the_log.name}{where} in "
+            f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
