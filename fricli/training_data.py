@@ -52,6 +52,7 @@ class Selection:
 
     train: np.ndarray
     val: np.ndarray
+    blocks: np.ndarray  # (n,) int: the piece (levels, all) or time block (moving) of every row, -1 for rows not used
     mode: str          # "levels" (discrete velocities), "moving" (continuous: the moving rows) or "all" (no balancing)
     groups: int        # velocity levels found ("levels"), time blocks held out ("moving")
 
@@ -127,21 +128,33 @@ def split_segments(labels: np.ndarray, val_fraction: float, rng: np.random.Gener
     return val
 
 
+def pieces(labels: np.ndarray) -> np.ndarray:
+    """(n,) int: the piece 0..PIECES-1 of every row in a run of equal labels >= 0 (runs cut as
+    by ``split_segments``), -1 for rows in no run or in a run shorter than MIN_RUN."""
+    out = np.full(labels.size, -1, dtype=np.int64)
+    for start, stop in runs(labels):
+        if stop - start >= MIN_RUN:
+            cuts = np.linspace(start, stop, PIECES + 1).astype(np.int64)
+            out[start:stop] = np.searchsorted(cuts, np.arange(start, stop), side="right") - 1
+    return out
+
+
 def held_blocks(val_fraction: float) -> int:
     """Time blocks (of PIECES) held out for ``val_fraction``: at least one when it is above 0,
     and one left for training."""
     return min(max(int(round(PIECES * val_fraction)), 1 if val_fraction > 0 else 0), PIECES - 1)
 
 
-def time_blocks(n: int, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
-    """Boolean mask (n,) of validation rows: round(PIECES * val_fraction) of PIECES contiguous
-    blocks of rows (at least one block and one left for training when val_fraction > 0)."""
-    val = np.zeros(n, dtype=bool)
-    held = held_blocks(val_fraction)
+def time_block(n: int) -> np.ndarray:
+    """(n,) int: the block 0..PIECES-1 of every row, the rows cut into PIECES contiguous blocks."""
     cuts = np.linspace(0, n, PIECES + 1).astype(np.int64)
-    for block in rng.choice(PIECES, size=held, replace=False):
-        val[cuts[block]:cuts[block + 1]] = True
-    return val
+    return np.searchsorted(cuts, np.arange(n), side="right") - 1
+
+
+def time_blocks(n: int, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """Boolean mask (n,) of validation rows: ``held_blocks(val_fraction)`` of the PIECES
+    contiguous blocks of ``time_block``, drawn at random."""
+    return np.isin(time_block(n), rng.choice(PIECES, size=held_blocks(val_fraction), replace=False))
 
 
 def _at_most(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -206,7 +219,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
         val_rows = balanced(val_rows, labels, n_val, rng)
     if train_rows.size == 0:
         raise DataError("no rows left to train on")
-    return Selection(train=train_rows, val=val_rows, mode=mode, groups=groups)
+    blocks = np.where(usable & (labels >= 0), pieces(run_labels), -1)
+    return Selection(train=train_rows, val=val_rows, blocks=blocks, mode=mode, groups=groups)
 
 
 def _moving(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
@@ -218,4 +232,5 @@ def _moving(moving: np.ndarray, val_fraction: float, max_samples: int | None, rn
         train_rows, val_rows = _at_most(train_rows, max_samples - n_val, rng), _at_most(val_rows, n_val, rng)
     if train_rows.size == 0:
         raise DataError("no rows left to train on")
-    return Selection(train=train_rows, val=val_rows, mode="moving", groups=held_blocks(val_fraction))
+    blocks = np.where(moving, time_block(moving.size), -1)
+    return Selection(train=train_rows, val=val_rows, blocks=blocks, mode="moving", groups=held_blocks(val_fraction))

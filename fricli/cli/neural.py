@@ -68,6 +68,19 @@ def _rows_used(summary: dict) -> str:
     return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
 
 
+def _decision(summary: dict, tau: str) -> str:
+    """adapt's verdict on its held-out rows, for its message."""
+    held = summary.get("held_out")
+    if held is None:
+        return "no rows held out (--val-fraction 0): the residual network is kept unchecked"
+    figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
+               f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f}")
+    if summary["adapted"]:
+        return f"{figures}; the residual network is kept"
+    return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
+            f"and in most pieces of the log): the base model is kept")
+
+
 def _wrote(output: str) -> str:
     return "wrote the model to stdout" if output == "-" else f"wrote {output}"
 
@@ -207,7 +220,10 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
     NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model. BASE may be a model folder (one model per joint):
+    with every command that takes a model. Held-out rows decide (cross-validated over whole
+    pieces of every stretch of motion; for a log without velocity levels, whole blocks of
+    time): when NN_add does not lower the RMS error there consistently, the output is BASE
+    unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
 
     \b
@@ -247,8 +263,9 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         if outside is not None:
             say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
                 "outside the base model's training envelope", quiet)
-        say(_wrote(out), quiet)
-        return {"model": out, "kind": "residual", "base": base_path, "seconds": round(seconds, 3), **summary}
+        say(_decision(summary, tau), quiet)
+        say(_wrote(out) + ("" if summary["adapted"] else " (the base model unchanged)"), quiet)
+        return {"model": out, "kind": model.kind, "base": base_path, "seconds": round(seconds, 3), **summary}
 
     results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
                                      if_changed=if_changed, quiet=quiet, source=modelset.source(base),
