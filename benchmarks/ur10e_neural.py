@@ -111,7 +111,7 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
                 out = os.path.join(work, f"adapted-{kind}-s{seed}-{on}")
                 results = fricli("adapt", base, on_path, "--seed", str(seed), "-o", out, "--json", "-q",
                                  json_out=True)
-                kept = {int(j): r["adapted"] for j, r in results["joints"].items()}
+                kept = {int(j): r.get("adapted", True) for j, r in results["joints"].items()}  # no key: always adapted
                 for j in JOINTS:
                     cases.append({"base": kind, "adapted_on": on, "scored_on": scored, "joint": j,
                                   "residual_kept": kept[j], "base_error": moving_error(base, [scored_path], j),

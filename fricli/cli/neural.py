@@ -112,7 +112,8 @@ def _wrote(output: str) -> str:
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed for the row selection, the initial weights and the batches.")
 @click.option("--val-fraction", type=click.FloatRange(min=0, max=0.9), default=0.2, show_default=True,
-              help="Share of every constant-velocity stretch held out for validation, in whole pieces.")
+              help="Share of every constant-velocity stretch held out for validation, in whole pieces "
+                   "(a log without velocity levels: whole blocks of time).")
 @click.option("--no-balance", is_flag=True,
               help="Train on every row instead of the same number of rows per velocity level.")
 @click.option("--max-samples", type=click.IntRange(min=10), default=learning.DEFAULT_MAX_SAMPLES, show_default=True,
@@ -138,6 +139,8 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
     level are held out for validation, and the weights with the lowest validation loss are kept.
+    A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
+    rows in motion instead and holds out whole blocks of time; stderr says which.
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
@@ -204,11 +207,13 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
               help="Adam learning rate.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for the split, weights and batches.")
 @click.option("--val-fraction", type=click.FloatRange(min=0, max=0.9), default=0.2, show_default=True,
-              help="Share of every stretch of motion held out for validation, in whole pieces.")
+              help="Share of every stretch of motion (a log without velocity levels: of the log's time) held "
+                   "out for validation, in whole pieces; 0 also skips the held-out decision (NN_add kept unchecked).")
 @click.option("--max-seconds", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Use only the first S seconds of LOG.")
 @click.option("--min-speed", type=click.FloatRange(min=0), default=None,
-              help="Leave out rows slower than this [rad/s or m/s]; default 2 % of the log's top speed.")
+              help="Leave out rows slower than this [rad/s or m/s]; default: the rows not in motion (slower "
+                   "than 2 % of the log's top speed).")
 @log_reading
 @if_changed_option
 @json_flag
