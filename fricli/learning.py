@@ -39,7 +39,7 @@ VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (s
 # adapt keeps NN_add only when, cross-validated over FOLDS folds of whole pieces of the log, it
 # lowers the RMS error by MIN_GAIN at least and the gain per piece is positive by SIGNIFICANCE
 # standard errors (about 95 % one-sided over the ten pieces): a network fitted to pure noise
-# moves the RMS by about 1 / (training rows), and a gain that only some pieces of the log show
+# moves the RMS by a fraction of a per cent, and a gain that only some pieces of the log show
 # is not one that another run of the joint will show
 MIN_GAIN = 0.01
 SIGNIFICANCE = 2.0
@@ -147,10 +147,11 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
           base_envelope=None) -> tuple[FrictionModel, dict]:
     """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
 
-    The model is the adapted ``ResidualFriction`` when it has a lower RMS error than ``base``
-    on the held-out rows (whole pieces of the log's stretches of motion, or for a log without
-    velocity levels whole blocks of time, none used for training), else ``base`` itself;
-    summary["adapted"] says which (``helps``).
+    The model is the adapted ``ResidualFriction`` when NN_add helps on rows it was not trained
+    on (``cross_validate`` over whole pieces of the log's stretches of motion, or for a log
+    without velocity levels whole blocks of time), else ``base`` itself; summary["adapted"] says
+    which and summary["held_out"] gives the figures. ``val_fraction`` 0 skips the check (the
+    residual model is returned).
 
     Rows slower than ``min_speed`` (default: the rows not in motion, ``metrics.in_motion``) are left out: at rest
     the bristles hold a friction torque set by the motion before (the residual there says
@@ -194,10 +195,13 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
         summary["val"] = _errors(target, pred, sel.val)
         summary["base_val"] = _errors(target, base_pred, sel.val)
     if val_fraction > 0:
-        held = cross_validate(lambda train: ResidualFriction(
-            base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr, min_speed=float(min_speed),
-            units=log.units).fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred).on_base(sig, base_pred),
-            sel.blocks, target, base_pred, rng)
+        def fit_predict(train: np.ndarray) -> np.ndarray:
+            fold = ResidualFriction(base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr,
+                                    min_speed=float(min_speed), units=log.units)
+            fold.fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred)
+            return fold.on_base(sig, base_pred)
+
+        held = cross_validate(fit_predict, sel.blocks, target, base_pred, rng)
         summary["held_out"] = held
         summary["adapted"] = held["helps"]
     else:
@@ -216,7 +220,7 @@ def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray
     outside one fold and returns the prediction (n,) [Nm] for every row. Returns the RMS
     [Nm] of base and adapted model over the held-out rows, the mean and standard error of the
     per-piece gain in mean squared error [Nm^2], and "helps": the RMS falls by MIN_GAIN and the
-    mean gain exceeds SIGNIFICANCE standard errors.
+    mean gain exceeds SIGNIFICANCE standard errors (False when fewer than two pieces hold rows).
     """
     fold_of = rng.permutation(training_data.PIECES) % FOLDS
     pred = np.array(base_pred, dtype=np.float64)
@@ -229,10 +233,11 @@ def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray
     e_base, e_new = (target - base_pred)[rows], (target - pred)[rows]
     gains = np.array([np.mean(e_base[b] ** 2 - e_new[b] ** 2) for b in
                       (blocks[rows] == k for k in range(training_data.PIECES)) if b.any()])
+    out = {"rows": int(rows.sum()), "pieces": int(gains.size), "folds": FOLDS, "helps": False}
+    if gains.size < 2:
+        return out
     base_rms, new_rms = float(np.sqrt(np.mean(e_base ** 2))), float(np.sqrt(np.mean(e_new ** 2)))
-    mean = float(gains.mean())
-    se = float(gains.std(ddof=1) / np.sqrt(gains.size)) if gains.size > 1 else float("inf")
-    return {"rows": int(rows.sum()), "pieces": int(gains.size), "folds": FOLDS, "base_rmse": base_rms,
-            "adapted_rmse": new_rms, "gain_mean": mean, "gain_se": se,
+    mean, se = float(gains.mean()), float(gains.std(ddof=1) / np.sqrt(gains.size))
+    return {**out, "base_rmse": base_rms, "adapted_rmse": new_rms, "gain_mean": mean, "gain_se": se,
             "helps": bool(new_rms <= (1.0 - MIN_GAIN) * base_rms and mean > SIGNIFICANCE * se)}
 

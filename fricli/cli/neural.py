@@ -73,6 +73,8 @@ def _decision(summary: dict, tau: str) -> str:
     held = summary.get("held_out")
     if held is None:
         return "no rows held out (--val-fraction 0): the residual network is kept unchecked"
+    if "base_rmse" not in held:
+        return "too few rows to hold out (fewer than two pieces of motion): the base model is kept"
     figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
                f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f}")
     if summary["adapted"]:
