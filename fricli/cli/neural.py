@@ -6,7 +6,7 @@ import time
 
 import click
 
-from fricli import learning, models
+from fricli import learning, models, training_data
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 output_option, progress_enabled, reading_kwargs, say)
@@ -59,6 +59,30 @@ def _check_outputs(output: str, as_json: bool) -> None:
         raise click.UsageError("-o - and --json both write to stdout: choose one")
 
 
+def _rows_used(summary: dict) -> str:
+    """How train-base chose its rows, for its message."""
+    mode, val = summary["velocity_groups"], summary["val_rows"]
+    if mode == "moving":
+        return (f"rows in motion ({val} for validation in {summary['groups']} of "
+                f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
+    return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
+
+
+def _decision(summary: dict, tau: str) -> str:
+    """adapt's verdict on its held-out rows, for its message."""
+    held = summary.get("held_out")
+    if held is None:
+        return "no rows held out (--val-fraction 0): the residual network is kept unchecked"
+    if "base_rmse" not in held:
+        return "too few rows to hold out (fewer than two pieces of motion): the base model is kept"
+    figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
+               f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f}")
+    if summary["adapted"]:
+        return f"{figures}; the residual network is kept"
+    return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
+            f"and in most pieces of the log): the base model is kept")
+
+
 def _wrote(output: str) -> str:
     return "wrote the model to stdout" if output == "-" else f"wrote {output}"
 
@@ -90,7 +114,8 @@ def _wrote(output: str) -> str:
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed for the row selection, the initial weights and the batches.")
 @click.option("--val-fraction", type=click.FloatRange(min=0, max=0.9), default=0.2, show_default=True,
-              help="Share of every constant-velocity stretch held out for validation, in whole pieces.")
+              help="Share of every constant-velocity stretch held out for validation, in whole pieces "
+                   "(a log without velocity levels: whole blocks of time).")
 @click.option("--no-balance", is_flag=True,
               help="Train on every row instead of the same number of rows per velocity level.")
 @click.option("--max-samples", type=click.IntRange(min=10), default=learning.DEFAULT_MAX_SAMPLES, show_default=True,
@@ -116,6 +141,8 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
     level are held out for validation, and the weights with the lowest validation loss are kept.
+    A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
+    rows in motion instead and holds out whole blocks of time; stderr says which.
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
@@ -153,9 +180,8 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
         rows = summary["train_rows"] + summary["val_rows"]
         models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
-            f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
-            f"of {the_log.name}{where} in {seconds:.1f} s; weights from step {summary['best_step']} of "
+        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary)} of {the_log.name}{where} in "
+            f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
@@ -183,11 +209,13 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
               help="Adam learning rate.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed for the split, weights and batches.")
 @click.option("--val-fraction", type=click.FloatRange(min=0, max=0.9), default=0.2, show_default=True,
-              help="Share of every stretch of motion held out for validation, in whole pieces.")
+              help="Share of every stretch of motion (a log without velocity levels: of the log's time) held "
+                   "out for validation, in whole pieces; 0 also skips the held-out decision (NN_add kept unchecked).")
 @click.option("--max-seconds", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Use only the first S seconds of LOG.")
 @click.option("--min-speed", type=click.FloatRange(min=0), default=None,
-              help="Leave out rows slower than this [rad/s or m/s]; default 2 % of the log's top speed.")
+              help="Leave out rows slower than this [rad/s or m/s]; default: the rows not in motion (slower "
+                   "than 2 % of the log's top speed).")
 @log_reading
 @if_changed_option
 @json_flag
@@ -199,7 +227,10 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
     NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model. BASE may be a model folder (one model per joint):
+    with every command that takes a model. Held-out rows decide (cross-validated over whole
+    pieces of every stretch of motion; for a log without velocity levels, whole blocks of
+    time): when NN_add does not lower the RMS error there consistently, the output is BASE
+    unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
 
     \b
@@ -239,8 +270,9 @@ def adapt_cmd(base, log, output, hidden, epochs, batch_size, lr, seed, val_fract
         if outside is not None:
             say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
                 "outside the base model's training envelope", quiet)
-        say(_wrote(out), quiet)
-        return {"model": out, "kind": "residual", "base": base_path, "seconds": round(seconds, 3), **summary}
+        say(_decision(summary, tau), quiet)
+        say(_wrote(out) + ("" if summary["adapted"] else " (the base model unchanged)"), quiet)
+        return {"model": out, "kind": model.kind, "base": base_path, "seconds": round(seconds, 3), **summary}
 
     results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
                                      if_changed=if_changed, quiet=quiet, source=modelset.source(base),
