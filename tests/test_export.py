@@ -67,15 +67,15 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
 
 
 SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T.term("p*pos", T.P, T.POS),
-             T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN),
-             T.term("tau_l*moving", T.GEAR, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
+             T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN),
+             T.term("tau_l*moving", T.OVERLOAD, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
              T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
              T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
              T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd")),
-             T.term("tau_l held", T.HELDGEAR), T.term("payload*sign", T.PAYLOADGEAR, T.SIGN)]
+             T.term("tau_g held", T.HELDGRAVITY), T.term("payload*sign", T.OVERLOAD, T.SIGN)]
 EMPS_TERMS = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd")), T.term("p*pos", T.P, T.POS),
               T.term("sign", T.SIGN), T.term("sat1", {"f": "sat", "scale": 0.01}),
-              T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0}), T.term("tau_l held", T.HELDGEAR)]
+              T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0}), T.term("tau_g held", T.HELDGRAVITY)]
 # robot-model errors: the logged gravity torque off by a factor, an offset, a missing inertia
 ERROR_TERMS = [T.term("tau_g", T.sig_("tau_g")), T.term("1", T.ONE), T.term("qdd", T.sig_("qdd"))]
 

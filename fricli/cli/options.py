@@ -28,8 +28,25 @@ def common(f):
     return f
 
 
+def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
+    if value:
+        ctx.meta.setdefault("fricli.zero", []).append({"no_gravity": "tau_g", "no_dynamics": "tau_dyn"}[param.name])
+    return value
+
+
+def declared_zero() -> tuple[str, ...]:
+    """Robot-model columns declared zero by --no-gravity/--no-dynamics (docs/log-format.md)."""
+    ctx = click.get_current_context(silent=True)
+    return tuple(ctx.meta.get("fricli.zero", ())) if ctx else ()
+
+
 def log_reading(f):
-    """--joint, --kt, --cutoff, --drop-invalid: how a log is read (see docs/log-format.md)."""
+    """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read
+    (see docs/log-format.md)."""
+    for flag, what in (("--no-dynamics", "tau_dyn (inertia and Coriolis torque) as 0"),
+                       ("--no-gravity", "tau_g as 0: the joint carries no gravity load")):
+        f = click.option(flag, is_flag=True, expose_value=False, callback=_declare_zero,
+                         help=f"When the log has no {what.split(' ')[0]} column, take {what}.")(f)
     f = click.option("--drop-invalid", is_flag=True,
                      help="Drop rows with NaN or infinite values (with a warning) instead of refusing the log.")(f)
     f = click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=DEFAULT_CUTOFF_HZ,
@@ -86,7 +103,8 @@ def progress_enabled(quiet: bool) -> bool:
 
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
-    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn}
+    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn,
+            "zero": declared_zero()}
 
 
 # Options that do not change the model a command writes (arguments are files: the log is

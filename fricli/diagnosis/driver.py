@@ -19,7 +19,7 @@ DEFAULT_ALPHA = 0.01
 MIN_ROWS_PER_FOLD = 20
 INTERVAL_LEVEL = 0.95
 #: effects that the same log may explain about equally, and what tells them apart
-TWINS = {("gravity", "quadrant"): "rests with a varying tau_g, or a measured payload (tau_ext)"}
+TWINS = {("gravity", "quadrant"): "rests with a varying tau_g"}
 
 
 @dataclasses.dataclass
