@@ -249,9 +249,9 @@ def test_numbers_are_written_to_round_trip():
 
 def test_step_takes_the_signals_in_the_documented_order(sim_models):
     text = c.export(sim_models["augmented"], "fr")
-    assert "static inline double fr_step(fr_state *s, double t, double q, double qd, double qdd, double tau_g, " \
-           "double tau_ext, double temp)" in text
-    assert " *   0. t [s] time" in text and " *   6. temp [degC] temperature" in text
+    assert "static inline double fr_step(fr_state *s, double t, double q, double qd, double qdd, double tau_m, " \
+           "double tau_g, double tau_dyn, double temp)" in text                  # inputs only: no tau_ext
+    assert " *   0. t [s] time" in text and " *   7. temp [degC] temperature" in text
 
 
 @needs_cc
