@@ -301,6 +301,16 @@ def missing_robot_model(column: str) -> str:
             f"'fricli import ... --urdf', or give {option} {when}")
 
 
+def require_robot_model(schema: pa.Schema, name: str, zero=()) -> None:
+    """DataError (one line, with the fix) when the log lacks tau_g or tau_dyn and neither the
+    options (``zero``) nor the log's metadata declare it zero: checked once before any joint is
+    fitted or predicted."""
+    declared = declared_zero(schema, name, zero)
+    for column in ROBOT_MODEL:
+        if column not in schema.names and column not in declared:
+            raise DataError(f"{name}: {missing_robot_model(column)}")
+
+
 def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
     """Robot-model columns declared zero: ``zero`` (the options) and the schema metadata key
     ``fricli.zero_columns`` (a JSON list). LogError for a name that is not tau_g or tau_dyn."""

@@ -243,6 +243,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     from tqdm import tqdm
 
     pf, name = open_log(log_path)
+    logs.require_robot_model(pf.schema_arrow, name, zero)
     found = file_joints(pf, name)
     streams = {}
     for j, path in joints.pair(source, found, joint, name):

@@ -168,6 +168,7 @@ def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_chang
 
     table, digest = read or logs.read_table(log)
     name = "stdin" if log == "-" else log
+    logs.require_robot_model(table.schema, name, reading.get("zero", ()))
     pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
     results: dict = {}
     reading = {k: v for k, v in reading.items() if k != "joint"}
