@@ -233,17 +233,20 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
                warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
                progress: bool = False, load: Callable[[str], tuple] = models.load,
-               flag_extrapolation: bool = False, window: timewindow.Window | None = None) -> Result:
+               flag_extrapolation: bool = False, window: timewindow.Window | None = None,
+               zero: tuple = ()) -> Result:
     """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
     file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` added to
     ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
     ``extrapolating`` (the row lies outside its model's training envelope) when ``flag_extrapolation``.
     Rows keep their order;
     rows of joints the run does not cover are left out, and rows outside ``window`` (the time
-    window, fricli.timewindow). Returns the figures."""
+    window, fricli.timewindow). ``zero``: robot-model columns declared zero (``logs.from_table``);
+    a log without tau_g or tau_dyn is refused otherwise. Returns the figures."""
     from tqdm import tqdm
 
     pf, name = open_log(log_path)
+    logs.require_robot_model(pf.schema_arrow, name, zero)
     limits = timewindow.limits_of_file(pf, window, name) if window else None
     found = file_joints(pf, name)
     streams = {}
@@ -286,7 +289,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                     if part.num_rows == 0:
                         continue
                     out, n_in = _predict_part(st, part, offset, name, total, reason, external, lowpass_hz, kt,
-                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation)
+                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation, zero)
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -314,8 +317,8 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     if warnings and warn:
         if dropped:
             warn(f"warning: dropped {dropped} rows with NaN or infinite values")
-        else:
-            for message in dict.fromkeys(warnings):
+        for message in dict.fromkeys(warnings):
+            if not dropped or message.startswith("note:"):
                 warn(message)
     per_joint = None
     n_outside = sum(st.outside for st in streams.values())
@@ -336,7 +339,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
 
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, external: bool,
                   lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list,
-                  flag_extrapolation: bool = False) -> tuple[pa.Table, int]:
+                  flag_extrapolation: bool = False, zero: tuple = ()) -> tuple[pa.Table, int]:
     """One joint's rows of one batch with tau_f_pred (and tau_ext_pred) added; the rows it had."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
     jpos = table.schema.get_field_index("joint")
@@ -346,7 +349,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         table = table.remove_column(jpos)
     try:
         log = logs.from_table(table, name=name, kt=kt, cutoff_hz=cutoff_hz, drop_invalid=drop_invalid,
-                              warn=warnings.append)
+                              warn=warnings.append, zero=zero)
     except LogError as exc:
         if reason is None and (offset or table.num_rows < total):
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None

@@ -36,15 +36,32 @@ def _window_bound(ctx: click.Context, param, value: str | None) -> None:
             raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
+def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
+    if value:
+        ctx.meta.setdefault("fricli.zero", []).append({"no_gravity": "tau_g", "no_dynamics": "tau_dyn"}[param.name])
+    return value
+
+
+def declared_zero() -> tuple[str, ...]:
+    """Robot-model columns declared zero by --no-gravity/--no-dynamics (docs/log-format.md)."""
+    ctx = click.get_current_context(silent=True)
+    return tuple(ctx.meta.get("fricli.zero", ())) if ctx else ()
+
+
 def log_reading(f):
-    """--joint, --kt, --cutoff, --drop-invalid: how a log is read (see docs/log-format.md); --from,
-    --until: the rows read (``time_window``, ``read_log``; fricli.timewindow)."""
+    """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
+    docs/log-format.md); --from, --until: the rows read (``time_window``, ``read_log``;
+    fricli.timewindow)."""
     for name in ("until", "from"):
         f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
                          callback=_window_bound,
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
+    for flag, what in (("--no-dynamics", "tau_dyn (inertia and Coriolis torque) as 0"),
+                       ("--no-gravity", "tau_g as 0: the joint carries no gravity load")):
+        f = click.option(flag, is_flag=True, expose_value=False, callback=_declare_zero,
+                         help=f"When the log has no {what.split(' ')[0]} column, take {what}.")(f)
     f = click.option("--drop-invalid", is_flag=True,
                      help="Drop rows with NaN or infinite values (with a warning) instead of refusing the log.")(f)
     f = click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=DEFAULT_CUTOFF_HZ,
@@ -118,7 +135,8 @@ def read_log(log: str):
 
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
-    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn}
+    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn,
+            "zero": declared_zero()}
 
 
 # Options that do not change the model a command writes (arguments are files: the log is
@@ -185,6 +203,7 @@ def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_chang
 
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
+    logs.require_robot_model(table.schema, name, reading.get("zero", ()))
     pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
     results: dict = {}
     reading = {k: v for k, v in reading.items() if k != "joint"}

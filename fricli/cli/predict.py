@@ -6,8 +6,8 @@ import click
 
 from fricli import modelset, predicting
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, output_option,
-                                progress_enabled, say, time_window, warn)
+from fricli.cli.options import (common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
+                                output_option, progress_enabled, say, time_window, warn)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -45,7 +45,8 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
     result = predicting.run_models(modelset.source(model_path), log, output, external=external, lowpass_hz=lowpass,
                                    joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn,
                                    batch_rows=batch_rows, progress=progress_enabled(quiet),
-                                   flag_extrapolation=flag_extrapolation, load=load, window=time_window())
+                                   flag_extrapolation=flag_extrapolation, load=load, window=time_window(),
+                                   zero=declared_zero())
     if not quiet:
         where = f" of joint {result.joint}" if result.joint is not None else ""
         if result.per_joint:
