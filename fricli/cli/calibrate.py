@@ -28,6 +28,9 @@ def report_path(output: str) -> str:
               help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint (IDIM-LS).")
 @click.option("--prior", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
               help="Prior standard deviation of each inertial parameter around its CAD value, relative to its scale.")
+@click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
+              help="enforce: fit again over physically consistent parameters when the linear estimate is not; "
+                   "check: refuse (exit 5) an inconsistent estimate.")
 @click.option("--edge", type=click.FloatRange(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
@@ -37,7 +40,7 @@ def report_path(output: str) -> str:
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
 @output_option(help="The calibrated URDF.")
 @common
-def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, edge, cutoff, report_file, as_json,
+def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consistency, edge, cutoff, report_file, as_json,
                   output, quiet):
     """Identify the arm's rigid-body model and each joint's friction from one whole-arm log.
 
@@ -75,10 +78,14 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, edge, 
     name = "stdin" if log == "-" else log
     motion = cb.read_motion(table, name, robot, match=match, urdf_names=names,
                             cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
-    cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge)
+    cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce")
     report = {"log": name, "urdf": urdf, "output": output, **cal.report}
     for line in _summary(report):
         say(line, quiet)
+    enforced = report["consistency_enforced"]
+    if enforced:
+        warn(f"warning: the linear estimate was physically inconsistent ({'; '.join(enforced['inconsistent_before'])}): "
+             "fitted again over consistent parameters only")
     for line in report["consistency"]["warnings"] + report["suspicious"]:
         warn(f"warning: {line}")
     cb.refuse_inconsistent(cal)

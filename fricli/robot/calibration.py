@@ -119,8 +119,9 @@ def bodies(robot) -> list[str]:
     out = []
     for i in range(1, model.njoints):
         joint_frame = model.getFrameId(model.names[i])
-        link = next((f.name for f in model.frames if f.parentJoint == i and f.previousFrame == joint_frame
-                     and f.name != model.names[i]), model.names[i])
+        link = next((f.name for f in model.frames if f.parentJoint == i and f.name != model.names[i]
+                     and getattr(f, "parentFrame", None if hasattr(f, "parentFrame") else f.previousFrame) == joint_frame),
+                    model.names[i])
         out.append(link)
     return out
 
@@ -559,6 +560,5 @@ def refuse_inconsistent(cal: Calibration) -> None:
     """FitError (exit 5) when the identified model is physically impossible."""
     problems = cal.report["consistency"]["problems"]
     if problems:
-        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-        raise FitError(f"the identified model is physically inconsistent: {problems[0]}{more}; excite the arm "
-                       "more or tighten the prior (--prior)")
+        raise FitError(f"the identified model is physically inconsistent: {'; '.join(problems)}; excite the arm "
+                       "more, tighten the prior (--prior) or enforce consistency (--consistency enforce)")
