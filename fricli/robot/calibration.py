@@ -502,7 +502,7 @@ def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
     plus the identified change of its body: fixed children keep theirs) and the armature as
     Pinocchio's ``<rotor_params>`` (gear_ratio 1, mass = armature)."""
     pin = _pin()
-    root = ET.fromstring(urdf_text)
+    root = ET.fromstring(urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     links = {link.get("name"): link for link in root.findall("link")}
     nj = len(cal.joints)
     for b, body in enumerate(cal.bodies):
@@ -515,14 +515,15 @@ def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
         _set_inertial(link, inertia)
     for old in root.findall("rotor_params"):
         root.remove(old)
+    if len(root):
+        root[-1].tail = "\n  "
     rotor = ET.SubElement(root, "rotor_params")
     rotor.text, rotor.tail = "\n    ", "\n"
     for j, joint in enumerate(cal.joints):
         element = ET.SubElement(rotor, "joint", {"name": joint, "mass": repr(float(cal.x[10 * nj + j])),
                                                  "gear_ratio": "1"})
         element.tail = "\n    " if j < nj - 1 else "\n  "
-    ET.indent(root, space="  ")
-    return ET.tostring(root, encoding="unicode") + "\n"
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
 def _link_parameters(pin, link) -> np.ndarray:
@@ -550,10 +551,11 @@ def _set_inertial(link, inertia) -> None:
     for child in list(inertial):
         inertial.remove(child)
     c, tensor = inertia.lever, inertia.inertia
-    ET.SubElement(inertial, "mass", {"value": repr(float(inertia.mass))})
-    ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"})
+    inertial.text = "\n      "
+    ET.SubElement(inertial, "mass", {"value": repr(float(inertia.mass))}).tail = "\n      "
+    ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"}).tail = "\n      "
     ET.SubElement(inertial, "inertia", {k: repr(float(tensor[a, b])) for k, (a, b) in (
-        ("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2)))})
+        ("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2)))}).tail = "\n    "
 
 
 def refuse_inconsistent(cal: Calibration) -> None:
