@@ -117,11 +117,11 @@ def unconstrained(fit_log, cad):
     return robot, cb.calibrate(robot, motion, enforce=False)
 
 
-def study(data, work, keep) -> dict:
+def study(data, work, keep, fit_run=FIT_RUN) -> dict:
     cad = os.path.join(data, "ur10e.urdf")
     names = sorted(f[:-4] for f in os.listdir(os.path.join(data, "identification")) if f.endswith(".csv"))
-    val_names = [n for n in names if not n.startswith(FIT_RUN[:11]) and n != LOAD_RUN]
-    fit_cad = import_run(data, work, FIT_RUN, cad, "cad", keep)
+    val_names = [n for n in names if not n.startswith(fit_run[:11]) and n != LOAD_RUN]
+    fit_cad = import_run(data, work, fit_run, cad, "cad", keep)
     cal_urdf, report = calibrate(fit_cad, cad, work, "cal", keep)
     val_cad = [import_run(data, work, n, cad, "cad", keep) for n in val_names]
     val_cal = [import_run(data, work, n, cal_urdf, "cal", keep) for n in val_names]
@@ -136,7 +136,7 @@ def study(data, work, keep) -> dict:
             _cache[path] = (cb.regressor(robot, m.q, m.qd, m.qdd) @ free.x).reshape(len(m.t), nj)
         return _cache[path][:, j - 1]
 
-    result = {"fit_run": FIT_RUN, "validation_runs": val_names, "calibration": report, "joints": {}}
+    result = {"fit_run": fit_run, "validation_runs": val_names, "calibration": report, "joints": {}}
     for j in JOINTS:
         fs = sig(fit_cad, j)
         coef = np.linalg.lstsq(np.column_stack([fs["qd"], np.sign(fs["qd"]), np.ones_like(fs["qd"])]),
@@ -205,11 +205,13 @@ def main() -> None:
     ap.add_argument("--data", default=DEFAULT_DATA)
     ap.add_argument("--work", required=True, help="working folder (logs, URDFs, reports)")
     ap.add_argument("--keep", action="store_true", help="reuse outputs already in --work")
+    ap.add_argument("--fit-run", default=FIT_RUN, help=f"the calibration run (default {FIT_RUN}); validation: "
+                    "the identification runs of other days")
     args = ap.parse_args()
     if not os.path.isdir(os.path.join(args.data, "identification")):
         raise SystemExit(f"{args.data}: no UR10e recordings (see ../shared/data/README.md)")
     os.makedirs(args.work, exist_ok=True)
-    res = study(args.data, args.work, args.keep)
+    res = study(args.data, args.work, args.keep, args.fit_run)
     with open(os.path.join(args.work, "calibration-study.json"), "w", encoding="utf-8") as fh:
         json.dump(res, fh, indent=2, default=float)
     print(tables(res))
