@@ -66,9 +66,9 @@ def import_run(data, work, name, urdf, tag, keep, payload=False) -> str:
     return out
 
 
-def calibrate(log, cad, work, tag, keep) -> tuple[str, dict]:
+def calibrate(log, cad, work, tag, keep, *extra) -> tuple[str, dict]:
     out = os.path.join(work, f"{tag}.urdf")
-    fricli("calibrate", log, "--urdf", cad, "-o", out, "-q", skip=keep and os.path.exists(out))
+    fricli("calibrate", log, "--urdf", cad, "-o", out, "-q", *extra, skip=keep and os.path.exists(out))
     with open(out[:-5] + ".calibration.json", encoding="utf-8") as fh:
         return out, json.load(fh)
 
@@ -79,6 +79,15 @@ def sig(path, joint):
 
 def lin(s, coef):
     return np.column_stack([s["qd"], np.sign(s["qd"]), np.ones_like(s["qd"])]) @ np.asarray(coef)
+
+
+def friction(s, fr):
+    """The calibration's friction of one joint (report entry ``fr``) at the log's velocities."""
+    qd = s["qd"]
+    out = fr["Fv"] * qd + fr["Fc"] * np.sign(qd) + fr["offset"]
+    if "Fs" in fr:
+        out += (fr["Fs"] - fr["Fc"]) * np.sign(qd) * np.exp(-np.abs(qd / fr["vs"]) ** fr["delta"])
+    return out
 
 
 def rms(x):
@@ -125,6 +134,8 @@ def study(data, work, keep, fit_run=FIT_RUN) -> dict:
     cal_urdf, report = calibrate(fit_cad, cad, work, "cal", keep)
     val_cad = [import_run(data, work, n, cad, "cad", keep) for n in val_names]
     val_cal = [import_run(data, work, n, cal_urdf, "cal", keep) for n in val_names]
+    str_urdf, str_report = calibrate(fit_cad, cad, work, "cal-stribeck", keep, "--friction", "stribeck")
+    val_str = [import_run(data, work, n, str_urdf, "cal-stribeck", keep) for n in val_names]
     robot, free = unconstrained(fit_cad, cad)
     nj = len(JOINTS)
 
@@ -136,7 +147,8 @@ def study(data, work, keep, fit_run=FIT_RUN) -> dict:
             _cache[path] = (cb.regressor(robot, m.q, m.qd, m.qdd) @ free.x).reshape(len(m.t), nj)
         return _cache[path][:, j - 1]
 
-    result = {"fit_run": fit_run, "validation_runs": val_names, "calibration": report, "joints": {}}
+    result = {"fit_run": fit_run, "validation_runs": val_names, "calibration": report,
+              "calibration_stribeck": str_report, "joints": {}}
     for j in JOINTS:
         fs = sig(fit_cad, j)
         coef = np.linalg.lstsq(np.column_stack([fs["qd"], np.sign(fs["qd"]), np.ones_like(fs["qd"])]),
@@ -145,7 +157,10 @@ def study(data, work, keep, fit_run=FIT_RUN) -> dict:
         base = residuals(val_cad, j, lambda p, s: s["tau_g"] + s["tau_dyn"] + lin(s, coef))
         cal = residuals(val_cal, j, lambda p, s: s["tau_g"] + s["tau_dyn"] + lin(s, [fr["Fv"], fr["Fc"], fr["offset"]]))
         unc = residuals(val_cad, j, lambda p, s: free_pred(p, s, j))
-        result["joints"][j] = {"baseline": base, "calibrated": cal, "unconstrained": unc, "baseline_friction": coef.tolist()}
+        frs = str_report["friction"]["joints"][str(j)]
+        stri = residuals(val_str, j, lambda p, s: s["tau_g"] + s["tau_dyn"] + friction(s, frs))
+        result["joints"][j] = {"baseline": base, "calibrated": cal, "unconstrained": unc, "stribeck": stri,
+                               "baseline_friction": coef.tolist()}
 
     # payload run: models fitted on the unloaded twin
     twin_cad = import_run(data, work, TWIN_RUN, cad, "cad", keep)
@@ -176,18 +191,21 @@ def study(data, work, keep, fit_run=FIT_RUN) -> dict:
 
 
 def tables(res) -> str:
-    lines = ["| joint | baseline in motion [Nm] | calibrated | ratio | unconstrained ratio | floor (above 2 Hz) | "
-             "target (halfway) | ratio, all rows |", "|---|---|---|---|---|---|---|---|"]
-    ratios = []
+    lines = ["| joint | baseline in motion [Nm] | calibrated | ratio | unconstrained ratio | with Stribeck | floor (above 2 Hz) | "
+             "target (halfway) | ratio, all rows | with Stribeck, all rows |", "|---|---|---|---|---|---|---|---|---|---|"]
+    ratios, str_ratios = [], []
     for j, r in res["joints"].items():
         b, c, u = r["baseline"], r["calibrated"], r["unconstrained"]
         ratio = c["moving"] / b["moving"]
         ratios.append(ratio)
         floor = b["hf_moving"] / b["moving"]
         target = 0.5 * (PATCHED[int(j) - 1] + FLOOR[int(j) - 1])
+        st = r["stribeck"]
+        str_ratios.append(st["moving"] / b["moving"])
         lines.append(f"| {j} | {b['moving']:.3f} | {c['moving']:.3f} | **{ratio:.2f}** | {u['moving'] / b['moving']:.2f} | "
-                     f"{floor:.2f} | {target:.3f} | {c['all'] / b['all']:.2f} |")
-    lines.append(f"| mean | | | **{np.mean(ratios):.2f}** | | | 0.66 | |")
+                     f"{str_ratios[-1]:.2f} | {floor:.2f} | {target:.3f} | {c['all'] / b['all']:.2f} | "
+                     f"{st['all'] / b['all']:.2f} |")
+    lines.append(f"| mean | | | **{np.mean(ratios):.2f}** | | {np.mean(str_ratios):.2f} | | 0.66 | | |")
     lines += ["", "| joint | payload torque RMS [Nm] | linear error | calibrated error | ratio | ratio in motion | "
               "linear sees | calibrated sees |", "|---|---|---|---|---|---|---|---|"]
     for j, p in res["payload"].items():

@@ -24,8 +24,9 @@ def report_path(output: str) -> str:
               help="The URDF joint of a log joint, with --match name. Repeatable.")
 @click.option("--gravity", nargs=3, type=float, default=(0.0, 0.0, -9.81), show_default=True, metavar="X Y Z",
               help="Gravity in the URDF's base frame [m/s^2].")
-@click.option("--friction", type=click.Choice(["linear"]), default="linear", show_default=True,
-              help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint (IDIM-LS).")
+@click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
+              help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint "
+                   "(IDIM-LS); stribeck adds the LuGre static curve's bump (Fs - Fc) exp(-(qd/vs)^2).")
 @click.option("--prior", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
               help="Prior standard deviation of each inertial parameter around its CAD value, relative to its scale.")
 @click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
@@ -78,7 +79,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     name = "stdin" if log == "-" else log
     motion = cb.read_motion(table, name, robot, match=match, urdf_names=names,
                             cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
-    cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce")
+    cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce", friction=friction)
     report = {"log": name, "urdf": urdf, "output": output, **cal.report}
     for line in _summary(report):
         say(line, quiet)
@@ -118,6 +119,7 @@ def _summary(report: dict) -> list[str]:
     lines.append("fit: RMS of tau_m minus the model [Nm], CAD + friction -> calibrated:")
     for joint, f in report["fit"].items():
         fr = report["friction"]["joints"][joint]
+        extra = f", Fs {fr['Fs']:.4g}, vs {fr['vs']:.3g}" if "Fs" in fr else ""
         lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} "
-                     f"(Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}, offset {fr['offset']:.4g})")
+                     f"(Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, offset {fr['offset']:.4g})")
     return lines

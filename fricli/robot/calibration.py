@@ -40,6 +40,8 @@ SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is
 UNDETERMINED = 1.0         # a direction whose data information is below the prior's stays at CAD
 NUMERIC_ZERO = 1e-10       # ... or below this share of the best-determined direction's
 MAX_ITERATIONS = 30
+STRIBECK_ALTERNATIONS = 4
+STRIBECK_GRID = np.geomspace(0.005, 0.5, 25)   # Stribeck velocities searched, x the joint's top speed
 TOLERANCE = 1e-9           # relative: a body on the boundary of consistency (a thin rod, a point) passes
 OTHER_CAUSES = ("a drive gain off by a similar share on the joints that carry it", "a cable or hose pulling on the arm",
                 "a counterbalance spring", "a tool or payload not in the URDF")
@@ -126,15 +128,17 @@ def bodies(robot) -> list[str]:
     return out
 
 
-def parameter_names(robot) -> list[str]:
-    """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset."""
+def parameter_names(robot, stribeck: bool = False) -> list[str]:
+    """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset (and JOINT.Fs-Fc)."""
     return ([f"{b}.{p}" for b in bodies(robot) for p in PARAMS] + [f"{j}.armature" for j in robot.joints]
-            + [f"{j}.{f}" for j in robot.joints for f in FRICTION])
+            + [f"{j}.{f}" for j in robot.joints for f in FRICTION] + ([f"{j}.Fs-Fc" for j in robot.joints]
+                                                                       if stribeck else []))
 
 
-def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vs: np.ndarray | None = None) -> np.ndarray:
     """The full observation matrix, shape (n * joints, 14 * joints): the rows of sample k are
-    k * joints ... (k + 1) * joints - 1 (joint order of the URDF); columns as ``parameter_names``."""
+    k * joints ... (k + 1) * joints - 1 (joint order of the URDF); columns as ``parameter_names``.
+    With Stribeck velocities ``vs`` (joints,) one more column per joint, ``stribeck_columns``."""
     pin = _pin()
     model = robot.pin_model
     data = model.createData()
@@ -148,7 +152,17 @@ def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarr
     out[:, idx, 11 * nj + 3 * idx] = qd
     out[:, idx, 11 * nj + 3 * idx + 1] = np.sign(qd)
     out[:, idx, 11 * nj + 3 * idx + 2] = 1.0
-    return out.reshape(n * nj, 14 * nj)
+    out = out.reshape(n * nj, 14 * nj)
+    return out if vs is None else np.hstack([out, stribeck_columns(qd, vs)])
+
+
+def stribeck_columns(qd: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """The Stribeck bump sign(qd_j) exp(-(qd_j / vs_j)^2) of each joint in its own rows, (n * joints, joints)."""
+    n, nj = qd.shape
+    out = np.zeros((n, nj, nj))
+    idx = np.arange(nj)
+    out[:, idx, idx] = np.sign(qd) * np.exp(-np.square(qd / vs))
+    return out.reshape(n * nj, nj)
 
 
 def _pin():
@@ -204,11 +218,13 @@ class Calibration:
 
 
 def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
-              enforce: bool = True, seed: int = 0) -> Calibration:
+              enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
     """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion``.
     ``enforce``: when the linear estimate is physically inconsistent, fit again over consistent
     parameters only (``consistent_fit``). ``seed`` fixes the random configurations of the
-    structural (trajectory-independent) analysis."""
+    structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
+    or "stribeck" (and the bump (Fs - Fc) sign(qd) exp(-(qd / vs)^2) of the LuGre static curve, vs
+    per joint alternated with the linear fit by a search on a grid)."""
     nj = len(robot.joints)
     keep = edge_rows(motion.t, edge_s)
     moving = np.abs(motion.qd[keep]).max(axis=0) if keep.any() else np.zeros(nj)
@@ -221,7 +237,8 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     n = len(q)
     Phi = regressor(robot, q, qd, qdd)
     y = tau.reshape(-1)
-    names = parameter_names(robot)
+    stribeck = friction == "stribeck"
+    names = parameter_names(robot, stribeck)
     pi_cad = cad_parameters(robot)
     urdf_armature = robot.armature
     armature0 = np.where(np.isnan(urdf_armature), np.nan_to_num(motion.rotor_inertia), urdf_armature)
@@ -240,22 +257,25 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         fric_before[j] = coef
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
-    # maximum a posteriori, rows weighted by each joint's residual std, until the weights settle
     rows_of = np.tile(np.arange(nj), n)
-    for iteration in range(1, MAX_ITERATIONS + 1):
-        A = (Phi / sigma[rows_of, None]) * s
-        z = np.linalg.lstsq(np.vstack([A, np.eye(len(s))]),
-                            np.concatenate([(y - Phi @ x0) / sigma[rows_of], np.zeros(len(s))]), rcond=None)[0]
-        x = x0 + s * z
-        resid = (y - Phi @ x).reshape(n, nj)
-        new = np.maximum(np.sqrt(np.mean(resid ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
-        settled = np.max(np.abs(np.log(new / sigma))) < 0.01
-        sigma = new
-        if settled:
-            break
+    vs = None
+    if stribeck:
+        top = np.abs(qd).max(axis=0)
+        vs = 0.1 * top
+        x0 = np.concatenate([x0, np.zeros(nj)])
+        s = np.concatenate([s, 10.0 * np.maximum(tau_rms, 1e-6)])
+        for _ in range(STRIBECK_ALTERNATIONS):
+            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs)])
+            x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms)
+            own = (Phi_s[:, 11 * nj:] * x[11 * nj:]).reshape(n, nj, -1).sum(axis=2)  # friction part, (n, nj)
+            for j in range(nj):
+                target = resid[:, j] + own[:, j]
+                vs[j] = min(top[j] * STRIBECK_GRID, key=lambda v: _stribeck_rss(qd[:, j], target, v))
+        Phi = np.hstack([Phi, stribeck_columns(qd, vs)])
+    x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms)
 
     A = (Phi / sigma[rows_of, None]) * s
-    excitation = _excitation(robot, A, Phi, s, names, seed)
+    excitation = _excitation(robot, A, Phi, s, names, seed, vs)
     linear = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report={})
     broken = consistency(linear)["problems"]
     enforced = None
@@ -272,12 +292,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
                                        "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
                                        "rms_after": float(np.sqrt(np.mean(resid[:, j] ** 2))),
                                        "noise_std": float(sigma[j])} for j in range(nj)},
-        "friction": {"kind": "linear", "model": "Fv*qd + Fc*sign(qd) + offset", "units": {
-            "Fv": "Nm s/rad", "Fc": "Nm", "offset": "Nm"} if robot.kinds[0] == "rotary" else {
-            "Fv": "N s/m", "Fc": "N", "offset": "N"},
-            "joints": {str(motion.names[j]): {"urdf_joint": robot.joints[j],
-                                              **{f: float(x[11 * nj + 3 * j + k]) for k, f in enumerate(FRICTION)}}
-                       for j in range(nj)}},
+        "friction": _friction_report(robot, motion, x, vs),
         "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k]) for k, f in enumerate(FRICTION)}
                               for j in range(nj)},
         "consistency_enforced": enforced,
@@ -289,6 +304,47 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal)
     return cal
+
+
+def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
+    """Maximum a posteriori estimate, rows weighted by each joint's residual std, re-estimated until
+    the weights settle: (x, sigma (joints,), residuals (n, joints), iterations)."""
+    nj = len(sigma)
+    for iteration in range(1, MAX_ITERATIONS + 1):
+        A = (Phi / sigma[rows_of, None]) * s
+        z = np.linalg.lstsq(np.vstack([A, np.eye(len(s))]),
+                            np.concatenate([(y - Phi @ x0) / sigma[rows_of], np.zeros(len(s))]), rcond=None)[0]
+        x = x0 + s * z
+        resid = (y - Phi @ x).reshape(-1, nj)
+        new = np.maximum(np.sqrt(np.mean(resid ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
+        settled = np.max(np.abs(np.log(new / sigma))) < 0.01
+        sigma = new
+        if settled:
+            break
+    return x, sigma, resid, iteration
+
+
+def _stribeck_rss(qd: np.ndarray, target: np.ndarray, vs: float) -> float:
+    cols = np.column_stack([qd, np.sign(qd), np.sign(qd) * np.exp(-np.square(qd / vs)), np.ones_like(qd)])
+    coef = np.linalg.lstsq(cols, target, rcond=None)[0]
+    return float(np.sum(np.square(target - cols @ coef)))
+
+
+def _friction_report(robot, motion: Motion, x: np.ndarray, vs: np.ndarray | None) -> dict:
+    nj = len(robot.joints)
+    rotary = robot.kinds[0] == "rotary"
+    units = {"Fv": "Nm s/rad", "Fc": "Nm", "offset": "Nm"} if rotary else {"Fv": "N s/m", "Fc": "N", "offset": "N"}
+    joints = {}
+    for j in range(nj):
+        row = {"urdf_joint": robot.joints[j], **{f: float(x[11 * nj + 3 * j + k]) for k, f in enumerate(FRICTION)}}
+        if vs is not None:
+            row.update(Fs=row["Fc"] + float(x[14 * nj + j]), vs=float(vs[j]), delta=2.0)
+        joints[str(motion.names[j])] = row
+    if vs is None:
+        return {"kind": "linear", "model": "Fv*qd + Fc*sign(qd) + offset", "units": units, "joints": joints}
+    units.update(Fs=units["Fc"], vs="rad/s" if rotary else "m/s", delta="-")
+    return {"kind": "stribeck", "model": "Fv*qd + (Fc + (Fs - Fc) exp(-|qd/vs|^delta)) sign(qd) + offset",
+            "units": units, "joints": joints}
 
 
 def pseudo_inertia(pi: np.ndarray) -> np.ndarray:
@@ -363,7 +419,8 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
     return params(fit.x)
 
 
-def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int) -> dict:
+def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int,
+                vs: np.ndarray | None = None) -> dict:
     """How well the run determines the parameters.
 
     Structural: the base parameters (QR with column pivoting of the regressor at random states,
@@ -372,7 +429,7 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
     prior-whitened information matrix, 1 = as much as the prior's) is below ``UNDETERMINED``."""
     from scipy import linalg
 
-    R_ = _random_regressor(robot, seed) * s
+    R_ = _random_regressor(robot, seed, vs) * s
     _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     rank = int(np.sum(d > 1e-9 * d[0]))
@@ -400,13 +457,14 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
     }
 
 
-def _random_regressor(robot, seed: int) -> np.ndarray:
+def _random_regressor(robot, seed: int, vs: np.ndarray | None = None) -> np.ndarray:
     """The regressor at random states (positions uniform in [-pi, pi], standard normal velocities
     and accelerations): enough rows to show every structural dependency."""
     nj = len(robot.joints)
     rng = np.random.default_rng(seed)
     k = max(60, 30 * nj)
-    return regressor(robot, rng.uniform(-np.pi, np.pi, (k, nj)), rng.normal(size=(k, nj)), rng.normal(size=(k, nj)))
+    qd = rng.normal(size=(k, nj)) * (1.0 if vs is None else 2 * vs)
+    return regressor(robot, rng.uniform(-np.pi, np.pi, (k, nj)), qd, rng.normal(size=(k, nj)), vs)
 
 
 def base_parameters(robot, x: np.ndarray, seed: int = 0) -> tuple[np.ndarray, list[str]]:
