@@ -234,3 +234,26 @@ def test_refusals(arm, tmp_path):
     assert res.returncode == errors.INPUT and "--match" in res.stderr
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.DATA and "joint 3 does not move" in res.stderr
+
+
+def test_stribeck_friction_is_found_with_the_rigid_body(arm):
+    """With a Stribeck bump in the true friction at a velocity on the search grid, --friction stribeck
+    finds that velocity and the whole model; the linear friction cannot follow it."""
+    model, _, fit, held = arm
+    t, q, qd, qdd = fit
+    keep = cb.edge_rows(t, cb.DEFAULT_EDGE_S)
+    vs = np.abs(qd[keep]).max(axis=0) * cb.STRIBECK_GRID[12]
+    bump = np.array([4.0, -3.0, 2.0, 0.5])                     # Fs - Fc [Nm]
+
+    def torque(t, q, qd, qdd):
+        return simulate(model, t, q, qd, qdd) + bump * np.sign(qd) * np.exp(-np.square(qd / vs))
+
+    robot = RobotModel(URDF, "cad")
+    cal = cb.calibrate(robot, motion(*fit, torque(*fit)), friction="stribeck")
+    linear = cb.calibrate(robot, motion(*fit, torque(*fit)))
+    fr = cal.report["friction"]
+    assert fr["kind"] == "stribeck"
+    np.testing.assert_allclose([fr["joints"][j]["vs"] for j in "1234"], vs, rtol=1e-9)
+    np.testing.assert_allclose([fr["joints"][j]["Fs"] - fr["joints"][j]["Fc"] for j in "1234"], bump, rtol=1e-6)
+    after = max(f["rms_after"] for f in cal.report["fit"].values())
+    assert after < 1e-6 * min(f["rms_after"] for f in linear.report["fit"].values())
