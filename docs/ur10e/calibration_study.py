@@ -168,19 +168,24 @@ def study(data, work, keep, fit_run=FIT_RUN) -> dict:
     load_cad = import_run(data, work, LOAD_RUN, cad, "cad", keep)
     load_ref = import_run(data, work, LOAD_RUN, cad, "cad", keep, payload=True)
     load_cal = import_run(data, work, LOAD_RUN, twin_urdf, "cal-twin", keep)
+    twin_str_urdf, twin_str = calibrate(twin_cad, cad, work, "cal-twin-stribeck", keep, "--friction", "stribeck")
+    load_str = import_run(data, work, LOAD_RUN, twin_str_urdf, "cal-twin-stribeck", keep)
     result["payload"] = {}
     for j in JOINTS:
         ts = sig(twin_cad, j)
         coef = np.linalg.lstsq(np.column_stack([ts["qd"], np.sign(ts["qd"]), np.ones_like(ts["qd"])]),
                                ts["tau_m"] - ts["tau_g"] - ts["tau_dyn"], rcond=None)[0]
-        s, r, c = sig(load_cad, j), sig(load_ref, j), sig(load_cal, j)
+        s, r, c, cs = sig(load_cad, j), sig(load_ref, j), sig(load_cal, j), sig(load_str, j)
         reference = -((r["tau_g"] + r["tau_dyn"]) - (s["tau_g"] + s["tau_dyn"]))
         fr = twin_report["friction"]["joints"][str(j)]
         ext_lin = logs.external_torque(s, lin(s, coef))
         ext_cal = logs.external_torque(c, lin(c, [fr["Fv"], fr["Fc"], fr["offset"]]))
+        ext_str = logs.external_torque(cs, friction(cs, twin_str["friction"]["joints"][str(j)]))
         mv = metrics.in_motion(s["qd"])
         result["payload"][j] = {
             "reference_rms": rms(reference), "linear": rms(ext_lin - reference), "calibrated": rms(ext_cal - reference),
+            "stribeck": rms(ext_str - reference), "stribeck_moving": rms((ext_str - reference)[mv]),
+            "stribeck_gain": float(np.dot(ext_str - reference, reference) / np.dot(reference, reference)),
             "linear_moving": rms((ext_lin - reference)[mv]), "calibrated_moving": rms((ext_cal - reference)[mv]),
             "linear_gain": float(np.dot(ext_lin - reference, reference) / np.dot(reference, reference)),
             "calibrated_gain": float(np.dot(ext_cal - reference, reference) / np.dot(reference, reference)),
@@ -207,14 +212,18 @@ def tables(res) -> str:
                      f"{st['all'] / b['all']:.2f} |")
     lines.append(f"| mean | | | **{np.mean(ratios):.2f}** | | {np.mean(str_ratios):.2f} | | 0.66 | | |")
     lines += ["", "| joint | payload torque RMS [Nm] | linear error | calibrated error | ratio | ratio in motion | "
-              "linear sees | calibrated sees |", "|---|---|---|---|---|---|---|---|"]
+              "linear sees | calibrated sees | with Stribeck: ratio | sees |", "|---|---|---|---|---|---|---|---|---|---|"]
     for j, p in res["payload"].items():
+        has = p["reference_rms"] > 0.01
         seen = (f"{100 * (1 + p['linear_gain']):.0f} % | {100 * (1 + p['calibrated_gain']):.0f} %"
-                if p["reference_rms"] > 0.01 else "– (no payload torque) | –")
+                if has else "– (no payload torque) | –")
+        stribeck_seen = f"{100 * (1 + p['stribeck_gain']):.0f} %" if has else "–"
         lines.append(f"| {j} | {p['reference_rms']:.2f} | {p['linear']:.3f} | {p['calibrated']:.3f} | "
-                     f"**{p['calibrated'] / p['linear']:.2f}** | {p['calibrated_moving'] / p['linear_moving']:.2f} | {seen} |")
-    two = [res["payload"][j]["calibrated"] / res["payload"][j]["linear"] for j in (2, 3)]
-    lines.append(f"\njoints 2 and 3: mean ratio {np.mean(two):.2f}")
+                     f"**{p['calibrated'] / p['linear']:.2f}** | {p['calibrated_moving'] / p['linear_moving']:.2f} | {seen} | "
+                     f"{p['stribeck'] / p['linear']:.2f} | {stribeck_seen} |")
+    for kind in ("calibrated", "stribeck"):
+        two = [res["payload"][j][kind] / res["payload"][j]["linear"] for j in (2, 3)]
+        lines.append(f"\n{kind}: joints 2 and 3, mean ratio {np.mean(two):.2f}")
     return "\n".join(lines)
 
 

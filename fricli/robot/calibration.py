@@ -7,7 +7,8 @@ The inverse dynamic model, linear in its parameters (IDIM):
 ``Y``: Pinocchio's joint-torque regressor (``computeJointTorqueRegressor``, gravity included),
 ``pi``: the 10 standard inertial parameters of every moving body (Pinocchio's order
 m, m c, inertia at the joint origin), ``a``: the reflected rotor inertia (armature) per joint,
-``f_j = (Fv, Fc, offset)``: joint j's linear friction.
+``f_j = (Fv, Fc, offset)``: joint j's linear friction (optionally with the LuGre static curve's
+Stribeck bump, linear for a given Stribeck velocity, which alternates with the fit).
 
 The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
 CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
@@ -209,7 +210,7 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
 class Calibration:
     """The identified parameters and the report (plain JSON types)."""
 
-    x: np.ndarray              # every parameter, (14 * joints,): inertial, armature, friction
+    x: np.ndarray              # every parameter, (14 or 15 * joints,): inertial, armature, friction (, Fs - Fc)
     x0: np.ndarray             # the prior's centre (CAD, prior armature, zero friction)
     names: list[str]
     bodies: list[str]
@@ -225,6 +226,8 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
     or "stribeck" (and the bump (Fs - Fc) sign(qd) exp(-(qd / vs)^2) of the LuGre static curve, vs
     per joint alternated with the linear fit by a search on a grid)."""
+    if friction not in ("linear", "stribeck"):
+        raise ValueError(f"unknown friction kind {friction!r}")
     nj = len(robot.joints)
     keep = edge_rows(motion.t, edge_s)
     moving = np.abs(motion.qd[keep]).max(axis=0) if keep.any() else np.zeros(nj)
