@@ -533,6 +533,8 @@ def consistency(cal: Calibration) -> dict:
         if fv < 0 or fc < 0:
             warnings.append(f"joint {joint}: friction Fv {fv:.4g}, Fc {fc:.4g}: a negative coefficient "
                             "makes the joint gain energy")
+        if len(cal.x) == 15 * nj and fc + cal.x[14 * nj + j] < 0:
+            warnings.append(f"joint {joint}: friction Fs {fc + cal.x[14 * nj + j]:.4g} at zero speed is negative")
     return {"ok": not problems, "problems": problems, "warnings": warnings}
 
 
