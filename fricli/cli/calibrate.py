@@ -31,7 +31,7 @@ def report_path(output: str) -> str:
               help="Prior standard deviation of each inertial parameter around its CAD value, relative to its scale.")
 @click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
               help="enforce: fit again over physically consistent parameters when the linear estimate is not; "
-                   "check: refuse (exit 5) an inconsistent estimate.")
+                   "check: refuse (FIT, exit 5) an inconsistent estimate.")
 @click.option("--edge", type=click.FloatRange(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
