@@ -1,0 +1,189 @@
+"""Friction where it lives: one model for a group of joints that share motors (kind ``coupled``).
+
+For the k joints of a coupled group with transmission R (k, k) (``fricli.robot.transmission``):
+
+    theta_d = R q_d                                        motor velocities [rad/s], (k,) per sample
+    f_i     = Fv_i theta_d_i + Fc_i sign(theta_d_i) + o_i  motor i's friction [Nm] (motor side)
+    tau_f   = R^T f                                        each joint's friction [Nm]
+
+A per-joint model of (q_d_j, tau_g_j) cannot represent this: motor 6 of a coupled wrist turns
+at r65 q_d5 + r66 q_d6, and its friction reaches joints 5 and 6. The parameters are linear, so
+the fit is one linear least squares in motor coordinates: the joints' friction targets mapped to
+the motors, R^-T tau_f (n, k), regressed on every motor's features [theta_d, sign(theta_d), 1]
+(which is the joint-side system tau_f = R^T Phi p whitened for equal noise on every motor).
+
+The model predicts the friction of every joint of the group from the group's rows at the same
+times (``predict_group``). A command applying it to one joint's rows uses ``member(joint)``, a
+view whose inputs are the joint's own ``qd`` and its partners' velocities as ``qd@<joint>``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fricli import logs
+from fricli.errors import DataError, FitError
+from fricli.models import register
+from fricli.models.base import FrictionModel
+from fricli.robot.transmission import Transmission
+
+FEATURES = ("fv", "fc", "offset")
+PARAM_INFO = {"fv": ("Nm s/rad", "viscous friction (motor side)"), "fc": ("Nm", "Coulomb friction (motor side)"),
+              "offset": ("Nm", "constant torque (motor side)")}
+
+
+def partner_key(joint) -> str:
+    """The signal name of another joint's velocity in a member's inputs."""
+    return f"qd@{joint}"
+
+
+@register
+class CoupledModel(FrictionModel):
+    """Motor-side Coulomb + viscous friction of a coupled group; ``joints`` (k,), ``ratio`` R (k, k),
+    per-motor ``fv`` [Nm s/rad], ``fc`` [Nm], ``offset`` [Nm], each (k,)."""
+
+    kind = "coupled"
+
+    def __init__(self, joints, ratio, fv, fc, offset):
+        self.transmission = Transmission(joints, ratio)
+        k = len(self.joints)
+        self.fv, self.fc, self.offset = (np.array(v, dtype=np.float64).reshape(-1) for v in (fv, fc, offset))
+        for name in FEATURES:
+            v = getattr(self, name)
+            if v.shape != (k,) or not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} needs {k} finite numbers")
+
+    @property
+    def joints(self) -> tuple:
+        return self.transmission.joints
+
+    @property
+    def ratio(self) -> np.ndarray:
+        return self.transmission.ratio
+
+    def index(self, joint) -> int | None:
+        return next((i for i, j in enumerate(self.joints) if str(j) == str(joint)), None)
+
+    # ---------------------------------------------------------------- equations
+
+    def motor_friction(self, theta_d: np.ndarray) -> np.ndarray:
+        """f (n, k) [Nm] per motor at motor velocities theta_d (n, k) [rad/s]."""
+        return self.fv * theta_d + self.fc * np.sign(theta_d) + self.offset
+
+    def predict_group(self, qd: np.ndarray) -> np.ndarray:
+        """tau_f (n, k) [Nm] of the group's joints at joint velocities qd (n, k) [rad/s]."""
+        tr = self.transmission
+        return tr.joint_torques(self.motor_friction(tr.motor_velocities(qd)))
+
+    @classmethod
+    def fit(cls, joints, ratio, qd: np.ndarray, tau_f: np.ndarray) -> tuple["CoupledModel", dict]:
+        """Least squares on joint velocities qd (n, k) [rad/s] and friction targets tau_f (n, k) [Nm];
+        returns the model and its fit figures per joint (MAE, RMSE, max [Nm])."""
+        tr = Transmission(joints, ratio)
+        k = len(tr.joints)
+        w = tr.motor_velocities(qd)
+        y = tr.motor_torques(tau_f)
+        params = np.zeros((3, k))
+        for i in range(k):
+            a = np.column_stack([w[:, i], np.sign(w[:, i]), np.ones(len(w))])
+            if np.linalg.matrix_rank(a) < 3:
+                raise FitError(f"motor {i + 1} of joints {', '.join(map(str, tr.joints))} does not move in both "
+                               "directions: its friction cannot be fitted")
+            params[:, i] = np.linalg.lstsq(a, y[:, i], rcond=None)[0]
+        model = cls(tr.joints, tr.ratio, *params)
+        return model, {"joints": {str(j): figures(model.predict_group(qd)[:, c] - tau_f[:, c])
+                                  for c, j in enumerate(tr.joints)}, "rows": int(len(qd))}
+
+    # ------------------------------------------------------- as a FrictionModel
+
+    def member(self, joint) -> "GroupMember":
+        """The view of this model that predicts joint ``joint``'s friction from its rows."""
+        i = self.index(joint)
+        if i is None:
+            raise DataError(f"joint {joint} is not in the coupled group {', '.join(map(str, self.joints))}")
+        return GroupMember(self, i)
+
+    def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
+        """The friction of the group's first joint (a member view of it): see ``member``."""
+        return self.member(self.joints[0]).predict(signals, state)
+
+    def required_inputs(self) -> set[str]:
+        return self.member(self.joints[0]).required_inputs()
+
+    def get_params(self) -> dict:
+        return {"joints": list(self.joints)}
+
+    def get_arrays(self) -> dict[str, np.ndarray]:
+        return {"ratio": self.ratio, "fv": self.fv, "fc": self.fc, "offset": self.offset}
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "CoupledModel":
+        if set(params) != {"joints"} or not isinstance(params["joints"], list):
+            raise ValueError("a coupled model records its joints, and nothing else")
+        return cls(params["joints"], arrays["ratio"], arrays["fv"], arrays["fc"], arrays["offset"])
+
+    def describe(self) -> str:
+        lines = [f"coupled group of joints {', '.join(map(str, self.joints))}: friction per motor, "
+                 "f = fv*theta_d + fc*sign(theta_d) + offset, tau_f = R^T f"]
+        lines.append("  R (motor rows, joint columns):")
+        lines += ["    " + "  ".join(f"{x:>10.6g}" for x in row) for row in self.ratio]
+        for i in range(len(self.joints)):
+            lines.append(f"  motor {i + 1}: " + "  ".join(f"{n} {getattr(self, n)[i]:.6g} {PARAM_INFO[n][0]}"
+                                                        for n in FEATURES))
+        return "\n".join(lines)
+
+
+class GroupMember(FrictionModel):
+    """Joint ``index`` of a coupled model: ``predict`` reads the joint's ``qd`` and its partners'
+    velocities ``qd@<joint>`` (n,) at the same times. Not saved on its own (the file holds the group)."""
+
+    kind = "coupled-member"
+
+    def __init__(self, group: CoupledModel, index: int):
+        self.group, self.i = group, index
+        self.joint = group.joints[index]
+        self.partners = [j for c, j in enumerate(group.joints) if c != index]
+
+    def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
+        missing = [partner_key(j) for j in self.partners if partner_key(j) not in signals]
+        if missing:
+            raise DataError(f"the friction of joint {self.joint} depends on joints {', '.join(map(str, self.partners))} "
+                            f"(coupled group), and their rows are missing")
+        cols = [signals["qd"] if c == self.i else signals[partner_key(j)] for c, j in enumerate(self.group.joints)]
+        return self.group.predict_group(np.column_stack(cols))[:, self.i], None
+
+    def required_inputs(self) -> set[str]:
+        return {"t", "qd"} | {partner_key(j) for j in self.partners}
+
+
+def figures(err: np.ndarray) -> dict:
+    """MAE, RMSE, max of an error (n,) [Nm]."""
+    a = np.abs(err)
+    return {"mae": float(a.mean()), "rmse": float(np.sqrt(np.mean(err ** 2))), "max": float(a.max())}
+
+
+def group_rows(table, group, name: str, **reading) -> tuple[np.ndarray, list]:
+    """The times t (n,) [s] and the ``fricli.logs.Log`` of every joint of ``group`` in ``table``
+    (long format); refused unless every joint has rows at the same times."""
+    datas = [logs.from_table(table, name=name, joint=j, **reading) for j in group]
+    t = datas[0].signals["t"]
+    for j, d in zip(group[1:], datas[1:]):
+        other = d.signals["t"]
+        if len(other) != len(t) or not np.array_equal(other, t):
+            raise DataError(f"{name}: joints {group[0]} and {j} share motors, but their rows are not at the same "
+                            "times: the coupled group needs every joint's row of every sample")
+    return t, datas
+
+
+def stack(datas: list, column: str) -> np.ndarray:
+    """(n, k): ``column`` of each joint's log."""
+    return np.column_stack([d.signals[column] for d in datas])
+
+
+def fit_group(datas: list, transmission: Transmission) -> tuple[CoupledModel, dict]:
+    """The coupled model of the joints of ``datas`` (their logs, rows at the same times) with
+    their transmission (its joints in the same order)."""
+    target = np.column_stack([logs.friction_target(d.signals) for d in datas])
+    return CoupledModel.fit(transmission.joints, transmission.ratio, stack(datas, "qd"), target)
