@@ -187,3 +187,17 @@ def fit_group(datas: list, transmission: Transmission) -> tuple[CoupledModel, di
     their transmission (its joints in the same order)."""
     target = np.column_stack([logs.friction_target(d.signals) for d in datas])
     return CoupledModel.fit(transmission.joints, transmission.ratio, stack(datas, "qd"), target)
+
+
+def save_group(path: str, model: CoupledModel, data, *, fit: dict, **provenance) -> dict:
+    """Write ``model`` to ``path``: a model file that records its joints as ``joints`` (``joint``
+    null), with units and provenance from ``data``, the log of one of the group's joints."""
+    from fricli import modelfile, models
+
+    spec, arrays = models.to_parts(model)
+    meta = modelfile.base_meta()
+    meta.update(kind=model.kind, model=spec, joint=None, joints=list(model.joints), axis=data.axis,
+                units=data.units, inputs=["qd", "t"],
+                provenance=models.provenance(data, rows_used=len(data) * len(model.joints), **provenance), fit=fit)
+    modelfile.write(path, meta, arrays)
+    return meta
