@@ -1,0 +1,190 @@
+"""Drives: transmissions, the simulated coupled-wrist arm, the coupled friction model (docs/drives.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from fricli import logs, models
+from fricli.cli import cli
+from fricli.models.coupled import CoupledModel, fit_group, group_rows
+from fricli.robot.transmission import Transmission, of_schema
+from fricli.sim.coupled import default_arm, simulate_coupled
+
+WRIST = [4, 5]   # indices of joints 5 and 6
+
+
+def run(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def arm_logs(tmp_path_factory):
+    """Two runs of the simulated arm (different trajectories): training and held-out."""
+    folder = tmp_path_factory.mktemp("arm")
+    runs = {}
+    for name, seed in (("train", 11), ("test", 12)):
+        r = simulate_coupled(duration=10.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
+        logs.write_table(r.table, str(folder / f"{name}.parquet"))
+        runs[name] = r
+    return folder, runs
+
+
+# --------------------------------------------------------------------------- transmission
+
+
+def test_transmission_maps_motor_and_joint_sides_both_ways(rng):
+    ratio = np.diag([-120.0, 80.0, -50.0, 40.0])
+    ratio[3, 2] = 30.0
+    tr = Transmission([1, 2, 5, 6], ratio, offset=[0.1, 0.2, -0.3, 1.0], rotor_inertia=[1e-4, 2e-4, 3e-5, 4e-5])
+    q, qd, tau_motor = rng.normal(size=(3, 50, 4))
+    np.testing.assert_allclose(tr.joint_positions(tr.motor_positions(q)), q, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(tr.joint_velocities(tr.motor_velocities(qd)), qd, rtol=1e-12, atol=1e-13)
+    tau = tr.joint_torques(tau_motor)
+    np.testing.assert_allclose(tr.motor_torques(tau), tau_motor, rtol=1e-12, atol=1e-13)
+    # power is the same on both sides of the gearing
+    np.testing.assert_allclose((tau_motor * tr.motor_velocities(qd)).sum(1), (tau * qd).sum(1), rtol=1e-12)
+    # motor 6 turns with joint 5: theta_6 = 30 q5 + 40 q6 + theta0
+    np.testing.assert_allclose(tr.motor_positions(q)[:, 3], 30 * q[:, 2] + 40 * q[:, 3] + 1.0)
+    m = tr.reflected_inertia()
+    np.testing.assert_allclose(m, ratio.T @ np.diag(tr.rotor_inertia) @ ratio)
+    np.testing.assert_allclose(tr.armature(), [1e-4 * 120 ** 2, 2e-4 * 80 ** 2, 3e-5 * 50 ** 2 + 4e-5 * 30 ** 2,
+                                               4e-5 * 40 ** 2])
+    assert tr.cross_inertia()[2, 3] == pytest.approx(4e-5 * 30 * 40)
+    assert np.count_nonzero(tr.cross_inertia()) == 2
+    assert tr.groups() == [[0], [1], [2, 3]] and tr.coupled_groups() == [[2, 3]]
+    assert Transmission.from_meta(tr.to_meta()).to_meta() == tr.to_meta()
+
+
+def test_groups_are_connected_components():
+    ratio = np.eye(5)
+    ratio[0, 3] = ratio[3, 4] = 2.0        # 0-3-4 a chain, 1 and 2 alone
+    assert Transmission("abcde", ratio).groups() == [[0, 3, 4], [1], [2]]
+    assert Transmission.diagonal([1, 2], [-3.0, 4.0]).is_diagonal
+
+
+@pytest.mark.parametrize("ratio, message", [(np.zeros((2, 2)), "singular"), (np.ones((2, 3)), "2 x 2"),
+                                            ([[1.0, np.nan], [0.0, 1.0]], "non-finite")])
+def test_bad_transmissions_are_refused(ratio, message):
+    with pytest.raises(ValueError, match=message):
+        Transmission([5, 6], ratio)
+
+
+# --------------------------------------------------------------------------- simulated arm
+
+
+def test_simulated_arm_noise_is_the_stated_floor(arm_logs):
+    _, runs = arm_logs
+    r = runs["train"]
+    noise = r.tau_m - r.tau_g - r.tau_dyn - r.tau_f
+    floor = default_arm().noise_floor()
+    np.testing.assert_allclose(noise.std(axis=0), floor, rtol=0.03)
+    table = r.table
+    assert of_schema(table.schema.metadata).to_meta() == default_arm().transmission.to_meta()
+    # joint 6's friction depends on joint 5's velocity: the wrist is coupled
+    tr = default_arm().transmission
+    assert tr.coupled_groups() == [WRIST]
+
+
+# --------------------------------------------------------------------------- coupled model
+
+
+def _target(r):
+    return r.tau_m - r.tau_g - r.tau_dyn
+
+
+def test_coupled_model_reaches_the_noise_floor_on_held_out_data(arm_logs):
+    folder, runs = arm_logs
+    tr = default_arm().transmission.sub(WRIST)
+    table = pq.read_table(folder / "train.parquet")
+    _, datas = group_rows(table, [5, 6], "train")
+    model, fit = fit_group(datas, tr)
+    test = runs["test"]
+    err = model.predict_group(test.qd[:, WRIST]) - _target(test)[:, WRIST]
+    rmse = np.sqrt(np.mean(err ** 2, axis=0))
+    floor = default_arm().noise_floor()[WRIST]
+    assert np.all(rmse <= 1.3 * floor), (rmse, floor)
+    np.testing.assert_allclose(model.fc, [0.03, 0.025], rtol=0.02)
+    assert set(fit["joints"]) == {"5", "6"}
+
+
+def test_coupled_model_file_round_trip(tmp_path, arm_logs):
+    folder, runs = arm_logs
+    table = pq.read_table(folder / "train.parquet")
+    _, datas = group_rows(table, [5, 6], "train")
+    model, _ = fit_group(datas, default_arm().transmission.sub(WRIST))
+    spec, arrays = models.to_parts(model)
+    again = models.from_parts(spec, arrays)
+    qd = runs["test"].qd[:, WRIST]
+    np.testing.assert_array_equal(again.predict_group(qd), model.predict_group(qd))
+    member = again.member(6)
+    assert member.required_inputs() == {"t", "qd", "qd@5"}
+    got, _ = member.predict({"t": runs["test"].t, "qd": qd[:, 1], "qd@5": qd[:, 0]})
+    np.testing.assert_array_equal(got, model.predict_group(qd)[:, 1])
+
+
+def test_identify_coupling_and_predict_beat_per_joint_lugre(tmp_path, arm_logs):
+    folder, _ = arm_logs
+    train, test = folder / "train.parquet", folder / "test.parquet"
+    res = run("identify", train, "--coupling", "-o", tmp_path / "coupled", "-q")
+    assert res.exit_code == 0, res.output
+    assert sorted(p.name for p in (tmp_path / "coupled").iterdir()) == [
+        "joint_1.npz", "joint_2.npz", "joint_3.npz", "joint_4.npz", "joints_5_6.npz"]
+    res = run("identify", train, "--joint", 5, "-o", tmp_path / "l5.npz", "-q")
+    assert res.exit_code == 0, res.output
+    res = run("identify", train, "--joint", 6, "-o", tmp_path / "l6.npz", "-q")
+    assert res.exit_code == 0, res.output
+    floor = dict(zip((5, 6), default_arm().noise_floor()[WRIST]))
+
+    def rmse(model, joint):
+        out = tmp_path / f"pred_{model.name}_{joint}.parquet"
+        res = run("predict", model, test, "--joint", joint, "-o", out, "-q")
+        assert res.exit_code == 0, res.output
+        t = pq.read_table(out)
+        assert set(t.column("joint").to_pylist()) == {joint}
+        e = t.column("tau_f_pred").to_numpy() - (t.column("tau_m").to_numpy() - t.column("tau_g").to_numpy()
+                                                   - t.column("tau_dyn").to_numpy())
+        return float(np.sqrt(np.mean(e ** 2)))
+
+    for joint in (5, 6):
+        coupled = rmse(tmp_path / "coupled", joint)
+        lugre = rmse(tmp_path / f"l{joint}.npz", joint)
+        assert coupled <= 1.3 * floor[joint]
+        assert lugre > 2 * coupled, (joint, lugre, coupled)
+    # the group's file alone on the whole arm covers its two joints
+    res = run("predict", tmp_path / "coupled" / "joints_5_6.npz", test, "-o", tmp_path / "p56.parquet", "-q")
+    assert res.exit_code == 0, res.output
+    assert set(pq.read_table(tmp_path / "p56.parquet").column("joint").to_pylist()) == {5, 6}
+
+
+def test_group_model_refuses_other_joints_and_missing_partners(tmp_path, arm_logs):
+    folder, _ = arm_logs
+    train = folder / "train.parquet"
+    model = tmp_path / "g.npz"
+    assert run("identify", train, "--coupling", "--joint", 5, "-o", model, "-q").exit_code == 0
+    res = run("predict", model, train, "--joint", 3, "-o", tmp_path / "p.parquet")
+    assert res.exit_code == 4 and "fitted on joints 5, 6, not on joint 3" in res.output
+    only5 = pq.read_table(train).filter(pq.read_table(train).column("joint").to_numpy() == 5)
+    logs.write_table(only5, str(tmp_path / "only5.parquet"))
+    res = run("predict", model, tmp_path / "only5.parquet", "-o", tmp_path / "p.parquet")
+    assert res.exit_code == 3 and "depends on joint 6" in res.output
+    assert not (tmp_path / "p.parquet").exists()
+
+
+def test_coupling_needs_a_transmission(tmp_path, arm_logs):
+    folder, _ = arm_logs
+    table = pq.read_table(folder / "train.parquet")
+    logs.write_table(table.replace_schema_metadata({}), str(tmp_path / "bare.parquet"))
+    res = run("identify", tmp_path / "bare.parquet", "--coupling", "-o", tmp_path / "m")
+    assert res.exit_code == 3 and "records none" in res.output
+    assert not (tmp_path / "m").exists()
+
+
+def test_coupled_fit_refuses_a_motor_that_does_not_move():
+    qd = np.zeros((100, 2))
+    qd[:, 0] = np.linspace(-1, 1, 100)
+    from fricli.errors import FitError
+    with pytest.raises(FitError, match="motor 1"):
+        CoupledModel.fit([5, 6], [[1.0, 0.0], [0.0, 1.0]], qd[:, ::-1], np.zeros((100, 2)))
