@@ -188,3 +188,68 @@ def test_coupled_fit_refuses_a_motor_that_does_not_move():
     from fricli.errors import FitError
     with pytest.raises(FitError, match="motor 1"):
         CoupledModel.fit([5, 6], [[1.0, 0.0], [0.0, 1.0]], qd[:, ::-1], np.zeros((100, 2)))
+
+
+# --------------------------------------------------------------------------- C export
+
+GROUP_DRIVER = r"""#include <stdio.h>
+#include <stdlib.h>
+#include "HEADER"
+/* driver IN OUT: rows of PREFIX_N_JOINTS joint velocities in, rows of PREFIX_N_JOINTS frictions out */
+int main(int argc, char **argv) {
+    const size_t k = PREFIX_N_JOINTS;
+    double qd[PREFIX_N_JOINTS], tau[PREFIX_N_JOINTS];
+    PREFIX_state s;
+    FILE *in, *out;
+    if (argc != 3 || !(in = fopen(argv[1], "rb")) || !(out = fopen(argv[2], "wb"))) return 2;
+    PREFIX_init(&s);
+    while (fread(qd, sizeof(double), k, in) == k) {
+        PREFIX_step(&s, qd, tau);
+        if (fwrite(tau, sizeof(double), k, out) != k) return 3;
+    }
+    fclose(in);
+    return fclose(out) == 0 ? 0 : 4;
+}
+"""
+
+
+def _build_group(header, prefix, exe, cxx):
+    import subprocess
+
+    from fricli.export import check
+    src = f"{exe}.c"
+    with open(src, "w") as fh:
+        fh.write(GROUP_DRIVER.replace("HEADER", str(header)).replace("PREFIX", prefix))
+    cmd = [check.compiler(cxx), *(check.CXX_FLAGS if cxx else check.C_FLAGS), src, "-o", str(exe), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    assert proc.returncode == 0 and proc.stderr == "", proc.stderr
+
+
+@pytest.mark.parametrize("cxx", [False, True], ids=["c99", "c++"])
+def test_exported_group_matches_predict_double(cxx, tmp_path, arm_logs):
+    import subprocess
+
+    from fricli.export import check
+    if check.compiler(cxx) is None:
+        pytest.skip("no compiler")
+    folder, _ = arm_logs
+    test = folder / "test.parquet"
+    assert run("identify", folder / "train.parquet", "--coupling", "-o", tmp_path / "arm", "-q").exit_code == 0
+    header = tmp_path / "arm.h"
+    res = run("export", tmp_path / "arm", "--prefix", "arm", "-o", header, "-q")
+    assert res.exit_code == 0, res.output
+    text = header.read_text()
+    assert "arm_joints_5_6_step(arm_joints_5_6_state *s, const double *qd, double *tau_f)" in text
+    assert "arm_joint_4_step(" in text
+    _build_group(header, "arm_joints_5_6", tmp_path / "drv", cxx)
+    res = run("predict", tmp_path / "arm", test, "--precision", "double", "-o", tmp_path / "p.parquet", "-q")
+    assert res.exit_code == 0, res.output
+    pred = pq.read_table(tmp_path / "p.parquet")
+    joint = pred.column("joint").to_numpy()
+    qd = np.column_stack([pred.column("qd").to_numpy()[joint == j] for j in (5, 6)])
+    ref = np.column_stack([pred.column("tau_f_pred").to_numpy()[joint == j] for j in (5, 6)])
+    qd.tofile(tmp_path / "in.bin")
+    subprocess.run([str(tmp_path / "drv"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")], check=True)
+    got = np.fromfile(tmp_path / "out.bin").reshape(-1, 2)
+    assert got.shape == ref.shape
+    assert np.max(np.abs(got - ref) / (1e-12 + np.abs(ref))) <= 1e-9
