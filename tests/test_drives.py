@@ -26,7 +26,7 @@ def arm_logs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("arm")
     runs = {}
     for name, seed in (("train", 11), ("test", 12)):
-        r = simulate_coupled(duration=10.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
+        r = simulate_coupled(duration=20.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
         logs.write_table(r.table, str(folder / f"{name}.parquet"))
         runs[name] = r
     return folder, runs
@@ -253,3 +253,27 @@ def test_exported_group_matches_predict_double(cxx, tmp_path, arm_logs):
     got = np.fromfile(tmp_path / "out.bin").reshape(-1, 2)
     assert got.shape == ref.shape
     assert np.max(np.abs(got - ref) / (1e-12 + np.abs(ref))) <= 1e-9
+
+
+# --------------------------------------------------------------------------- diagnose
+
+
+def test_diagnose_names_the_coupling_that_per_joint_models_miss(tmp_path, arm_logs):
+    import json
+
+    folder, _ = arm_logs
+    train = folder / "train.parquet"
+    for joint in (4, 5, 6):
+        res = run("identify", train, "--joint", joint, "-o", tmp_path / f"l{joint}.npz", "-q")
+        assert res.exit_code == 0, res.output
+    found = {}
+    for joint in (4, 5, 6):
+        res = run("diagnose", tmp_path / f"l{joint}.npz", train, "--json")
+        assert res.exit_code == 0, res.output
+        found[joint] = json.loads(res.output)
+    for joint in (5, 6):
+        assert found[joint]["added"][:1] == ["coupling"], found[joint]["added"]
+    assert "coupling" not in [e["name"] for e in found[4]["effects"]]     # joint 4 shares no motor
+    # joint 6 = 40 f6(30 qd5 + 40 qd6): the Coulomb level of motor 6 seen at joint 6 is 40 x 0.025 Nm
+    params = next(e for e in found[6]["effects"] if e["name"] == "coupling")["params"]
+    assert params["Fc motor 6"]["value"] == pytest.approx(1.0, rel=0.05)

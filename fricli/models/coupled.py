@@ -201,3 +201,35 @@ def save_group(path: str, model: CoupledModel, data, *, fit: dict, **provenance)
                 provenance=models.provenance(data, rows_used=len(data) * len(model.joints), **provenance), fit=fit)
     modelfile.write(path, meta, arrays)
     return meta
+
+
+def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]:
+    """For the rows of ``joint`` in ``table`` (long format), what the diagnosis's coupling effect
+    reads: the velocities ``qd@<p>`` [rad/s] of the joints p that share motors with it, and the
+    direction ``sign_motor@<m>`` of each motor m that turns with ``joint`` and another joint (a
+    motor is named by the joint of its row of R); {} when the log records no transmission or the
+    joint shares no motor."""
+    from fricli.robot import transmission
+
+    try:
+        tr = transmission.of_schema(table.schema.metadata)
+    except ValueError:
+        return {}
+    if tr is None:
+        return {}
+    group = next((g for g in tr.coupled_groups() if any(str(tr.joints[i]) == str(joint) for i in g)), None)
+    if group is None:
+        return {}
+    sub = tr.sub(group)
+    c = next(i for i, j in enumerate(sub.joints) if str(j) == str(joint))
+    order = [c] + [i for i in range(len(group)) if i != c]
+    _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
+    qd = np.empty((len(datas[0]), len(group)))
+    for i, d in zip(order, datas):
+        qd[:, i] = d.signals["qd"]
+    out = {partner_key(sub.joints[i]): qd[:, i] for i in order[1:]}
+    w = sub.motor_velocities(qd)
+    for m in range(len(group)):
+        if sub.ratio[m, c] != 0 and np.count_nonzero(sub.ratio[m]) > 1:
+            out[f"sign_motor@{sub.joints[m]}"] = np.sign(w[:, m])
+    return out
