@@ -76,7 +76,14 @@ class Transmission:
         return q @ self.ratio.T + self.offset
 
     def joint_positions(self, theta: np.ndarray) -> np.ndarray:
-        """q (n, k) [rad] from motor positions theta (n, k) [rad]."""
+        """q (n, k) [rad] from motor positions theta (n, k) [rad]. A diagonal R is applied per joint
+        as q = theta * (1/r) + (-theta0/r), the offset added only where theta0 is not zero: the
+        arithmetic of a column's ``scale`` and ``offset`` in a mapping (fricli.robot.mapping)."""
+        if self.is_diagonal:
+            d = np.diag(self.ratio)
+            q = theta * (1.0 / d)
+            off = -self.offset / d
+            return np.where(off != 0, q + off, q)
         return np.linalg.solve(self.ratio, (theta - self.offset).T).T
 
     def motor_velocities(self, qd: np.ndarray) -> np.ndarray:
@@ -84,11 +91,17 @@ class Transmission:
         return qd @ self.ratio.T
 
     def joint_velocities(self, theta_d: np.ndarray) -> np.ndarray:
-        """qd (n, k) [rad/s] (or accelerations) from motor velocities theta_d (n, k)."""
+        """qd (n, k) [rad/s] (or accelerations) from motor velocities theta_d (n, k) (a diagonal R:
+        theta_d * (1/r))."""
+        if self.is_diagonal:
+            return theta_d * (1.0 / np.diag(self.ratio))
         return np.linalg.solve(self.ratio, theta_d.T).T
 
     def joint_torques(self, tau_motor: np.ndarray) -> np.ndarray:
-        """tau (n, k) [Nm] = R^T tau_motor, from motor torques tau_motor (n, k) [Nm]."""
+        """tau (n, k) [Nm] = R^T tau_motor, from motor torques tau_motor (n, k) [Nm] (a diagonal R:
+        tau_motor * r)."""
+        if self.is_diagonal:
+            return tau_motor * np.diag(self.ratio)
         return tau_motor @ self.ratio
 
     def motor_torques(self, tau: np.ndarray) -> np.ndarray:
