@@ -277,3 +277,123 @@ def test_diagnose_names_the_coupling_that_per_joint_models_miss(tmp_path, arm_lo
     # joint 6 = 40 f6(30 qd5 + 40 qd6): the Coulomb level of motor 6 seen at joint 6 is 40 x 0.025 Nm
     params = next(e for e in found[6]["effects"] if e["name"] == "coupling")["params"]
     assert params["Fc motor 6"]["value"] == pytest.approx(1.0, rel=0.05)
+
+
+# --------------------------------------------------------------------------- import, motor side
+
+
+def _wrist_mapping(tr, *, files=("positions", "torques"), rate=2000.0, torque_scale=-1e-3) -> str:
+    lines = [f"files = {list(files)!r}".replace("'", '"'), f"time = {{rate = {rate!r}}}", "", "[transmission]",
+             f"ratio = {tr.ratio.tolist()!r}", f"offset = {tr.offset.tolist()!r}", ""]
+    for k, joint in enumerate(tr.joints):
+        lines += ["[[joints]]", f"name = {joint}", f'theta = {{file = "{files[0]}", column = {k + 1}}}',
+                  f'tau_motor = {{file = "{files[1]}", column = {k + 1}, unit = "Nm", scale = {torque_scale!r}}}', ""]
+    return "\n".join(lines)
+
+
+@pytest.fixture(scope="module")
+def motor_recording(tmp_path_factory):
+    """The simulated arm's motor-side recording: two files without time, torques in mNm, negated."""
+    from fricli.sim.coupled import write_recording
+
+    folder = tmp_path_factory.mktemp("motor")
+    r = simulate_coupled(duration=3.0, rate_hz=2000.0, rng=np.random.default_rng(5))
+    write_recording(r, str(folder / "pos.csv"), str(folder / "tor.csv"), torque_scale=-1e-3)
+    (folder / "wrist.toml").write_text(_wrist_mapping(default_arm().transmission))
+    return folder, r
+
+
+def _per_joint(table, column, joints):
+    j = table.column("joint").to_numpy()
+    return np.column_stack([table.column(column).to_numpy()[j == x] for x in joints])
+
+
+def test_motor_side_recording_in_two_files_gives_joint_positions_and_torques(tmp_path, motor_recording):
+    folder, r = motor_recording
+    out = tmp_path / "arm.parquet"
+    res = run("import", folder / "pos.csv", folder / "tor.csv", "--mapping", folder / "wrist.toml", "-o", out)
+    assert res.exit_code == 0, res.output
+    table = pq.read_table(out)
+    joints = default_arm().transmission.joints
+    for column, truth in (("q", r.q), ("tau_m", r.tau_m)):
+        got = _per_joint(table, column, joints)
+        assert np.max(np.abs(got - truth) / np.max(np.abs(truth), axis=0)) <= 1e-9
+    np.testing.assert_array_equal(_per_joint(table, "t", joints)[:, 0], r.t)
+    recorded, arm = of_schema(table.schema.metadata), default_arm().transmission
+    np.testing.assert_array_equal(recorded.ratio, arm.ratio)
+    np.testing.assert_array_equal(recorded.offset, arm.offset)
+
+
+def test_diagonal_transmission_is_the_same_as_joint_side_scales(tmp_path, motor_recording):
+    """A diagonal R on motor-side columns gives the log, byte for byte, of the mapping without a
+    transmission whose columns carry scale = 1/r, offset = -theta0/r (positions) and scale = r
+    (torques); and identify makes the same model file of both."""
+    from fricli.sim.coupled import write_recording
+
+    _, r = motor_recording
+    folder = tmp_path
+    write_recording(r, str(folder / "pos.csv"), str(folder / "tor.csv"))     # motor torques in Nm
+    tr = Transmission.diagonal([1, 2, 3, 4, 5, 6], [-120.0, 100.0, -80.0, 60.0, -50.0, 40.0],
+                               offset=[0.3, -1.0, 2.0, 0.0, 0.5, -0.7])
+    (tmp_path / "motor.toml").write_text(_wrist_mapping(tr, torque_scale=1.0).replace(
+        f"ratio = {tr.ratio.tolist()!r}", f"gear_ratios = {np.diag(tr.ratio).tolist()!r}"))
+    lines = ['files = ["positions", "torques"]', "time = {rate = 2000.0}", ""]
+    for k, (joint, r, off) in enumerate(zip(tr.joints, np.diag(tr.ratio), tr.offset)):
+        offset = f", offset = {float(-off / r)!r}" if off else ""
+        lines += ["[[joints]]", f"name = {joint}",
+                  f'q = {{file = "positions", column = {k + 1}, scale = {float(1 / r)!r}{offset}}}',
+                  f'tau_m = {{file = "torques", column = {k + 1}, scale = {float(r)!r}}}', ""]
+    (tmp_path / "joint.toml").write_text("\n".join(lines))
+    outs = []
+    for side in ("motor", "joint"):
+        (tmp_path / side).mkdir()
+        out = tmp_path / side / "arm.parquet"
+        res = run("import", folder / "pos.csv", folder / "tor.csv", "--mapping", tmp_path / f"{side}.toml", "-o", out)
+        assert res.exit_code == 0, res.output
+        res = run("identify", out, "--joint", 5, "-o", tmp_path / side / "m5.npz", "-q")
+        assert res.exit_code == 0, res.output
+        outs.append((out.read_bytes(), (tmp_path / side / "m5.npz").read_bytes()))
+    assert outs[0] == outs[1]
+
+
+def test_defects_of_either_file_drop_the_row_from_both(tmp_path, motor_recording):
+    folder, _ = motor_recording
+    pos = (folder / "pos.csv").read_text().splitlines()
+    tor = (folder / "tor.csv").read_text().splitlines()
+    pos[9] = "not,a,number,at,all,x"          # line 10 garbage in the positions
+    tor = tor[:-3]                              # the torques end three rows early
+    (tmp_path / "pos.csv").write_text("\n".join(pos) + "\n")
+    (tmp_path / "tor.csv").write_text("\n".join(tor) + "\n")
+    out = tmp_path / "arm.parquet"
+    res = run("import", tmp_path / "pos.csv", tmp_path / "tor.csv", "--mapping", folder / "wrist.toml", "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "dropped 1 row with non-numeric or non-finite value (first at line 10)" in res.output
+    assert f"dropped 3 rows with no matching row in another of the recording's files (lines {len(pos) - 2}-{len(pos)})" \
+        in res.output
+    table = pq.read_table(out)
+    assert table.num_rows == 6 * (len(pos) - 4)
+    t = _per_joint(table, "t", [5])[:, 0]
+    assert 9 / 2000.0 not in t and 10 / 2000.0 in t    # the row's time stays its line's: a gap, no shift
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda m: m.replace("[transmission]", "[unused]"), "unknown key 'unused'"),
+    (lambda m: m.replace("theta = {", "q = {", 1), "positions and torques are motor-side"),
+    (lambda m: m.replace('file = "torques"', 'file = "currents"', 1), "expected one of the mapping's files"),
+    (lambda m: m.replace(", [0.0, 0.0, 0.0, 0.0, 30.0, 40.0]]", "]"), "expected 6 rows of 6 numbers"),
+    (lambda m: m.replace("time = {rate = 2000.0}", "time = {rate = 0.0}"), "must be positive"),
+    (lambda m: m.replace("[0.0, 0.0, 0.0, 0.0, 30.0, 40.0]", "[0.0, 0.0, 0.0, 0.0, -50.0, 0.0]"), "singular"),
+])
+def test_mapping_mistakes_are_one_line(edit, message, tmp_path, motor_recording):
+    folder, _ = motor_recording
+    (tmp_path / "bad.toml").write_text(edit((folder / "wrist.toml").read_text()))
+    res = run("import", folder / "pos.csv", folder / "tor.csv", "--mapping", tmp_path / "bad.toml", "-o",
+              tmp_path / "x.parquet")
+    assert res.exit_code == 3 and message in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1 and not (tmp_path / "x.parquet").exists()
+
+
+def test_two_files_need_files_in_the_mapping(tmp_path, motor_recording):
+    folder, _ = motor_recording
+    res = run("import", folder / "pos.csv", "--mapping", folder / "wrist.toml", "-o", tmp_path / "x.parquet")
+    assert res.exit_code == 3 and "names 2 files (positions, torques), but 1 recordings were given" in res.output

@@ -65,10 +65,13 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
         _merge(defects, rec.defects)
     values: dict = {}
     lines = None
+    ends = [int(rec.lines[-1]) for rec in recs]
     for f, (rec, k) in enumerate(zip(recs, keys)):
         keep = np.isin(k, common)
-        if not keep.all():
-            gone = rec.lines[~keep]
+        # row by row, a row dropped from another file for a defect of its own is reported there
+        alone = ~keep if mapping.join == "time" else ~keep & (rec.lines > min(ends[:f] + ends[f + 1:]))
+        if alone.any():
+            gone = rec.lines[alone]
             _merge(defects, {"unmatched": Defect(len(gone), int(gone[0]), ranges(gone))})
         for ref, v in rec.values.items():
             values[ref if f == 0 else (f, ref)] = v[keep]
