@@ -70,8 +70,10 @@ class CoupledArm:
         return tr.joint_torques(self.motor_friction(tr.motor_velocities(qd)))
 
 
-def default_arm(stribeck: bool = False) -> CoupledArm:
-    """The arm of docs/drives.md: signed gear ratios, wrist R[5:7, 5:7] = [[-50, 0], [30, 40]]."""
+def default_arm(stribeck: bool = False, rigid_body: bool = True) -> CoupledArm:
+    """The arm of docs/drives.md: signed gear ratios, wrist R[5:7, 5:7] = [[-50, 0], [30, 40]].
+    ``rigid_body`` False: no gravity and no inertia, the motor torques are friction and noise alone
+    (a recording a log needs no robot model for)."""
     ratio = np.diag([-120.0, 100.0, -80.0, 60.0, -50.0, 40.0])
     ratio[5, 4] = 30.0
     fc = (0.05, 0.06, 0.04, 0.03, 0.03, 0.025)
@@ -79,8 +81,10 @@ def default_arm(stribeck: bool = False) -> CoupledArm:
     friction = tuple(MotorFriction(c, v, fs=1.4 * c if stribeck else None) for c, v in zip(fc, fv))
     tr = Transmission(JOINTS, ratio, offset=[0.3, -1.0, 2.0, 0.0, 0.5, -0.7],
                       rotor_inertia=[1.5e-4, 1.5e-4, 8e-5, 5e-5, 3e-5, 3e-5])
-    return CoupledArm(tr, friction, gravity=np.array([0.0, 40.0, 15.0, 2.0, 1.0, 0.2]),
-                      link_inertia=np.array([3.0, 4.0, 1.0, 0.2, 0.1, 0.05]),
+    body = 1.0 if rigid_body else 0.0
+    tr = Transmission(JOINTS, ratio, offset=tr.offset, rotor_inertia=body * tr.rotor_inertia)
+    return CoupledArm(tr, friction, gravity=body * np.array([0.0, 40.0, 15.0, 2.0, 1.0, 0.2]),
+                      link_inertia=body * np.array([3.0, 4.0, 1.0, 0.2, 0.1, 0.05]),
                       noise_sd=np.full(6, 0.002))
 
 

@@ -1,0 +1,97 @@
+"""Make docs/img/drives-coupled-wrist.png and print the figures of docs/drives.md.
+
+The simulated arm of ``fricli.sim.coupled`` (coupled wrist, friction in the motors): a training
+and a held-out run; on the wrist joints 5 and 6, the coupled model (identify --coupling) and a
+per-joint LuGre model each (identify --joint J), scored on the held-out run against the friction
+target tau_m - tau_g - tau_dyn and the simulation's noise floor. Run from the repository root:
+
+    python docs/img/make_drives_figure.py
+"""
+
+from __future__ import annotations
+
+import pathlib
+import sys
+import tempfile
+
+import numpy as np
+import pyarrow.parquet as pq
+from click.testing import CliRunner
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from fricli import logs
+from fricli.cli import cli
+from fricli.sim.coupled import default_arm, simulate_coupled
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+OUT = ROOT / "docs" / "img" / "drives-coupled-wrist.png"
+WRIST = (5, 6)
+
+
+def run(*args) -> None:
+    res = CliRunner().invoke(cli, [str(a) for a in args])
+    if res.exit_code != 0:
+        sys.exit(f"fricli {' '.join(map(str, args))} failed: {res.output}")
+
+
+def joint_rows(path, joint) -> dict[str, np.ndarray]:
+    table = pq.read_table(path)
+    rows = table.column("joint").to_numpy() == joint
+    return {c: table.column(c).to_numpy()[rows] for c in ("t", "tau_m", "tau_g", "tau_dyn", "tau_f_pred")}
+
+
+def main() -> None:
+    arm = default_arm()
+    floor = dict(zip(arm.transmission.joints, arm.noise_floor()))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = pathlib.Path(tmp)
+        for name, seed in (("train", 1), ("test", 2)):
+            r = simulate_coupled(arm, duration=20.0, rate_hz=2000.0, rng=np.random.default_rng(seed))
+            logs.write_table(r.table, str(tmp / f"{name}.parquet"))
+        run("identify", tmp / "train.parquet", "--coupling", "--joint", 5, "-o", tmp / "wrist.npz", "-q")
+        run("predict", tmp / "wrist.npz", tmp / "test.parquet", "-o", tmp / "coupled.parquet", "-q")
+        per_joint = {}
+        for joint in WRIST:
+            run("identify", tmp / "train.parquet", "--joint", joint, "-o", tmp / f"lugre{joint}.npz", "-q")
+            run("predict", tmp / f"lugre{joint}.npz", tmp / "test.parquet", "-o", tmp / f"lugre{joint}.parquet", "-q")
+            per_joint[joint] = joint_rows(tmp / f"lugre{joint}.parquet", joint)
+        coupled = {joint: joint_rows(tmp / "coupled.parquet", joint) for joint in WRIST}
+
+    fig = Figure(figsize=(11, 6.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplot_mosaic([["5", "5", "bars"], ["6", "6", "bars"]])
+    rmse = {}
+    print("held-out friction error (RMSE against tau_m - tau_g - tau_dyn), simulated arm, 20 s at 2 kHz:")
+    print(f"{'joint':>5}  {'noise floor':>11}  {'coupled':>15}  {'per-joint LuGre':>17}")
+    for joint in WRIST:
+        c, lg = coupled[joint], per_joint[joint]
+        target = c["tau_m"] - c["tau_g"] - c["tau_dyn"]
+        rmse[joint] = [float(np.sqrt(np.mean((m["tau_f_pred"] - target) ** 2))) for m in (c, lg)]
+        print(f"{joint:>5}  {floor[joint]:>8.4f} Nm  {rmse[joint][0]:>8.4f} Nm ({rmse[joint][0] / floor[joint]:.2f}x)  "
+              f"{rmse[joint][1]:>8.4f} Nm ({rmse[joint][1] / floor[joint]:.2f}x)")
+        ax = axes[str(joint)]
+        window = (c["t"] >= 4.0) & (c["t"] < 10.0)
+        t = c["t"][window]
+        ax.plot(t, target[window], color="0.75", lw=0.6, label="friction target (tau_m - tau_g - tau_dyn)")
+        ax.plot(t, lg["tau_f_pred"][window], color="tab:red", lw=1.2, label="per-joint LuGre model")
+        ax.plot(t, c["tau_f_pred"][window], color="tab:blue", lw=1.2, label="coupled model (friction per motor)")
+        ax.set_ylabel(f"joint {joint} friction [Nm]")
+        ax.set_title(f"joint {joint}, held-out run", loc="left", fontsize=10)
+    axes["6"].set_xlabel("t [s]")
+    axes["5"].legend(loc="upper right", fontsize=8)
+    ax = axes["bars"]
+    x = np.arange(len(WRIST))
+    ax.bar(x - 0.2, [rmse[j][0] / floor[j] for j in WRIST], 0.4, color="tab:blue", label="coupled")
+    ax.bar(x + 0.2, [rmse[j][1] / floor[j] for j in WRIST], 0.4, color="tab:red", label="per-joint LuGre")
+    ax.axhline(1.0, color="k", lw=0.8, ls="--", label="noise floor")
+    ax.set_xticks(x, [f"joint {j}" for j in WRIST])
+    ax.set_ylabel("held-out RMSE / noise floor")
+    ax.legend(fontsize=8)
+    fig.suptitle("Coupled wrist (R = [[-50, 0], [30, 40]]): friction lives in the motors", fontsize=11)
+    fig.savefig(OUT, dpi=110)
+    print(f"wrote {OUT.relative_to(ROOT)}")
+
+
+if __name__ == "__main__":
+    main()
