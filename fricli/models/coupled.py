@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from fricli import logs
-from fricli.errors import DataError, FitError
+from fricli.errors import DataError, FitError, ModelFileError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.robot.transmission import Transmission
@@ -106,11 +106,13 @@ class CoupledModel(FrictionModel):
         return GroupMember(self, i)
 
     def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
-        """The friction of the group's first joint (a member view of it): see ``member``."""
-        return self.member(self.joints[0]).predict(signals, state)
+        """Refused: the group's joints are predicted together (``predict_group``) or one of them
+        through ``member``; a command that takes models of one joint cannot use it."""
+        raise ModelFileError(f"a model of the coupled group of joints {', '.join(map(str, self.joints))}: "
+                             "fricli predict, estimate-ext and export apply it (this command takes models of one joint)")
 
     def required_inputs(self) -> set[str]:
-        return self.member(self.joints[0]).required_inputs()
+        return {"t", "qd"} | {partner_key(j) for j in self.joints}
 
     def get_params(self) -> dict:
         return {"joints": list(self.joints)}

@@ -156,3 +156,45 @@ def write_recording(run: CoupledRun, positions: str, torques: str, *, position_s
     divided by ``torque_scale``; comma-separated, no header, every digit of a float64."""
     np.savetxt(positions, run.theta / position_scale, delimiter=",", fmt="%.17g")
     np.savetxt(torques, run.tau_motor / torque_scale, delimiter=",", fmt="%.17g")
+
+
+def mapping_text(tr: Transmission, rate_hz: float, torque_scale: float) -> str:
+    """The import mapping (TOML) of ``write_recording``'s two files for transmission ``tr``."""
+    rows = ",\n         ".join("[" + ", ".join(f"{x:g}" for x in row) + "]" for row in tr.ratio)
+    lines = ['files = ["positions", "torques"]     # the two files, in the order they are given',
+             f"time = {{rate = {rate_hz!r}}}             # no time column", "",
+             "[transmission]                       # theta = R q + theta0, tau = R^T tau_motor",
+             f"ratio = [{rows}]", f"offset = {tr.offset.tolist()!r}", ""]
+    for k, joint in enumerate(tr.joints):
+        lines += ["[[joints]]", f"name = {joint}", f'theta = {{file = "positions", column = {k + 1}}}',
+                  f'tau_motor = {{file = "torques", column = {k + 1}, unit = "Nm", scale = {torque_scale!r}}}', ""]
+    return "\n".join(lines)
+
+
+def write_example(folder: str, *, seed: int, duration: float = 20.0, rate_hz: float = 4000.0) -> list[str]:
+    """The motor-side recording of the friction-only arm (``default_arm(rigid_body=False)``) in
+    ``folder``: positions.csv, torques.csv (mNm, sign reversed) and wrist.toml. Returns the paths."""
+    import os
+
+    arm = default_arm(rigid_body=False)
+    run = simulate_coupled(arm, duration=duration, rate_hz=rate_hz, rng=np.random.default_rng(seed))
+    paths = [os.path.join(folder, n) for n in ("positions.csv", "torques.csv", "wrist.toml")]
+    write_recording(run, paths[0], paths[1], torque_scale=-1e-3)
+    with open(paths[2], "w") as fh:
+        fh.write(mapping_text(arm.transmission, rate_hz, -1e-3))
+    return paths
+
+
+if __name__ == "__main__":
+    import argparse
+    import os
+
+    parser = argparse.ArgumentParser(prog="python -m fricli.sim.coupled",
+                                     description="Write a motor-side recording of the simulated coupled-wrist arm.")
+    parser.add_argument("folder")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--duration", type=float, default=20.0, help="[s]")
+    parser.add_argument("--rate", type=float, default=4000.0, help="[Hz]")
+    args = parser.parse_args()
+    os.makedirs(args.folder, exist_ok=True)
+    print("wrote " + ", ".join(write_example(args.folder, seed=args.seed, duration=args.duration, rate_hz=args.rate)))
