@@ -397,3 +397,28 @@ def test_two_files_need_files_in_the_mapping(tmp_path, motor_recording):
     folder, _ = motor_recording
     res = run("import", folder / "pos.csv", "--mapping", folder / "wrist.toml", "-o", tmp_path / "x.parquet")
     assert res.exit_code == 3 and "names 2 files (positions, torques), but 1 recordings were given" in res.output
+
+
+def test_files_joined_by_time(tmp_path, motor_recording):
+    """join = "time": each file has the time column (ms here); rows pair up by equal time."""
+    _, r = motor_recording
+    t_ms = np.round(r.t * 1000.0, 6)
+    pos = np.column_stack([t_ms, r.theta])
+    tor = np.column_stack([t_ms, r.tau_motor])
+    np.savetxt(tmp_path / "pos.csv", np.delete(pos, 100, axis=0), delimiter=",", fmt="%.17g")   # a sample missing
+    np.savetxt(tmp_path / "tor.csv", tor, delimiter=",", fmt="%.17g")
+    tr = default_arm().transmission
+    text = _wrist_mapping(tr, torque_scale=1.0)
+    for k in range(6, 0, -1):    # the signals one column to the right
+        text = text.replace(f"column = {k}}}", f"column = {k + 1}}}").replace(f"column = {k}, unit", f"column = {k + 1}, unit")
+    text = text.replace("time = {rate = 2000.0}", 'join = "time"\ntime = {column = 1, unit = "ms"}')
+    (tmp_path / "map.toml").write_text(text)
+    res = run("import", tmp_path / "pos.csv", tmp_path / "tor.csv", "--mapping", tmp_path / "map.toml", "-o",
+              tmp_path / "arm.parquet")
+    assert res.exit_code == 0, res.output
+    assert "dropped 1 row with no matching row in another of the recording's files (line 101)" in res.output
+    table = pq.read_table(tmp_path / "arm.parquet")
+    keep = np.arange(len(r.t)) != 100
+    got = _per_joint(table, "tau_m", tr.joints)
+    np.testing.assert_allclose(got, r.tau_m[keep], rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(_per_joint(table, "t", [1])[:, 0], t_ms[keep] * 1e-3)
