@@ -422,3 +422,55 @@ def test_files_joined_by_time(tmp_path, motor_recording):
     got = _per_joint(table, "tau_m", tr.joints)
     np.testing.assert_allclose(got, r.tau_m[keep], rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(_per_joint(table, "t", [1])[:, 0], t_ms[keep] * 1e-3)
+
+
+def test_motor_rotor_inertias_reach_the_dynamics_with_their_cross_term(tmp_path, rng):
+    """With --urdf, motor-side rotor inertias J_m become the armature diag(R^T J_m R) and the
+    off-diagonal part of R^T J_m R is added to tau_dyn as a torque in qdd."""
+    pytest.importorskip("pinocchio")
+    from test_urdf import URDF, motion
+
+    n = 400
+    q, qd, _ = motion(rng, n)
+    t = np.arange(n) * 0.01
+    tr = Transmission(["a", "b"], [[10.0, 0.0], [4.0, 5.0]], rotor_inertia=[0.01, 0.02])
+    tau = rng.normal(size=(n, 2))
+    np.savetxt(tmp_path / "motor.csv", np.column_stack([t, tr.motor_positions(q), tr.motor_torques(tau)]),
+               delimiter=",", fmt="%.17g")
+    np.savetxt(tmp_path / "joint.csv", np.column_stack([t, q, tau]), delimiter=",", fmt="%.17g")
+    (tmp_path / "two_link.urdf").write_text(URDF)
+    head = 'time = 1\n[robot]\nmatch = "order"\ngravity = [0.0, -9.81, 0.0]\n'
+    motor = head + "[transmission]\nratio = [[10.0, 0.0], [4.0, 5.0]]\nrotor_inertia = [0.01, 0.02]\n"
+    joint = head
+    for k, (name, armature) in enumerate(zip("ab", tr.armature())):
+        motor += f'[[joints]]\nname = "{name}"\ntheta = {2 + k}\ntau_motor = {4 + k}\n'
+        joint += f'[[joints]]\nname = "{name}"\nq = {2 + k}\ntau_m = {4 + k}\nrotor_inertia = {float(armature)!r}\n'
+    (tmp_path / "motor.toml").write_text(motor)
+    (tmp_path / "joint.toml").write_text(joint)
+    tables = {}
+    for side in ("motor", "joint"):
+        res = run("import", tmp_path / f"{side}.csv", "--mapping", tmp_path / f"{side}.toml", "--urdf",
+                  tmp_path / "two_link.urdf", "-o", tmp_path / f"{side}.parquet")
+        assert res.exit_code == 0, res.output
+        tables[side] = pq.read_table(tmp_path / f"{side}.parquet")
+    qdd = _per_joint(tables["motor"], "qdd", "ab")
+    extra = _per_joint(tables["motor"], "tau_dyn", "ab") - _per_joint(tables["joint"], "tau_dyn", "ab")
+    cross = tr.cross_inertia()
+    assert cross[0, 1] == pytest.approx(0.02 * 4 * 5)
+    np.testing.assert_allclose(extra, qdd @ cross.T, rtol=1e-6, atol=1e-9 * np.abs(qdd @ cross.T).max())
+    np.testing.assert_allclose(_per_joint(tables["motor"], "tau_m", "ab"), tau, rtol=1e-12, atol=1e-12)
+
+
+def test_estimate_ext_with_a_group_model_and_commands_of_one_joint_refuse_it(tmp_path, arm_logs):
+    folder, runs = arm_logs
+    test = folder / "test.parquet"
+    model = tmp_path / "wrist.npz"
+    assert run("identify", folder / "train.parquet", "--coupling", "--joint", 6, "-o", model, "-q").exit_code == 0
+    res = run("estimate-ext", model, test, "-o", tmp_path / "ext.parquet", "-q")
+    assert res.exit_code == 0, res.output
+    table = pq.read_table(tmp_path / "ext.parquet")
+    # no external torque in the simulation: the estimate is the friction error, at the noise floor
+    ext = _per_joint(table, "tau_ext_pred", [5, 6])
+    assert np.all(np.sqrt(np.mean(ext ** 2, axis=0)) <= 1.3 * default_arm().noise_floor()[WRIST])
+    res = run("evaluate", "--model", f"g={model}", "--log", test)
+    assert res.exit_code == 4 and "this command takes models of one joint" in res.output
