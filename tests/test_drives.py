@@ -474,3 +474,15 @@ def test_estimate_ext_with_a_group_model_and_commands_of_one_joint_refuse_it(tmp
     assert np.all(np.sqrt(np.mean(ext ** 2, axis=0)) <= 1.3 * default_arm().noise_floor()[WRIST])
     res = run("evaluate", "--model", f"g={model}", "--log", test)
     assert res.exit_code == 4 and "this command takes models of one joint" in res.output
+
+
+def test_a_log_of_the_wrist_alone_gives_one_model_file(tmp_path, arm_logs):
+    folder, _ = arm_logs
+    table = pq.read_table(folder / "train.parquet")
+    wrist = table.filter(np.isin(table.column("joint").to_numpy(), [5, 6]))
+    logs.write_table(wrist, str(tmp_path / "wrist.parquet"))
+    res = run("identify", tmp_path / "wrist.parquet", "--coupling", "-o", tmp_path / "wrist.npz", "--json")
+    assert res.exit_code == 0, res.output
+    assert models.load(str(tmp_path / "wrist.npz"))[1]["joints"] == [5, 6]
+    res = run("identify", folder / "train.parquet", "--coupling", "-o", tmp_path / "arm.npz")
+    assert res.exit_code == 3 and "give -o a folder" in res.output

@@ -149,9 +149,7 @@ def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_cha
             seen.add(key)
             units.append((j, group))
     labels = {j: (", ".join(map(str, g.joints)) if g else j) for j, g in units}
-    _, folder = modelset.plan(log_joints, joint, output, name)
-    if folder is None and len(units) > 1:
-        raise joints.several(log_joints, name, "give -o a folder for the models of its joints and groups")
+    folder = modelset.output_folder(output, [j for j, _ in units], log_joints, name)   # a group alone: one file
     reading = {k: v for k, v in reading.items() if k != "joint"}
     results: dict = {}
 
