@@ -2,7 +2,7 @@
 
 The simulated arm of ``fricli.sim.coupled`` (coupled wrist, friction in the motors): a training
 and a held-out run; on the wrist joints 5 and 6, the coupled model (identify --coupling) and a
-per-joint LuGre model each (identify --joint J), scored on the held-out run against the friction
+per-joint LuGre and linear model each (identify --joint J [--kind linear]), scored on the held-out run against the friction
 target tau_m - tau_g - tau_dyn and the simulation's noise floor. Run from the repository root:
 
     python docs/img/make_drives_figure.py
@@ -51,11 +51,14 @@ def main() -> None:
             logs.write_table(r.table, str(tmp / f"{name}.parquet"))
         run("identify", tmp / "train.parquet", "--coupling", "--joint", 5, "-o", tmp / "wrist.npz", "-q")
         run("predict", tmp / "wrist.npz", tmp / "test.parquet", "-o", tmp / "coupled.parquet", "-q")
-        per_joint = {}
+        per_joint, linear = {}, {}
         for joint in WRIST:
-            run("identify", tmp / "train.parquet", "--joint", joint, "-o", tmp / f"lugre{joint}.npz", "-q")
-            run("predict", tmp / f"lugre{joint}.npz", tmp / "test.parquet", "-o", tmp / f"lugre{joint}.parquet", "-q")
-            per_joint[joint] = joint_rows(tmp / f"lugre{joint}.parquet", joint)
+            for kind, store in (("lugre", per_joint), ("linear", linear)):
+                run("identify", tmp / "train.parquet", "--joint", joint, "--kind", kind, "-o", tmp / f"{kind}{joint}.npz",
+                    "-q")
+                run("predict", tmp / f"{kind}{joint}.npz", tmp / "test.parquet", "-o", tmp / f"{kind}{joint}.parquet",
+                    "-q")
+                store[joint] = joint_rows(tmp / f"{kind}{joint}.parquet", joint)
         coupled = {joint: joint_rows(tmp / "coupled.parquet", joint) for joint in WRIST}
 
     fig = Figure(figsize=(11, 6.5), layout="constrained")
@@ -63,13 +66,13 @@ def main() -> None:
     axes = fig.subplot_mosaic([["5", "5", "bars"], ["6", "6", "bars"]])
     rmse = {}
     print("held-out friction error (RMSE against tau_m - tau_g - tau_dyn), simulated arm, 20 s at 2 kHz:")
-    print(f"{'joint':>5}  {'noise floor':>11}  {'coupled':>15}  {'per-joint LuGre':>17}")
+    print(f"{'joint':>5}  {'noise floor':>11}  {'coupled':>17}  {'per-joint LuGre':>18}  {'per-joint linear':>18}")
     for joint in WRIST:
         c, lg = coupled[joint], per_joint[joint]
         target = c["tau_m"] - c["tau_g"] - c["tau_dyn"]
-        rmse[joint] = [float(np.sqrt(np.mean((m["tau_f_pred"] - target) ** 2))) for m in (c, lg)]
-        print(f"{joint:>5}  {floor[joint]:>8.4f} Nm  {rmse[joint][0]:>8.4f} Nm ({rmse[joint][0] / floor[joint]:.2f}x)  "
-              f"{rmse[joint][1]:>8.4f} Nm ({rmse[joint][1] / floor[joint]:.2f}x)")
+        rmse[joint] = [float(np.sqrt(np.mean((m["tau_f_pred"] - target) ** 2))) for m in (c, lg, linear[joint])]
+        print(f"{joint:>5}  {floor[joint]:>8.4f} Nm" + "".join(f"  {e:>8.4f} Nm ({e / floor[joint]:5.2f}x)"
+                                                            for e in rmse[joint]))
         ax = axes[str(joint)]
         window = (c["t"] >= 4.0) & (c["t"] < 10.0)
         t = c["t"][window]
@@ -82,8 +85,9 @@ def main() -> None:
     axes["5"].legend(loc="upper right", fontsize=8)
     ax = axes["bars"]
     x = np.arange(len(WRIST))
-    ax.bar(x - 0.2, [rmse[j][0] / floor[j] for j in WRIST], 0.4, color="tab:blue", label="coupled")
-    ax.bar(x + 0.2, [rmse[j][1] / floor[j] for j in WRIST], 0.4, color="tab:red", label="per-joint LuGre")
+    for i, (label, color) in enumerate((("coupled", "tab:blue"), ("per-joint LuGre", "tab:red"),
+                                        ("per-joint linear", "tab:orange"))):
+        ax.bar(x + (i - 1) * 0.27, [rmse[j][i] / floor[j] for j in WRIST], 0.27, color=color, label=label)
     ax.axhline(1.0, color="k", lw=0.8, ls="--", label="noise floor")
     ax.set_xticks(x, [f"joint {j}" for j in WRIST])
     ax.set_ylabel("held-out RMSE / noise floor")
