@@ -382,6 +382,8 @@ def test_defects_of_either_file_drop_the_row_from_both(tmp_path, motor_recording
     (lambda m: m.replace('file = "torques"', 'file = "currents"', 1), "expected one of the mapping's files"),
     (lambda m: m.replace(", [0.0, 0.0, 0.0, 0.0, 30.0, 40.0]]", "]"), "expected 6 rows of 6 numbers"),
     (lambda m: m.replace("time = {rate = 2000.0}", "time = {rate = 0.0}"), "must be positive"),
+    (lambda m: m.replace('files = ["positions", "torques"]', 'files = ["positions", "torques", "currents"]'),
+     "no column is read from file 'currents'"),
     (lambda m: m.replace("[0.0, 0.0, 0.0, 0.0, 30.0, 40.0]", "[0.0, 0.0, 0.0, 0.0, -50.0, 0.0]"), "singular"),
 ])
 def test_mapping_mistakes_are_one_line(edit, message, tmp_path, motor_recording):

@@ -310,6 +310,10 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
         _fail(name, "rotor inertias are given twice: per joint (joint side) and in [transmission] (motor side)")
     if len(files) == 1:
         _fail(f"{name}: files", "a single file needs no 'files' (give it on the command line)")
+    used = {c.file for j in joints for c in j.columns.values()}
+    unused = [f for i, f in enumerate(files) if i not in used]
+    if unused:
+        _fail(f"{name}: files", f"no column is read from file {unused[0]!r}")
     return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, files=files, join=join,
                    transmission=transmission, **_robot(doc, name))
 
