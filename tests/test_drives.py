@@ -488,3 +488,60 @@ def test_a_log_of_the_wrist_alone_gives_one_model_file(tmp_path, arm_logs):
     assert models.load(str(tmp_path / "wrist.npz"))[1]["joints"] == [5, 6]
     res = run("identify", folder / "train.parquet", "--coupling", "-o", tmp_path / "arm.npz")
     assert res.exit_code == 3 and "give -o a folder" in res.output
+
+
+# --------------------------------------------------------------------------- Stribeck curve per motor
+
+
+@pytest.fixture(scope="module")
+def stribeck_logs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("stribeck")
+    arm = default_arm(stribeck=True)
+    runs = {}
+    for name, seed in (("train", 11), ("test", 12)):
+        runs[name] = simulate_coupled(arm, duration=20.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
+        logs.write_table(runs[name].table, str(folder / f"{name}.parquet"))
+    return folder, runs
+
+
+def test_motor_stribeck_curve_reaches_the_noise_floor_where_the_linear_motor_model_cannot(stribeck_logs):
+    _, runs = stribeck_logs
+    tr = default_arm().transmission.sub(WRIST)
+    floor = default_arm().noise_floor()[WRIST]
+    ratio = {}
+    for stribeck in (False, True):
+        model, _ = CoupledModel.fit(tr.joints, tr.ratio, runs["train"].qd[:, WRIST], _target(runs["train"])[:, WRIST],
+                                    stribeck=stribeck)
+        err = model.predict_group(runs["test"].qd[:, WRIST]) - _target(runs["test"])[:, WRIST]
+        ratio[stribeck] = np.sqrt(np.mean(err ** 2, axis=0)) / floor
+    assert np.all(ratio[True] <= 1.3) and np.all(ratio[False] > 1.3), ratio
+    np.testing.assert_allclose(model.fs, [0.042, 0.035], rtol=0.05)
+    np.testing.assert_allclose(model.vs, [5.0, 5.0], rtol=0.15)
+
+
+def test_exported_stribeck_group_matches_predict_double(tmp_path, stribeck_logs):
+    import subprocess
+
+    from fricli.export import check
+    if check.compiler() is None:
+        pytest.skip("no compiler")
+    folder, _ = stribeck_logs
+    model = tmp_path / "wrist.npz"
+    res = run("identify", folder / "train.parquet", "--coupling", "--motor-stribeck", "--joint", 5, "-o", model, "-q")
+    assert res.exit_code == 0, res.output
+    assert models.load(str(model))[0].stribeck
+    assert run("export", model, "--prefix", "wr", "-o", tmp_path / "wr.h", "-q").exit_code == 0
+    _build_group(tmp_path / "wr.h", "wr", tmp_path / "drv", False)
+    assert run("predict", model, folder / "test.parquet", "--precision", "double", "-o", tmp_path / "p.parquet",
+               "-q").exit_code == 0
+    pred = pq.read_table(tmp_path / "p.parquet")
+    _per_joint(pred, "qd", WRIST_NAMES).tofile(tmp_path / "in.bin")
+    subprocess.run([str(tmp_path / "drv"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")], check=True)
+    ref = _per_joint(pred, "tau_f_pred", WRIST_NAMES)
+    got = np.fromfile(tmp_path / "out.bin").reshape(ref.shape)
+    assert np.max(np.abs(got - ref) / (1e-12 + np.abs(ref))) <= 1e-9
+    res = run("identify", folder / "train.parquet", "--motor-stribeck", "-o", tmp_path / "x")
+    assert res.exit_code == 2 and "--motor-stribeck applies to --coupling" in res.output
+
+
+WRIST_NAMES = [5, 6]

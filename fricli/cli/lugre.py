@@ -39,12 +39,14 @@ def _figures(errs: dict, unit: str) -> str:
 @click.option("--coupling", is_flag=True,
               help="Fit each group of joints that share motors (the log's transmission, docs/drives.md) as one "
                    "model of friction per motor (kind coupled); the other joints as before.")
+@click.option("--motor-stribeck", is_flag=True,
+              help="With --coupling: each motor's friction with the Stribeck curve (fs, vs) as well.")
 @if_changed_option
 @json_flag
 @common
 def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 samples: str, settle: float, refine: bool, kind: str, coupling: bool, if_changed: bool,
-                 as_json: bool, quiet: bool) -> None:
+                 samples: str, settle: float, refine: bool, kind: str, coupling: bool, motor_stribeck: bool,
+                 if_changed: bool, as_json: bool, quiet: bool) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -83,9 +85,12 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
                 "units": data.units, "parameters": params,
                 "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit}
 
+    if motor_stribeck and not coupling:
+        raise click.UsageError("--motor-stribeck applies to --coupling")
     reading = reading_kwargs(joint, kt, cutoff, drop_invalid)
     if coupling:
-        results, folder_run = _fit_coupled(log, output, joint, reading, fit_one, if_changed=if_changed, quiet=quiet)
+        results, folder_run = _fit_coupled(log, output, joint, reading, fit_one, if_changed=if_changed, quiet=quiet,
+                                           stribeck=motor_stribeck)
     else:
         results, folder_run = fit_joints(log, output, joint, reading, fit_one, if_changed=if_changed, quiet=quiet)
     if as_json:
@@ -121,7 +126,7 @@ def _report(data, model, fit, output, quiet) -> None:
 
 
 def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_changed: bool,
-                 quiet: bool) -> tuple[dict, bool]:
+                 quiet: bool, stribeck: bool = False) -> tuple[dict, bool]:
     """``fit_joints`` for identify --coupling: a joint of a coupled group of the log's transmission
     brings its whole group into one model (DIR/joints_<a>_<b>.npz); the other joints get theirs."""
     from fricli import joints, logs, modelset
@@ -170,7 +175,7 @@ def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_cha
         out = os.path.join(folder, modelset.group_file_name(group.joints)) if folder else output
         with model_job(out, datas[0], if_changed=if_changed, quiet=quiet, exit_unchanged=folder is None) as job:
             if job is not None:
-                model, fit = coupled.fit_group(datas, group)
+                model, fit = coupled.fit_group(datas, group, stribeck=stribeck)
                 coupled.save_group(out, model, datas[0], fit=fit, job=job)
                 if not quiet:
                     unit = datas[0].units["tau"]
@@ -181,7 +186,7 @@ def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_cha
                         say(f"fit error, joint {x}: {_figures(errs, unit)}")
                     say(f"wrote {out}")
                 results[labels[j]] = {"model": out, "log": name, "joints": list(group.joints), "kind": "coupled",
-                                      "parameters": {k: getattr(model, k).tolist() for k in coupled.FEATURES},
+                                      "parameters": {k: getattr(model, k).tolist() for k in model.names()},
                                       "ratio": model.ratio.tolist(), "fit": fit}
 
     modelset.each_joint([labels[j] for j, _ in units], work)

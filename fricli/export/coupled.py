@@ -6,7 +6,8 @@
         qd[k]: the group's joint velocities [rad/s], tau_f[k]: each joint's friction [Nm]
 
 in the order of ``CoupledModel.predict_group``: motor velocities w = R qd, motor friction
-f = fv w + fc sign(w) + offset, joint friction tau_f = R^T f. The model has no state; the state
+f = fv w + fc sign(w) + offset (+ (fs - fc) sign(w) exp(-(w/vs)^2) with the Stribeck curve), joint friction
+tau_f = R^T f. The model has no state; the state
 argument keeps the calls of every other exported model.
 """
 
@@ -26,8 +27,11 @@ def group_code(model, meta: dict, prefix: str, sgn: str) -> str:
         w = " + ".join(f"{num(r[i, j])} * qd[{j}]" for j in range(k) if r[i, j] != 0) or "0.0"
         body.append(f"    const double w{i} = {w};")
     for i in range(k):
-        body.append(f"    const double f{i} = {num(model.fv[i])} * w{i} + {num(model.fc[i])} * {sgn}(w{i}) + "
-                    f"{num(model.offset[i])};")
+        f = f"{num(model.fv[i])} * w{i} + {num(model.fc[i])} * {sgn}(w{i}) + {num(model.offset[i])}"
+        if model.stribeck:
+            f += (f" + {num(model.fs[i] - model.fc[i])} * {sgn}(w{i}) * exp(-((w{i} / {num(model.vs[i])}) * "
+                  f"(w{i} / {num(model.vs[i])})))")
+        body.append(f"    const double f{i} = {f};")
     for j in range(k):
         terms = " + ".join(f"{num(r[i, j])} * f{i}" for i in range(k) if r[i, j] != 0) or "0.0"
         body.append(f"    tau_f[{j}] = {terms};")

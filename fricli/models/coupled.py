@@ -4,6 +4,7 @@ For the k joints of a coupled group with transmission R (k, k) (``fricli.robot.t
 
     theta_d = R q_d                                        motor velocities [rad/s], (k,) per sample
     f_i     = Fv_i theta_d_i + Fc_i sign(theta_d_i) + o_i  motor i's friction [Nm] (motor side)
+              [+ (Fs_i - Fc_i) sign(theta_d_i) exp(-(theta_d_i / vs_i)^2)]   with the Stribeck curve
     tau_f   = R^T f                                        each joint's friction [Nm]
 
 A per-joint model of (q_d_j, tau_g_j) cannot represent this: motor 6 of a coupled wrist turns
@@ -11,6 +12,8 @@ at r65 q_d5 + r66 q_d6, and its friction reaches joints 5 and 6. The parameters 
 the fit is one linear least squares in motor coordinates: the joints' friction targets mapped to
 the motors, R^-T tau_f (n, k), regressed on every motor's features [theta_d, sign(theta_d), 1]
 (which is the joint-side system tau_f = R^T Phi p whitened for equal noise on every motor).
+With the Stribeck curve (the static curve of the LuGre model with delta = 2), each motor's vs is
+chosen on a grid and the rest is linear for a given vs.
 
 The model predicts the friction of every joint of the group from the group's rows at the same
 times (``predict_group``). A command applying it to one joint's rows uses ``member(joint)``, a
@@ -30,8 +33,11 @@ from fricli.models.base import FrictionModel
 from fricli.robot.transmission import Transmission
 
 FEATURES = ("fv", "fc", "offset")
+STRIBECK = ("fs", "vs")
+VS_GRID = 24            # Stribeck velocities tried per motor, between the 2nd and 60th percentile of |theta_d|
 PARAM_INFO = {"fv": ("Nm s/rad", "viscous friction (motor side)"), "fc": ("Nm", "Coulomb friction (motor side)"),
-              "offset": ("Nm", "constant torque (motor side)")}
+              "offset": ("Nm", "constant torque (motor side)"), "fs": ("Nm", "static friction (motor side)"),
+              "vs": ("rad/s", "Stribeck velocity (motor side)")}
 
 
 def partner_key(joint) -> str:
@@ -42,18 +48,32 @@ def partner_key(joint) -> str:
 @register
 class CoupledModel(FrictionModel):
     """Motor-side Coulomb + viscous friction of a coupled group; ``joints`` (k,), ``ratio`` R (k, k),
-    per-motor ``fv`` [Nm s/rad], ``fc`` [Nm], ``offset`` [Nm], each (k,)."""
+    per-motor ``fv`` [Nm s/rad], ``fc`` [Nm], ``offset`` [Nm], each (k,); optionally the Stribeck
+    curve's ``fs`` [Nm] and ``vs`` [rad/s], each (k,)."""
 
     kind = "coupled"
 
-    def __init__(self, joints, ratio, fv, fc, offset):
+    def __init__(self, joints, ratio, fv, fc, offset, fs=None, vs=None):
         self.transmission = Transmission(joints, ratio)
         k = len(self.joints)
         self.fv, self.fc, self.offset = (np.array(v, dtype=np.float64).reshape(-1) for v in (fv, fc, offset))
-        for name in FEATURES:
+        if (fs is None) != (vs is None):
+            raise ValueError("the Stribeck curve needs both fs and vs")
+        self.fs, self.vs = (None if v is None else np.array(v, dtype=np.float64).reshape(-1) for v in (fs, vs))
+        if self.stribeck and not np.all(self.vs > 0):
+            raise ValueError("vs must be positive")
+        for name in self.names():
             v = getattr(self, name)
             if v.shape != (k,) or not np.all(np.isfinite(v)):
                 raise ValueError(f"{name} needs {k} finite numbers")
+
+    @property
+    def stribeck(self) -> bool:
+        return self.fs is not None
+
+    def names(self) -> tuple[str, ...]:
+        """The per-motor parameters the model has."""
+        return FEATURES + (STRIBECK if self.stribeck else ())
 
     @property
     def joints(self) -> tuple:
@@ -70,7 +90,10 @@ class CoupledModel(FrictionModel):
 
     def motor_friction(self, theta_d: np.ndarray) -> np.ndarray:
         """f (n, k) [Nm] per motor at motor velocities theta_d (n, k) [rad/s]."""
-        return self.fv * theta_d + self.fc * np.sign(theta_d) + self.offset
+        f = self.fv * theta_d + self.fc * np.sign(theta_d) + self.offset
+        if self.stribeck:
+            f += (self.fs - self.fc) * np.sign(theta_d) * np.exp(-np.square(theta_d / self.vs))
+        return f
 
     def predict_group(self, qd: np.ndarray) -> np.ndarray:
         """tau_f (n, k) [Nm] of the group's joints at joint velocities qd (n, k) [rad/s]."""
@@ -78,20 +101,35 @@ class CoupledModel(FrictionModel):
         return tr.joint_torques(self.motor_friction(tr.motor_velocities(qd)))
 
     @classmethod
-    def fit(cls, joints, ratio, qd: np.ndarray, tau_f: np.ndarray) -> tuple["CoupledModel", dict]:
-        """Least squares on joint velocities qd (n, k) [rad/s] and friction targets tau_f (n, k) [Nm];
-        returns the model and its fit figures per joint (MAE, RMSE, max [Nm])."""
+    def fit(cls, joints, ratio, qd: np.ndarray, tau_f: np.ndarray, *,
+            stribeck: bool = False) -> tuple["CoupledModel", dict]:
+        """Least squares on joint velocities qd (n, k) [rad/s] and friction targets tau_f (n, k) [Nm]
+        (with ``stribeck``, the Stribeck curve per motor too); returns the model and its fit
+        figures per joint (MAE, RMSE, max [Nm])."""
         tr = Transmission(joints, ratio)
         k = len(tr.joints)
         w = tr.motor_velocities(qd)
         y = tr.motor_torques(tau_f)
-        params = np.zeros((3, k))
+        params = np.zeros((5 if stribeck else 3, k))
         for i in range(k):
-            a = np.column_stack([w[:, i], np.sign(w[:, i]), np.ones(len(w))])
+            s = np.sign(w[:, i])
+            a = np.column_stack([w[:, i], s, np.ones(len(w))])
             if np.linalg.matrix_rank(a) < 3:
                 raise FitError(f"motor {i + 1} of joints {', '.join(map(str, tr.joints))} does not move in both "
                                "directions: its friction cannot be fitted")
-            params[:, i] = np.linalg.lstsq(a, y[:, i], rcond=None)[0]
+            if not stribeck:
+                params[:, i] = np.linalg.lstsq(a, y[:, i], rcond=None)[0]
+                continue
+            speed = np.abs(w[:, i])
+            best = None
+            for vs in np.geomspace(*np.percentile(speed[speed > 0], [2, 60]), VS_GRID):
+                ab = np.column_stack([a, s * np.exp(-np.square(w[:, i] / vs))])
+                coef, *_ = np.linalg.lstsq(ab, y[:, i], rcond=None)
+                sse = float(np.sum(np.square(ab @ coef - y[:, i])))
+                if best is None or sse < best[0]:
+                    best = (sse, coef, vs)
+            _, (fv, fc, offset, bump), vs = best
+            params[:, i] = fv, fc, offset, fc + bump, vs
         model = cls(tr.joints, tr.ratio, *params)
         return model, {"joints": {str(j): figures(model.predict_group(qd)[:, c] - tau_f[:, c])
                                   for c, j in enumerate(tr.joints)}, "rows": int(len(qd))}
@@ -118,22 +156,24 @@ class CoupledModel(FrictionModel):
         return {"joints": list(self.joints)}
 
     def get_arrays(self) -> dict[str, np.ndarray]:
-        return {"ratio": self.ratio, "fv": self.fv, "fc": self.fc, "offset": self.offset}
+        return {"ratio": self.ratio, **{name: getattr(self, name) for name in self.names()}}
 
     @classmethod
     def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "CoupledModel":
         if set(params) != {"joints"} or not isinstance(params["joints"], list):
             raise ValueError("a coupled model records its joints, and nothing else")
-        return cls(params["joints"], arrays["ratio"], arrays["fv"], arrays["fc"], arrays["offset"])
+        return cls(params["joints"], arrays["ratio"], arrays["fv"], arrays["fc"], arrays["offset"],
+                   arrays.get("fs"), arrays.get("vs"))
 
     def describe(self) -> str:
         lines = [f"coupled group of joints {', '.join(map(str, self.joints))}: friction per motor, "
-                 "f = fv*theta_d + fc*sign(theta_d) + offset, tau_f = R^T f"]
+                 "f = fv*theta_d + fc*sign(theta_d) + offset"
+                 + (" + (fs - fc)*sign(theta_d)*exp(-(theta_d/vs)^2)" if self.stribeck else "") + ", tau_f = R^T f"]
         lines.append("  R (motor rows, joint columns):")
         lines += ["    " + "  ".join(f"{x:>10.6g}" for x in row) for row in self.ratio]
         for i in range(len(self.joints)):
             lines.append(f"  motor {i + 1}: " + "  ".join(f"{n} {getattr(self, n)[i]:.6g} {PARAM_INFO[n][0]}"
-                                                        for n in FEATURES))
+                                                        for n in self.names()))
         return "\n".join(lines)
 
 
@@ -184,11 +224,11 @@ def stack(datas: list, column: str) -> np.ndarray:
     return np.column_stack([d.signals[column] for d in datas])
 
 
-def fit_group(datas: list, transmission: Transmission) -> tuple[CoupledModel, dict]:
+def fit_group(datas: list, transmission: Transmission, *, stribeck: bool = False) -> tuple[CoupledModel, dict]:
     """The coupled model of the joints of ``datas`` (their logs, rows at the same times) with
     their transmission (its joints in the same order)."""
     target = np.column_stack([logs.friction_target(d.signals) for d in datas])
-    return CoupledModel.fit(transmission.joints, transmission.ratio, stack(datas, "qd"), target)
+    return CoupledModel.fit(transmission.joints, transmission.ratio, stack(datas, "qd"), target, stribeck=stribeck)
 
 
 def save_group(path: str, model: CoupledModel, data, *, fit: dict, **provenance) -> dict:
