@@ -136,6 +136,7 @@ def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_cha
 
     table, digest = logs.read_table(log)
     name = "stdin" if log == "-" else log
+    logs.require_robot_model(table.schema, name, reading.get("zero", ()))
     try:
         tr = transmission.of_schema(table.schema.metadata)
     except ValueError as exc:

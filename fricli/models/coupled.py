@@ -209,7 +209,8 @@ def figures(err: np.ndarray) -> dict:
 def group_rows(table, group, name: str, **reading) -> tuple[np.ndarray, list]:
     """The times t (n,) [s] and the ``fricli.logs.Log`` of every joint of ``group`` in ``table``
     (long format); refused unless every joint has rows at the same times."""
-    datas = [logs.from_table(table, name=name, joint=j, **reading) for j in group]
+    quiet = {k: v for k, v in reading.items() if k != "warn"}   # the log's notes once, with the first joint
+    datas = [logs.from_table(table, name=name, joint=j, **(reading if i == 0 else quiet)) for i, j in enumerate(group)]
     t = datas[0].signals["t"]
     for j, d in zip(group[1:], datas[1:]):
         other = d.signals["t"]
@@ -265,6 +266,7 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     sub = tr.sub(group)
     c = next(i for i, j in enumerate(sub.joints) if str(j) == str(joint))
     order = [c] + [i for i in range(len(group)) if i != c]
+    reading = {k: v for k, v in reading.items() if k != "warn"}     # noted when the joint's own rows were read
     _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
     qd = np.empty((len(datas[0]), len(group)))
     for i, d in zip(order, datas):
