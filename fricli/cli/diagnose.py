@@ -8,8 +8,8 @@ import click
 
 from fricli import joints, logs, metrics, modelset, models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                read_log, reading_kwargs, say)
+from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
+                                log_reading, read_log, reading_kwargs, say, warn)
 from fricli.diagnosis import driver
 from fricli.diagnosis import effects as E
 from fricli.errors import OutputError
@@ -101,12 +101,19 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
 @click.option("--accept-implausible", is_flag=True,
               help="Add effects whose fitted parameters are out of plausible range (e.g. a gravity scale "
                    "beyond +-30 %) instead of reporting them as suspicious.")
+@click.option("--urdf", default=None, metavar="ROBOT.urdf",
+              help="The URDF LOG's tau_g and tau_dyn came from (default: the one its import recorded), for the "
+                   "robot-model check of a whole-arm log and --calibrate.")
+@click.option("--calibrate", "calibrated", default=None, metavar="CAL.urdf",
+              help="With --fix on a whole-arm log: calibrate the robot model (as fricli calibrate), write CAL.urdf "
+                   "and its report, recompute tau_g and tau_dyn from it, refit each joint's friction model and "
+                   "diagnose again.")
 @log_reading
 @if_changed_option
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
-                 joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
+                 urdf, calibrated, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -115,7 +122,10 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     (friction growing with |tau_g|), payload (a measured tau_ext loading the gear), quadrant
     (driving vs back-driven), velocity (curve shape), level, offset and column:NAME for any
     other numeric column. Gravity, acceleration and offset are errors of the robot model or
-    the measurement, not friction, and are reported as such. Effects are scored on held-out
+    the measurement, not friction, and are reported as such; on a whole-arm log imported with a
+    URDF, gravity or acceleration errors on several joints are reported once as errors of the
+    robot model, with the command that calibrates it and what that calibration changes, and
+    --fix --calibrate CAL.urdf performs it before fixing the friction. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
     still removes enough of the residual (docs/diagnose.md). An effect the log cannot identify
     (e.g. tau_g nearly constant) is not tested; one chosen with implausible parameters (a gravity
@@ -142,6 +152,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("--fix writes a model file: give -o FILE.npz, not -")
     if if_changed and not fix:
         raise click.UsageError("--if-changed applies to --fix (the model it writes)")
+    if calibrated and not fix:
+        raise click.UsageError("--calibrate applies to --fix (it recomputes the log before fixing the friction)")
     if output:
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
@@ -154,39 +166,147 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
     several = len(pairs) > 1
 
+    if calibrated and not several:
+        raise click.UsageError("--calibrate needs a whole-arm log and a model folder (one model per joint)")
+    refitted: dict = {}
+
     def one(data, out, job, model_path):
         base, meta = models.load(model_path)
-        models.check_log(meta, data, model_path)
+        if data.joint in refitted:
+            from fricli.diagnosis.fix import refit
+
+            base = refitted[data.joint] = refit(base, data)
+        else:
+            models.check_log(meta, data, model_path)
         result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
                                  max_effects=max_effects, accept_implausible=accept_implausible)
-        if not as_json:
+        if not as_json and (out is not None or not calibrated):   # --calibrate: the tables after it only
             if several:
                 click.echo(f"joint {data.joint} ({model_path}):")
             click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
                        + ("\n" if several else ""))
-        if fix:
-            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
+        if fix and out is not None:
+            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet, data.joint in refitted)
         return result.to_json()
 
-    if fix:
-        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
-                                         source=source, read=(table_, digest))
-    else:
-        results, folder_run = {}, several
-
+    def diagnose_all(table):
+        found = {}
         from fricli.models import coupled
 
         def work(j):
-            data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
-            data.signals.update(coupled.partner_signals(table_, j, name, **reading))   # the coupling effect's
-            results[j] = one(data, None, None, pairs[j])
+            data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
+            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
+            found[j] = one(data, None, None, pairs[j])
 
         modelset.each_joint(list(pairs), work, what="results")
+        return found
+
+    robot = None
+    if calibrated:
+        before = diagnose_all(table_)
+        cal, text, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet)
+        refitted.update(dict.fromkeys(pairs))
+        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=False, quiet=quiet,
+                                         source=source, read=(table_, digest))
+        robot = _calibrated_record(before, results, cal, calibrated)
+    elif fix:
+        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
+                                         source=source, read=(table_, digest))
+    else:
+        results, folder_run = diagnose_all(table_), several
+    if several and robot is None:
+        robot = _robot_model_check(results, table_, name, log, urdf, cutoff)
+    if robot is not None and not as_json:
+        click.echo(robot["summary"])
     if as_json:
-        emit_results(results, folder_run)
+        if robot is not None and folder_run:
+            emit_json({"joints": {str(j): r for j, r in results.items()}, "robot_model": robot})
+        else:
+            emit_results(results, folder_run)
 
 
-def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -> None:
+def _urdf_of(table, urdf: str | None) -> str | None:
+    """The URDF given, or the one the log's import recorded when it is still there."""
+    from fricli.robot import calibration as cb
+
+    if urdf:
+        return urdf
+    recorded = cb.recorded_urdf(table)
+    return recorded if recorded and os.path.isfile(recorded) else None
+
+
+def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool):
+    """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
+    import json
+
+    from fricli.atomic import atomic_write_bytes
+    from fricli.cli.calibrate import report_path
+    from fricli.cli.options import _json_safe
+    from fricli.robot import calibration as cb
+
+    path = _urdf_of(table, urdf)
+    if path is None:
+        raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
+    cal, text, new = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
+    atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
+                                          + "\n").encode())
+    atomic_write_bytes(output, text.encode())
+    for line in cal.report["suspicious"]:
+        warn(f"warning: {line}")
+    say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)
+    return cal, text, new
+
+
+def _fit_lines(cal, joints_: list) -> str:
+    fit = cal.report["fit"]
+    return ", ".join(f"joint {j} {fit[str(j)]['rms_before']:.3g} -> {fit[str(j)]['rms_after']:.3g} Nm"
+                     for j in joints_ if str(j) in fit)
+
+
+def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | None, cutoff) -> dict | None:
+    """Once per whole-arm log imported with a URDF: gravity or acceleration errors on several joints are the
+    robot model's; the calibration that fixes them and, when the URDF is at hand, what it changes."""
+    from fricli.robot import calibration as cb
+
+    if cb.recorded_urdf(table) is None and urdf is None:
+        return None
+    flagged = driver.robot_model_joints(results)
+    if len(flagged) < 2:
+        return None
+    path = _urdf_of(table, urdf)
+    who = ", ".join(str(j) for j in flagged)
+    command = f"fricli calibrate {log} --urdf {path or 'ROBOT.urdf'} -o CAL.urdf"
+    out = {"joints": [str(j) for j in flagged], "command": command, "fit": None}
+    summary = f"robot-model errors on joints {who}: calibrate the robot model: `{command}`"
+    if path is None:
+        summary += " (give --urdf to see what it changes)"
+    else:
+        cal, _, _ = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+        out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
+        out["suspicious"] = cal.report["suspicious"]
+        summary += (f"; RMS of tau_m minus the robot model and linear friction on this log, CAD -> calibrated: "
+                    f"{_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction on it")
+    out["summary"] = summary
+    return out
+
+
+def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
+    """What --calibrate changed: per joint the held-out MAE with the CAD robot model and the friction model
+    given -> with the calibrated robot model, its refitted friction and the added effects."""
+    flagged = driver.robot_model_joints(before)
+    rows = {str(j): {"mae_before": before[j]["mae_before"], "mae_after": after[j]["mae_after"],
+                     "model_errors_before": before[j].get("model_errors", []),
+                     "model_errors_after": after[j].get("model_errors", [])} for j in after}
+    change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
+    summary = (f"robot model calibrated ({output}; robot-model errors before on joints "
+               f"{', '.join(str(j) for j in flagged) or 'none'}): held-out MAE, CAD + friction model -> calibrated "
+               f"+ refitted and fixed friction: {change}")
+    return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],
+            "suspicious": cal.report["suspicious"], "mae": rows, "summary": summary}
+
+
+def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet, refitted=False) -> None:
     from fricli.diagnosis.fix import augment
 
     fixed = augment(base, result, data, carry=not no_carry)
@@ -209,4 +329,5 @@ def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -
             f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
     else:
         held = f" (not added, implausible: {', '.join(result.suspected)})" if result.suspected else ""
-        say(f"wrote {output}: nothing added{held}, same predictions as {model_path}")
+        same = f"{base.kind} refitted on the recomputed log" if refitted else f"same predictions as {model_path}"
+        say(f"wrote {output}: nothing added{held}, {same}")
