@@ -222,18 +222,19 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
                                  "idim": ext_idim, "linear": ext_linear}
         result["joints"][j] = row
     pairs = [p for p in PAIRS if set(p) <= set(val_names)]
-    result["adapt"] = adapt_pairs(data, work, fixed, cal, joints, pairs) if adapt and pairs else None
+    imported = dict(zip(val_names, val_cal))
+    result["adapt"] = adapt_pairs(work, fixed, imported, joints, pairs) if adapt and pairs else None
     return result
 
 
-def adapt_pairs(data: str, work: str, base: str, cal: str, joints, pairs) -> dict:
+def adapt_pairs(work: str, base: str, imported: dict[str, str], joints, pairs) -> dict:
     """Same-day adaptation (as benchmarks/ur10e_neural.py): for each day with two runs, ``adapt`` the
     fixed models on one run, scored on the other (both imported with the calibrated URDF), against the
     fixed models there: RMS over the rows in motion of the friction target minus the prediction."""
     cases = []
     for first, second in pairs:
         for on, scored in ((first, second), (second, first)):
-            on_path, scored_path = import_run(data, work, on, cal, "cal"), import_run(data, work, scored, cal, "cal")
+            on_path, scored_path = imported[on], imported[scored]
             out = os.path.join(work, f"adapted-{on}")
             done = fricli("adapt", base, on_path, "--seed", "0", "-o", out, "--json", "-q", json_out=True)
             for j in joints:

@@ -299,9 +299,11 @@ def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
                      "model_errors_before": before[j].get("model_errors", []),
                      "model_errors_after": after[j].get("model_errors", [])} for j in after}
     change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
-    summary = (f"robot model calibrated ({output}; robot-model errors before on joints "
-               f"{', '.join(str(j) for j in flagged) or 'none'}): held-out MAE, CAD + friction model -> calibrated "
-               f"+ refitted and fixed friction: {change}")
+    fit = ", ".join(f"joint {j} {f['rms_before']:.3g} -> {f['rms_after']:.3g} Nm" for j, f in cal.report["fit"].items())
+    summary = (f"robot-model errors on joints {', '.join(str(j) for j in flagged) or 'none'}: calibrated the robot "
+               f"model -> {output} (RMS of tau_m minus the robot model and linear friction, CAD -> calibrated: {fit})\n"
+               f"held-out MAE, CAD robot model + friction model -> calibrated robot model + refitted and fixed "
+               f"friction: {change}")
     return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],
             "suspicious": cal.report["suspicious"], "mae": rows, "summary": summary}
 
