@@ -467,14 +467,25 @@ def main(argv=None) -> None:
     pictures = figures(res, img)
     import case_study_text  # docs/ur10e/case_study_text.py: the words around the figures
 
-    shown = [c.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA")
-             .replace(ROOT + os.sep, "") for c in COMMANDS]
+    def paths(text: str) -> str:
+        return text.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA") \
+            .replace(ROOT + os.sep, "")
+
+    shown = [paths(c) for c in COMMANDS]
+    if res.get("robot_model"):
+        res["robot_model"]["summary"] = paths(res["robot_model"]["summary"])
     text = case_study_text.render(res, tables(res), shown, full=(len(res["joints"]) == 6 and res["validation_runs"] == validation_runs(args.data)))
     atomic_write_bytes(os.path.join(docs, "case-study-ur10e.md"), text.encode())
-    summary = {j: {k: v for k, v in r.items() if k != "payload_series"} for j, r in res["joints"].items()}
+    digest = ("added", "suspected", "model_errors", "mae_before", "mae_after")
+    summary = {j: {k: ({d: v.get(d) for d in digest} if k.startswith("diagnose") else v) for k, v in r.items()
+                   if k != "payload_series"} for j, r in res["joints"].items()}
+    calibration = {k: v for k, v in res["calibration"].items() if k != "excitation"}
+    calibration["excitation"] = {k: res["calibration"]["excitation"][k] for k in ("parameters", "base_parameters")}
+    calibration["excitation"]["undetermined"] = len(res["calibration"]["excitation"]["undetermined"])
+    robot = {k: v for k, v in (res.get("robot_model") or {}).items() if k in ("joints", "summary", "mae")}
     atomic_write_bytes(os.path.join(docs, "ur10e-results.json"), json.dumps(
-        {"validation_runs": res["validation_runs"], "joints": summary, "calibration": res["calibration"],
-         "robot_model": res["robot_model"], "adapt": res.get("adapt")}, indent=1).encode())
+        {"validation_runs": res["validation_runs"], "joints": summary, "calibration": calibration,
+         "robot_model": robot, "adapt": res.get("adapt")}, indent=1).encode())
     print(f"wrote {os.path.join(docs, 'case-study-ur10e.md')} and {', '.join(pictures)}", file=sys.stderr)
 
 
