@@ -2,16 +2,11 @@
 
 from __future__ import annotations
 
-import os
-
 import click
 
-from fricli import models
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                output_option, reading_kwargs, say)
-from fricli.errors import OutputError
-from fricli.identify import LuGreIdentifier
+from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
+                                log_reading, output_option, say, spec_options, wrote)
 from fricli.models.lugre import PARAM_INFO, unit_of
 
 
@@ -21,26 +16,13 @@ def _figures(errs: dict, unit: str) -> str:
 
 @cli.command("identify")
 @click.argument("log")
-@output_option(help="Model file to write (.npz), or a folder for one model per joint (docs/joints.md).")
+@output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
 @log_reading
-@click.option("--hold", type=click.FloatRange(min=0, min_open=True), default=0.2, show_default=True,
-              help="Steady state: the velocity must have been constant for at least this long [s].")
-@click.option("--travel", type=click.FloatRange(min=0), default=0.002, show_default=True,
-              help="Steady state: ... and over at least this distance [rad or m] (longer holds at slow speeds).")
-@click.option("--samples", type=click.Choice(["auto", "steady", "settled"]), default="auto", show_default=True,
-              help="Rows for the static curve: constant-velocity holds, every row --settle past a reversal "
-                   "(continuous excitation), or settled when holds cover under half of the motion and the log has tau_dyn.")
-@click.option("--settle", type=click.FloatRange(min=0), default=0.01, show_default=True,
-              help="Settled rows: travel since the last velocity reversal [rad or m].")
-@click.option("--refine", is_flag=True, help="Finally fit all parameters jointly on the whole log.")
-@click.option("--kind", type=click.Choice(["lugre", "linear", "linear-asymmetric"]), default="lugre", show_default=True,
-              help="lugre, or the linear model Fv*qd + Fc*sign(qd) + offset (linear-asymmetric: Fv, Fc per "
-                   "direction) fitted by least squares on the rows in motion (docs/tutorial.md).")
+@spec_options("identify")
 @if_changed_option
 @json_flag
 @common
-def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 samples: str, settle: float, refine: bool, kind: str, if_changed: bool, as_json: bool, quiet: bool) -> None:
+def identify_cmd(log: str, output: str, kind: str, if_changed: bool, as_json: bool, quiet: bool, **_options) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -59,40 +41,29 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
       fricli identify nightly.parquet -o lugre.npz --if-changed   # cron: exit 9 (UNCHANGED) when up to date
       fricli identify arm.parquet -o lugre-arm/                    # every joint of the arm
     """
-    if output == "-":
-        raise click.UsageError("identify writes a model file: give -o FILE.npz (or a folder), not -")
-    folder = os.path.dirname(os.path.abspath(output))
-    if not os.path.isdir(folder):
-        raise OutputError(f"cannot write {output}: folder {folder} does not exist")
+    check_outputs(output, as_json)
 
-    def fit_one(data, out, job, _model):
+    def report(made):
+        data, model, fit, out = made.data, made.model, made.summary, made.output
         if kind != "lugre":
-            return _fit_linear(data, out, job, kind == "linear-asymmetric", quiet)
-        idf = LuGreIdentifier(hold=hold, travel=travel, refine=refine, samples=samples,
-                              settle=settle).fit(data.signals, units=data.units,
-                                                                           axis=data.axis)
-        model, fit = idf.model_, idf.fit_
-        models.save_for_log(out, model, data, rows_used=len(data), fit=fit, job=job)
+            return _report_linear(data, model, fit, out, quiet)
         _report(data, model, fit, out, quiet)
         params = model.parameters()
         return {"model": out, "log": data.name, "joint": data.joint, "axis": data.axis,
                 "units": data.units, "parameters": params,
                 "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit}
 
-    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
-                                     if_changed=if_changed, quiet=quiet)
+    results, folder_run = fit_joints("identify", log, output, report, if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)
 
 
-def _fit_linear(data, out, job, asymmetric: bool, quiet: bool) -> dict:
+def _report_linear(data, model, fit, out, quiet: bool) -> dict:
     from fricli.models import linear
 
-    model, fit = linear.fit(data.signals, asymmetric=asymmetric, axis=data.axis)
-    models.save_for_log(out, model, data, rows_used=fit["moving"]["n"], fit=fit, job=job)
     unit, params = data.units["tau"], model.parameters()
     say(f"{model.describe()}\nfit error, all rows: {_figures(fit, unit)}\n"
-        f"fit error, {fit['moving_rows']:,} rows in motion: {_figures(fit['moving'], unit)}\nwrote {out}", quiet)
+        f"fit error, {fit['moving_rows']:,} rows in motion: {_figures(fit['moving'], unit)}\n{wrote(out)}", quiet)
     return {"model": out, "log": data.name, "joint": data.joint, "axis": data.axis, "units": data.units,
             "parameters": params, "parameter_units": {k: linear.unit_of(k, data.axis) for k in params}, "fit": fit}
 
@@ -110,4 +81,4 @@ def _report(data, model, fit, output, quiet) -> None:
     say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
     for note in fit["notes"]:
         say(f"note: {note}")
-    say(f"wrote {output}")
+    say(wrote(output))
