@@ -36,7 +36,14 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
         return COSINE_STEPS[arch]
     return SCHEDULES[schedule][1]
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
-REST_SHARE = 0.02   # adapt: rows slower than this share of the top speed count as at rest
+# adapt keeps NN_add only when, cross-validated over FOLDS folds of whole pieces of the log, it
+# lowers the RMS error by MIN_GAIN at least and the gain per piece is positive by SIGNIFICANCE
+# standard errors (about 95 % one-sided over the ten pieces): a network fitted to pure noise
+# moves the RMS by a fraction of a per cent, and a gain that only some pieces of the log show
+# is not one that another run of the joint will show
+MIN_GAIN = 0.01
+SIGNIFICANCE = 2.0
+FOLDS = 5
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
 
 
@@ -66,8 +73,11 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
-    Rows at rest (|qd| under 0.1 % of the top speed) are left out: the friction there is held
-    by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
+    A log of constant-velocity sweeps trains on its velocity levels (``training_data``), rows
+    slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
+    trains on its rows in motion (``metrics.in_motion``) and validates on whole blocks of time
+    (summary "velocity_groups": "moving"). At rest the friction is held by the bristles and
+    depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
     always sees asinh(|qd| / v0)). Returns (model,
@@ -90,13 +100,17 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     sig = log.signals
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
-    speed = np.abs(sig["qd"])
-    moving = speed > training_data.LOW * float(speed.max())
-    if not moving.any():
+    # velocity levels are looked for down to LOW of the top speed (a sweep's slowest levels lie
+    # below the in-motion share); without levels the rows in motion are the training rows
+    sweeping = metrics.in_motion(sig["qd"], training_data.LOW)
+    moving = metrics.in_motion(sig["qd"])
+    if not sweeping.any():
         raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
-    check_motion(log.name, sig["qd"], moving, "train-base")
+    check_motion(log.name, sig["qd"], sweeping, "train-base")
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
-                               rng=rng, keep=moving)
+                               rng=rng, keep=sweeping, moving=moving)
+    if sel.mode == "moving":
+        check_motion(log.name, sig["qd"], moving, "train-base")
     model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
                         batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
                         velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
@@ -130,10 +144,16 @@ def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]
 def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] = (30,), epochs: int = 200,
           batch_size: int = 64, lr: float = 0.01, seed: int = 0, val_fraction: float = 0.2, max_seconds: float | None = None,
           min_speed: float | None = None, on_eval: Callable | None = None,
-          base_envelope=None) -> tuple[ResidualFriction, dict]:
+          base_envelope=None) -> tuple[FrictionModel, dict]:
     """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
 
-    Rows slower than ``min_speed`` (default 2 % of the log's top speed) are left out: at rest
+    The model is the adapted ``ResidualFriction`` when NN_add helps on rows it was not trained
+    on (``cross_validate`` over whole pieces of the log's stretches of motion, or for a log
+    without velocity levels whole blocks of time), else ``base`` itself; summary["adapted"] says
+    which and summary["held_out"] gives the figures. ``val_fraction`` 0 skips the check (the
+    residual model is returned).
+
+    Rows slower than ``min_speed`` (default: the rows not in motion, ``metrics.in_motion``) are left out: at rest
     the bristles hold a friction torque set by the motion before (the residual there says
     nothing about (tau_g, direction)), and sign(qd) flips with noise. When the log moves at
     discrete velocities (the paper's one velocity out and back), only the rows at those
@@ -147,8 +167,10 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     if not top > 0:
         raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
     if min_speed is None:
-        min_speed = REST_SHARE * top
-    moving = np.abs(qd) >= min_speed
+        min_speed = metrics.REST_SHARE * top
+        moving = metrics.in_motion(qd)
+    else:
+        moving = np.abs(qd) >= min_speed
     if not (qd[moving] > 0).any() or not (qd[moving] < 0).any():
         direction = "positive" if (qd[moving] > 0).any() else "negative"
         raise DataError(f"{log.name}: the log moves only in the {direction} direction; "
@@ -173,7 +195,50 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
         summary["base_val"] = _errors(target, base_pred, sel.val)
+    if val_fraction > 0:
+        def fit_predict(train: np.ndarray) -> np.ndarray:
+            fold = ResidualFriction(base, hidden_sizes=hidden, epochs=epochs, batch_size=batch_size, lr=lr,
+                                    min_speed=float(min_speed), units=log.units)
+            fold.fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred)
+            return fold.on_base(sig, base_pred)
+
+        held = cross_validate(fit_predict, sel.blocks, target, base_pred, rng)
+        summary["held_out"] = held
+        summary["adapted"] = held["helps"]
+    else:
+        summary["adapted"] = True
     if base_envelope is not None:
         summary["outside_base_envelope"] = share_outside(base_envelope, sig)
-    return model, summary
+    return (model if summary["adapted"] else base), summary
+
+
+def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray, base_pred: np.ndarray,
+                   rng: np.random.Generator) -> dict:
+    """Whether a residual model beats its base on rows it was not trained on.
+
+    ``blocks`` (n,) int gives the piece 0..PIECES-1 of every usable row (-1: not used); the
+    pieces fall into FOLDS folds at random, and ``fit_predict(train_rows)`` trains on the rows
+    outside one fold and returns the prediction (n,) [Nm] for every row. Returns the RMS
+    [Nm] of base and adapted model over the held-out rows, the mean and standard error of the
+    per-piece gain in mean squared error [Nm^2], and "helps": the RMS falls by MIN_GAIN and the
+    mean gain exceeds SIGNIFICANCE standard errors (False when fewer than two pieces hold rows).
+    """
+    fold_of = rng.permutation(training_data.PIECES) % FOLDS
+    pred = np.array(base_pred, dtype=np.float64)
+    for fold in range(FOLDS):
+        held = np.isin(blocks, np.flatnonzero(fold_of == fold))
+        train = np.flatnonzero((blocks >= 0) & ~held)
+        if train.size and held.any():
+            pred[held] = fit_predict(train)[held]
+    rows = blocks >= 0
+    e_base, e_new = (target - base_pred)[rows], (target - pred)[rows]
+    gains = np.array([np.mean(e_base[b] ** 2 - e_new[b] ** 2) for b in
+                      (blocks[rows] == k for k in range(training_data.PIECES)) if b.any()])
+    out = {"rows": int(rows.sum()), "pieces": int(gains.size), "folds": FOLDS, "helps": False}
+    if gains.size < 2:
+        return out
+    base_rms, new_rms = float(np.sqrt(np.mean(e_base ** 2))), float(np.sqrt(np.mean(e_new ** 2)))
+    mean, se = float(gains.mean()), float(gains.std(ddof=1) / np.sqrt(gains.size))
+    return {**out, "base_rmse": base_rms, "adapted_rmse": new_rms, "gain_mean": mean, "gain_se": se,
+            "helps": bool(new_rms <= (1.0 - MIN_GAIN) * base_rms and mean > SIGNIFICANCE * se)}
 

@@ -158,7 +158,8 @@ TRAIN_BASE = (
     Option("batch_size", "int", 0, "Samples per step; 0 = full batch.", low=0),
     Option("seed", "int", 0, "Seed for the row selection, the initial weights and the batches."),
     Option("val_fraction", "float", 0.2,
-           "Share of every constant-velocity stretch held out for validation, in whole pieces.", low=0, high=0.9),
+           "Share of every constant-velocity stretch held out for validation, in whole pieces (a log without "
+           "velocity levels: whole blocks of time).", low=0, high=0.9),
     Option("no_balance", "flag", False,
            "Train on every row instead of the same number of rows per velocity level."),
     Option("max_samples", "int", learning.DEFAULT_MAX_SAMPLES,
@@ -179,10 +180,13 @@ ADAPT = (
     Option("lr", "float", 0.01, "Adam learning rate.", low=0, low_open=True),
     Option("seed", "int", 0, "Seed for the split, weights and batches."),
     Option("val_fraction", "float", 0.2,
-           "Share of every stretch of motion held out for validation, in whole pieces.", low=0, high=0.9),
+           "Share of every stretch of motion (a log without velocity levels: of the log's time) held out for "
+           "validation, in whole pieces; 0 also skips the held-out decision (NN_add kept unchecked).",
+           low=0, high=0.9),
     Option("max_seconds", "float", None, "Use only the first S seconds of LOG.", unit="s", low=0, low_open=True),
     Option("min_speed", "float", None,
-           "Leave out rows slower than this [rad/s or m/s]; default 2 % of the log's top speed.",
+           "Leave out rows slower than this [rad/s or m/s]; default: the rows not in motion (slower than 2 % of the "
+           "log's top speed).",
            unit="rad/s or m/s", low=0),
 )
 

@@ -12,11 +12,19 @@ velocities are continuous and the groups are 32 equal-width bins of signed veloc
 ``balanced`` then draws the same number of rows from every group (all rows of a group that
 holds fewer).
 
+Continuous excitation. A log without velocity levels (a real arm running sums of harmonics)
+has no steady state to balance: ``select`` then takes the moving rows it is given, as they
+come (mode "moving"), at most ``max_samples`` of them drawn at random.
+
 Validation by segments. Neighbouring rows are nearly identical, so a random-row validation
 set would only measure interpolation between training rows. ``split_segments`` cuts every run
 of consecutive rows in one velocity group (for continuous velocities: the whole log) into ten
 contiguous pieces and holds out round(10 * val_fraction) pieces of each, chosen at random, so
 every level keeps training rows and the validation rows come in whole stretches of motion.
+In mode "moving" the validation rows are whole blocks of time instead (``time_blocks``): the
+log cut into ten blocks of equal duration, round(10 * val_fraction) of them held out, so the
+validation rows follow other harmonics' phases than the training rows, not the neighbours of
+training rows.
 """
 
 from __future__ import annotations
@@ -44,8 +52,9 @@ class Selection:
 
     train: np.ndarray
     val: np.ndarray
-    mode: str          # "levels" (discrete velocities), "bins" (continuous) or "all" (no balancing)
-    groups: int        # velocity levels or bins found
+    blocks: np.ndarray  # (n,) int: the piece (levels, all) or time block (moving) of every row, -1 for rows not used
+    mode: str          # "levels" (discrete velocities), "moving" (continuous: the moving rows) or "all" (no balancing)
+    groups: int        # velocity levels found ("levels"), time blocks held out ("moving")
 
     def summary(self) -> dict:
         return {"train_rows": int(self.train.size), "val_rows": int(self.val.size),
@@ -119,6 +128,40 @@ def split_segments(labels: np.ndarray, val_fraction: float, rng: np.random.Gener
     return val
 
 
+def pieces(labels: np.ndarray) -> np.ndarray:
+    """(n,) int: the piece 0..PIECES-1 of every row in a run of equal labels >= 0 (runs cut as
+    by ``split_segments``), -1 for rows in no run or in a run shorter than MIN_RUN."""
+    out = np.full(labels.size, -1, dtype=np.int64)
+    for start, stop in runs(labels):
+        if stop - start >= MIN_RUN:
+            cuts = np.linspace(start, stop, PIECES + 1).astype(np.int64)
+            out[start:stop] = np.searchsorted(cuts, np.arange(start, stop), side="right") - 1
+    return out
+
+
+def held_blocks(val_fraction: float) -> int:
+    """Time blocks (of PIECES) held out for ``val_fraction``: at least one when it is above 0,
+    and one left for training."""
+    return min(max(int(round(PIECES * val_fraction)), 1 if val_fraction > 0 else 0), PIECES - 1)
+
+
+def time_block(n: int) -> np.ndarray:
+    """(n,) int: the block 0..PIECES-1 of every row, the rows cut into PIECES contiguous blocks."""
+    cuts = np.linspace(0, n, PIECES + 1).astype(np.int64)
+    return np.searchsorted(cuts, np.arange(n), side="right") - 1
+
+
+def time_blocks(n: int, val_fraction: float, rng: np.random.Generator) -> np.ndarray:
+    """Boolean mask (n,) of validation rows: ``held_blocks(val_fraction)`` of the PIECES
+    contiguous blocks of ``time_block``, drawn at random."""
+    return np.isin(time_block(n), rng.choice(PIECES, size=held_blocks(val_fraction), replace=False))
+
+
+def _at_most(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """At most n of ``rows`` (sorted), drawn at random."""
+    return rows if rows.size <= n else np.sort(rng.choice(rows, size=n, replace=False))
+
+
 def balanced(rows: np.ndarray, labels: np.ndarray, n_target: int, rng: np.random.Generator) -> np.ndarray:
     """At most ``n_target`` of ``rows``, the same number from every label group (labels >= 0)."""
     rows = rows[labels[rows] >= 0]
@@ -141,11 +184,13 @@ def balanced(rows: np.ndarray, labels: np.ndarray, n_target: int, rng: np.random
 
 
 def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None = 2500, balance: bool = True,
-           rng: np.random.Generator, keep: np.ndarray | None = None) -> Selection:
+           rng: np.random.Generator, keep: np.ndarray | None = None, moving: np.ndarray | None = None) -> Selection:
     """Training and validation rows for a log with velocity ``qd`` (n,).
 
     ``max_samples`` bounds training plus validation rows after balancing (None: no bound);
-    ``keep`` (bool (n,)) restricts the rows that may be used at all.
+    ``keep`` (bool (n,)) restricts the rows that may be used at all. With ``balance``, a log
+    without velocity levels trains on the rows ``moving`` (bool (n,); default ``keep``) and
+    validates on whole blocks of time (mode "moving").
     """
     if not 0 <= val_fraction < 1:
         raise ValueError("val_fraction must be in [0, 1)")
@@ -158,6 +203,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
             full = np.full(n, -1, dtype=np.int64)
             full[usable] = labels
             labels = full
+        if mode != "levels":
+            return _moving(usable if moving is None else np.asarray(moving, dtype=bool), val_fraction, max_samples, rng)
     else:
         labels, mode = np.where(usable, 0, -1).astype(np.int64), "all"
     # runs: constant-velocity stretches for discrete levels, else stretches of usable rows
@@ -172,4 +219,18 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
         val_rows = balanced(val_rows, labels, n_val, rng)
     if train_rows.size == 0:
         raise DataError("no rows left to train on")
-    return Selection(train=train_rows, val=val_rows, mode=mode, groups=groups)
+    blocks = np.where(usable & (labels >= 0), pieces(run_labels), -1)
+    return Selection(train=train_rows, val=val_rows, blocks=blocks, mode=mode, groups=groups)
+
+
+def _moving(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
+    """Mode "moving": the rows ``moving`` (bool (n,)) of whole time blocks (``time_blocks``)."""
+    val_mask = time_blocks(moving.size, val_fraction, rng)
+    train_rows, val_rows = np.flatnonzero(moving & ~val_mask), np.flatnonzero(moving & val_mask)
+    if max_samples is not None and train_rows.size + val_rows.size > max_samples:
+        n_val = int(round(max_samples * val_rows.size / (train_rows.size + val_rows.size)))
+        train_rows, val_rows = _at_most(train_rows, max_samples - n_val, rng), _at_most(val_rows, n_val, rng)
+    if train_rows.size == 0:
+        raise DataError("no rows left to train on")
+    blocks = np.where(moving, time_block(moving.size), -1)
+    return Selection(train=train_rows, val=val_rows, blocks=blocks, mode="moving", groups=held_blocks(val_fraction))

@@ -207,3 +207,35 @@ def test_simulate_thin_base(tmp_path):
     assert out[True] < 0.3 * out[False]
     result = CliRunner().invoke(cli, ["simulate", "--scenario", "adapt", "--thin", "-o", str(tmp_path / "x.parquet")])
     assert result.exit_code == 2 and "--thin" in result.stderr
+
+
+def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
+    # trained up to 0.2 rad/s in the positive direction and 0.4 in the negative one
+    log = logs.from_table(motion_log((0.05, 0.1, 0.2), seed=1), name="slow")
+    qd = log.signals["qd"]
+    qd[qd < -0.15] = -0.4
+    model, _ = learning.train_base(log, steps=300, seed=0)
+    assert model.v_max_ == (pytest.approx(0.2), pytest.approx(0.4)) and min(model.slope_) >= 0
+    for direction, top in ((1.0, 0.2), (-1.0, 0.4)):
+        speeds = direction * np.array([top, 1.5 * top, 3 * top])
+        m = model.magnitude({"qd": speeds, "tau_g": np.full(3, 20.0)})
+        slope = model.y_scale_ * model.slope_[0 if direction > 0 else 1]
+        np.testing.assert_allclose(np.diff(m), slope * np.diff(np.abs(speeds)), rtol=1e-5, atol=1e-6)
+        # the secant over the upper half of the training speeds
+        inside = model.magnitude({"qd": direction * np.array([0.5 * top, top]), "tau_g": np.zeros(2)})
+        assert slope == pytest.approx(max(0.0, (inside[1] - inside[0]) / (0.5 * top)), rel=1e-5, abs=1e-9)
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, log, rows_used=1)
+    loaded, meta = models.load(path)
+    assert meta["model"]["params"]["extrapolation"]["v_max"] == list(model.v_max_)
+    sig = grid(log.signals, scale=3.0)
+    np.testing.assert_array_equal(loaded.predict(sig)[0], model.predict(sig)[0])
+    assert_dissipative(loaded, sig, loaded.v_ps_)
+    # files written without the records extrapolate as the network does
+    from fricli import modelfile
+
+    meta, arrays = modelfile.read(path)
+    del meta["model"]["params"]["extrapolation"]
+    modelfile.write(path, meta, arrays)
+    older = models.load(path)[0]
+    assert older.v_max_ is None and "beyond" not in older.describe() and "beyond" in model.describe()

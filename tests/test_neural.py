@@ -175,7 +175,7 @@ def test_velocity_input_options(files, tmp_path):
     sig = load(files["base"]).signals
     np.testing.assert_allclose(model._features(sig)[1], np.arcsinh(sig["qd"] / 0.01))
     # the residual network has no velocity input and no transform
-    adapted, _ = learning.adapt(model, load(files["adapt"]), epochs=2, seed=0)
+    adapted, _ = learning.adapt(model, load(files["adapt"]), epochs=2, seed=0, val_fraction=0)
     assert adapted.add.velocity_scale is None and "velocity" not in adapted.add.get_params()
     with pytest.raises(ValueError):
         MLPFriction(velocity_scale=-1.0)
@@ -347,8 +347,9 @@ def test_adapt_a_lugre_base(files, tmp_path):
 
 def test_adapt_an_adapted_model(files, base_model, tmp_path):
     once, twice = tmp_path / "once.npz", tmp_path / "twice.npz"
-    assert run("adapt", base_model, files["adapt"], "-o", once, "--epochs", 5, "-q").exit_code == 0
-    assert run("adapt", once, files["adapt"], "-o", twice, "--epochs", 5, "-q").exit_code == 0
+    # --val-fraction 0: the residual is kept unchecked, whatever 5 epochs gave
+    for base, out in ((base_model, once), (once, twice)):
+        assert run("adapt", base, files["adapt"], "-o", out, "--epochs", 5, "--val-fraction", 0, "-q").exit_code == 0
     model, meta = models.load(str(twice))
     assert meta["model"]["children"]["base"]["kind"] == "residual"
     assert model.predict(load(files["adapt"]).signals)[0].shape == (len(load(files["adapt"])),)
@@ -397,7 +398,7 @@ def test_train_base_on_emps(tmp_path):
     out = json.loads(result.stdout)
     model, meta = models.load(str(tmp_path / "emps.npz"))
     assert meta["axis"] == "linear" and meta["units"]["tau"] == "N"
-    assert out["velocity_groups"] in ("levels", "bins")
+    assert out["velocity_groups"] in ("levels", "moving")
     # better than the best constant (the EMPS target also holds the inertial force: no tau_dyn)
     target = logs.friction_target(load(path).signals)
     assert out["log"]["mae"] < np.mean(np.abs(target - np.median(target)))
@@ -426,3 +427,86 @@ def test_model_to_stdout(files):
     assert meta["kind"] == "dissipative" and "W0" in arrays
     clash = run("train-base", files["base"], "-o", "-", "--json")
     assert clash.exit_code == 2 and "stdout" in clash.stderr
+
+
+# ---------------------------------------------------------------------------- continuous excitation
+
+
+def harmonic_log(seed=0, rate=100.0, seconds=40.0, residual=None, base=None, noise=0.2):
+    """A sum of harmonics (no steady velocity level), friction static_friction plus noise; with
+    ``base`` (a model) the friction is base's prediction plus ``residual(qd, tau_g)`` instead."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * rate)) / rate
+    qd = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in
+             zip((0.4, 0.25, 0.15), (0.11, 0.23, 0.41), rng.uniform(0, 2 * np.pi, 3)))
+    q = np.cumsum(qd) / rate
+    g = 30 * np.sin(2 * q + 0.3)
+    sig = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": g}
+    f = static_friction(qd, g) if base is None else base.predict(sig)[0]
+    if residual is not None:
+        f = f + residual(qd, g)
+    cols = {**sig, "tau_m": g + f + rng.normal(0, noise, t.size), "tau_f_true": f}
+    return table_from_arrays(cols, UNITS)
+
+
+@pytest.fixture(scope="module")
+def harmonic(tmp_path_factory):
+    d = tmp_path_factory.mktemp("harmonic")
+    path = write(harmonic_log(seed=5), d / "harmonic.parquet")
+    model, summary = learning.train_base(load(path), steps=300, seed=0)
+    base = str(d / "base.npz")
+    models.save_for_log(base, model, load(path), rows_used=1, seed=0, fit=summary)
+    return {"log": path, "base": base, "model": model, "summary": summary, "dir": d}
+
+
+def test_train_base_on_continuous_excitation_uses_the_moving_rows_in_time_blocks(harmonic):
+    sig, summary = load(harmonic["log"]).signals, harmonic["summary"]
+    assert summary["velocity_groups"] == "moving"
+    sel = training_data.select(sig["qd"], rng=np.random.default_rng(0), keep=metrics.in_motion(sig["qd"], training_data.LOW),
+                               moving=metrics.in_motion(sig["qd"]))
+    assert sel.mode == "moving" and sel.train.size == summary["train_rows"] and sel.val.size == summary["val_rows"]
+    assert metrics.in_motion(sig["qd"])[np.concatenate([sel.train, sel.val])].all()
+    assert np.intersect1d(sel.train, sel.val).size == 0
+    # the validation rows lie in two of ten blocks of time, none of them trained on
+    cuts = np.linspace(0, sig["qd"].size, training_data.PIECES + 1).astype(int)
+    block = np.searchsorted(cuts, np.arange(sig["qd"].size), side="right") - 1
+    assert np.unique(block[sel.val]).size == 2 and not np.isin(block[sel.train], block[sel.val]).any()
+    # it learned the friction: far below the friction's own size on the rows in motion
+    target, moving = logs.friction_target(sig), metrics.in_motion(sig["qd"])
+    assert summary["moving"]["rmse"] < 0.3 * np.sqrt(np.mean(target[moving] ** 2))
+
+
+def test_train_base_says_it_trains_on_the_moving_rows(harmonic, tmp_path):
+    result = run("train-base", harmonic["log"], "-o", tmp_path / "m.npz", "--steps", 20)
+    assert result.exit_code == 0, result.stderr
+    assert "rows in motion" in result.stderr and "no steady velocity levels" in result.stderr
+    levels = run("train-base", write(motion_log(LEVELS, seed=1), tmp_path / "b.parquet"), "-o", tmp_path / "b.npz",
+                 "--steps", 20)
+    assert "velocity levels" in levels.stderr and "rows in motion" not in levels.stderr
+
+
+def test_adapt_keeps_the_base_when_the_residual_is_noise(harmonic, tmp_path):
+    noise = write(harmonic_log(seed=6, base=harmonic["model"], noise=0.5), tmp_path / "noise.parquet")
+    result = run("adapt", harmonic["base"], noise, "-o", tmp_path / "a.npz", "--epochs", 40, "--json")
+    assert result.exit_code == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["adapted"] is False and out["kind"] == "dissipative" and out["velocity_groups"] == "moving"
+    assert "the base model is kept" in result.stderr and "(the base model unchanged)" in result.stderr
+    written, meta = models.load(str(tmp_path / "a.npz"))
+    assert meta["kind"] == "dissipative" and meta["fit"]["adapted"] is False
+    held = meta["fit"]["held_out"]
+    assert held["helps"] is False and held["pieces"] == training_data.PIECES
+    sig = load(noise).signals
+    np.testing.assert_array_equal(written.predict(sig)[0], harmonic["model"].predict(sig)[0])
+
+
+def test_adapt_keeps_a_residual_that_helps(harmonic, tmp_path):
+    shifted = write(harmonic_log(seed=7, base=harmonic["model"], residual=lambda v, g: np.sign(v) * (1.5 + 0.04 * g)),
+                    tmp_path / "shifted.parquet")
+    result = run("adapt", harmonic["base"], shifted, "-o", tmp_path / "a.npz", "--epochs", 40, "--json")
+    assert result.exit_code == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert out["adapted"] is True and out["kind"] == "residual"
+    assert out["held_out"]["adapted_rmse"] < 0.5 * out["held_out"]["base_rmse"]
+    assert "the residual network is kept" in result.stderr
+    assert models.load(str(tmp_path / "a.npz"))[1]["fit"]["adapted"] is True

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from fricli import learning, training_data
 from fricli.cli import cli
 from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, output_option, progress_enabled, say, spec_options, wrote)
@@ -39,6 +40,30 @@ def _mae(summary: dict, key: str) -> str:
     return f"{summary[key]['mae']:.3f}" if key in summary else "-"
 
 
+def _rows_used(summary: dict) -> str:
+    """How train-base chose its rows, for its message."""
+    mode, val = summary["velocity_groups"], summary["val_rows"]
+    if mode == "moving":
+        return (f"rows in motion ({val} for validation in {summary['groups']} of "
+                f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
+    return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
+
+
+def _decision(summary: dict, tau: str) -> str:
+    """adapt's verdict on its held-out rows, for its message."""
+    held = summary.get("held_out")
+    if held is None:
+        return "no rows held out (--val-fraction 0): the residual network is kept unchecked"
+    if "base_rmse" not in held:
+        return "too few rows to hold out (fewer than two pieces of motion): the base model is kept"
+    figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
+               f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f}")
+    if summary["adapted"]:
+        return f"{figures}; the residual network is kept"
+    return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
+            f"and in most pieces of the log): the base model is kept")
+
+
 @cli.command("train-base")
 @click.argument("log")
 @output_option(help="Model file to write (.npz; - for stdout), or a folder for one model per joint (docs/joints.md).")
@@ -57,6 +82,8 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
     level are held out for validation, and the weights with the lowest validation loss are kept.
+    A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
+    rows in motion instead and holds out whole blocks of time; stderr says which.
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
@@ -76,9 +103,8 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
     def report(made):
         the_log, summary, out, seconds = made.data, made.summary, made.output, made.seconds
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} rows ({summary['val_rows']} for validation, "
-            f"{summary['groups']} velocity {'levels' if summary['velocity_groups'] == 'levels' else 'groups'}) "
-            f"of {the_log.name}{where} in {seconds:.1f} s; weights from step {summary['best_step']} of "
+        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary)} of {the_log.name}{where} in "
+            f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
@@ -107,10 +133,13 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
 def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     """Adapt BASE (any fricli model) to LOG by learning its residual: tau_f = base + NN_add(tau_g, sign(qd)).
 
-    NN_add (one hidden layer of ELU units) is trained on the friction target minus BASE's
+    NN_add (ELU layers, --hidden; one of 30 units by default) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model. BASE may be a model folder (one model per joint):
+    with every command that takes a model. Held-out rows decide (cross-validated over whole
+    pieces of every stretch of motion; for a log without velocity levels, whole blocks of
+    time): when NN_add does not lower the RMS error there consistently, the output is BASE
+    unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
 
     \b
@@ -135,8 +164,10 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
         if outside is not None:
             say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
                 "outside the base model's training envelope", quiet)
-        say(wrote(out), quiet)
-        return {"model": out, "kind": "residual", "base": base_path, "seconds": round(made.seconds, 3), **summary}
+        say(_decision(summary, tau), quiet)
+        say(wrote(out) + ("" if summary["adapted"] else " (the base model unchanged)"), quiet)
+        return {"model": out, "kind": made.model.kind, "base": base_path, "seconds": round(made.seconds, 3),
+                **summary}
 
     def progress(data):
         return _Progress(quiet, "adapt" + (f" joint {data.joint}" if data.joint is not None else ""))

@@ -55,7 +55,8 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
              "    double x[2], r0, s_;",
-             f"    s_ = fabs(qd) / {num(model.v0_)};",
+             (f"    s_ = fabs(qd) / {num(model.v0_)};" if model.v_max_ is None else
+              f"    s_ = fmin(fabs(qd), qd > 0.0 ? {num(model.v_max_[0])} : {num(model.v_max_[1])}) / {num(model.v0_)};"),
              "    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
              "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
              f"    x[0] = (s_ - {num(model.u_mean_)}) / {num(model.u_scale_)};",
@@ -63,5 +64,8 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              f"    r0 = {name}_net(x);",
              "    r0 = log(1.0 + exp(-fabs(r0))) + (r0 > 0.0 ? r0 : 0.0);   /* softplus(r0), to 1e-16 absolute */",
              f"    r0 = r0 + {num(acts.softplus(np.float64(b1)))} * (fabs({tau_g}) / {num(model.g_scale_)});",
+             *([] if model.v_max_ is None else [   # linear beyond the top training speeds
+                 f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
+                 f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),
              f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
     return Part(name, "\n".join(lines), stateful=False)

@@ -22,6 +22,16 @@ pair; and the slope is learned from every speed at once, so a slow level seen at
 cannot trade it for a different velocity dependence. Asymmetry between the directions comes
 through the sign(qd) input.
 
+Beyond the training speeds. A network of asinh(|qd| / v0) extrapolates logarithmically in the
+speed, and a direction trained only at slow speeds can bend anywhere. Above the top training
+speed v_top of its direction (v_max, recorded per direction) the network sees v_top, and the
+magnitude grows linearly with the speed instead, by the mean slope of the learned magnitude
+(at tau_g = 0) over the upper half of the training speeds, at least 0 (``slope``):
+
+    m(|qd| > v_top) = m(v_top) + slope * (|qd| - v_top)
+
+Models written without these records extrapolate as the network does.
+
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
 PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
 training target. Training minimises the mean squared error of tau_f / y_scale with the
@@ -69,6 +79,8 @@ class DissipativeFriction(FrictionModel):
         self.eval_every, self.units = eval_every, dict(units or {})
         self.velocity_scale, self.presliding_speed = velocity_scale, presliding_speed
         self.net_: HeadedNetwork | None = None
+        self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
+        self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
 
     # ------------------------------------------------------------------ inputs
 
@@ -85,7 +97,8 @@ class DissipativeFriction(FrictionModel):
         g = sig.get("tau_g")
         g = np.zeros_like(qd) if g is None else np.asarray(g, dtype=np.float64)
         out = np.empty((4, qd.size))
-        np.arcsinh(np.abs(qd) / self.v0_, out=out[0])
+        speed = np.abs(qd) if self.v_max_ is None else np.minimum(np.abs(qd), self._by_direction(qd, self.v_max_))
+        np.arcsinh(speed / self.v0_, out=out[0])
         out[0] -= self.u_mean_
         out[0] /= self.u_scale_
         np.sign(qd, out=out[1])
@@ -93,6 +106,11 @@ class DissipativeFriction(FrictionModel):
         np.abs(g, out=out[3])
         out[3] /= self.g_scale_
         return out
+
+    @staticmethod
+    def _by_direction(qd: np.ndarray, pair: tuple[float, float]) -> np.ndarray:
+        """pair[0] where qd > 0, pair[1] elsewhere (n,)."""
+        return np.where(qd > 0, pair[0], pair[1])
 
     # ------------------------------------------------------------------ fitting
 
@@ -132,7 +150,19 @@ class DissipativeFriction(FrictionModel):
         trainer.fit(net, x, y, xv, tv, rng=rng)
         self.net_ = net
         record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])
+        self._fit_extrapolation(np.asarray(sig["qd"], dtype=np.float64))
         return self
+
+    def _fit_extrapolation(self, qd: np.ndarray) -> None:
+        """v_max_ and slope_ from the training velocities qd (n,) (see the module doc)."""
+        top = [float(np.max(np.abs(qd[side]), initial=0.0)) for side in (qd > 0, qd < 0)]
+        self.v_max_ = (top[0] or top[1], top[1] or top[0])
+        self.slope_ = (0.0, 0.0)
+        slopes = []
+        for direction, v in zip((1.0, -1.0), self.v_max_):
+            m = self.magnitude({"qd": direction * np.array([0.5 * v, v]), "tau_g": np.zeros(2)})
+            slopes.append(max(0.0, float(m[1] - m[0]) / (0.5 * v) / self.y_scale_))
+        self.slope_ = (slopes[0], slopes[1])
 
     # ------------------------------------------------------------------ predicting
 
@@ -173,6 +203,12 @@ class DissipativeFriction(FrictionModel):
                     ws = net.workspace(stop - start, backward=False)
                 ws.set_inputs(x)
                 np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
+                if self.v_max_ is not None:
+                    qd = signals["qd"][start:stop]
+                    beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
+                    if (beyond > 0).any():
+                        grow = self._by_direction(qd, self.slope_) * np.maximum(beyond, 0.0) * self.y_scale_
+                        out[start:stop] += grow * x[2]
 
         predict_in_chunks(n, run)
         return out
@@ -191,6 +227,8 @@ class DissipativeFriction(FrictionModel):
         if self.net_ is not None:
             params["network"] = self.net_.spec()
             params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
+            if self.v_max_ is not None:
+                params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
             params["fitted"] = training_params(self)
         return params
 
@@ -225,6 +263,12 @@ class DissipativeFriction(FrictionModel):
         if net.theta[net.frozen].any():
             raise ValueError("the load slope depends on the speed")
         model.net_ = net
+        extra = params.get("extrapolation")
+        if extra is not None:
+            v_max, slope = extra.get("v_max"), extra.get("slope")
+            if not (_pair(v_max) and _pair(slope) and min(v_max) > 0 and min(slope) >= 0):
+                raise ValueError(f"damaged extrapolation {extra!r}")
+            model.v_max_, model.slope_ = (float(v_max[0]), float(v_max[1])), (float(slope[0]), float(slope[1]))
         load_training(model, params, arrays)
         return model
 
@@ -243,8 +287,18 @@ class DissipativeFriction(FrictionModel):
                   f"  v0 {self.v0_:.4g} {v}, pre-sliding speed v_ps {self.v_ps_:.4g} {v}, "
                   f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}",
                   f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"]
+        if self.v_max_ is not None:
+            lines.append(f"  beyond the top training speeds (+{self.v_max_[0]:.4g} / -{self.v_max_[1]:.4g} {v}) the "
+                         f"magnitude grows by {self.y_scale_ * self.slope_[0]:.4g} / "
+                         f"{self.y_scale_ * self.slope_[1]:.4g} {tau} per {v}")
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
         lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
                      f"({self.n_val_} for validation); weights kept from step {self.best_step_}")
         return "\n".join(lines)
+
+
+def _pair(value) -> bool:
+    """Two finite numbers."""
+    return (isinstance(value, list) and len(value) == 2
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in value))

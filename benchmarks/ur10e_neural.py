@@ -1,0 +1,180 @@
+"""Neural models on the real UR10e arm: train-base against the LuGre model on runs of other
+days, and adapt on one run of a day scored on another run of the same day.
+
+    python benchmarks/ur10e_neural.py                 # both tables (about 10 minutes on 2 cores)
+    python benchmarks/ur10e_neural.py --part base     # the train-base table only
+    python benchmarks/ur10e_neural.py --part adapt --json out.json
+
+Every model comes from the fricli command line (the commands are printed on stderr and listed
+at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
+the friction target tau_m - tau_g - tau_dyn minus the model's prediction, pooled over the runs
+scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10).
+
+- base: ``identify`` and ``train-base`` on ur-20_02_12-50sec_12harm, scored on every run of
+  19_10_01, 20_02_05, 20_02_06 and 20_02_10.
+- adapt: the bases (LuGre from ``identify``, NN_base from ``train-base``) fitted on
+  ur-20_02_19_14harm50sec, a day of no pair; for each day with two runs, ``adapt`` on one run,
+  scored on the other, both ways round, against the base on that other run.
+
+Data: ../shared/data/ur10e (see ../shared/data/README.md), or --data.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from fricli import logs, metrics, models  # noqa: E402
+
+DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "ur10e")
+MAPPING = os.path.join(ROOT, "docs", "ur10e-mapping.toml")
+JOINTS = (1, 2, 3, 4, 5, 6)
+CUTOFF_HZ = 10.0
+BASE_FIT = "ur-20_02_12-50sec_12harm"
+BASE_VALIDATION = ("ur-19_10_01-13_51_41", "ur-19_10_01-14_04_13", "ur-19_10_01-14_04_41",
+                   "ur-20_02_05-20sec_12harm", "ur-20_02_05-20sec_8harm", "ur-20_02_06-20sec_10harm",
+                   "ur-20_02_06-20sec_5harm", "ur-20_02_10-20sec_7harm", "ur-20_02_10-30sec_12harm")
+ADAPT_BASE = "ur-20_02_19_14harm50sec"
+PAIRS = (("ur-19_10_01-14_04_13", "ur-19_10_01-14_04_41"),
+         ("ur-20_02_05-20sec_12harm", "ur-20_02_05-20sec_8harm"),
+         ("ur-20_02_06-20sec_10harm", "ur-20_02_06-20sec_5harm"),
+         ("ur-20_02_10-20sec_7harm", "ur-20_02_10-30sec_12harm"),
+         ("ur-20_02_12-40sec_12harm", "ur-20_02_12-50sec_12harm"))
+
+COMMANDS: list[str] = []
+
+
+def fricli(*args: str, json_out: bool = False):
+    """Run one fricli command as a user would; its --json output when asked."""
+    shown = " ".join(args)
+    COMMANDS.append(shown)
+    print(f"$ fricli {shown}", file=sys.stderr, flush=True)
+    done = subprocess.run([sys.executable, "-m", "fricli", *args], capture_output=True, text=True,
+                          env=dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")))
+    if done.returncode != 0:
+        raise SystemExit(f"fricli {shown} failed ({done.returncode}): {done.stderr.strip()}")
+    return json.loads(done.stdout) if json_out else None
+
+
+def import_run(data: str, work: str, name: str) -> str:
+    out = os.path.join(work, name + ".parquet")
+    if not os.path.exists(out):
+        fricli("import", os.path.join(data, "identification", name + ".csv"), "--mapping", MAPPING,
+               "--urdf", os.path.join(data, "ur10e.urdf"), "--cutoff", str(CUTOFF_HZ), "-o", out, "-q")
+    return out
+
+
+def moving_error(model_dir: str, runs: list[str], joint: int) -> float:
+    """RMS [Nm] over the rows in motion of target - prediction, pooled over ``runs``."""
+    model = models.load(os.path.join(model_dir, f"joint_{joint}.npz"))[0]
+    errs = []
+    for path in runs:
+        sig = logs.load_log(path, joint=str(joint)).signals
+        e = logs.friction_target(sig) - model.predict(sig)[0]
+        errs.append(e[metrics.in_motion(sig["qd"])])
+    e = np.concatenate(errs)
+    return float(np.sqrt(np.mean(e * e)))
+
+
+def base_part(data: str, work: str, seed: int) -> dict:
+    fit = import_run(data, work, BASE_FIT)
+    runs = [import_run(data, work, name) for name in BASE_VALIDATION]
+    lugre, nn = os.path.join(work, "base-lugre"), os.path.join(work, f"base-nn-s{seed}")
+    fricli("identify", fit, "-o", lugre, "-q")
+    fricli("train-base", fit, "--seed", str(seed), "-o", nn, "-q")
+    rows = []
+    for j in JOINTS:
+        a, b = moving_error(lugre, runs, j), moving_error(nn, runs, j)
+        rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a})
+    return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "joints": rows}
+
+
+def adapt_part(data: str, work: str, seed: int) -> dict:
+    fit = import_run(data, work, ADAPT_BASE)
+    bases = {"lugre": os.path.join(work, "adapt-base-lugre"), "nn": os.path.join(work, f"adapt-base-nn-s{seed}")}
+    fricli("identify", fit, "-o", bases["lugre"], "-q")
+    fricli("train-base", fit, "--seed", str(seed), "-o", bases["nn"], "-q")
+    cases = []
+    for first, second in PAIRS:
+        for on, scored in ((first, second), (second, first)):
+            on_path, scored_path = import_run(data, work, on), import_run(data, work, scored)
+            for kind, base in bases.items():
+                out = os.path.join(work, f"adapted-{kind}-s{seed}-{on}")
+                results = fricli("adapt", base, on_path, "--seed", str(seed), "-o", out, "--json", "-q",
+                                 json_out=True)
+                kept = {int(j): r.get("adapted", True) for j, r in results["joints"].items()}  # no key: always adapted
+                for j in JOINTS:
+                    cases.append({"base": kind, "adapted_on": on, "scored_on": scored, "joint": j,
+                                  "residual_kept": kept[j], "base_error": moving_error(base, [scored_path], j),
+                                  "adapted_error": moving_error(out, [scored_path], j)})
+    return {"base_fit": ADAPT_BASE, "cases": cases}
+
+
+def base_table(result: dict) -> str:
+    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre |", "|---|---:|---:|---:|"]
+    for r in result["joints"]:
+        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} |")
+    return "\n".join(lines)
+
+
+def adapt_table(result: dict, kind: str) -> str:
+    lines = ["| adapted on | scored on | " + " | ".join(f"joint {j}" for j in JOINTS) + " |",
+             "|---|---|" + "---|" * len(JOINTS)]
+    cases = [c for c in result["cases"] if c["base"] == kind]
+    for on, scored in dict.fromkeys((c["adapted_on"], c["scored_on"]) for c in cases):
+        cells = []
+        for c in (c for c in cases if c["adapted_on"] == on and c["scored_on"] == scored):
+            mark = "" if c["residual_kept"] else " (base kept)"
+            cells.append(f"{c['base_error']:.3f} → {c['adapted_error']:.3f}{mark}")
+        lines.append(f"| {on[3:]} | {scored[3:]} | " + " | ".join(cells) + " |")
+    worse = [c for c in cases if c["adapted_error"] > c["base_error"]]
+    ratios = [c["adapted_error"] / c["base_error"] for c in cases]
+    lines.append("")
+    lines.append(f"adapted / base on the other run: {min(ratios):.3f} to {max(ratios):.3f}; "
+                 f"worse than the base in {len(worse)} of {len(cases)} cases")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default=DEFAULT_DATA)
+    parser.add_argument("--work", default=None, help="working folder (default: a temporary one)")
+    parser.add_argument("--part", choices=("base", "adapt", "both"), default="both")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--json", default=None, help="also write the figures to this file")
+    args = parser.parse_args()
+    if not os.path.isdir(os.path.join(args.data, "identification")):
+        raise SystemExit(f"no UR10e data at {args.data}")
+    with tempfile.TemporaryDirectory() as scratch:
+        work = args.work or scratch
+        os.makedirs(work, exist_ok=True)
+        out = {}
+        if args.part in ("base", "both"):
+            out["base"] = base_part(args.data, work, args.seed)
+            print(f"## train-base on {BASE_FIT}, in-motion RMS on the runs of other days\n")
+            print(base_table(out["base"]) + "\n")
+        if args.part in ("adapt", "both"):
+            out["adapt"] = adapt_part(args.data, work, args.seed)
+            for kind, label in (("lugre", "LuGre"), ("nn", "NN_base")):
+                print(f"## adapt {label} (fitted on {ADAPT_BASE}): base → adapted, in-motion RMS [Nm] "
+                      "on the other run of the day\n")
+                print(adapt_table(out["adapt"], kind) + "\n")
+        print("Commands run (WORK is the working folder):\n")
+        for command in COMMANDS:
+            print("    fricli " + command.replace(work, "WORK").replace(args.data, "DATA").replace(ROOT + os.sep, ""))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(out, fh, indent=1)
+
+
+if __name__ == "__main__":
+    main()
