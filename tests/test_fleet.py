@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from fricli import errors
+from fricli import errors, logs, metrics, models
 from fricli.fleet import history, manifest, trend
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -356,6 +356,12 @@ def test_fleet_job_and_command_write_the_same_bytes(tmp_path, pipeline):
                            base=str(bases / f"joint_{joint}.npz") if pipeline == "adapt" else None)
         result = pipelines.run(job)
         assert result["status"] == "ok", result
+        # the history's error figures: over the rows in motion, whatever the pipeline
+        data = logs.load_log(log, joint=joint)
+        model = models.load(job.model)[0]
+        moving = metrics.in_motion(data.signals["qd"])
+        want = metrics.errors(logs.friction_target(data.signals)[moving], model.predict(data.signals)[0][moving])
+        assert result["errors"] == pytest.approx(want)
         command_file = tmp_path / "cmd" / f"joint_{joint}.npz"
         assert (tmp_path / "fleet" / f"joint{joint}.npz").read_bytes() == command_file.read_bytes()
     # and each is up to date for the other

@@ -6,7 +6,7 @@ import os
 
 import click
 
-from fricli import joints, logs, modelset, models
+from fricli import logs, modelset, models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 read_log, reading_kwargs, say)
@@ -151,7 +151,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     del reading["joint"]
     table_, digest = read_log(log)
     name = "stdin" if log == "-" else log
-    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
+    pairs = modelset.paired(source, table_, name, joint)
     several = len(pairs) > 1
 
     def show(result, data, model_path) -> None:
