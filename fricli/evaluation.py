@@ -112,7 +112,8 @@ def static_friction(model, qd: np.ndarray, tau_g: np.ndarray, like: dict | None 
 
     Points are spaced 1000 s apart with zero acceleration, so every history-dependent state
     (e.g. the LuGre bristles) settles between them. Other inputs the model reads are held at
-    the median of ``like`` (a log's signals), or zero.
+    the median of ``like`` (a log's signals), or zero; a model that reads the motor torque (a
+    payload term) gets the steady state's, tau_g plus the friction of a first pass.
     """
     qd = np.asarray(qd, dtype=np.float64).ravel()
     n = qd.size
@@ -122,4 +123,8 @@ def static_friction(model, qd: np.ndarray, tau_g: np.ndarray, like: dict | None 
         if name not in sig:
             value = float(np.median(like[name])) if like is not None and name in like else 0.0
             sig[name] = np.full(n, value)
-    return model.predict(sig)[0]
+    out = model.predict(sig)[0]
+    if "tau_m" in model.required_inputs():
+        sig["tau_m"] = sig["tau_g"] + out
+        out = model.predict(sig)[0]
+    return out

@@ -238,7 +238,7 @@ class LuGreIdentifier:
         if self.samples == "auto":
             share = steady.sum() / max(int(moving.sum()), 1)
             # away from holds the target is static friction only if the inertia has been removed
-            continuous = share < self.min_steady_share and "tau_dyn" in sig
+            continuous = share < self.min_steady_share and "tau_dyn" in sig and bool(np.any(sig["tau_dyn"]))
             self.samples_ = "settled" if continuous else "steady"
             if self.samples_ == "settled":
                 self.notes_.append(f"constant-velocity holds cover {100 * share:.0f} % of the moving rows: the "

@@ -8,6 +8,12 @@ A log holds one row per sample. Columns (SI units unless the Parquet field metad
 
 A linear axis uses m, m/s, m/s^2 and N in the same columns. Every model kind sees a log
 through ``Log.signals``: float64 arrays of shape (n,) in canonical units.
+
+Columns are inputs (``INPUTS``: what a controller has, the only ones a model, an effect term or
+exported C reads) or references (``REFERENCES``, and any column whose field metadata ``role`` is
+``reference``: what results are scored against). The robot-model columns tau_g and tau_dyn are
+unknown when absent, not zero: they count as zero only when declared so (``from_table(zero=...)``,
+the options --no-gravity/--no-dynamics, or the schema metadata key ``fricli.zero_columns``).
 """
 
 from __future__ import annotations
@@ -31,6 +37,19 @@ pq = lazy.module("pyarrow.parquet")
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
+# what a controller has: models read these only (i_m counts as tau_m with kt)
+INPUTS = ("t", "q", "qd", "qdd", "tau_m", "i_m", "tau_g", "tau_dyn", "temp")
+# what results are scored against, never a model input; a column marked with the field metadata
+# ``role: reference`` is one too (it is carried through but not read into ``Log.signals``)
+REFERENCES = ("tau_ext", "tau_f_true")
+ROLE_KEY, REFERENCE_ROLE = b"role", b"reference"
+# robot-model columns: unknown when absent; zero only when declared (option, schema metadata key)
+ROBOT_MODEL = {"tau_g": ("--no-gravity", "the robot model's gravity torque",
+                         "if the joint carries no gravity load (e.g. a horizontal axis)"),
+               "tau_dyn": ("--no-dynamics", "the robot model's inertia and Coriolis torque",
+                           "to take it as 0 (the inertia then stays in the friction target; diagnose finds it "
+                           "as 'acceleration')")}
+ZERO_KEY = b"fricli.zero_columns"   # schema metadata: JSON list of robot-model columns declared zero
 DEFAULT_CUTOFF_HZ = 50.0
 
 # unit spelling -> (dimension, factor to canonical)
@@ -181,6 +200,7 @@ class Log:
     sha256: str
     name: str
     derived: dict                  # {"columns": [...], "cutoff_hz": float} when derived
+    zero: tuple = ()               # robot-model columns the log lacks, declared zero (filled in signals)
 
     @property
     def units(self) -> dict:
@@ -256,7 +276,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
     out: dict[str, np.ndarray] = {}
     for field in table.schema:
         column = field.name
-        if column == "joint":
+        if column == "joint" or (is_marked_reference(field) and column not in REFERENCES):
             continue
         typ = field.type
         if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
@@ -276,6 +296,49 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
             raise LogError(f"{name}: the log has motor current 'i_m' but no 'tau_m': give --kt (Nm/A)")
         out["tau_m"] = out["i_m"] * kt
     return out
+
+
+def is_marked_reference(field: pa.Field) -> bool:
+    """Whether the field metadata marks the column as a reference (``role: reference``)."""
+    return (field.metadata or {}).get(ROLE_KEY, b"").strip().lower() == REFERENCE_ROLE
+
+
+def missing_robot_model(column: str) -> str:
+    """The one-line refusal for a robot-model column the log lacks and nobody declared zero."""
+    option, meaning, when = ROBOT_MODEL[column]
+    return (f"the log has no '{column}' column ({meaning}): unknown, not zero; add it with "
+            f"'fricli import ... --urdf', or give {option} {when}")
+
+
+def require_robot_model(schema: pa.Schema, name: str, zero=()) -> None:
+    """DataError (one line, with the fix) when the log lacks tau_g or tau_dyn and neither the
+    options (``zero``) nor the log's metadata declare it zero: checked once before any joint is
+    fitted or predicted."""
+    declared = declared_zero(schema, name, zero)
+    for column in ROBOT_MODEL:
+        if column not in schema.names and column not in declared:
+            raise DataError(f"{name}: {missing_robot_model(column)}")
+
+
+def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
+    """Robot-model columns declared zero: ``zero`` (the options) and the schema metadata key
+    ``fricli.zero_columns`` (a JSON list). LogError for a name that is not tau_g or tau_dyn."""
+    import json
+
+    found = list(zero)
+    raw = (schema.metadata or {}).get(ZERO_KEY)
+    if raw is not None:
+        try:
+            listed = json.loads(raw)
+        except ValueError:
+            listed = None
+        if not isinstance(listed, list):
+            raise LogError(f"{name}: the metadata key fricli.zero_columns is not a JSON list of column names")
+        found += listed
+    bad = [c for c in found if c not in ROBOT_MODEL]
+    if bad:
+        raise LogError(f"{name}: only tau_g and tau_dyn can be declared zero, not {bad[0]!r}")
+    return tuple(c for c in ROBOT_MODEL if c in found)
 
 
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
@@ -392,8 +455,10 @@ def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
-               cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None) -> Log:
-    """Check ``table`` against the contract and build a ``Log`` for one joint."""
+               cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=()) -> Log:
+    """Check ``table`` against the contract and build a ``Log`` for one joint. ``zero``: robot-model
+    columns (tau_g, tau_dyn) declared zero when the log lacks them (``declared_zero``); they are
+    filled with zeros in ``signals``, with a note through ``warn``."""
     table, joint = select_joint(table, joint, name)
     axis = axis_of(table.schema, name)
     sig = table_signals(table, axis, name, kt=kt)
@@ -401,7 +466,13 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     if mask is not None:
         table = take_rows(table, mask)
     derived = derive_motion(sig, cutoff_hz)
-    return Log(table=table, signals=sig, axis=axis, joint=joint, sha256=sha256, name=name, derived=derived)
+    zero = tuple(c for c in declared_zero(table.schema, name, zero) if c not in sig)
+    for column in zero:
+        sig[column] = np.zeros(len(sig["t"]))
+    if zero and warn:
+        warn(f"note: {name}: no {' and no '.join(zero)} column: taken as 0, as declared")
+    return Log(table=table, signals=sig, axis=axis, joint=joint, sha256=sha256, name=name, derived=derived,
+               zero=zero)
 
 
 def load_log(path: str, **kwargs) -> Log:
@@ -414,27 +485,28 @@ def load_log(path: str, **kwargs) -> Log:
 
 
 def friction_target(sig: dict[str, np.ndarray]) -> np.ndarray:
-    """tau_f = tau_m + tau_ext - tau_g - tau_dyn [Nm]: the torque lost to friction,
-    positive along the motion. Absent optional terms count as zero (``column``)."""
+    """tau_f = tau_m + tau_ext - tau_g - tau_dyn [Nm]: the torque lost to friction, positive along
+    the motion. A training and scoring target, not a model input: it reads the reference tau_ext
+    where the log measures it (a log without it is taken to move free of external torque). A
+    missing tau_g or tau_dyn is refused (``column``) unless declared zero when the log was read."""
     return sig["tau_m"] + column(sig, "tau_ext") - column(sig, "tau_g") - column(sig, "tau_dyn")
 
 
 def external_torque(sig: dict[str, np.ndarray], tau_f_pred: np.ndarray) -> np.ndarray:
-    """tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m [Nm]."""
+    """tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m [Nm]: inputs only."""
     return tau_f_pred - sig["tau_m"] + column(sig, "tau_g") + column(sig, "tau_dyn")
 
 
-# Torque terms a log may leave out: a missing one counts as zero everywhere.
-OPTIONAL_TORQUES = ("tau_g", "tau_dyn", "tau_ext")
-
-
 def column(sig: dict[str, np.ndarray], name: str, start: int = 0, stop: int | None = None) -> np.ndarray:
-    """Rows start:stop of a signal, or zeros for a missing optional torque term (OPTIONAL_TORQUES)."""
+    """Rows start:stop of a signal. A missing tau_ext (a reference: no external torque measured)
+    gives zeros; a missing robot-model column (tau_g, tau_dyn) is unknown: DataError with the fix."""
     if name in sig:
         return sig[name][start:stop]
-    if name in OPTIONAL_TORQUES:
+    if name == "tau_ext":
         rows = next((len(v) for v in sig.values()), 0)
         return np.zeros(len(range(rows)[start:stop]))
+    if name in ROBOT_MODEL:
+        raise DataError(missing_robot_model(name))
     raise DataError(f"the log has no column {name!r}")
 
 

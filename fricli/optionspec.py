@@ -116,7 +116,13 @@ READING = (
            unit="Hz", low=0, low_open=True),
     Option("drop_invalid", "flag", False,
            "Drop rows with NaN or infinite values (with a warning) instead of refusing the log."),
+    Option("no_gravity", "flag", False, "When the log has no tau_g column, take tau_g as 0: the joint carries no "
+                                        "gravity load."),
+    Option("no_dynamics", "flag", False, "When the log has no tau_dyn column, take tau_dyn (inertia and Coriolis "
+                                         "torque) as 0."),
 )
+# the flags that declare a robot-model column zero (docs/log-format.md) -> that column
+ZERO_FLAGS = {"no_gravity": "tau_g", "no_dynamics": "tau_dyn"}
 
 IDENTIFY = (
     Option("hold", "float", 0.2, "Steady state: the velocity must have been constant for at least this long [s].",

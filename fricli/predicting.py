@@ -232,6 +232,7 @@ class Reading:
     drop_invalid: bool = False
     window: timewindow.Window | None = None
     batch_rows: int = DEFAULT_BATCH_ROWS
+    zero: tuple = ()               # robot-model columns declared zero (logs.from_table)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -261,11 +262,13 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
     """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
     file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` (and
     ``outputs``) added to ``out_path`` (``-``: stdout). Rows keep their order; rows of joints the
-    run does not cover are left out, and rows outside ``reading.window``. ``on_rows(rows, total)``
+    run does not cover are left out, and rows outside ``reading.window``. A log without tau_g or
+    tau_dyn is refused unless ``reading.zero`` declares it zero. ``on_rows(rows, total)``
     is called as each record batch of ``rows`` of the log's ``total`` is read (progress).
     Returns the figures."""
     joint, window, batch_rows = reading.joint, reading.window, reading.batch_rows
     pf, name = open_log(log_path)
+    logs.require_robot_model(pf.schema_arrow, name, reading.zero)
     limits = timewindow.limits_of_file(pf, window, name) if window else None
     found = file_joints(pf, name)
     streams = {}
@@ -336,8 +339,8 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
     if warnings and warn:
         if dropped:
             warn(f"warning: dropped {dropped} rows with NaN or infinite values")
-        else:
-            for message in dict.fromkeys(warnings):
+        for message in dict.fromkeys(warnings):
+            if not dropped or message.startswith("note:"):
                 warn(message)
     per_joint = None
     n_outside = sum(st.outside for st in streams.values())
@@ -367,7 +370,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         table = table.remove_column(jpos)
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
-                              drop_invalid=reading.drop_invalid, warn=warnings.append)
+                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero)
     except LogError as exc:
         if reason is None and (offset or table.num_rows < total):
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None

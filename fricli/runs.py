@@ -64,10 +64,22 @@ def check_train_base(opts: dict) -> None:
                                      "asinh(|qd| / v0); use --arch mlp", "velocity_input")
 
 
+def zero(opts: dict) -> tuple[str, ...]:
+    """The robot-model columns the options declare zero (--no-gravity, --no-dynamics)."""
+    return tuple(column for flag, column in optionspec.ZERO_FLAGS.items() if opts.get(flag))
+
+
+def check_table(table, name: str, opts: dict) -> None:
+    """LogError when the log lacks tau_g or tau_dyn and the options do not declare it zero
+    (checked once, before any joint)."""
+    logs.require_robot_model(table.schema, name, zero(opts))
+
+
 def read(table, digest: str, name: str, opts: dict, joint=None, warn=None) -> logs.Log:
     """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options."""
     return logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
-                           kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], warn=warn)
+                           kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], warn=warn,
+                           zero=zero(opts))
 
 
 def record(pipeline: str, opts: dict, data: logs.Log, base: str | None = None, window: dict | None = None) -> dict:
@@ -186,6 +198,7 @@ def run_file(pipeline: str, log: str, output: str, given: dict, *, base: str | N
     (what was made or None when up to date, the log's sha256)."""
     opts = options(pipeline, given)
     table, digest = logs.read_table(log)
+    check_table(table, log, opts)
     data = read(table, digest, log, opts)
     return run(pipeline, data, output, opts, base=base, if_changed=if_changed), digest
 

@@ -16,8 +16,30 @@ def rng():
     return np.random.default_rng(1234)
 
 
+def declare_zero(table, *columns):
+    """``table`` with the schema metadata key fricli.zero_columns: the robot-model columns (tau_g,
+    tau_dyn; default tau_dyn) it lacks are zero, as for a log with no inertia torque in tau_m."""
+    import json
+
+    meta = dict(table.schema.metadata or {})
+    meta[b"fricli.zero_columns"] = json.dumps(list(columns or ("tau_dyn",))).encode()
+    return table.replace_schema_metadata(meta)
+
+
+def no_inertia(table):
+    """``table`` with a tau_dyn column of zeros in tau_m's unit: a synthetic log whose tau_m holds no
+    inertia torque (a missing tau_dyn is unknown, not zero)."""
+    from fricli import logs
+
+    if "tau_dyn" in table.column_names:
+        return table
+    unit = logs.field_unit(table.schema.field("tau_m")) if "tau_m" in table.column_names else "Nm"
+    return logs.with_column(table, "tau_dyn", np.zeros(table.num_rows), unit or "Nm")
+
+
 def make_table(n=500, rate=100.0, units=None, **extra):
-    """A small valid log: sinusoidal motion, friction = 5 sign(qd) + 10 qd."""
+    """A small valid log: sinusoidal motion, friction = 5 sign(qd) + 10 qd, no inertia torque
+    (tau_dyn zero)."""
     t = np.arange(n) / rate
     q = 0.5 * np.sin(0.5 * t)
     qd = 0.25 * np.cos(0.5 * t)
@@ -27,7 +49,7 @@ def make_table(n=500, rate=100.0, units=None, **extra):
     cols.update(extra)
     default_units = {"t": "s", "q": "rad", "qd": "rad/s", "tau_m": "Nm", "tau_g": "Nm"}
     default_units.update(units or {})
-    return table_from_arrays(cols, default_units)
+    return no_inertia(table_from_arrays(cols, default_units))
 
 
 def write(table, path):

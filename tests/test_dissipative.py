@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import write
+from conftest import no_inertia, write
 from fricli import learning, logs, models
 from fricli.cli import cli
 from fricli.logs import table_from_arrays
@@ -39,8 +39,8 @@ def thin_log(seed, rate=50.0, noise=0.2):
     g = 30 * np.sin(2 * q + 0.3)
     f = static_friction(qd, g)
     tau_m = g + f + rng.normal(0, noise, qd.size)
-    return table_from_arrays({"t": t, "q": q, "qd": qd, "qdd": np.zeros_like(t), "tau_m": tau_m, "tau_g": g,
-                              "tau_f_true": f}, UNITS)
+    return no_inertia(table_from_arrays({"t": t, "q": q, "qd": qd, "qdd": np.zeros_like(t), "tau_m": tau_m,
+                                           "tau_g": g, "tau_f_true": f}, UNITS))   # no inertia torque in tau_m
 
 
 def grid(sig, scale=1.5, n=61):

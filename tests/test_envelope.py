@@ -8,7 +8,7 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
-from conftest import write
+from conftest import no_inertia, write
 from fricli import logs, modelfile, models
 from fricli.cli import cli
 from fricli.envelope import Envelope
@@ -26,7 +26,7 @@ def uniform_log(seed=0, n=20000, speed=1.0):
     f = 5 * np.sign(qd) + 10 * qd
     cols = {"t": t, "q": np.cumsum(qd) * 0.01, "qd": qd, "tau_m": g + f + rng.normal(0, 0.1, n), "tau_g": g,
             "tau_ext": np.zeros(n)}
-    return table_from_arrays(cols, UNITS)
+    return no_inertia(table_from_arrays(cols, UNITS))   # no inertia torque in tau_m
 
 
 def run(*args):

@@ -16,6 +16,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
+from conftest import no_inertia
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -48,7 +49,7 @@ def parquet_bytes(table, **kwargs):
     return buf.getvalue()
 
 
-VALID_LOG = parquet_bytes(logs.table_from_arrays(small_log(), UNITS), row_group_size=128)
+VALID_LOG = parquet_bytes(no_inertia(logs.table_from_arrays(small_log(), UNITS)), row_group_size=128)
 
 
 @st.composite

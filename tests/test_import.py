@@ -11,6 +11,7 @@ import pytest
 
 from conftest import ROOT, shared_data
 from fricli import errors
+from fricli.errors import DataError
 from fricli.logs import friction_target, from_table
 from fricli.robot import recording
 from fricli.robot.importing import import_recording
@@ -79,6 +80,9 @@ def test_clean_recording_becomes_a_long_log_in_the_contract():
     assert result.meta["robot"] is None
     # the log reader takes it as it is, joint by joint
     log = from_table(table, name="out", joint="2")
+    with pytest.raises(DataError, match="no 'tau_g' column.*--urdf"):   # without --urdf: unknown, not zero
+        friction_target(log.signals)
+    log = from_table(table, name="out", joint="2", zero=("tau_g", "tau_dyn"))
     np.testing.assert_allclose(friction_target(log.signals), 4.0 * values[:, 6], rtol=1e-15)
 
 
@@ -270,7 +274,7 @@ def test_every_ur10e_recording_imports(tmp_path):
         if result.recording.unterminated:
             unterminated.append(path.name)
         assert result.table.num_rows == 6 * result.meta["rows"]
-        log = from_table(result.table, name=path.name, joint="2")
+        log = from_table(result.table, name=path.name, joint="2", zero=("tau_g", "tau_dyn"))
         assert np.isfinite(friction_target(log.signals)).all()
     assert unterminated == ["ur-20_02_19_14harm50sec.csv"]
 

@@ -9,6 +9,7 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
+from conftest import no_inertia
 from fricli import errors, logs, models, modelset
 from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
@@ -35,14 +36,14 @@ def joint_columns(joint, n=2000, seed=0):
 def write_log(path, joints, interleave=True):
     """A long-format log of ``joints`` (None: no joint column); rows interleaved in time."""
     if joints is None:
-        pq.write_table(logs.table_from_arrays(joint_columns(2), UNITS), path)
+        pq.write_table(no_inertia(logs.table_from_arrays(joint_columns(2), UNITS)), path)
         return str(path)
     parts = [dict(joint_columns(j, seed=j), joint=np.full(2000, j)) for j in joints]
     cols = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     if interleave:
         order = np.argsort(np.concatenate([np.arange(2000)] * len(parts)), kind="stable")
         cols = {k: v[order] for k, v in cols.items()}
-    pq.write_table(logs.table_from_arrays(cols, UNITS), path)
+    pq.write_table(no_inertia(logs.table_from_arrays(cols, UNITS)), path)
     return str(path)
 
 
@@ -51,7 +52,8 @@ def half_moving_log(path):
     cols = [dict(joint_columns(j, seed=j), joint=np.full(2000, j)) for j in (2, 4)]
     for k in ("q", "qd", "qdd"):
         cols[1][k] = np.zeros(2000)
-    pq.write_table(logs.table_from_arrays({k: np.concatenate([c[k] for c in cols]) for k in cols[0]}, UNITS), path)
+    pq.write_table(no_inertia(logs.table_from_arrays({k: np.concatenate([c[k] for c in cols]) for k in cols[0]},
+                                                    UNITS)), path)
 
 
 def save_lugre(path, joint):

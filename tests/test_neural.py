@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE, shared_data, write
+from conftest import SAMPLE, no_inertia, shared_data, write
 from fricli import learning, logs, metrics, modelfile, models, training_data
 from fricli.cli import cli
+from fricli.errors import DataError
 from fricli.logs import table_from_arrays
 from fricli.models.neural import MLPFriction, NNACMFriction, SelmicFriction, feature
 from fricli.models.residual import ResidualFriction
@@ -41,7 +42,7 @@ def motion_log(levels, seed=0, rate=50.0, seconds=6.0, shift=False, rest=0.4, no
     f = static_friction(qd, g, shift)
     tau_m = g + f + rng.normal(0, noise, qd.size)
     cols = {"t": t, "q": q, "qd": qd, "qdd": np.zeros_like(t), "tau_m": tau_m, "tau_g": g, "tau_f_true": f}
-    return table_from_arrays(cols, UNITS)
+    return no_inertia(table_from_arrays(cols, UNITS))   # no inertia torque in tau_m
 
 
 @pytest.fixture(scope="module")
@@ -108,8 +109,9 @@ def test_validation_rows_are_whole_pieces_of_every_run(rng):
 
 
 def test_no_motion_is_a_data_error(files, tmp_path):
-    table = table_from_arrays({"t": np.arange(100.0), "qd": np.zeros(100), "tau_m": np.ones(100)},
-                              {"t": "s", "qd": "rad/s", "tau_m": "Nm"})
+    table = table_from_arrays({"t": np.arange(100.0), "qd": np.zeros(100), "tau_m": np.ones(100),
+                               "tau_g": np.zeros(100), "tau_dyn": np.zeros(100)},
+                              {"t": "s", "qd": "rad/s", "tau_m": "Nm", "tau_g": "Nm", "tau_dyn": "Nm"})
     result = run("train-base", write(table, tmp_path / "still.parquet"), "-o", tmp_path / "m.npz", "--steps", 5)
     assert result.exit_code == 6
     assert "no motion" in result.stderr and not (tmp_path / "m.npz").exists()
@@ -123,7 +125,9 @@ def test_features():
     np.testing.assert_array_equal(feature(sig, "sign(qd)"), [-1, 0, 1, 1])
     np.testing.assert_array_equal(feature(sig, "pos(qd)"), [0, 0.5, 1, 1])
     np.testing.assert_array_equal(feature(sig, "neg(qd)"), [1, 0.5, 0, 0])
-    np.testing.assert_array_equal(feature(sig, "tau_g", 1, 3), [0, 0])   # absent gravity torque is zero
+    with pytest.raises(DataError, match="no 'tau_g' column.*--urdf.*--no-gravity"):
+        feature(sig, "tau_g", 1, 3)                                          # unknown, not zero
+    np.testing.assert_array_equal(feature(dict(sig, tau_g=np.arange(4.0)), "tau_g", 1, 3), [1, 2])
 
 
 @pytest.mark.parametrize("cls", [MLPFriction, SelmicFriction, NNACMFriction])
@@ -393,14 +397,15 @@ def test_adapt_refuses_a_log_in_other_units(files, base_model, tmp_path):
 
 def test_train_base_on_emps(tmp_path):
     path = shared_data("emps/emps.parquet")
-    result = run("train-base", path, "-o", tmp_path / "emps.npz", "--steps", 300, "--json", "-q")
+    result = run("train-base", path, "-o", tmp_path / "emps.npz", "--steps", 300, "--no-gravity", "--no-dynamics",
+                 "--json", "-q")
     assert result.exit_code == 0, result.stderr
     out = json.loads(result.stdout)
     model, meta = models.load(str(tmp_path / "emps.npz"))
     assert meta["axis"] == "linear" and meta["units"]["tau"] == "N"
     assert out["velocity_groups"] in ("levels", "moving")
     # better than the best constant (the EMPS target also holds the inertial force: no tau_dyn)
-    target = logs.friction_target(load(path).signals)
+    target = logs.friction_target(logs.load_log(str(path), zero=("tau_g", "tau_dyn")).signals)
     assert out["log"]["mae"] < np.mean(np.abs(target - np.median(target)))
 
 

@@ -38,7 +38,7 @@ def run(*args) -> str:
 def main() -> None:
     if not DATA.exists():
         sys.exit(f"{DATA} is absent")
-    log = logs.load_log(str(DATA), cutoff_hz=emps.CUTOFF_HZ)
+    log = logs.load_log(str(DATA), cutoff_hz=emps.CUTOFF_HZ, zero=("tau_g", "tau_dyn"))   # no robot model
     sig = log.signals
     sym = emps.idim_ls(sig["t"], sig["q"], sig["tau_m"])
     asym = emps.idim_ls(sig["t"], sig["q"], sig["tau_m"], asymmetric=True)
@@ -50,7 +50,7 @@ def main() -> None:
         fixed = {}
         for refine in (False, True):
             base = f"{tmp}/emps{'-refine' if refine else ''}.npz"
-            run("identify", DATA, "--cutoff", 100, "-o", base, "-q", *(["--refine"] if refine else []))
+            run("identify", DATA, "--cutoff", 100, "--no-gravity", "--no-dynamics", "-o", base, "-q", *(["--refine"] if refine else []))
             model, _ = models.load(base)
             d = diagnose(model, log)
             name = "identify --refine" if refine else "identify"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import sys
+
 import click
 
 from fricli import errors, timewindow
@@ -32,19 +33,37 @@ def _window_bound(ctx: click.Context, param, value: str | None) -> None:
             raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
+def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
+    from fricli import optionspec
+
+    if value:
+        ctx.meta.setdefault("fricli.zero", []).append(optionspec.ZERO_FLAGS[param.name])
+    return value
+
+
+def declared_zero() -> tuple[str, ...]:
+    """Robot-model columns declared zero by --no-gravity/--no-dynamics (docs/log-format.md)."""
+    ctx = click.get_current_context(silent=True)
+    return tuple(ctx.meta.get("fricli.zero", ())) if ctx else ()
+
+
 def log_reading(f):
-    """--joint, --kt, --cutoff, --drop-invalid: how a log is read (see docs/log-format.md); --from,
-    --until: the rows read (``time_window``, ``read_log``; fricli.timewindow)."""
+    """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
+    docs/log-format.md); --from, --until: the rows read (``time_window``, ``read_log``;
+    fricli.timewindow)."""
     for name in ("until", "from"):
         f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
                          callback=_window_bound,
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
-    from fricli.optionspec import READING
+    from fricli.optionspec import READING, ZERO_FLAGS
 
     for opt in reversed(READING):
-        f = _click_option(opt)(f)
+        if opt.name in ZERO_FLAGS:   # read by declared_zero, like --from/--until by time_window
+            f = click.option(opt.flag, is_flag=True, expose_value=False, callback=_declare_zero, help=opt.help)(f)
+        else:
+            f = _click_option(opt)(f)
     return f
 
 
@@ -122,7 +141,8 @@ def read_log(log: str):
 
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
-    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn}
+    return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn,
+            "zero": declared_zero()}
 
 
 # Options that do not change the model a command writes (arguments are files: the log is
@@ -194,14 +214,17 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
 
     ctx = click.get_current_context()
     arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
+    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments}
+    given.update({flag: True for flag, column in optionspec.ZERO_FLAGS.items() if column in declared_zero()})
     try:
-        opts = runs.options(pipeline, {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments})
+        opts = runs.options(pipeline, given)
     except optionspec.OptionError as exc:
         message = str(exc).split(": ", 1)[-1]
         raise click.BadParameter(message, param_hint="--" + exc.option.replace("_", "-")) from None
     window = time_window()
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
+    runs.check_table(table, name, opts)
     pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
     results: dict = {}
 

@@ -6,8 +6,8 @@ import click
 
 from fricli import modelset, predicting
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, output_option,
-                                progress_enabled, say, time_window, warn)
+from fricli.cli.options import (common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
+                                output_option, progress_enabled, say, time_window, warn)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -43,7 +43,7 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         return models.set_precision(model, precision), meta
 
     reading = predicting.Reading(joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid,
-                                 window=time_window(), batch_rows=batch_rows)
+                                 window=time_window(), batch_rows=batch_rows, zero=declared_zero())
     outputs = predicting.Outputs(external=external, lowpass_hz=lowpass, flag_extrapolation=flag_extrapolation)
     bar = None
     if progress_enabled(quiet):

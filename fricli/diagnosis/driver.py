@@ -20,7 +20,7 @@ MIN_ROWS_PER_FOLD = 20
 INTERVAL_LEVEL = 0.95
 WORST_GAIN = -1.0                  # gains are clipped here: an effect that doubles the residual or worse is "worse"
 #: effects that the same log may explain about equally, and what tells them apart
-TWINS = {("gravity", "quadrant"): "rests with a varying tau_g, or a measured payload (tau_ext)"}
+TWINS = {("gravity", "quadrant"): "rests with a varying tau_g"}
 
 
 @dataclasses.dataclass

@@ -366,17 +366,16 @@ def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
 
 class Load(Effect):
     name = "load"
-    description = ("Coulomb level growing with |tau_l|, tau_l = tau_g - tau_ext the torque through the gear "
-                   "(its normal force)")
+    description = "Coulomb level growing with |tau_g|, the gravity load on the gear (its normal force)"
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_l|*sign(qd)")
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_g|*sign(qd)")
 
     def terms(self, ctx, residual):
-        return [T.term("|tau_l|*sign", T.ABSGEAR, T.SIGN)]
+        return [T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN)]
 
     def params(self, coef, ctx):
-        return {"kc": _par(coef["|tau_l|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+        return {"kc": _par(coef["|tau_g|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def implausible(self, params, ctx):
         return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
@@ -386,19 +385,18 @@ class Load(Effect):
 
 
 class Payload(Effect):
-    """A payload measured by tau_ext loads the gear: the friction's load dependence follows the
-    torque through the gear, |tau_g - tau_ext|, where the model sees only |tau_g|."""
+    """A payload the robot model lacks loads the gear: the friction's load dependence follows the
+    torque through the gear, |tau_l| with tau_l = tau_m - tau_dyn - p (motor torque minus inertia and friction),
+    where the model sees only |tau_g|."""
 
     name = "payload"
-    description = "friction growing with |tau_g - tau_ext| - |tau_g|: the measured payload loads the gear"
+    description = "friction growing with |tau_l| - |tau_g|: the gear carries a load tau_g lacks (a payload)"
 
     def applicable(self, ctx):
-        if "tau_ext" not in ctx.signals or np.ptp(ctx.signals["tau_ext"]) <= 0:
-            return "the log has no varying 'tau_ext'"
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "(|tau_g - tau_ext| - |tau_g|)*sign(qd)")
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "(|tau_l| - |tau_g|)*sign(qd)")
 
     def terms(self, ctx, residual):
-        return [T.term("(|tau_l|-|tau_g|)*sign", T.PAYLOADGEAR, T.SIGN)]
+        return [T.term("(|tau_l|-|tau_g|)*sign", T.OVERLOAD, T.SIGN)]
 
     def params(self, coef, ctx):
         return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
@@ -446,30 +444,30 @@ class Gravity(Effect):
 
 
 class Quadrant(Effect):
-    """Friction that differs between the quadrants of (qd, tau_l): the Coulomb level is
-    Fc + kq*tau_l*sign(qd), higher when the joint drives against the torque through the gear
-    (sign(qd*tau_l) > 0) than when that torque back-drives it. In the signed friction that is
-    kq*tau_l, held through rests at its value when the motion stopped (the bristles hold the
+    """Friction that differs between the quadrants of (qd, tau_g): the Coulomb level is
+    Fc + kq*tau_g*sign(qd), higher when the joint drives against the gravity load on the gear
+    (sign(qd*tau_g) > 0) than when that load back-drives it. In the signed friction that is
+    kq*tau_g, held through rests at its value when the motion stopped (the bristles hold the
     friction they had), which tells it apart from an error of the logged gravity torque."""
 
     name = "quadrant"
     rivals = (("offset",),)
-    description = "friction kq*|tau_l| higher when the joint drives against tau_l than when back-driven"
+    description = "friction kq*|tau_g| higher when the joint drives against tau_g than when back-driven"
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_l")
+        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_g held through rests")
 
     def terms(self, ctx, residual):
-        return [T.term("tau_l held", T.HELDGEAR)]
+        return [T.term("tau_g held", T.HELDGRAVITY)]
 
     def implausible(self, params, ctx):
         return _ratio_implausible("kq", params["kq"]["value"], params["kq"]["unit"])
 
     def params(self, coef, ctx):
-        return {"kq": _par(coef["tau_l held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+        return {"kq": _par(coef["tau_g held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def summary(self, params):
-        return f"{_ratio_text('kq', params['kq'])}: Coulomb level + kq*tau_l*sign(qd) (driving vs back-driven)"
+        return f"{_ratio_text('kq', params['kq'])}: Coulomb level + kq*tau_g*sign(qd) (driving vs back-driven)"
 
 
 class Velocity(Effect):

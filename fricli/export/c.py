@@ -31,14 +31,15 @@ import numpy as np
 
 from fricli import __version__
 from fricli.errors import ModelFileError
+from fricli.logs import REFERENCES
 from fricli.models.base import FrictionModel
 
 # signals in the order the step function takes them; other columns follow in name order
-SIGNAL_ORDER = ("t", "q", "qd", "qdd", "tau_g", "tau_dyn", "tau_ext", "temp")
+# (inputs only: a reference column such as tau_ext is never a signal, ``Context.signal``)
+SIGNAL_ORDER = ("t", "q", "qd", "qdd", "tau_m", "tau_g", "tau_dyn", "temp")
 SIGNAL_INFO = {"t": ("s", "time"), "q": ("q", "position"), "qd": ("qd", "velocity"),
-               "qdd": ("qdd", "acceleration"), "tau_g": ("tau", "gravity torque"),
-               "tau_dyn": ("tau", "rigid-body dynamics torque"), "tau_ext": ("tau", "external torque"),
-               "temp": ("degC", "temperature")}
+               "qdd": ("qdd", "acceleration"), "tau_m": ("tau", "motor torque"), "tau_g": ("tau", "gravity torque"),
+               "tau_dyn": ("tau", "rigid-body dynamics torque"), "temp": ("degC", "temperature")}
 _C_KEYWORDS = set("""auto break case char const continue default do double else enum extern float for goto if
 inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
 volatile while bool class delete new operator private protected public template this throw try virtual""".split())
@@ -109,7 +110,10 @@ class Context:
         self.sgn = sgn
 
     def signal(self, name: str) -> str:
-        """The C expression of signal ``name`` inside a step function (argument ``in``)."""
+        """The C expression of signal ``name`` inside a step function (argument ``in``); a
+        reference column (``fricli.logs.REFERENCES``) is refused."""
+        if name in REFERENCES:
+            raise ModelFileError(f"the model reads the reference column {name!r}, which a controller does not have")
         if name not in self.fields:
             field = identifier(name)
             if field in self.fields.values():
@@ -202,7 +206,7 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
     tau = units.get("tau", "Nm")
     has_error = bool(root.parts and getattr(model, "error_terms", None))
     args = ", ".join(f"double {ctx.fields[s]}" for s in signals)
-    out = [f"/* Signals of {prefix}_step, in this order (pass 0 for a torque the robot does not measure):"]
+    out = [f"/* Signals of {prefix}_step, in this order (what the controller has):"]
     out += [f" *   {i}. {comment(_signal_doc(s, units))}" for i, s in enumerate(signals)]
     out += [f" * Returns the friction torque tau_f [{tau}], positive along the motion. */",
             f"enum {{ {prefix}_N_SIGNALS = {len(signals)} }};",

@@ -52,20 +52,20 @@ def residual(model, name: str, ctx: Context) -> Part:
 def augmented(model, name: str, ctx: Context) -> Part:
     """friction = p + sum_j coef[j] term_j, robot-model error = sum_k error_coef[k] error_term_k,
     p the base's prediction; ``_step`` returns their sum (as ``predict``), ``_step_parts`` the
-    friction and the error apart. The held direction of motion and gear torque are state."""
+    friction and the error apart. The held direction of motion and gravity torque are state."""
     base = emit(model.base, f"{name}_base", ctx)
     every = model.terms + model.error_terms
     held_dir, held_gear = T.uses_direction(every), T.uses_held_gear(every)
     fields = ([f"{base.name}_state base"] if base.stateful else [])
     fields += ["double dir  /* direction of the last motion, 0 before any */"] if held_dir else []
-    fields += ["double gear  /* tau_g - tau_ext at the last moving sample [Nm] */"] if held_gear else []
+    fields += ["double gear  /* tau_g at the last moving sample [Nm] */"] if held_gear else []
     stateful = bool(fields)
     code = [base.code]
     body = [f"    const double p = {base.step('&s->base')};", "    double v, acc = 0.0, err = 0.0;"]
     if held_dir or held_gear:
         qd = ctx.signal("qd")
         updates = ([f"s->dir = {ctx.sgn}({qd});"] if held_dir else []) + (
-            [f"s->gear = {ctx.signal('tau_g')} - {ctx.signal('tau_ext')};"] if held_gear else [])
+            [f"s->gear = {ctx.signal('tau_g')};"] if held_gear else [])
         body.append(f"    if ({qd} != 0.0) {{ {' '.join(updates)} }}")
         body += ["    const double dir = s->dir;"] if held_dir else []
         body += ["    const double gear = s->gear;"] if held_gear else []

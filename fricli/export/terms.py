@@ -3,7 +3,7 @@
 A term is a product of factors; ``FACTORS`` maps each factor kind to a function
 (factor, context) -> C expression. The held direction of motion is the variable ``dir``
 (updated before the terms, as ``Columns.direction``), the held gear torque ``gear`` (as
-``Columns.held_gear``) and the base prediction ``p``.
+``Columns.held_gravity``, held tau_g) and the base prediction ``p``.
 A new factor kind needs one entry here.
 """
 
@@ -12,17 +12,19 @@ from __future__ import annotations
 from fricli.errors import ModelFileError
 from fricli.export.c import Context, num
 
+def gear(ctx: Context) -> str:
+    """tau_l = tau_m - tau_dyn - p, as ``Columns.gear`` (the payload effect)."""
+    return f"{ctx.signal('tau_m')} - {ctx.signal('tau_dyn')} - p"
+
+
 FACTORS = {
     "one": lambda f, ctx: "1.0",
     "p": lambda f, ctx: "p",
     "signal": lambda f, ctx: ctx.signal(f["name"]),
     "dev": lambda f, ctx: f"({ctx.signal(f['name'])} - {num(f['center'])})",
     "abs": lambda f, ctx: f"fabs({ctx.signal(f['name'])})",
-    "gear": lambda f, ctx: f"({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
-    "absgear": lambda f, ctx: f"fabs({ctx.signal('tau_g')} - {ctx.signal('tau_ext')})",
-    "payloadgear": lambda f, ctx: (f"(fabs({ctx.signal('tau_g')} - {ctx.signal('tau_ext')}) - "
-                                   f"fabs({ctx.signal('tau_g')}))"),
-    "heldgear": lambda f, ctx: "gear",
+    "overload": lambda f, ctx: f"(fabs({gear(ctx)}) - fabs({ctx.signal('tau_g')}))",
+    "heldgravity": lambda f, ctx: "gear",
     "sign": lambda f, ctx: "dir",
     "moving": lambda f, ctx: "fabs(dir)",
     "pos": lambda f, ctx: "(dir > 0.0 ? 1.0 : 0.0)",
@@ -39,7 +41,7 @@ def uses_direction(terms: list[dict]) -> bool:
 
 
 def uses_held_gear(terms: list[dict]) -> bool:
-    return any(f["f"] == "heldgear" for term in terms for f in term["factors"])
+    return any(f["f"] == "heldgravity" for term in terms for f in term["factors"])
 
 
 def term(spec: dict, ctx: Context) -> str:

@@ -76,6 +76,8 @@ def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name
                 for child, child_spec in spec.get("children", {}).items()}
     try:
         return cls.from_parts(spec.get("params", {}), own, children)
+    except ModelFileError as exc:   # a readable file the current fricli refuses, with the fix
+        raise ModelFileError(f"{name}: {exc}") from None
     except Exception as exc:  # the file is untrusted: whatever its parts break is a damaged file
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise ModelFileError(f"{name}: damaged {spec['kind']} model ({first})") from None

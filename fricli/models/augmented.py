@@ -12,7 +12,7 @@ model of any kind, stored in the same file; the terms are the regressor terms of
 LuGre base can express as its own physical parameters (direction asymmetry, temperature
 dependence, a change of level) are carried by the base instead and listed under ``carried``
 (base parameters refitted along with them under ``refitted``). ``predict`` carries the base's
-state and what the terms hold (direction of motion, gear torque) from one batch of rows to the
+state and what the terms hold (direction of motion, gravity torque) from one batch of rows to the
 next.
 """
 

@@ -10,20 +10,29 @@ any later log from the constants it carries. Factors:
     {"f": "signal", "name": S}                     signal S (e.g. qd, qdd)
     {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column)
     {"f": "abs", "name": S}                        |S|
-    {"f": "gear"}, {"f": "absgear"}                tau_g - tau_ext (the torque through the gear), |...|
-    {"f": "payloadgear"}                           |tau_g - tau_ext| - |tau_g|: what a payload adds to the gear load
+    {"f": "overload"}                              |tau_l| - |tau_g|, tau_l = tau_m - tau_dyn - p the load the
+                                                   gear holds: what it carries beyond the robot model's gravity
     {"f": "sign"}                                  direction of motion, held at rest
     {"f": "moving"}                                |direction| (0 only before the first motion)
     {"f": "pos"}                                   1 where the direction is positive, else 0
-    {"f": "heldgear"}                              tau_g - tau_ext while moving, held through samples at
-                                                   rest at its value when the motion stopped
+    {"f": "heldgravity"}                           tau_g while moving, held through samples at rest at
+                                                   its value when the motion stopped
     {"f": "sat", "scale": s}                       sign(qd) * (1 - exp(-|qd| / s))
     {"f": "sin" | "cos", "name": S, "w": w}        sin(w S), cos(w S)
 
 The direction is sign(qd), held through samples at rest at the sign of the last motion: a
 joint at rest holds the friction of the direction it last moved in (the bristles stay
 deflected); a friction term in the gear torque is held the same way (0 before the first
-motion). Both carry over from one batch of rows to the next as the terms' state.
+motion); so is the gravity torque of ``heldgravity``. Both carry over from one batch of rows to
+the next as the terms' state.
+
+The load the gear holds is what the motor puts in minus what the motor-side friction and the
+inertia take: tau_l = tau_m - tau_dyn - p, with the base model's friction p; that is gravity plus
+any external load (tau_g - tau_ext where both are known) from what a controller has
+(docs/diagnose.md). Terms read inputs only
+(``fricli.logs.INPUTS``), never a reference column such as tau_ext; the factors ``gear``,
+``absgear``, ``payloadgear`` and ``heldgear`` of older model files read tau_ext and are refused
+(``check``).
 """
 
 from __future__ import annotations
@@ -31,16 +40,16 @@ from __future__ import annotations
 import numpy as np
 
 from fricli import logs
-from fricli.errors import DataError
+from fricli.errors import DataError, ModelFileError
 
 
 def factor_inputs(factor: dict) -> set[str]:
     f = factor["f"]
     if f in ("one", "p"):
         return set()
-    if f in ("gear", "absgear", "payloadgear"):
-        return {"tau_g"}
-    if f == "heldgear":
+    if f == "overload":
+        return {"tau_m", "tau_dyn", "tau_g"}
+    if f == "heldgravity":
         return {"qd", "tau_g"}
     if f in ("sign", "moving", "pos", "sat"):
         return {"qd"}
@@ -57,10 +66,12 @@ def inputs(terms: list[dict]) -> set[str]:
 
 
 def _signal(sig: dict, name: str) -> np.ndarray:
+    if name in logs.REFERENCES:
+        raise DataError(f"a model term cannot read the reference column {name!r}")
     if name in sig:
         return sig[name]
-    if name in logs.OPTIONAL_TORQUES:
-        return logs.column(sig, name)
+    if name in logs.ROBOT_MODEL:
+        return logs.column(sig, name)   # refuses with the fix
     raise DataError(f"the log has no column {name!r}, which the model's term needs")
 
 
@@ -79,7 +90,7 @@ def held(x: np.ndarray, qd: np.ndarray, x0: float = 0.0) -> np.ndarray:
 class Columns:
     """Evaluates terms on one batch of signals (n,) with the base prediction p (n,).
 
-    ``state`` is what is held from the previous batch: (direction, gear torque) or a direction
+    ``state`` is what is held from the previous batch: (direction, gravity torque) or a direction
     alone (None: no motion seen yet).
     """
 
@@ -97,16 +108,26 @@ class Columns:
         return self._dir
 
     @property
-    def held_gear(self) -> np.ndarray:
+    def gear(self) -> np.ndarray:
+        """tau_l = tau_m - tau_dyn - p (n,) [Nm]: the load the gear holds."""
+        if self.p is None:
+            raise ValueError("the gear torque needs the base prediction")
+        return _signal(self.sig, "tau_m") - _signal(self.sig, "tau_dyn") - self.p
+
+    @property
+    def held_gravity(self) -> np.ndarray:
         if self._gear is None:
-            gear = _signal(self.sig, "tau_g") - _signal(self.sig, "tau_ext")
-            self._gear = held(gear, self.sig["qd"], self._g0)
+            self._gear = held(_signal(self.sig, "tau_g"), self.sig["qd"], self._g0)
         return self._gear
 
     @property
     def state(self) -> tuple[float, float]:
-        d, g = self.direction, self.held_gear
-        return (float(d[-1]), float(g[-1])) if len(d) else (self._s0, self._g0)
+        """(held direction, held gravity torque) after the last row; the gravity torque only moves
+        on when a term read it."""
+        d = self.direction
+        if not len(d):
+            return self._s0, self._g0
+        return float(d[-1]), (self._g0 if self._gear is None else float(self._gear[-1]))
 
     def factor(self, factor: dict) -> np.ndarray | float:
         f = factor["f"]
@@ -123,19 +144,16 @@ class Columns:
             return _signal(sig, factor["name"]) - float(factor["center"])
         if f == "abs":
             return np.abs(_signal(sig, factor["name"]))
-        if f in ("gear", "absgear", "payloadgear"):
-            gear = _signal(sig, "tau_g") - _signal(sig, "tau_ext")
-            if f == "payloadgear":
-                return np.abs(gear) - np.abs(_signal(sig, "tau_g"))
-            return np.abs(gear) if f == "absgear" else gear
+        if f == "overload":
+            return np.abs(self.gear) - np.abs(_signal(sig, "tau_g"))
         if f == "sign":
             return self.direction
         if f == "moving":
             return np.abs(self.direction)
         if f == "pos":
             return (self.direction > 0).astype(np.float64)
-        if f == "heldgear":
-            return self.held_gear
+        if f == "heldgravity":
+            return self.held_gravity
         if f == "sat":
             v = sig["qd"]
             return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
@@ -175,6 +193,13 @@ def check(term: dict) -> None:
     if not isinstance(term, dict) or not isinstance(term.get("name"), str) or not isinstance(term.get("factors"), list):
         raise ValueError("malformed term")
     for factor in term["factors"]:
+        if isinstance(factor, dict) and factor.get("f") in READS_REFERENCE:
+            raise ModelFileError(f"the term {term['name']!r} reads the reference column tau_ext (factor "
+                                 f"{factor['f']!r}, written by an older fricli): refit the model with "
+                                 "'fricli diagnose MODEL LOG --fix'")
+        if isinstance(factor, dict) and factor.get("name") in logs.REFERENCES:
+            raise ModelFileError(f"the term {term['name']!r} reads the reference column {factor['name']!r}: "
+                                 "refit the model with 'fricli diagnose MODEL LOG --fix'")
         if not isinstance(factor, dict) or factor.get("f") not in _KNOWN:
             raise ValueError(f"unknown term factor in {term.get('name')!r}")
         need = _KNOWN[factor["f"]]
@@ -183,8 +208,10 @@ def check(term: dict) -> None:
             raise ValueError(f"term {term['name']!r}: factor {factor['f']!r} lacks {', '.join(missing)}")
 
 
+# factors of older model files that read the reference tau_ext (the gear torque as tau_g - tau_ext)
+READS_REFERENCE = ("gear", "absgear", "payloadgear", "heldgear")
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
-          "gear": (), "absgear": (), "payloadgear": (), "sign": (), "moving": (), "pos": (), "heldgear": (),
+          "overload": (), "sign": (), "moving": (), "pos": (), "heldgravity": (),
           "sat": ("scale",),
           "sin": ("name", "w"), "cos": ("name", "w")}
 
@@ -199,10 +226,8 @@ P = {"f": "p"}
 SIGN = {"f": "sign"}
 MOVING = {"f": "moving"}
 POS = {"f": "pos"}
-HELDGEAR = {"f": "heldgear"}
-GEAR = {"f": "gear"}
-ABSGEAR = {"f": "absgear"}
-PAYLOADGEAR = {"f": "payloadgear"}
+HELDGRAVITY = {"f": "heldgravity"}
+OVERLOAD = {"f": "overload"}
 
 
 def sig_(name: str) -> dict:
