@@ -233,7 +233,7 @@ def test_trend_flags_the_wearing_joint_only(tmp_path, rng):
 
 
 def test_trend_history_keeps_units_and_reads_with_pandas(tmp_path, rng):
-    import pandas as pd
+    pd = pytest.importorskip("pandas")   # any Parquet dataset reader; fricli itself does not use pandas
 
     synthetic_history(tmp_path / "h", rng, days=3)
     table = history.read(str(tmp_path / "h"))
