@@ -1,5 +1,6 @@
-"""The import rule of docs/architecture.md: only the command line (fricli/cli/ and
-fricli/__main__.py) imports fricli.cli; the library never reads the command line."""
+"""The import rules of docs/architecture.md: a module imports only from its own layer and the
+layers below it, and only the command line (fricli/cli/ and fricli/__main__.py) imports
+fricli.cli (the library never reads the command line)."""
 
 import ast
 from pathlib import Path
@@ -7,6 +8,22 @@ from pathlib import Path
 from conftest import ROOT
 
 PACKAGE = Path(ROOT) / "fricli"
+
+# bottom to top: (layer, the modules and packages of fricli in it), as docs/architecture.md lists them
+LAYERS = [
+    ("contracts and files", {"errors", "atomic", "lazy", "modelfile", "logs", "joints", "timewindow", "jobs",
+                             "modelset", "metrics", "envelope"}),
+    ("numerics", {"blas", "physics", "least_squares", "nn"}),
+    ("models", {"models"}),
+    ("fitting", {"identify", "training_data", "learning", "diagnosis", "optionspec", "runs"}),
+    ("applying", {"predicting", "evaluation", "report", "emps"}),
+    ("robot", {"robot"}),
+    ("fleet", {"fleet"}),
+    ("export", {"export"}),
+    ("simulation", {"sim"}),
+    ("cli", {"cli", "__main__", "demo"}),
+]
+RANK = {name: i for i, (_, names) in enumerate(LAYERS) for name in names}
 
 
 def imported_modules(source: str, package: str) -> set[str]:
@@ -41,6 +58,37 @@ def cli_importers() -> list[str]:
 
 def test_only_the_command_line_imports_fricli_cli():
     assert cli_importers() == []
+
+
+def package_parts() -> set[str]:
+    return {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir()
+            if (p.suffix == ".py" or (p / "__init__.py").exists()) and p.name != "__init__.py"}
+
+
+def test_every_module_has_a_layer():
+    assert package_parts() - set(RANK) == set(), "place the new module in LAYERS and docs/architecture.md"
+
+
+def upward_imports() -> list[str]:
+    """Imports of a module from a layer above its own."""
+    out = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = path.relative_to(PACKAGE).parts
+        if parts == ("__init__.py",):
+            continue
+        me = parts[0].removesuffix(".py")
+        package = ".".join(path.relative_to(ROOT).parts[:-1])
+        for module in imported_modules(path.read_text(), package):
+            names = module.split(".")
+            other = names[1] if len(names) > 1 and names[0] == "fricli" else None
+            if other in RANK and RANK[other] > RANK[me]:
+                out.append(f"fricli/{'/'.join(parts)} ({LAYERS[RANK[me]][0]}) imports {module} "
+                           f"({LAYERS[RANK[other]][0]})")
+    return sorted(set(out))
+
+
+def test_no_module_imports_from_a_layer_above_its_own():
+    assert upward_imports() == []
 
 
 def test_the_rule_sees_every_form_of_import():
