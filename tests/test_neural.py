@@ -451,7 +451,7 @@ def harmonic_log(seed=0, rate=100.0, seconds=40.0, residual=None, base=None, noi
     if residual is not None:
         f = f + residual(qd, g)
     cols = {**sig, "tau_m": g + f + rng.normal(0, noise, t.size), "tau_f_true": f}
-    return table_from_arrays(cols, UNITS)
+    return no_inertia(table_from_arrays(cols, UNITS))   # no inertia torque in tau_m
 
 
 @pytest.fixture(scope="module")
