@@ -191,14 +191,3 @@ def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
 
 _FIT = {"identify": _identify, "train-base": _train_base, "adapt": _adapt, "diagnose": _diagnose}
 
-
-def run_file(pipeline: str, log: str, output: str, given: dict, *, base: str | None = None,
-             if_changed: bool = False) -> tuple[Made | None, str]:
-    """``run`` on the log file ``log`` with the options ``given`` (over the defaults); returns
-    (what was made or None when up to date, the log's sha256)."""
-    opts = options(pipeline, given)
-    table, digest = logs.read_table(log)
-    check_table(table, log, opts)
-    data = read(table, digest, log, opts)
-    return run(pipeline, data, output, opts, base=base, if_changed=if_changed), digest
-

@@ -7,7 +7,7 @@ from __future__ import annotations
 import os
 import time
 
-from fricli import errors, runs
+from fricli import errors, logs, runs
 from fricli.fleet.manifest import Job
 
 
@@ -39,8 +39,10 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
     try:
         opts = options_of(job)
         os.makedirs(os.path.dirname(job.model), exist_ok=True)
-        made, out["sha256"] = runs.run_file(job.pipeline, job.log, job.model, opts, base=job.base,
-                                            if_changed=if_changed)
+        table, out["sha256"] = logs.read_table(job.log)
+        runs.check_table(table, job.log, opts)
+        made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts), job.model, opts, base=job.base,
+                        if_changed=if_changed)
         if made is None:
             out["status"] = "unchanged"
             return out
