@@ -624,11 +624,11 @@ def test_an_implausible_gravity_scale_is_flagged_and_not_applied(tmp_path):
 
 def test_a_ratio_beyond_one_is_not_printed_as_a_coefficient():
     ctx = E.Context({"qd": np.ones(3)}, np.zeros(3))
-    params = E.Quadrant().params({"tau_l held": -4.7}, ctx)
+    params = E.Quadrant().params({"tau_g held": -4.7}, ctx)
     assert E.Quadrant().summary(params).startswith("kq < -1 Nm/Nm (not physical)")
     assert "not physical" in E.Quadrant().implausible(params, ctx)
-    assert E.Load().summary(E.Load().params({"|tau_l|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
-    assert E.Load().implausible(E.Load().params({"|tau_l|*sign": 0.02}, ctx), ctx) is None
+    assert E.Load().summary(E.Load().params({"|tau_g|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
+    assert E.Load().implausible(E.Load().params({"|tau_g|*sign": 0.02}, ctx), ctx) is None
 
 
 @pytest.mark.parametrize("inertia, flagged", [(0.5, False), (2.4, False), (-0.05, False), (-1.0, True), (3.0, True)])
