@@ -141,7 +141,14 @@ IDENTIFY = (
            "lugre, or the linear model Fv*qd + Fc*sign(qd) + offset (linear-asymmetric: Fv, Fc per direction) "
            "fitted by least squares on the rows in motion (docs/tutorial.md).",
            choices=("lugre", "linear", "linear-asymmetric")),
+    Option("coupling", "flag", False,
+           "Fit each group of joints that share motors (the log's transmission, docs/drives.md) as one model of "
+           "friction per motor (kind coupled); the other joints as before."),
+    Option("motor_stribeck", "flag", False, "With --coupling: each motor's friction with the Stribeck curve (fs, vs) "
+                                            "as well."),
 )
+# options a fleet job (one joint per job) cannot take: a coupled group's model needs every joint of the group
+WHOLE_LOG = {"coupling", "motor_stribeck"}
 
 TRAIN_BASE = (
     Option("arch", "choice", learning.DEFAULT_ARCH,

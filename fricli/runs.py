@@ -113,6 +113,28 @@ def run(pipeline: str, data: logs.Log, output: str, opts: dict, *, base: str | N
     return made
 
 
+def run_group(datas: list, transmission, output: str, opts: dict, *, if_changed: bool = False,
+              window: dict | None = None) -> Made | None:
+    """identify --coupling for one coupled group: the joints of ``datas`` (their logs, rows at the
+    same times, in the order of ``transmission``'s joints) into one model of kind coupled
+    (``fricli.models.coupled``) at ``output``; None when up to date. ``Made.data`` is the first
+    joint's log, ``Made.summary`` the fit figures per joint."""
+    from fricli.models import coupled
+
+    opts = options("identify", opts)
+    recorded = dict(opts, joint=[str(j) for j in transmission.joints])
+    if window:
+        recorded["window"] = window
+    job = jobs.job_record("identify", recorded)
+    with jobs.output_lock(output):
+        if if_changed and jobs.up_to_date(output, datas[0].sha256, job):
+            return None
+        start = time.perf_counter()
+        model, fit = coupled.fit_group(datas, transmission, stribeck=opts["motor_stribeck"])
+        coupled.save_group(output, model, datas[0], fit=fit, job=job)
+    return Made("identify", output, datas[0], model, fit, seconds=time.perf_counter() - start)
+
+
 def moving_errors(made: Made) -> dict:
     """MAE, RMSE, max [Nm or N] of the written model against the friction target over the rows
     in motion (``metrics.in_motion``): the one figure the fleet history keeps for every pipeline."""

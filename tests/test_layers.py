@@ -12,7 +12,7 @@ PACKAGE = Path(ROOT) / "fricli"
 # bottom to top: (layer, the modules and packages of fricli in it), as docs/architecture.md lists them
 LAYERS = [
     ("contracts and files", {"errors", "atomic", "lazy", "modelfile", "logs", "joints", "timewindow", "jobs",
-                             "modelset", "metrics", "envelope"}),
+                             "modelset", "metrics", "envelope", "robot.transmission"}),
     ("numerics", {"blas", "physics", "least_squares", "nn"}),
     ("models", {"models"}),
     ("fitting", {"identify", "training_data", "learning", "diagnosis", "optionspec", "runs"}),
@@ -24,6 +24,16 @@ LAYERS = [
     ("cli", {"cli", "__main__", "demo"}),
 ]
 RANK = {name: i for i, (_, names) in enumerate(LAYERS) for name in names}
+
+
+def layer_of(dotted: str) -> int | None:
+    """The layer of a module named relative to fricli ("robot.transmission", "fleet.run"): its
+    own entry in LAYERS, else its package's."""
+    parts = dotted.split(".")
+    for k in range(len(parts), 0, -1):
+        if ".".join(parts[:k]) in RANK:
+            return RANK[".".join(parts[:k])]
+    return None
 
 
 def imported_modules(source: str, package: str) -> set[str]:
@@ -39,7 +49,6 @@ def imported_modules(source: str, package: str) -> set[str]:
             if node.level:
                 parts = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(parts + ([base] if base else []))
-            found.add(base)
             found.update(f"{base}.{alias.name}" for alias in node.names)
     return found
 
@@ -76,14 +85,12 @@ def upward_imports() -> list[str]:
         parts = path.relative_to(PACKAGE).parts
         if parts == ("__init__.py",):
             continue
-        me = parts[0].removesuffix(".py")
+        me = layer_of(".".join(parts).removesuffix(".py").removesuffix(".__init__"))
         package = ".".join(path.relative_to(ROOT).parts[:-1])
         for module in imported_modules(path.read_text(), package):
-            names = module.split(".")
-            other = names[1] if len(names) > 1 and names[0] == "fricli" else None
-            if other in RANK and RANK[other] > RANK[me]:
-                out.append(f"fricli/{'/'.join(parts)} ({LAYERS[RANK[me]][0]}) imports {module} "
-                           f"({LAYERS[RANK[other]][0]})")
+            other = layer_of(module.removeprefix("fricli.")) if module.startswith("fricli.") else None
+            if other is not None and other > me:
+                out.append(f"fricli/{'/'.join(parts)} ({LAYERS[me][0]}) imports {module} ({LAYERS[other][0]})")
     return sorted(set(out))
 
 

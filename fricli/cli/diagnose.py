@@ -172,8 +172,11 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     else:
         results, folder_run = {}, several
 
+        from fricli.models import coupled
+
         def work(j):
             data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
+            data.signals.update(coupled.partner_signals(table_, j, name, **reading))   # the coupling effect's
             base, meta = models.load(pairs[j])
             models.check_log(meta, data, pairs[j])
             results[j] = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,

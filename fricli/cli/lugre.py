@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import os
+
 import click
 
+from fricli import errors
 from fricli.cli import cli
-from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
-                                log_reading, output_option, say, spec_options, wrote)
+from fricli.cli.options import (check_outputs, command_options, common, emit_results, fit_joints, if_changed_option,
+                                json_flag, log_reading, output_option, read_log, say, spec_options, time_window,
+                                up_to_date_line, warn, wrote)
 from fricli.models.lugre import PARAM_INFO, unit_of
 
 
@@ -22,7 +26,8 @@ def _figures(errs: dict, unit: str) -> str:
 @if_changed_option
 @json_flag
 @common
-def identify_cmd(log: str, output: str, kind: str, if_changed: bool, as_json: bool, quiet: bool, **_options) -> None:
+def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribeck: bool, if_changed: bool,
+                 as_json: bool, quiet: bool, **_options) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -53,7 +58,12 @@ def identify_cmd(log: str, output: str, kind: str, if_changed: bool, as_json: bo
                 "units": data.units, "parameters": params,
                 "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit}
 
-    results, folder_run = fit_joints("identify", log, output, report, if_changed=if_changed, quiet=quiet)
+    if motor_stribeck and not coupling:
+        raise click.UsageError("--motor-stribeck applies to --coupling")
+    if coupling:
+        results, folder_run = _fit_coupled(log, output, report, if_changed=if_changed, quiet=quiet)
+    else:
+        results, folder_run = fit_joints("identify", log, output, report, if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)
 
@@ -82,3 +92,81 @@ def _report(data, model, fit, output, quiet) -> None:
     for note in fit["notes"]:
         say(f"note: {note}")
     say(wrote(output))
+
+
+def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool) -> tuple[dict, bool]:
+    """``fit_joints`` for identify --coupling: a joint of a coupled group of the log's transmission
+    brings its whole group into one model (DIR/joints_<a>_<b>.npz); the other joints get theirs."""
+    from fricli import joints, logs, modelset, runs
+    from fricli.errors import LogError
+    from fricli.models import coupled
+    from fricli.robot import transmission
+
+    opts = command_options("identify")
+    window = time_window()
+    window = window.to_json() if window else None
+    table, digest = read_log(log)
+    name = "stdin" if log == "-" else log
+    runs.check_table(table, name, opts)
+    try:
+        tr = transmission.of_schema(table.schema.metadata)
+    except ValueError as exc:
+        raise LogError(f"{name}: {exc}") from None
+    if tr is None:
+        raise LogError(f"{name}: --coupling needs the log's transmission (written by fricli import from a mapping "
+                       "with a transmission, docs/drives.md); the log records none")
+    log_joints = logs.joints_of(table, name)
+    covered = joints.select(log_joints, opts["joint"], name)
+    groups = [tr.sub(g) for g in tr.coupled_groups()]
+    units, seen = [], set()
+    for j in covered:
+        group = next((g for g in groups if any(joints.same(j, x) for x in g.joints)), None)
+        key = tuple(map(str, group.joints)) if group else (str(j),)
+        if key not in seen:
+            seen.add(key)
+            units.append((j, group))
+    labels = {j: (", ".join(map(str, g.joints)) if g else j) for j, g in units}
+    folder = modelset.output_folder(output, [j for j, _ in units], log_joints, name)   # a group alone: one file
+    reading = {"kt": opts["kt"], "cutoff_hz": opts["cutoff"], "drop_invalid": opts["drop_invalid"], "warn": warn,
+               "zero": runs.zero(opts)}
+    results: dict = {}
+
+    def work(label):
+        j, group = next(u for u in units if labels[u[0]] == label)
+        if group is None:
+            data = runs.read(table, digest, name, opts, joint=j, warn=warn)
+            out = modelset.path_for(folder, j) if folder else output
+            made = runs.run("identify", data, out, opts, if_changed=if_changed, window=window)
+        else:
+            missing = [x for x in group.joints if not any(joints.same(x, y) for y in log_joints)]
+            if missing:
+                raise LogError(f"{name}: joint {j} shares motors with joints {joints.listed(missing)}, which the log "
+                               "does not hold: the coupled group needs every joint's rows")
+            _, datas = coupled.group_rows(table, list(group.joints), name, sha256=digest, **reading)
+            out = os.path.join(folder, modelset.group_file_name(group.joints)) if folder else output
+            made = runs.run_group(datas, group, out, opts, if_changed=if_changed, window=window)
+        if made is None:
+            say(up_to_date_line(out, digest, False), quiet)
+            if folder is None:
+                click.get_current_context().exit(errors.UNCHANGED)
+            return
+        if group is None:
+            results[j] = report(made)
+            return
+        model, fit = made.model, made.summary
+        if not quiet:
+            unit = made.data.units["tau"]
+            say(f"identified the coupled friction of joints {labels[j]} on {name} ({len(made.data):,} rows "
+                "per joint), per motor:")
+            say("\n".join(model.describe().splitlines()[1:]))
+            for x, errs in fit["joints"].items():
+                say(f"fit error, joint {x}: {_figures(errs, unit)}")
+            say(wrote(out))
+        results[labels[j]] = {"model": out, "log": name, "joints": list(group.joints), "kind": "coupled",
+                              "parameters": {k: getattr(model, k).tolist() for k in model.names()},
+                              "ratio": model.ratio.tolist(), "fit": fit}
+
+    modelset.each_joint([labels[j] for j, _ in units], work)
+    if folder and not results:
+        click.get_current_context().exit(errors.UNCHANGED)
+    return results, folder is not None

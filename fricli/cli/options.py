@@ -199,6 +199,27 @@ def if_changed_option(f):
                              "bytes (sha256) with the same options and input models (for cron jobs).")(f)
 
 
+def command_options(pipeline: str) -> dict:
+    """The options of the running command that shape the model ``pipeline`` writes
+    (``fricli.runs.options``; a wrong combination is a usage error on the option it names)."""
+    from fricli import optionspec, runs
+
+    ctx = click.get_current_context()
+    arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
+    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments}
+    given.update({flag: True for flag, column in optionspec.ZERO_FLAGS.items() if column in declared_zero()})
+    try:
+        return runs.options(pipeline, given)
+    except optionspec.OptionError as exc:
+        message = str(exc).split(": ", 1)[-1]
+        raise click.BadParameter(message, param_hint="--" + exc.option.replace("_", "-")) from None
+
+
+def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
+    same = "options and input models" if inputs else "options"
+    return f"{out} is up to date: made from the same log ({digest[:12]}...) with the same {same}; nothing to do"
+
+
 def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool,
                source=None, read=None, progress=None) -> tuple[dict, bool]:
     """Run ``pipeline`` (``fricli.runs.run``) with the command's options for every joint LOG's run
@@ -210,17 +231,10 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
     a trainer progress callback with ``close()``. Returns ({joint: result} for the joints fitted,
     whether OUTPUT is a folder). With --if-changed an up-to-date output is left untouched; exits
     UNCHANGED (9) when every output is up to date. LOCKED (8) when another job holds an output."""
-    from fricli import logs, modelset, optionspec, runs
+    from fricli import logs, modelset, runs
 
     ctx = click.get_current_context()
-    arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
-    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments}
-    given.update({flag: True for flag, column in optionspec.ZERO_FLAGS.items() if column in declared_zero()})
-    try:
-        opts = runs.options(pipeline, given)
-    except optionspec.OptionError as exc:
-        message = str(exc).split(": ", 1)[-1]
-        raise click.BadParameter(message, param_hint="--" + exc.option.replace("_", "-")) from None
+    opts = command_options(pipeline)
     window = time_window()
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
@@ -239,9 +253,7 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
             if on_eval is not None:
                 on_eval.close()
         if made is None:
-            same = "options and input models" if pairs[j] else "options"
-            say(f"{out} is up to date: made from the same log ({digest[:12]}...) with the same {same}; "
-                "nothing to do", quiet)
+            say(up_to_date_line(out, digest, bool(pairs[j])), quiet)
             if folder is None:
                 ctx.exit(errors.UNCHANGED)
             return
