@@ -315,6 +315,7 @@ def test_manifest_options_over_the_command_defaults(tmp_path):
     ("refine = 1", "identify option refine = 1: expected true or false"),
     ("travle = 1.0", "unknown identify option 'travle' (known: cutoff, drop_invalid, hold, "),
     ("joint = 3", "option 'joint' is set by joints = [...]"),
+    ("coupling = true", "option 'coupling' fits several joints into one model; a fleet job fits one joint"),
 ])
 def test_a_wrong_manifest_option_is_one_line_naming_robot_key_and_expectation(tmp_path, options, needle):
     (tmp_path / "logs").mkdir()
