@@ -6,7 +6,7 @@ import os
 
 import click
 
-from fricli import joints, logs, metrics, modelset, models
+from fricli import logs, modelset, models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, read_log, reading_kwargs, say, warn)
@@ -163,54 +163,51 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     del reading["joint"]
     table_, digest = read_log(log)
     name = "stdin" if log == "-" else log
-    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
+    pairs = modelset.paired(source, table_, name, joint)
     several = len(pairs) > 1
 
     if calibrated and not several:
         raise click.UsageError("--calibrate needs a whole-arm log and a model folder (one model per joint)")
-    refitted: dict = {}
 
-    def one(data, out, job, model_path):
-        base, meta = models.load(model_path)
-        if data.joint in refitted:
-            from fricli.diagnosis.fix import refit
-
-            base = refitted[data.joint] = refit(base, data)
-        else:
-            models.check_log(meta, data, model_path)
-        result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                                 max_effects=max_effects, accept_implausible=accept_implausible)
-        if not as_json and (out is not None or not calibrated):   # --calibrate: the tables after it only
+    def show(result, data, model_path) -> None:
+        if not as_json:
             if several:
                 click.echo(f"joint {data.joint} ({model_path}):")
             click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
                        + ("\n" if several else ""))
-        if fix and out is not None:
-            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet, data.joint in refitted)
-        return result.to_json()
 
-    def diagnose_all(table):
-        found = {}
+    def report(made, refitted: bool = False):
+        show(made.diagnosis, made.data, made.base)
+        _say_fixed(made, quiet, refitted)
+        return made.diagnosis.to_json()
+
+    def diagnose_all(table, echo: bool = True) -> dict:
         from fricli.models import coupled
+
+        found = {}
 
         def work(j):
             data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
             data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
-            found[j] = one(data, None, None, pairs[j])
+            base, meta = models.load(pairs[j])
+            models.check_log(meta, data, pairs[j])
+            result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
+                                     max_effects=max_effects, accept_implausible=accept_implausible)
+            if echo:
+                show(result, data, pairs[j])
+            found[j] = result.to_json()
 
         modelset.each_joint(list(pairs), work, what="results")
         return found
 
     robot = None
     if calibrated:
-        before = diagnose_all(table_)
-        cal, text, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet)
-        refitted.update(dict.fromkeys(pairs))
-        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=False, quiet=quiet,
-                                         source=source, read=(table_, digest))
+        before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
+        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet)
+        results, folder_run = _fix_refitted(table_, digest, name, output, source, report), True
         robot = _calibrated_record(before, results, cal, calibrated)
     elif fix:
-        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
+        results, folder_run = fit_joints("diagnose", log, output, report, if_changed=if_changed, quiet=quiet,
                                          source=source, read=(table_, digest))
     else:
         results, folder_run = diagnose_all(table_), several
@@ -223,6 +220,41 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
             emit_json({"joints": {str(j): r for j, r in results.items()}, "robot_model": robot})
         else:
             emit_results(results, folder_run)
+
+
+def _fix_refitted(table, digest: str, name: str, output: str, source, report) -> dict:
+    """--fix after --calibrate: each joint's base model refitted on the recomputed log
+    (``fix.refit``), diagnosed and fixed there, written under the job's record and lock as
+    ``fricli.runs`` writes a fixed model; {joint: report(made)}."""
+    from fricli import jobs, metrics, runs
+    from fricli.cli.options import command_options
+    from fricli.diagnosis.fix import augment, refit
+
+    opts = command_options("diagnose")
+    pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
+    results = {}
+
+    def work(j):
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn)
+        out = modelset.path_for(folder, data.joint)
+        base, meta = models.load(pairs[j])
+        base = refit(base, data)
+        job = runs.record("diagnose", opts, data, pairs[j])
+        with jobs.output_lock(out):
+            result = driver.diagnose(base, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
+                                     only=opts["only"], max_effects=opts["max_effects"],
+                                     accept_implausible=opts["accept_implausible"])
+            fixed = augment(base, result, data, carry=not opts["no_carry"])
+            fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+            fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+                       carried=fixed.carried, refitted=fixed.refitted)
+            models.save_for_log(out, fixed, data, rows_used=len(data), fit=fit, job=job,
+                                base={"path": pairs[j], "kind": base.kind, "refitted_on_calibrated_log": True})
+        results[j] = report(runs.Made("diagnose", out, data, fixed, fit, base=pairs[j], base_meta=meta,
+                                      diagnosis=result), refitted=True)
+
+    modelset.each_joint(list(pairs), work)
+    return results
 
 
 def _urdf_of(table, urdf: str | None) -> str | None:
@@ -255,7 +287,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     for line in cal.report["suspicious"]:
         warn(f"warning: {line}")
     say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)
-    return cal, text, new
+    return cal, new
 
 
 def _fit_lines(cal, joints_: list) -> str:
@@ -313,17 +345,12 @@ def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
             "suspicious": cal.report["suspicious"], "mae": rows, "summary": summary}
 
 
-def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet, refitted=False) -> None:
-    from fricli.diagnosis.fix import augment
-
-    fixed = augment(base, result, data, carry=not no_carry)
-    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-               carried=fixed.carried, refitted=fixed.refitted)
-    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
-                        base={"path": model_path, "kind": base.kind})
+def _say_fixed(made, quiet: bool, refitted: bool = False) -> None:
+    """The stderr line of a model written by --fix."""
+    result, fixed, fit = made.diagnosis, made.model, made.summary
     if quiet:
         return
+    base_kind = made.base_meta.get("kind")
     if result.added:
         carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
         if fixed.errors:
@@ -332,9 +359,9 @@ def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet, r
             carried += f"; refitted with them: {', '.join(fixed.refitted)}"
         if result.suspected:
             carried += f"; not added, implausible: {', '.join(result.suspected)}"
-        say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
+        say(f"wrote {made.output}: {base_kind} + {', '.join(result.added)}{carried} "
             f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
     else:
         held = f" (not added, implausible: {', '.join(result.suspected)})" if result.suspected else ""
-        same = f"{base.kind} refitted on the recomputed log" if refitted else f"same predictions as {model_path}"
-        say(f"wrote {output}: nothing added{held}, {same}")
+        same = f"{base_kind} refitted on the recomputed log" if refitted else f"same predictions as {made.base}"
+        say(f"wrote {made.output}: nothing added{held}, {same}")
