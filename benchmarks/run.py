@@ -4,6 +4,7 @@
     python benchmarks/run.py                   full sizes (several minutes on 2 cores)
     python benchmarks/run.py --quick           tiny sizes, about 15 s (what the tests run)
     python benchmarks/run.py --json            the figures as JSON on stdout
+    python benchmarks/run.py --only identify   only identify on 100,000 rows (library and command)
     python benchmarks/run.py --plot docs/img/performance-scaling.png
                                                also measure how cost grows with log length and
                                                network size, and plot it
@@ -522,6 +523,23 @@ def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
     return paths
 
 
+def bench_identify(add, tmp: str, size: dict, reps: int) -> None:
+    """identify on a simulated base log of ``identify_rows`` rows (the sample log when None):
+    the library call on the loaded log, and the whole command."""
+    from fricli import identify
+    if size["identify_rows"]:
+        id_path = os.path.join(tmp, "identify.parquet")
+        rate = size["identify_rows"] / 351.0
+        simulate(id_path, ["--scenario", "base", "--rate", f"{rate:.6g}", "--seed", "1"])
+    else:
+        id_path = BASE_LOG
+    id_log = logs.load_log(id_path)
+    add("lugre", f"identify (library), {len(id_log):,} rows",
+        median_time(lambda: identify.identify(id_log), reps), "s", "target < 5")
+    add("lugre", f"identify command (wall), {len(id_log):,} rows",
+        run_cli(["identify", id_path, "-o", os.path.join(tmp, "id.npz")], reps), "s", "target <= 1")
+
+
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--torch-worker"]:
@@ -536,6 +554,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--threads", type=int, default=2, help="PyTorch threads (fricli uses at most 2)")
     ap.add_argument("--plot", default=None, metavar="PNG", help="also measure scaling and plot it to PNG")
     ap.add_argument("--skip-torch", action="store_true", help="do not measure PyTorch even if installed")
+    ap.add_argument("--only", choices=["identify"], default=None,
+                    help="measure only this case (identify: the library call and the whole command)")
     args = ap.parse_args(argv)
     size = dict(QUICK if args.quick else FULL)
     reps = args.repeats or size["repeats"]
@@ -551,6 +571,13 @@ def main(argv=None) -> dict:
     def add(group, name, value, unit, note=""):
         rows.append({"group": group, "name": name, "value": value, "unit": unit, "note": note})
         say(f"  {group:<9} {name:<52} {fmt(value):>12} {unit} {note}")
+
+    if args.only == "identify":
+        with tempfile.TemporaryDirectory() as tmp:
+            say("lugre")
+            bench_identify(add, tmp, size, reps)
+        print(json.dumps(res, indent=1) if args.json else format_table(res))
+        return res
 
     with tempfile.TemporaryDirectory() as tmp:
         base_log = logs.load_log(BASE_LOG)
@@ -629,18 +656,7 @@ def main(argv=None) -> dict:
         secs = median_time(lambda: model_l.predict(sig_l), max(reps, 5))
         add("lugre", f"LuGreModel.predict (t, qd), {nl:,} samples", nl / secs, "samples/s")
 
-        from fricli import identify
-        if size["identify_rows"]:
-            id_path = os.path.join(tmp, "identify.parquet")
-            rate = size["identify_rows"] / 351.0
-            simulate(id_path, ["--scenario", "base", "--rate", f"{rate:.6g}", "--seed", "1"])
-        else:
-            id_path = BASE_LOG
-        id_log = logs.load_log(id_path)
-        add("lugre", f"identify (library), {len(id_log):,} rows",
-            median_time(lambda: identify.identify(id_log), reps), "s", "target < 5")
-        add("lugre", f"identify command (wall), {len(id_log):,} rows",
-            run_cli(["identify", id_path, "-o", os.path.join(tmp, "id.npz")], reps), "s", "target <= 1")
+        bench_identify(add, tmp, size, reps)
 
         # ---- prediction
         say("predict")
