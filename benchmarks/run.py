@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 from fricli import learning, logs, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.nn import activations as acts  # noqa: E402
-from fricli.blas import _openblas, single_threaded  # noqa: E402
+from fricli.threads import blas_threads, single_threaded  # noqa: E402
 from fricli.nn.network import Network  # noqa: E402
 from fricli.nn.training import Standardizer, Trainer  # noqa: E402
 
@@ -562,7 +562,7 @@ def main(argv=None) -> dict:
     torch = None if args.skip_torch else torch_version()
     res: dict = {"machine": {"python": platform.python_version(), "numpy": np.__version__, "cpus": os.cpu_count(),
                              "processor": platform.processor() or platform.machine(),
-                             "blas_threads": (_openblas()[0]() if _openblas() else None),
+                             "blas_threads": max(blas_threads().values(), default=None),
                              "torch": torch, "torch_threads": args.threads,
                              "quick": args.quick, "repeats": reps},
                  "rows": []}

@@ -1,6 +1,7 @@
 """Identify the extended LuGre model from a log (``fricli identify``).
 
-Two stages, both bounded Levenberg-Marquardt fits (``fricli.least_squares``):
+Two stages, both bounded nonlinear least-squares fits (``scipy.optimize.least_squares``, trust
+region reflective, x_scale='jac'):
 
 1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
    friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
@@ -32,10 +33,12 @@ import math
 
 import numpy as np
 
-from fricli import least_squares, logs, metrics, physics
+from fricli import lazy, logs, metrics, physics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
-from fricli.blas import single_threaded
+from fricli.threads import single_threaded
+
+optimize = lazy.module("scipy.optimize")
 
 
 MIN_STEADY_PER_DIRECTION = 20
@@ -357,7 +360,7 @@ class LuGreIdentifier:
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
-        costs = [least_squares.sumsq(residual(x)) for x in grid]
+        costs = [_sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
@@ -393,7 +396,7 @@ class LuGreIdentifier:
         lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
         ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        start_cost = 0.5 * least_squares.sumsq(residual(x0))
+        start_cost = 0.5 * _sumsq(residual(x0))
         try:
             res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement", partial=True)
         except FitError as exc:
@@ -472,20 +475,29 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     except np.linalg.LinAlgError:
         coef = np.linalg.lstsq(gram / np.outer(scale, scale), ry / scale, rcond=None)[0]
     coef = coef / scale
-    sse = least_squares.sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
+    sse = _sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
     return coef, max(sse, 0.0)
 
 
-def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False) -> least_squares.Result:
-    """``least_squares.solve``; failures become FitError. With ``partial``, a fit stopped at
-    ``max_nfev`` returns its last (best) iterate instead."""
+def _sumsq(r: np.ndarray) -> float:
+    """Sum of squares of r (n,)."""
+    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
+    return float(np.einsum("i,i->", r, r))
+
+
+def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False):
+    """``scipy.optimize.least_squares`` (trf, x_scale='jac') of fun from x0 within bounds;
+    failures become FitError. With ``partial``, a fit stopped at ``max_nfev`` returns its last
+    iterate (trf accepts only steps that lower the cost: the best one) instead."""
     try:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            res = least_squares.solve(fun, x0, bounds, max_nfev=max_nfev)
-    except ValueError as exc:
+            res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
+    except (ValueError, np.linalg.LinAlgError) as exc:
         raise FitError(f"fitting the {what} failed: {exc}") from None
     if res.status == 0 and not partial:
         raise FitError(f"fitting the {what} did not converge within {max_nfev} evaluations")
+    if res.status < 0 or not np.isfinite(res.x).all():
+        raise FitError(f"fitting the {what} failed: {res.message}")
     return res
 
 
