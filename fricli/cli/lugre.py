@@ -9,7 +9,7 @@ import click
 from fricli import models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                output_option, reading_kwargs, say)
+                                output_option, reading_kwargs, say, warn)
 from fricli.errors import OutputError
 from fricli.identify import LuGreIdentifier
 from fricli.models.lugre import PARAM_INFO, unit_of
@@ -80,16 +80,18 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
 
 
 def _report(data, model, fit, output, quiet) -> None:
-    if quiet:
-        return
-    unit = data.units["tau"]
-    where = f"joint {data.joint}, " if data.joint is not None else ""
-    say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
-        f"{fit['steady_rows']:,} steady-state)")
-    for name, value in model.parameters().items():
-        say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
-    say(f"fit error, all rows:          {_figures(fit, unit)}")
-    say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
-    for note in fit["notes"]:
-        say(f"note: {note}")
-    say(f"wrote {output}")
+    """Parameters, errors and notes (unless quiet), then the plausibility warnings (always)."""
+    if not quiet:
+        unit = data.units["tau"]
+        where = f"joint {data.joint}, " if data.joint is not None else ""
+        say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
+            f"{fit['steady_rows']:,} steady-state)")
+        for name, value in model.parameters().items():
+            say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
+        say(f"fit error, all rows:          {_figures(fit, unit)}")
+        say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
+        for note in fit["notes"]:
+            say(f"note: {note}")
+    for warning in fit["warnings"]:
+        warn(f"warning: {warning}")
+    say(f"wrote {output}", quiet)
