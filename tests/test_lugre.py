@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE, shared_data
-from fricli import errors, logs, models, physics
+from fricli import errors, logs, metrics, models, physics
 from fricli.cli import cli
 from fricli.errors import DataError, FitError, ModelFileError
 from fricli.identify import LuGreIdentifier, speed_levels, steady_state_mask
@@ -257,6 +257,62 @@ def test_identify_fits_the_data_at_least_as_well_as_the_true_parameters(sweep, f
     assert np.sum((refined.model_.predict(sweep)[0] - y) ** 2) <= np.sum((truth.predict(sweep)[0] - y) ** 2)
 
 
+# ---------------------------------------------------------------------------- plausibility warnings
+
+
+def with_spikes(sig, rows=slice(5000, 5010), size=20.0):
+    """sig with ``size`` [Nm] added to tau_m on ``rows``: a local effect the model cannot follow."""
+    sig = dict(sig, tau_m=sig["tau_m"].copy())
+    sig["tau_m"][rows] += size
+    return sig
+
+
+def warnings_of(sig):
+    return LuGreIdentifier().fit(sig).warnings_
+
+
+def test_warning_parameters_at_bounds_with_a_large_max_error():
+    # a Stribeck drop steeper than delta = 5 puts delta at its bound; spikes make the max error large
+    flagged = warnings_of(with_spikes(sweep_signals(seed=3, p=dict(TRUE, delta=10.0))))
+    assert len(flagged) == 1 and flagged[0].startswith("delta = 5 (at the bound of the fit)")
+    assert "fricli diagnose" in flagged[0]
+    # the same spikes with every parameter inside its bounds: no warning
+    assert warnings_of(with_spikes(sweep_signals(seed=3))) == []
+
+
+def test_warning_stribeck_velocity_spanning_the_speeds():
+    flagged = warnings_of(sweep_signals(seed=3, p=dict(TRUE, vs=0.5, fs=14.0, delta=1.0)))
+    assert len(flagged) == 1 and flagged[0].startswith("the Stribeck velocity vs = ")
+    assert "well below vs" in flagged[0]
+    assert warnings_of(sweep_signals(seed=3)) == []                      # vs = 0.04 rad/s, speeds to 0.7
+
+
+def test_warning_vanishing_coulomb_level():
+    no_load = dict(TRUE, kc=0.0, ks=0.0)
+    flagged = warnings_of(sweep_signals(seed=3, amp=0.0, p=dict(no_load, fc=0.1)))
+    assert len(flagged) == 1 and flagged[0].startswith("the Coulomb level vanishes: Fc = ")
+    assert "--kt" in flagged[0]
+    assert warnings_of(sweep_signals(seed=3, amp=0.0, p=no_load)) == []
+
+
+def test_warning_load_slope_without_a_varying_gravity_torque():
+    # |tau_g| within 0.1 Nm: the slopes rest on a gravity torque that hardly changes
+    flagged = warnings_of(sweep_signals(seed=3, amp=0.1, p=dict(TRUE, kc=2.0, ks=2.5)))
+    assert len(flagged) == 1 and flagged[0].startswith("load slope kc = ")
+    assert "leave tau_g out of the log" in flagged[0]
+    assert warnings_of(sweep_signals(seed=3, p=dict(TRUE, kc=2.0, ks=2.5))) == []    # |tau_g| up to 43 Nm
+
+
+def test_warnings_reach_stderr_and_the_model_file(tmp_path):
+    path = write_log(sweep_signals(seed=3, amp=0.0, p=dict(TRUE, fc=0.1, kc=0.0, ks=0.0)), tmp_path / "log.parquet")
+    out = tmp_path / "m.npz"
+    res = CliRunner().invoke(cli, ["identify", path, "-o", str(out), "--json", "-q"])
+    assert res.exit_code == 0, res.output
+    assert res.stderr.startswith("warning: the Coulomb level vanishes")     # also with --quiet
+    assert json.loads(res.stdout)["fit"]["warnings"] == [res.stderr.strip()[len("warning: "):]]
+    assert models.load(str(out))[1]["fit"]["warnings"] == json.loads(res.stdout)["fit"]["warnings"]
+
+
 def test_identify_without_gravity_and_on_a_linear_axis():
     sig = sweep_signals(seed=5, amp=0.0, p=dict(TRUE, kc=0.0, ks=0.0))
     del sig["tau_g"]
@@ -324,6 +380,7 @@ def test_refinement_that_does_not_converge_keeps_its_best_estimate():
 
 @pytest.mark.parametrize("case,needle", [
     ("positive-only", "no samples with negative velocity"),
+    ("creeping-back", "no samples with negative velocity"),
     ("sine", "too few steady-state samples"),
     ("still", "does not move"),
     ("one-speed", "only one speed"),
@@ -331,6 +388,9 @@ def test_refinement_that_does_not_converge_keeps_its_best_estimate():
 def test_unfittable_data_refused(case, needle):
     if case == "positive-only":
         sig = sweep_signals(levels=[0.05, 0.2, 0.5], both=False)
+    elif case == "creeping-back":
+        # the negative motion stays under metrics.in_motion's share of the top speed: it is no motion
+        sig = sweep_signals(levels=[0.05, 0.2, 0.5, -0.25 * metrics.REST_SHARE], both=False)
     elif case == "one-speed":
         sig = sweep_signals(levels=[0.2])
     else:
