@@ -456,9 +456,9 @@ class LuGreIdentifier:
             if hi - lo < MINOR * fc:
                 which = " and ".join(f"{k} = {p[k]:.3g}" for k in slopes)
                 out.append(f"load slope {which} fitted while |tau_g| varies by only {hi - lo:.3g} {tau} over the "
-                           f"static-curve rows ({100 * (hi - lo) / fc:.1f} % of the Coulomb level): the joint carries (nearly) "
-                           "no changing gravity torque. If it carries none, leave tau_g out of the log (kc = ks = 0 "
-                           "then); otherwise log poses with other gravity torques")
+                           f"static-curve rows ({100 * (hi - lo) / fc:.1f} % of the Coulomb level): the joint "
+                           "carries (nearly) no changing gravity torque. If it carries none, leave tau_g out of the "
+                           "log (kc = ks = 0 then); otherwise log poses with other gravity torques")
         return out
 
     # --------------------------------------------------------------------- fit
