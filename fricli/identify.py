@@ -466,9 +466,11 @@ class LuGreIdentifier:
     def fit(self, signals: dict[str, np.ndarray], units: dict | None = None, axis: str = "rotary") -> "LuGreIdentifier":
         """Fit on a log's signals (canonical units, see ``fricli.logs``).
 
-        numpy's BLAS runs on one thread meanwhile: its threaded reductions (over the log's rows)
-        round differently for each thread count, and the fit would not give the same bytes
-        under OMP_NUM_THREADS=1 and 2. It costs nothing measurable here."""
+        The BLAS libraries (numpy's and scipy's) run on one thread meanwhile: threaded
+        reductions (over the log's rows) round differently for each thread count, and the fit
+        would not give the same bytes under OMP_NUM_THREADS=1 and 2. It costs nothing
+        measurable here. scipy is imported first: its own BLAS must be loaded to be pinned."""
+        optimize.least_squares  # noqa: B018  (the import)
         with single_threaded():
             return self._fit(signals, units, axis)
 

@@ -8,6 +8,7 @@ with the training loop's two worker threads.
 The limits go through threadpoolctl, which finds the BLAS libraries actually loaded (numpy's
 and scipy's OpenBLAS, MKL, BLIS, FlexiBLAS) whatever their symbol names, and restores their
 thread counts afterwards. Apple's Accelerate offers no thread control and is not listed by it.
+A library loaded inside a block is not pinned: import it (scipy) before entering one.
 The OpenBLAS numpy ships (0.3.31) ignores a count set from another thread once the main thread
 has set one: fricli opens these blocks from the thread that runs the command.
 """

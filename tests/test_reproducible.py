@@ -12,6 +12,7 @@ too (its threaded reductions round differently per thread count); model files ha
 timestamps and sorted JSON; Parquet output carries no time stamps.
 """
 
+import json
 import os
 import subprocess
 import sys
@@ -147,3 +148,28 @@ def test_single_threaded_holds_until_the_last_thread_leaves(monkeypatch):
         worker.join(10)                     # the first thread leaves while this one is inside
         assert calls == [("set", 1, "blas")]
     assert calls == [("set", 1, "blas"), ("restore",)]
+
+
+_PINNED = """
+import json
+from fricli import identify, logs
+from fricli.threads import blas_threads
+
+seen = []
+fit = identify.LuGreIdentifier._fit
+identify.LuGreIdentifier._fit = lambda self, *a: seen.append(blas_threads()) or fit(self, *a)
+identify.identify(logs.load_log({path!r}))
+import scipy.optimize  # noqa: E402,F401
+print(json.dumps([seen[0], blas_threads()]))
+"""
+
+
+def test_identify_pins_scipys_blas_too():
+    # a fresh interpreter, where identify itself imports scipy (and scipy's own BLAS library)
+    code = _PINNED.format(path=str(SAMPLE / "joint2_base.parquet"))
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    inside, loaded = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert sorted(inside) == sorted(loaded)          # scipy's BLAS library was loaded before the fit
+    assert set(inside.values()) == {1}
