@@ -24,7 +24,8 @@ every level keeps training rows and the validation rows come in whole stretches 
 In mode "moving" the validation rows are whole blocks of time instead (``time_blocks``): the
 log cut into ten blocks of equal duration, round(10 * val_fraction) of them held out, so the
 validation rows follow other harmonics' phases than the training rows, not the neighbours of
-training rows.
+training rows. ``time_folds`` groups the ten blocks into folds for cross-validation (five folds
+of two blocks for a validation fraction of 0.2).
 """
 
 from __future__ import annotations
@@ -155,6 +156,16 @@ def time_blocks(n: int, val_fraction: float, rng: np.random.Generator) -> np.nda
     """Boolean mask (n,) of validation rows: ``held_blocks(val_fraction)`` of the PIECES
     contiguous blocks of ``time_block``, drawn at random."""
     return np.isin(time_block(n), rng.choice(PIECES, size=held_blocks(val_fraction), replace=False))
+
+
+def time_folds(val_fraction: float, rng: np.random.Generator) -> list[np.ndarray]:
+    """The PIECES time blocks in folds of ``held_blocks(val_fraction)`` blocks each, drawn at
+    random: PIECES // held folds (five for 0.2, every block held out once), no block in two."""
+    held = held_blocks(val_fraction)
+    if held == 0:
+        return []
+    order = rng.permutation(PIECES)
+    return [np.sort(order[k * held:(k + 1) * held]) for k in range(PIECES // held)]
 
 
 def _at_most(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:

@@ -62,6 +62,11 @@ def _check_outputs(output: str, as_json: bool) -> None:
 def _rows_used(summary: dict) -> str:
     """How train-base chose its rows, for its message."""
     mode, val = summary["velocity_groups"], summary["val_rows"]
+    cv = summary.get("cross_validation")
+    if mode == "moving" and cv is not None:
+        return (f"rows in motion (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
+                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g}; "
+                "no steady velocity levels in the log)")
     if mode == "moving":
         return (f"rows in motion ({val} for validation in {summary['groups']} of "
                 f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
