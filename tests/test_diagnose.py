@@ -560,7 +560,7 @@ def test_gains_below_minus_100_percent_read_worse(rng):
     h = 1e-3 * (logs.friction_target(log.signals) - CoulombViscous().predict(log.signals)[0])
     h[-n // 10:] = 0.5 * (-1.0) ** np.arange(n // 10)
     table_ = log.table.append_column("humidity", logs.table_from_arrays({"humidity": h}, {}).column(0))
-    d = diagnose(CoulombViscous(), logs.from_table(table_, name="synthetic"))
+    d = diagnose(CoulombViscous(), logs.from_table(table_, name="synthetic", zero=("tau_dyn",)))
     col = next(e for e in d.effects if e.name == "column:humidity")
     assert col.gain == driver.WORST_GAIN and col.step_gain >= driver.WORST_GAIN
     assert all(e.gain >= driver.WORST_GAIN for e in d.effects) and min(d.alone.values()) >= driver.WORST_GAIN
@@ -624,11 +624,11 @@ def test_an_implausible_gravity_scale_is_flagged_and_not_applied(tmp_path):
 
 def test_a_ratio_beyond_one_is_not_printed_as_a_coefficient():
     ctx = E.Context({"qd": np.ones(3)}, np.zeros(3))
-    params = E.Quadrant().params({"tau_l held": -4.7}, ctx)
+    params = E.Quadrant().params({"tau_g held": -4.7}, ctx)
     assert E.Quadrant().summary(params).startswith("kq < -1 Nm/Nm (not physical)")
     assert "not physical" in E.Quadrant().implausible(params, ctx)
-    assert E.Load().summary(E.Load().params({"|tau_l|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
-    assert E.Load().implausible(E.Load().params({"|tau_l|*sign": 0.02}, ctx), ctx) is None
+    assert E.Load().summary(E.Load().params({"|tau_g|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
+    assert E.Load().implausible(E.Load().params({"|tau_g|*sign": 0.02}, ctx), ctx) is None
 
 
 @pytest.mark.parametrize("inertia, flagged", [(0.5, False), (2.4, False), (-0.05, False), (-1.0, True), (3.0, True)])

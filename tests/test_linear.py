@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import SAMPLE, write
+from conftest import SAMPLE, no_inertia, write
 
 from fricli import logs, models
 from fricli.cli import cli
@@ -33,7 +33,7 @@ def synthetic(params: dict, tmp_path, *, rest_torque: float = 3.0) -> str:
     table = logs.table_from_arrays({"t": t, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": tau_g,
                                     "tau_m": tau_g + tau_f},
                                    {"t": "s", "qd": "rad/s", "qdd": "rad/s^2", "tau_g": "Nm", "tau_m": "Nm"})
-    return write(table, tmp_path / "linear.parquet")
+    return write(no_inertia(table), tmp_path / "linear.parquet")   # no inertia torque in tau_m
 
 
 @pytest.mark.parametrize("params", [SYM, ASYM], ids=["symmetric", "asymmetric"])

@@ -26,7 +26,7 @@ from typing import Callable
 
 import numpy as np
 
-from fricli import logs
+from fricli import logs, metrics
 from fricli.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
@@ -139,8 +139,8 @@ class NeuralFriction(FrictionModel):
     def _fit_velocity_scale(self, sig: dict[str, np.ndarray]) -> None:
         if self.velocity_scale != "auto" or "qd" not in self.inputs:
             return
-        speed = np.abs(feature(sig, "qd"))
-        speed = speed[speed > 0]
+        qd = feature(sig, "qd")
+        speed = np.abs(qd[metrics.in_motion(qd)])
         v0 = float(np.quantile(speed, VELOCITY_QUANTILE)) if speed.size else 0.0
         if not v0 > 0:
             raise DataError("no moving training samples to scale the velocity input with")
