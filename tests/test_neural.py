@@ -486,6 +486,12 @@ def test_train_base_says_it_trains_on_the_moving_rows(harmonic, tmp_path):
     result = run("train-base", harmonic["log"], "-o", tmp_path / "m.npz", "--steps", 20)
     assert result.exit_code == 0, result.stderr
     assert "rows in motion" in result.stderr and "no steady velocity levels" in result.stderr
+    assert "the mean of 5 networks, each validated on 2 of 10 time blocks" in result.stderr
+    one = run("train-base", harmonic["log"], "-o", tmp_path / "one.npz", "--steps", 20, "--no-folds", "--json")
+    assert one.exit_code == 0, one.stderr
+    out = json.loads(one.stdout)
+    assert "cross_validation" not in out and out["val_rows"] > 0 and "validation in 2 of 10 time blocks" in one.stderr
+    assert len(models.load(str(tmp_path / "one.npz"))[0].nets_) == 1
     levels = run("train-base", write(motion_log(LEVELS, seed=1), tmp_path / "b.parquet"), "-o", tmp_path / "b.npz",
                  "--steps", 20)
     assert "velocity levels" in levels.stderr and "rows in motion" not in levels.stderr
