@@ -11,6 +11,8 @@ Every command decides through this module (docs/joints.md):
   with no recorded joint, or a log without a joint column, never conflicts.
 - A single model file on a log of several joints applies to its own joint (or ``--joint``); a
   model set (a folder, ``fricli.modelset``) applies each joint's model to that joint's rows.
+- A model may cover a group of joints (joints that share motors, ``fricli.models.coupled``): its
+  file records them as ``joints``, and it applies to each of their rows (``covers``).
 
 Joints are compared by their text (``2`` in a model file matches joint ``"2"`` of a log).
 """
@@ -73,6 +75,12 @@ def several(log_joints: list | None, name: str, hint: str = "choose one with --j
     return LogError(f"{name}: the log holds joints {listed(log_joints)}: {hint}")
 
 
+def covers(meta: dict) -> list:
+    """The joints a model file covers: its ``joints`` (a model of a coupled group) or its ``joint``."""
+    group = meta.get("joints")
+    return list(group) if isinstance(group, list) and group else [meta.get("joint")]
+
+
 def check(model_joint, log_joint, model_name: str, log_name: str) -> None:
     """Refuse a model fitted on a known joint for rows of a known different joint."""
     if model_joint is not None and log_joint is not None and not same(model_joint, log_joint):
@@ -102,6 +110,16 @@ def pair(source: Source, log_joints: list | None, requested, log_name: str) -> l
     joint must match. A model set: every covered joint needs its model; on a log without a joint
     column the set must hold exactly one model."""
     covered = select(log_joints, requested, log_name)
+    if not source.folder and len(source.paths) > 1:   # one file of a coupled group: each of its joints
+        if covered == [None]:
+            raise ModelFileError(f"{source.name}: a model of joints {listed(source.paths)}, but {log_name} has no "
+                                 "'joint' column to find their rows by")
+        found = [j for j in covered if source.model_for(j)]
+        if not found:
+            what = f"joint {covered[0]}" if requested is not None or len(covered) == 1 else f"joints {listed(covered)}"
+            raise JointMismatch(f"{source.name}: the model was fitted on joints {listed(source.paths)}, not on "
+                                f"{what} of {log_name}")
+        return [(j, source.model_for(j)[1]) for j in found]
     if not source.folder:
         (model_joint, path), = source.paths.items()
         if log_joints is not None and requested is None and len(log_joints) > 1:

@@ -16,7 +16,7 @@ from typing import Callable
 
 from fricli import modelfile
 from fricli.errors import FricliError, LogError, ModelFileError, OutputError
-from fricli.joints import Source, listed, pair, same, select, several
+from fricli.joints import Source, covers, listed, pair, same, select, several
 
 
 def file_name(joint) -> str:
@@ -25,6 +25,11 @@ def file_name(joint) -> str:
 
 def path_for(folder: str, joint) -> str:
     return os.path.join(folder, file_name(joint))
+
+
+def group_file_name(joints) -> str:
+    """The file of a model that covers several joints (a coupled group): joints_<a>_<b>.npz."""
+    return "joints_" + "_".join(re.sub(r"[^A-Za-z0-9.-]", "_", str(j)) for j in joints) + ".npz"
 
 
 def listing(folder: str) -> dict:
@@ -37,12 +42,12 @@ def listing(folder: str) -> dict:
     for name in names:
         path = os.path.join(folder, name)
         meta, _ = modelfile.read(path)
-        joint = meta.get("joint")
-        if joint is None:
-            raise ModelFileError(f"{path}: records no joint; a model folder holds one model per named joint")
-        if any(same(joint, j) for j in out):
-            raise ModelFileError(f"{folder}: two models of joint {joint} ({name} and another)")
-        out[joint] = path
+        for joint in covers(meta):
+            if joint is None:
+                raise ModelFileError(f"{path}: records no joint; a model folder holds one model per named joint")
+            if any(same(joint, j) for j in out):
+                raise ModelFileError(f"{folder}: two models of joint {joint} ({name} and another)")
+            out[joint] = path
     if not out:
         raise ModelFileError(f"{folder}: no model files (.npz) in the folder")
     return out
@@ -53,7 +58,7 @@ def source(path: str) -> Source:
     if os.path.isdir(path):
         return Source(path, listing(path), folder=True)
     meta, _ = modelfile.read(path)
-    return Source(path, {meta.get("joint"): path})
+    return Source(path, {j: path for j in covers(meta)})
 
 
 def output_folder(output: str, covered: list, log_joints: list | None, log_name: str) -> str | None:

@@ -252,10 +252,14 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     streams = {}
     for j, path in joints.pair(source, found, joint, name):
         model, meta = load(path)
+        if hasattr(model, "member"):   # a model of a coupled group: this joint's view of it
+            model = model.member(j)
         streams[j] = _Stream(j, model, meta, path, env=models.envelope(meta, path))
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
     reason = whole_reason(pf.schema_arrow, lowpass_hz if external else None)
+    if reason is None and any(getattr(st.model, "partners", None) for st in streams.values()):
+        reason = "the joints of a coupled group are predicted together"
     warnings: list[str] = []
     fric, ext_err = ErrorSums(), ErrorSums()
     rows = batches = dropped = 0
@@ -288,8 +292,10 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                         part = table.filter(pc.equal(jcol, pa.scalar(j, jcol.type)))
                     if part.num_rows == 0:
                         continue
+                    partners = _partner_signals(st, table, name, kt, cutoff_hz, drop_invalid)
                     out, n_in = _predict_part(st, part, offset, name, total, reason, external, lowpass_hz, kt,
-                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation, zero)
+                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation, zero,
+                                              partners)
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -337,9 +343,26 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                                                           "share": n_outside / rows if rows else 0.0})
 
 
+def _partner_signals(st: _Stream, table: pa.Table, name: str, kt, cutoff_hz, drop_invalid) -> dict:
+    """{signal name: (t, qd)} of the other joints of a coupled group's member model (none for others)."""
+    from fricli.models.coupled import partner_key
+
+    out = {}
+    for p in getattr(st.model, "partners", None) or []:
+        try:
+            sig = logs.from_table(table, name=name, joint=p, kt=kt, cutoff_hz=cutoff_hz,
+                                  drop_invalid=drop_invalid).signals
+        except LogError:
+            raise LogError(f"{name}: the friction of joint {st.joint} depends on joint {p} (they share motors), "
+                           f"and the log has no usable rows of joint {p}") from None
+        out[partner_key(p)] = (sig["t"], sig["qd"])
+    return out
+
+
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, external: bool,
                   lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list,
-                  flag_extrapolation: bool = False, zero: tuple = ()) -> tuple[pa.Table, int]:
+                  flag_extrapolation: bool = False, zero: tuple = (),
+                  partners: dict | None = None) -> tuple[pa.Table, int]:
     """One joint's rows of one batch with tau_f_pred (and tau_ext_pred) added; the rows it had."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
     jpos = table.schema.get_field_index("joint")
@@ -364,6 +387,11 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         where = f" of joint {st.joint}" if st.joint is not None else ""
         raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
     st.t_last = float(t[-1])
+    for key, (tp, qdp) in (partners or {}).items():
+        if len(tp) != len(t) or not np.array_equal(tp, t):
+            raise LogError(f"{name}: joint {st.joint} and joint {key[3:]} share motors, but their rows are not at "
+                           "the same times")
+        sig = {**sig, key: qdp}
     with prediction_threads(1):   # the reader and writer threads keep the other core busy
         tau_f, st.state = st.model.predict(sig, st.state)
     unit = log.units["tau"]

@@ -50,7 +50,7 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
+COMMANDS = ["adapt", "calibrate", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
             "import", "inspect", "predict", "report", "simulate", "train-base", "trend"]
 
 
@@ -102,13 +102,16 @@ def test_every_command_in_a_process(tmp_path):
         "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
         "dynamics": ["dynamics", "rec.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "dyn.parquet",
                      "-q"],
+        "calibrate": ["calibrate", "rec.parquet", "--urdf", "two_link.urdf", "--match", "order", "--edge", "0.05",
+                      "-o", "cal.urdf", "-q"],
     }, tmp_path)
     has_pinocchio = importlib.util.find_spec("pinocchio") is not None
     for name, proc in second.items():
-        code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
+        code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY,
+                "calibrate": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
         check(name, proc, code)
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
-                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet",) if has_pinocchio else ()):
+                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet", "cal.urdf") if has_pinocchio else ()):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
 

@@ -18,6 +18,7 @@ from fricli import errors
 # command runs or its help is shown, so start-up stays fast; registering a command is one line.
 COMMANDS = {
     "adapt": "fricli.cli.neural:adapt_cmd",
+    "calibrate": "fricli.cli.calibrate:calibrate_cmd",
     "demo": "fricli.cli.demo:demo_cmd",
     "diagnose": "fricli.cli.diagnose:diagnose_cmd",
     "dynamics": "fricli.cli.robot:dynamics_cmd",

@@ -174,8 +174,11 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     else:
         results, folder_run = {}, several
 
+        from fricli.models import coupled
+
         def work(j):
             data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
+            data.signals.update(coupled.partner_signals(table_, j, name, **reading))   # the coupling effect's
             results[j] = one(data, None, None, pairs[j])
 
         modelset.each_joint(list(pairs), work, what="results")

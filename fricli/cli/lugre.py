@@ -6,10 +6,10 @@ import os
 
 import click
 
-from fricli import models
+from fricli import errors, models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                output_option, reading_kwargs, say)
+                                model_job, output_option, reading_kwargs, say)
 from fricli.errors import OutputError
 from fricli.identify import LuGreIdentifier
 from fricli.models.lugre import PARAM_INFO, unit_of
@@ -36,11 +36,17 @@ def _figures(errs: dict, unit: str) -> str:
 @click.option("--kind", type=click.Choice(["lugre", "linear", "linear-asymmetric"]), default="lugre", show_default=True,
               help="lugre, or the linear model Fv*qd + Fc*sign(qd) + offset (linear-asymmetric: Fv, Fc per "
                    "direction) fitted by least squares on the rows in motion (docs/tutorial.md).")
+@click.option("--coupling", is_flag=True,
+              help="Fit each group of joints that share motors (the log's transmission, docs/drives.md) as one "
+                   "model of friction per motor (kind coupled); the other joints as before.")
+@click.option("--motor-stribeck", is_flag=True,
+              help="With --coupling: each motor's friction with the Stribeck curve (fs, vs) as well.")
 @if_changed_option
 @json_flag
 @common
 def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: float, travel: float,
-                 samples: str, settle: float, refine: bool, kind: str, if_changed: bool, as_json: bool, quiet: bool) -> None:
+                 samples: str, settle: float, refine: bool, kind: str, coupling: bool, motor_stribeck: bool,
+                 if_changed: bool, as_json: bool, quiet: bool) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -79,8 +85,14 @@ def identify_cmd(log: str, output: str, joint, kt, cutoff, drop_invalid, hold: f
                 "units": data.units, "parameters": params,
                 "parameter_units": {k: unit_of(k, data.axis) for k in params}, "fit": fit}
 
-    results, folder_run = fit_joints(log, output, joint, reading_kwargs(joint, kt, cutoff, drop_invalid), fit_one,
-                                     if_changed=if_changed, quiet=quiet)
+    if motor_stribeck and not coupling:
+        raise click.UsageError("--motor-stribeck applies to --coupling")
+    reading = reading_kwargs(joint, kt, cutoff, drop_invalid)
+    if coupling:
+        results, folder_run = _fit_coupled(log, output, joint, reading, fit_one, if_changed=if_changed, quiet=quiet,
+                                           stribeck=motor_stribeck)
+    else:
+        results, folder_run = fit_joints(log, output, joint, reading, fit_one, if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)
 
@@ -111,3 +123,74 @@ def _report(data, model, fit, output, quiet) -> None:
     for note in fit["notes"]:
         say(f"note: {note}")
     say(f"wrote {output}")
+
+
+def _fit_coupled(log: str, output: str, joint, reading: dict, fit_one, *, if_changed: bool,
+                 quiet: bool, stribeck: bool = False) -> tuple[dict, bool]:
+    """``fit_joints`` for identify --coupling: a joint of a coupled group of the log's transmission
+    brings its whole group into one model (DIR/joints_<a>_<b>.npz); the other joints get theirs."""
+    from fricli import joints, logs, modelset
+    from fricli.errors import LogError
+    from fricli.models import coupled
+    from fricli.robot import transmission
+
+    table, digest = logs.read_table(log)
+    name = "stdin" if log == "-" else log
+    logs.require_robot_model(table.schema, name, reading.get("zero", ()))
+    try:
+        tr = transmission.of_schema(table.schema.metadata)
+    except ValueError as exc:
+        raise LogError(f"{name}: {exc}") from None
+    if tr is None:
+        raise LogError(f"{name}: --coupling needs the log's transmission (written by fricli import from a mapping "
+                       "with a transmission, docs/drives.md); the log records none")
+    log_joints = logs.joints_of(table, name)
+    covered = joints.select(log_joints, joint, name)
+    groups = [tr.sub(g) for g in tr.coupled_groups()]
+    units, seen = [], set()
+    for j in covered:
+        group = next((g for g in groups if any(joints.same(j, x) for x in g.joints)), None)
+        key = tuple(map(str, group.joints)) if group else (str(j),)
+        if key not in seen:
+            seen.add(key)
+            units.append((j, group))
+    labels = {j: (", ".join(map(str, g.joints)) if g else j) for j, g in units}
+    folder = modelset.output_folder(output, [j for j, _ in units], log_joints, name)   # a group alone: one file
+    reading = {k: v for k, v in reading.items() if k != "joint"}
+    results: dict = {}
+
+    def work(label):
+        j, group = next(u for u in units if labels[u[0]] == label)
+        if group is None:
+            data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
+            out = modelset.path_for(folder, j) if folder else output
+            with model_job(out, data, if_changed=if_changed, quiet=quiet, exit_unchanged=folder is None) as job:
+                if job is not None:
+                    results[j] = fit_one(data, out, job, None)
+            return
+        missing = [x for x in group.joints if not any(joints.same(x, y) for y in log_joints)]
+        if missing:
+            raise LogError(f"{name}: joint {j} shares motors with joints {joints.listed(missing)}, which the log "
+                           "does not hold: the coupled group needs every joint's rows")
+        _, datas = coupled.group_rows(table, list(group.joints), name, sha256=digest, **reading)
+        out = os.path.join(folder, modelset.group_file_name(group.joints)) if folder else output
+        with model_job(out, datas[0], if_changed=if_changed, quiet=quiet, exit_unchanged=folder is None) as job:
+            if job is not None:
+                model, fit = coupled.fit_group(datas, group, stribeck=stribeck)
+                coupled.save_group(out, model, datas[0], fit=fit, job=job)
+                if not quiet:
+                    unit = datas[0].units["tau"]
+                    say(f"identified the coupled friction of joints {labels[j]} on {name} ({len(datas[0]):,} rows "
+                        "per joint), per motor:")
+                    say("\n".join(model.describe().splitlines()[1:]))
+                    for x, errs in fit["joints"].items():
+                        say(f"fit error, joint {x}: {_figures(errs, unit)}")
+                    say(f"wrote {out}")
+                results[labels[j]] = {"model": out, "log": name, "joints": list(group.joints), "kind": "coupled",
+                                      "parameters": {k: getattr(model, k).tolist() for k in model.names()},
+                                      "ratio": model.ratio.tolist(), "fit": fit}
+
+    modelset.each_joint([labels[j] for j, _ in units], work)
+    if folder and not results:
+        click.get_current_context().exit(errors.UNCHANGED)
+    return results, folder is not None

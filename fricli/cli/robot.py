@@ -58,7 +58,7 @@ def _where(entry: dict, unit: str) -> str:
 
 
 @cli.command("import")
-@click.argument("recording")
+@click.argument("recordings", nargs=-1, required=True, metavar="RECORDING...")
 @click.option("--mapping", "mapping_path", default=None, metavar="MAP.toml",
               help="Which column holds what (docs/robot-import.md; docs/ur10e-mapping.toml is an example). "
                    "Required for a text recording; for a ROS bag it says what the effort is and which joints.")
@@ -73,11 +73,12 @@ def _where(entry: dict, unit: str) -> str:
               help="Drop rows whose time goes back a little (reported) instead of refusing the recording.")
 @output_option(help="Output Parquet log (- for stdout).")
 @common
-def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass,
+def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass,
                payload_com, payload_frame, cutoff, drop_backward, output, quiet):
     """Import a robot's delimited text recording or ROS bag as one long-format log.
 
-    RECORDING is a CSV (or other delimited) text file, - for stdin, or a ROS bag (a rosbag2
+    RECORDING is a CSV (or other delimited) text file, - for stdin, several text files that the
+    mapping joins row by row (its 'files', e.g. motor positions and motor torques), or a ROS bag (a rosbag2
     folder in MCAP or sqlite3 storage, or a ROS 1 .bag file: needs pip install 'fricli[ros]').
     For a text file the mapping says which column is the time and, per joint, which are q, qd,
     i_m or tau_m, with units and drive gains; a bag's sensor_msgs/JointState messages name their
@@ -93,13 +94,18 @@ def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pa
       fricli import load.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf \\
           --payload-mass 2.805 --payload-com 0 0 0.05 --payload-frame tool0 -o load.parquet
       fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
+      fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
     from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
     from fricli.robot import mapping as mp
     from fricli.robot import rosbag
-    from fricli.robot.importing import build_log, import_recording
+    from fricli.robot.importing import build_log, import_files, import_recording
 
+    recording = recordings[0]
     bag = rosbag.is_bag(recording)
+    if len(recordings) > 1 and (bag or mapping_path is None):
+        raise click.UsageError("several recordings are the files of one text recording: give --mapping MAP.toml "
+                               "with their 'files' (docs/robot-import.md)")
     if mapping_path is None and not bag:
         if recording != "-" and not Path(recording).exists():
             raise LogError(f"{recording}: no such file, folder or bag")
@@ -109,6 +115,13 @@ def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pa
     mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
     cutoff_hz = DEFAULT_CUTOFF_HZ if cutoff is None else cutoff
     name = "stdin" if recording == "-" else recording
+    if len(recordings) > 1 or mapping.files:
+        if len(recordings) != len(mapping.files):
+            raise LogError(f"{mapping_path}: the mapping names {len(mapping.files)} files "
+                           f"({', '.join(mapping.files) or 'none'}), but {len(recordings)} recordings were given")
+        if "-" in recordings:
+            raise click.UsageError("the files of a recording in several files cannot be read from stdin")
+        name = " + ".join(recordings)
     if bag:
         read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward)
         mapping = read.mapping
@@ -131,6 +144,9 @@ def import_cmd(recording, mapping_path, topic, kt_pairs, urdf, match, inertia_pa
         if read.stamps == "receive":
             say(f"note: {name}: the messages on {read.topic} have zero header stamps: t is the time the bag "
                 "received them", quiet)
+    elif mapping.files:
+        result = import_files([read_bytes(r) for r in recordings], mapping, list(recordings), model=model,
+                              cutoff_hz=cutoff_hz, drop_backward=drop_backward)
     else:
         result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff_hz,
                                   drop_backward=drop_backward)

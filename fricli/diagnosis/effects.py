@@ -632,3 +632,45 @@ def library(signals: dict[str, np.ndarray], only: list[str] | None = None) -> li
         keep = set(only)
         out = [e for e in out if e.name in keep or (e.name.startswith("column:") and "column" in keep)]
     return out
+
+
+class Coupling(Effect):
+    """Friction that moves with the other joints of a coupled group (joints that share motors):
+    terms in their velocities ``qd@<p>`` and in the direction ``sign_motor@<m>`` of each motor
+    that turns with this joint and another, which the command adds to a joint's signals when the
+    log records a coupled transmission. A per-joint model cannot follow a motor that turns with
+    two joints; the remedy is one model of the group."""
+
+    name = "coupling"
+    description = "friction moving with the joints it shares motors with (their velocities, the shared motors' directions)"
+
+    @staticmethod
+    def signals(ctx) -> list[str]:
+        return sorted(s for s in ctx.signals if s.startswith(("qd@", "sign_motor@")))
+
+    def applicable(self, ctx):
+        if not any(s.startswith("qd@") for s in self.signals(ctx)):
+            return "the joint shares no motor with another joint (or their rows are not given)"
+        return None
+
+    def terms(self, ctx, residual):
+        return LEVEL_TERMS + [T.term(s, T.sig_(s)) for s in self.signals(ctx)]
+
+    def params(self, coef, ctx):
+        out = {}
+        for s in self.signals(ctx):
+            kind, joint = s.split("@", 1)
+            if kind == "qd":
+                out[f"Fv@{joint}"] = _par(coef.get(s, 0.0), ctx.fv_unit)
+            else:
+                out[f"Fc motor {joint}"] = _par(coef.get(s, 0.0), ctx.tau_unit)
+        return out
+
+    def summary(self, params):
+        joints = sorted(k.split("@", 1)[1] for k in params if k.startswith("Fv@"))
+        return (f"moves with joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} (shared motors: fit the group "
+                "with identify --coupling); " + super().summary(params))
+
+
+BUILTIN = BUILTIN + (Coupling,)
+NAMES = tuple(cls.name for cls in BUILTIN)

@@ -252,6 +252,8 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
 def _meta_block(meta: dict, model: FrictionModel, prefix: str, source: str, sha256: str) -> list[str]:
     keep = {k: meta.get(k) for k in ("kind", "joint", "axis", "units", "inputs", "fricli_version",
                                      "format_version", "provenance")}
+    if meta.get("joints"):
+        keep["joints"] = meta["joints"]
     lines = [f"model {source} (sha256 {sha256}) as {prefix}_*"]
     lines += ["  " + line for line in json.dumps(keep, indent=1, sort_keys=True, ensure_ascii=True).splitlines()]
     lines += ["  " + line for line in model.describe().splitlines()]
@@ -267,6 +269,13 @@ class Entry:
     prefix: str
     source: str
     sha256: str
+
+
+def _code(entry: Entry, sgn: str) -> str:
+    if entry.model.kind == "coupled":   # a group of joints: a step function of its own shape
+        from fricli.export.coupled import group_code
+        return group_code(entry.model, entry.meta, entry.prefix, sgn)
+    return model_code(entry.model, entry.meta, entry.prefix, sgn)
 
 
 def header(entries: list[Entry], guard: str) -> str:
@@ -288,7 +297,7 @@ def header(entries: list[Entry], guard: str) -> str:
     out = top + [f"#ifndef FRICLI_{guard.upper()}_H", f"#define FRICLI_{guard.upper()}_H", "", "#include <math.h>", "",
                  "/* sign(v): -1, 0 or 1 */",
                  f"static inline double {sgn}(double v) {{ return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }}", ""]
-    codes = [model_code(entry.model, entry.meta, entry.prefix, sgn) for entry in entries]
+    codes = [_code(entry, sgn) for entry in entries]
     if any(AVX2 in code for code in codes):
         out.append(PRELUDE)
     for entry, code in zip(entries, codes):

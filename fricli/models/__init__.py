@@ -15,7 +15,7 @@ from fricli import modelfile
 from fricli.errors import ModelFileError
 from fricli.models.base import FrictionModel
 
-_KIND_MODULES = ("lugre", "linear", "neural", "dissipative", "residual", "augmented")
+_KIND_MODULES = ("lugre", "linear", "neural", "dissipative", "residual", "augmented", "coupled")
 KINDS: dict[str, type[FrictionModel]] = {}
 
 

@@ -5,6 +5,11 @@ URDF's joint order (rad or m, per second, per second squared):
 
     tau_g   = g(q)                              gravity torque [Nm or N]
     tau_dyn = M(q) qdd + C(q, qd) qd + I_r qdd  with reflected rotor inertias I_r [kg m^2]
+
+A URDF may carry the reflected rotor inertias itself, in Pinocchio's SRDF form (what
+``fricli calibrate`` writes; ``pin.loadRotorParameters`` reads the same element):
+``<rotor_params><joint name="J" mass="I_rotor" gear_ratio="N"/></rotor_params>`` under
+``<robot>``, armature = I_rotor * N^2. For those joints it replaces a rotor inertia given otherwise.
 """
 
 from __future__ import annotations
@@ -58,6 +63,8 @@ class RobotModel:
             frame = model.frames[model.getFrameId(payload.frame)]
             point = pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3)))
             model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(point)
+        self.armature = rotor_params(urdf_text, name, model)  # (joints,), NaN where the URDF gives none
+        model.armature = np.nan_to_num(self.armature)
         model.gravity = pin.Motion(np.asarray(gravity, dtype=float), np.zeros(3))
         self._with_g = model
         self._no_g = model.copy()
@@ -88,20 +95,51 @@ class RobotModel:
               rotor_inertia: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(tau_g, tau_dyn), each (n, joints), for inputs of shape (n, joints) in URDF order."""
         zeros = np.zeros_like(q)
-        config = self._configuration(q)
+        config = self.configuration(q)
         tau_g = _rnea(self._with_g, config, zeros, zeros)
         tau_dyn = _rnea(self._no_g, config, qd, qdd)
-        if rotor_inertia is not None:
-            tau_dyn += qdd * np.asarray(rotor_inertia, dtype=float)
+        if rotor_inertia is not None:  # not where the URDF's own armature (in tau_dyn already) applies
+            tau_dyn += qdd * np.where(np.isnan(self.armature), np.asarray(rotor_inertia, dtype=float), 0.0)
         return tau_g, tau_dyn
 
 
-    def _configuration(self, q: np.ndarray) -> np.ndarray:
+    @property
+    def pin_model(self):
+        """The Pinocchio model, with gravity, armature and payload."""
+        return self._with_g
+
+    def configuration(self, q: np.ndarray) -> np.ndarray:
+        """Pinocchio's configurations (n, nq) for joint positions q (n, joints)."""
         if not any(self._unbounded):
             return q
         parts = [np.column_stack([np.cos(q[:, k]), np.sin(q[:, k])]) if unbounded else q[:, k:k + 1]
                  for k, unbounded in enumerate(self._unbounded)]
         return np.hstack(parts)
+
+
+def rotor_params(urdf_text: str, name: str, model) -> np.ndarray:
+    """Armature [kg m^2] per moving joint (URDF order) from ``<robot><rotor_params>``; NaN where
+    the URDF gives none. ModelFileError for a joint it does not have or a value that is no number."""
+    import xml.etree.ElementTree as ET
+
+    out = np.full(model.nv, np.nan)
+    if "rotor_params" not in urdf_text:
+        return out
+    root = ET.fromstring(urdf_text)
+    joints = list(model.names)[1:]
+    for element in root.findall("rotor_params/joint"):
+        joint = element.get("name")
+        if joint not in joints:
+            raise ModelFileError(f"{name}: rotor_params names joint {joint!r}, which is not a moving joint")
+        try:
+            value = float(element.get("mass", "nan")) * float(element.get("gear_ratio", "1")) ** 2
+        except ValueError:
+            value = float("nan")
+        if not np.isfinite(value) or value < 0:
+            raise ModelFileError(f"{name}: rotor_params of joint {joint!r}: mass and gear_ratio must be "
+                                 "finite numbers, the mass not negative")
+        out[joints.index(joint)] = value
+    return out
 
 
 def _rnea(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ import numpy as np
 
 from fricli import logs
 from fricli.errors import LogError, ModelFileError
+from fricli.robot import transmission
 from fricli.robot.mapping import Mapping
 from fricli.robot.recording import KINDS, Recording, read_recording
 
@@ -31,18 +32,31 @@ class Imported:
 
 def _signals(mapping: Mapping, rec: Recording, name: str) -> tuple[np.ndarray, list[dict], str]:
     """Time [s] and, per joint, its signals in canonical units; and the axis kind."""
-    t = rec.values[mapping.time.ref] * mapping.time.factor
+    t = mapping.time.values(rec.values[mapping.time.key]) * mapping.time.factor
     per_joint = []
     for jm in mapping.joints:
-        sig = {s: rec.values[c.ref] * c.factor for s, c in jm.columns.items()}
+        sig = {s: c.values(rec.values[c.key]) * c.factor for s, c in jm.columns.items()}
         if "i_m" in sig:
             if jm.kt is None:
                 raise LogError(f"{name}: joint {jm.name} has a current column i_m but no drive gain: "
                                f"give kt in the mapping or --kt {jm.name}=VALUE [Nm/A]")
             sig["tau_m"] = sig["i_m"] * jm.kt
         per_joint.append(sig)
+    if mapping.transmission is not None:
+        to_joints(mapping.transmission, per_joint)
     kinds = {c.kind for jm in mapping.joints for c in jm.columns.values()} - {None}
     return t, per_joint, kinds.pop() if kinds else "rotary"
+
+
+def to_joints(tr, per_joint: list[dict]) -> None:
+    """Replace the motor-side signals theta, theta_d, tau_motor (n,) of each joint by the joint-side
+    q, qd, tau_m of the transmission ``tr`` (fricli.robot.transmission), in place."""
+    for motor, joint_side, convert in (("theta", "q", tr.joint_positions), ("theta_d", "qd", tr.joint_velocities),
+                                       ("tau_motor", "tau_m", tr.joint_torques)):
+        if all(motor in sig for sig in per_joint):
+            values = convert(np.column_stack([sig.pop(motor) for sig in per_joint]))
+            for k, sig in enumerate(per_joint):
+                sig[joint_side] = values[:, k].copy()
 
 
 def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], axis: str,
@@ -92,6 +106,18 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
     return build_log(rec, mapping, name, hashlib.sha256(data).hexdigest(), model=model, cutoff_hz=cutoff_hz)
 
 
+def import_files(datas: list[bytes], mapping: Mapping, names: list[str], *, model=None,
+                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_backward: bool = False) -> Imported:
+    """``import_recording`` of a recording in several files (``mapping.files``, fricli.robot.joined)."""
+    from fricli.robot.joined import read_joined
+
+    rec = read_joined(datas, mapping, names, drop_backward=drop_backward)
+    digest = hashlib.sha256(b"".join(hashlib.sha256(d).digest() for d in datas)).hexdigest()
+    return build_log(rec, mapping, " + ".join(names), digest, model=model, cutoff_hz=cutoff_hz,
+                     extra={"files": dict(zip(mapping.files, names)),
+                            "files_sha256": [hashlib.sha256(d).hexdigest() for d in datas]})
+
+
 def dropped_record(defects: dict, unit: str = "line") -> dict:
     """The metadata record of dropped rows: per kind its count, first line (or message), what it is
     and, when known, the [first, last] runs of lines."""
@@ -108,7 +134,17 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
     """The long-format table of ``rec`` (read with ``mapping``), its metadata recording the source
     (``extra`` added), the dropped rows (numbered by ``unit``) and, with ``model``, the robot terms."""
     t, per_joint, axis = _signals(mapping, rec, name)
+    tr = mapping.transmission
+    if model is not None and tr is not None and tr.rotor_inertia.any():   # motor-side inertias, reflected
+        for jm, armature in zip(mapping.joints, tr.armature()):
+            jm.rotor_inertia = float(armature)
     robot = robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
+    if robot is not None and tr is not None and tr.cross_inertia().any():
+        # the rotors' cross-inertia R^T J_m R off its diagonal: a diagonal armature leaves it out of tau_dyn
+        cross = tr.cross_torque(np.column_stack([sig["qdd"] for sig in per_joint]))
+        for k, sig in enumerate(per_joint):
+            sig["tau_dyn"] = sig["tau_dyn"] + cross[:, k]
+        robot["cross_inertia"] = tr.cross_inertia().tolist()
     units = dict(logs.CANONICAL[axis])
     units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
              **{c: units["tau"] for c in logs.TORQUES}}
@@ -134,5 +170,8 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
         "robot": robot,
     }
-    table = table.replace_schema_metadata({**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()})
+    schema_meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()}
+    if tr is not None and tr.coupled_groups():   # for identify --coupling (a diagonal one is fully applied)
+        schema_meta[transmission.META_KEY] = tr.to_json().encode()
+    table = table.replace_schema_metadata(schema_meta)
     return Imported(table=table, recording=rec, meta=meta)

@@ -11,6 +11,11 @@ when the file has a header line, by header name. Example::
     q = {column = 2, unit = "rad"}
     i_m = {column = 14, unit = "A"}
     kt = 10.0
+
+A recording may come in several files joined row by row (``files``), keep its time as a sample
+rate (``time = {rate = HZ}``), scale and offset any column, and hold motor-side signals (``theta``,
+``theta_d``, ``tau_motor``) that a ``[transmission]`` maps to the joints (docs/robot-import.md,
+"Motor-side recordings and coupled wrists").
 """
 
 from __future__ import annotations
@@ -25,9 +30,14 @@ from fricli.logs import column_unit
 # per-joint signals a mapping may name, with their default unit
 SIGNALS = {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "i_m": "A", "tau_m": "Nm",
            "tau_ext": "Nm", "temp": "degC"}
+# motor-side signals (with a [transmission]) and the joint-side signal each becomes
+MOTOR_SIGNALS = {"theta": ("q", "rad"), "theta_d": ("qd", "rad/s"), "tau_motor": ("tau_m", "Nm")}
 MATCHES = ("name", "order")
-_TOP_KEYS = {"header", "delimiter", "time", "joints", "robot"}
-_JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS}
+JOINS = ("rows", "time")
+_TOP_KEYS = {"header", "delimiter", "time", "joints", "robot", "files", "join", "transmission"}
+_JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS, *MOTOR_SIGNALS}
+_COLUMN_KEYS = {"column", "unit", "file", "scale", "offset"}
+_TRANSMISSION_KEYS = {"gear_ratios", "ratio", "offset", "rotor_inertia"}
 _ROBOT_KEYS = {"match", "gravity", "payload"}
 _PAYLOAD_KEYS = {"mass", "com", "frame"}
 # a ROS bag's mapping: what a JointState's effort is, per joint (docs/robot-import.md)
@@ -39,12 +49,28 @@ _BAG_JOINT_KEYS = {"name", "urdf", "effort", "kt", "gear_ratio", "rotor_inertia"
 
 @dataclasses.dataclass(frozen=True)
 class Column:
-    """A text column: ``ref`` is a 1-based index (int) or a header name (str)."""
+    """A text column: ``ref`` is a 1-based index (int) or a header name (str), in file number
+    ``file`` (0: the first) of the mapping's ``files``. Its value is ``scale * raw + offset`` in
+    ``unit``. A time kept as a sample rate has ``ref`` None and ``rate`` [Hz]."""
 
-    ref: int | str
+    ref: int | str | None
     unit: str
     factor: float          # to the canonical unit
     kind: str | None       # "rotary", "linear" or None (time, current, temperature)
+    file: int = 0
+    scale: float = 1.0
+    offset: float = 0.0
+    rate: float | None = None
+
+    @property
+    def key(self):
+        """The column's key in a recording's values: ``ref`` in the first file, else (file, ref)."""
+        return self.ref if self.file == 0 else (self.file, self.ref)
+
+    def values(self, raw):
+        """``scale * raw + offset``, each applied only when it changes something (a -0.0 stays -0.0)."""
+        out = raw if self.scale == 1.0 else raw * self.scale
+        return out if self.offset == 0.0 else out + self.offset
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,6 +100,9 @@ class Mapping:
     match: str | None = None
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     payload: Payload | None = None
+    files: tuple[str, ...] = ()       # labels of the input files, in the order they are given
+    join: str = "rows"                # how several files' rows pair up: "rows" (row by row) or "time"
+    transmission: object = None       # fricli.robot.transmission.Transmission of motor-side signals
 
     def joint(self, name: str) -> JointMap:
         """The joint whose log name reads ``name``."""
@@ -109,12 +138,21 @@ def _vector3(value, where: str) -> tuple[float, float, float]:
     return tuple(_number(v, where) for v in value)
 
 
-def _column(spec, signal: str, where: str, default_unit: str) -> Column:
+def _column(spec, signal: str, where: str, default_unit: str, files: tuple = ()) -> Column:
+    extra = {}
     if isinstance(spec, dict):
-        _unknown(spec, {"column", "unit"}, where)
+        _unknown(spec, _COLUMN_KEYS, where)
         if "column" not in spec:
             _fail(where, "missing key 'column'")
         ref, unit = spec["column"], spec.get("unit", default_unit)
+        extra = {k: _number(spec[k], f"{where}.{k}") for k in ("scale", "offset") if k in spec}
+        if extra.get("scale") == 0.0:
+            _fail(f"{where}.scale", "must not be zero")
+        if "file" in spec:
+            if spec["file"] not in files:
+                _fail(f"{where}.file", f"expected one of the mapping's files ({', '.join(map(repr, files)) or 'none'}), "
+                      f"got {spec['file']!r}")
+            extra["file"] = files.index(spec["file"])
     else:
         ref, unit = spec, default_unit
     if isinstance(ref, bool) or not isinstance(ref, (int, str)) or (isinstance(ref, int) and ref < 1) or ref == "":
@@ -125,7 +163,64 @@ def _column(spec, signal: str, where: str, default_unit: str) -> Column:
         kind, factor = column_unit(signal, unit)
     except LogError as exc:
         _fail(where, str(exc))
-    return Column(ref=ref, unit=unit, factor=factor, kind=kind)
+    return Column(ref=ref, unit=unit, factor=factor, kind=kind, **extra)
+
+
+def _time(spec, where: str, files: tuple) -> Column:
+    """The time column, or ``{rate = HZ}``: no time column, row k of the files at k / rate [s]."""
+    if isinstance(spec, dict) and "rate" in spec:
+        _unknown(spec, {"rate"}, where)
+        return Column(ref=None, unit="s", factor=1.0, kind=None,
+                      rate=_number(spec["rate"], f"{where}.rate", positive=True))
+    return _column(spec, "t", where, "s", files)
+
+
+def _transmission(spec, joints: list, where: str):
+    """The [transmission] table: ``gear_ratios`` (k,) signed, or ``ratio`` (k, k) (rows: motors,
+    columns: joints, both in the order of [[joints]]); ``offset`` (k,) the motor angles at joint
+    zero [rad] and ``rotor_inertia`` (k,) motor-side [kg m^2], both optional."""
+    from fricli.robot.transmission import Transmission
+
+    if not isinstance(spec, dict):
+        _fail(where, "expected a table")
+    _unknown(spec, _TRANSMISSION_KEYS, where)
+    if ("gear_ratios" in spec) == ("ratio" in spec):
+        _fail(where, "needs exactly one of gear_ratios (per joint, signed) and ratio (a matrix)")
+    k = len(joints)
+
+    def vector(key):
+        v = spec[key]
+        if not isinstance(v, list) or len(v) != k:
+            _fail(f"{where}.{key}", f"expected {k} numbers, one per joint in the order of [[joints]]")
+        return [_number(x, f"{where}.{key}") for x in v]
+
+    if "ratio" in spec:
+        rows = spec["ratio"]
+        if not isinstance(rows, list) or len(rows) != k or any(not isinstance(r, list) or len(r) != k for r in rows):
+            _fail(f"{where}.ratio", f"expected {k} rows of {k} numbers (rows: motors, columns: joints)")
+        ratio = [[_number(x, f"{where}.ratio") for x in r] for r in rows]
+    else:
+        ratios = vector("gear_ratios")
+        if 0.0 in ratios:
+            _fail(f"{where}.gear_ratios", "a gear ratio must not be zero")
+        ratio = [[r if i == j else 0.0 for j in range(k)] for i, r in enumerate(ratios)]
+    offset = vector("offset") if "offset" in spec else None
+    inertia = vector("rotor_inertia") if "rotor_inertia" in spec else None
+    try:
+        return Transmission([jm.name for jm in joints], ratio, offset, inertia)
+    except ValueError as exc:
+        _fail(where, str(exc))
+
+
+def _files(doc: dict, name: str) -> tuple[tuple, str]:
+    files = doc.get("files", [])
+    if not isinstance(files, list) or any(not isinstance(f, str) or not f for f in files) \
+            or len(set(files)) < len(files):
+        _fail(f"{name}: files", f"expected distinct labels of the input files, got {files!r}")
+    join = doc.get("join", "rows")
+    if join not in JOINS:
+        _fail(f"{name}: join", f"expected 'rows' or 'time', got {join!r}")
+    return tuple(files), join
 
 
 def _payload(spec, where: str) -> Payload:
@@ -151,8 +246,12 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"":
         _fail(f"{name}: delimiter", f"expected one character, got {delimiter!r}")
     if "time" not in doc:
-        _fail(name, "missing key 'time' (the time column)")
-    time = _column(doc["time"], "t", f"{name}: time", "s")
+        _fail(name, "missing key 'time' (the time column, or {rate = HZ})")
+    files, join = _files(doc, name)
+    time = _time(doc["time"], f"{name}: time", files)
+    if join == "time" and time.ref is None:
+        _fail(f"{name}: join", "join = \"time\" needs a time column in every file, not a sample rate")
+    motor_side = "transmission" in doc
     joints_doc = doc.get("joints")
     if not isinstance(joints_doc, list) or not joints_doc:
         _fail(name, "needs at least one [[joints]] table")
@@ -165,11 +264,26 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
         jname = spec.get("name")
         if isinstance(jname, bool) or not isinstance(jname, (int, str)) or jname == "":
             _fail(where, f"'name' (the joint's name in the log, an integer or a string) is required, got {jname!r}")
-        columns = {s: _column(spec[s], s, f"{where}.{s}", unit) for s, unit in SIGNALS.items() if s in spec}
-        if "q" not in columns and "qd" not in columns:
-            _fail(where, "needs a column for q or qd")
-        if ("i_m" in columns) == ("tau_m" in columns):
-            _fail(where, "needs exactly one of i_m (with kt) and tau_m")
+        columns = {s: _column(spec[s], s, f"{where}.{s}", unit, files) for s, unit in SIGNALS.items() if s in spec}
+        columns.update({s: _column(spec[s], joint_side, f"{where}.{s}", unit, files)
+                        for s, (joint_side, unit) in MOTOR_SIGNALS.items() if s in spec})
+        if motor_side:
+            joint_sided = sorted(set(columns) & {"q", "qd", "qdd", "i_m", "tau_m"})
+            if joint_sided:
+                _fail(where, f"with a [transmission], positions and torques are motor-side: theta or theta_d, "
+                      f"and tau_motor (not {joint_sided[0]})")
+            if "theta" not in columns and "theta_d" not in columns:
+                _fail(where, "needs a column for theta or theta_d (motor side)")
+            if "tau_motor" not in columns:
+                _fail(where, "needs a column for tau_motor (motor side; a current times its torque constant in scale)")
+        else:
+            motor = sorted(set(columns) & set(MOTOR_SIGNALS))
+            if motor:
+                _fail(where, f"{motor[0]} is a motor-side signal: it needs a [transmission] (docs/robot-import.md)")
+            if "q" not in columns and "qd" not in columns:
+                _fail(where, "needs a column for q or qd")
+            if ("i_m" in columns) == ("tau_m" in columns):
+                _fail(where, "needs exactly one of i_m (with kt) and tau_m")
         kinds = {c.kind for c in columns.values()} - {None}
         if len(kinds) > 1:
             _fail(where, "mixes rotary (rad, Nm) and linear (m, N) units")
@@ -191,7 +305,17 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     kinds = {c.kind for j in joints for c in j.columns.values()} - {None}
     if len(kinds) > 1:
         _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately)")
-    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, **_robot(doc, name))
+    transmission = _transmission(doc["transmission"], joints, f"{name}: transmission") if motor_side else None
+    if transmission is not None and "rotor_inertia" in doc["transmission"] and any(j.rotor_inertia for j in joints):
+        _fail(name, "rotor inertias are given twice: per joint (joint side) and in [transmission] (motor side)")
+    if len(files) == 1:
+        _fail(f"{name}: files", "a single file needs no 'files' (give it on the command line)")
+    used = {c.file for j in joints for c in j.columns.values()}
+    unused = [f for i, f in enumerate(files) if i not in used]
+    if unused:
+        _fail(f"{name}: files", f"no column is read from file {unused[0]!r}")
+    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, files=files, join=join,
+                   transmission=transmission, **_robot(doc, name))
 
 
 def _robot(doc: dict, name: str) -> dict:

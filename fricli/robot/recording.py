@@ -35,6 +35,7 @@ KINDS = {
     "time_jump": "time far from its neighbours'",
     "duplicate_time": "same time as the previous row",
     "backward_time": "time going back",
+    "unmatched": "no matching row in another of the recording's files",
 }
 STEP_FACTOR = 100.0        # a time step beyond this many median steps breaks the recording
 MAGNITUDE_FACTOR = 1e6     # |value| beyond this many times its column's median |value| (at least 1) is garbage
@@ -51,7 +52,8 @@ class Defect:
 @dataclasses.dataclass
 class Recording:
     """Columns named by the mapping, as float64 arrays of shape (n,) in the file's units,
-    keyed by the mapping's column reference; ``lines`` are the rows' 1-based line numbers."""
+    keyed by the mapping's column reference (``Column.key``; a time kept as a sample rate under
+    None, in s); ``lines`` are the rows' 1-based line numbers."""
 
     values: dict[int | str, np.ndarray]
     lines: np.ndarray
@@ -61,7 +63,8 @@ class Recording:
 
 
 def _refs(mapping: Mapping) -> list[int | str]:
-    refs = [mapping.time.ref] + [c.ref for jm in mapping.joints for c in jm.columns.values()]
+    refs = [mapping.time.ref] if mapping.time.ref is not None else []
+    refs += [c.ref for jm in mapping.joints for c in jm.columns.values()]
     return list(dict.fromkeys(refs))
 
 
@@ -354,9 +357,12 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         found = "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
         raise LogError(f"{name}: no usable rows" + (f" ({found})" if found else ""))
 
-    signals = [cols[index[c.ref]] * c.factor for c in _signal_columns(mapping)]
-    keep, found = consistent_rows(cols[index[mapping.time.ref]] * mapping.time.factor, signals, numbers,
-                                  name=name, drop_backward=drop_backward)
+    signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
+    if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
+        index[None] = -1
+        cols[-1] = (numbers - (start + 1)) / mapping.time.rate
+    keep, found = consistent_rows(mapping.time.values(cols[index[mapping.time.ref]]) * mapping.time.factor, signals,
+                                  numbers, name=name, drop_backward=drop_backward)
     for kind, d in found.items():
         defects[kind] = d
     if not keep.all():

@@ -1,0 +1,125 @@
+"""fricli calibrate: a whole-arm log + URDF -> a calibrated URDF (inertial parameters, armature)
+and each joint's linear friction, identified together."""
+
+from __future__ import annotations
+
+import click
+
+from fricli.cli.options import common, emit_json, output_option, say, warn
+
+
+def report_path(output: str) -> str:
+    """The report written beside OUT.urdf: OUT.calibration.json."""
+    stem = output[:-5] if output.lower().endswith(".urdf") else output
+    return stem + ".calibration.json"
+
+
+@click.command("calibrate")
+@click.argument("log")
+@click.option("--urdf", required=True, metavar="ROBOT.urdf",
+              help="The robot description whose CAD values are the starting point (needs Pinocchio).")
+@click.option("--match", type=click.Choice(["name", "order"]), default=None,
+              help="How log joints match URDF joints (default: as recorded by fricli import/dynamics).")
+@click.option("--urdf-joint", "urdf_pairs", multiple=True, metavar="JOINT=NAME",
+              help="The URDF joint of a log joint, with --match name. Repeatable.")
+@click.option("--gravity", nargs=3, type=float, default=(0.0, 0.0, -9.81), show_default=True, metavar="X Y Z",
+              help="Gravity in the URDF's base frame [m/s^2].")
+@click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
+              help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint "
+                   "(IDIM-LS); stribeck adds the LuGre static curve's bump (Fs - Fc) exp(-(qd/vs)^2).")
+@click.option("--prior", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
+              help="Prior standard deviation of each inertial parameter around its CAD value, relative to its scale.")
+@click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
+              help="enforce: fit again over physically consistent parameters when the linear estimate is not; "
+                   "check: refuse (FIT, exit 5) an inconsistent estimate.")
+@click.option("--edge", type=click.FloatRange(min=0), default=0.5, show_default=True,
+              help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
+@click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's).")
+@click.option("--report", "report_file", default=None, metavar="REPORT.json",
+              help="Where to write the report (default: OUT.calibration.json beside the URDF).")
+@click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
+@output_option(help="The calibrated URDF.")
+@common
+def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consistency, edge, cutoff, report_file, as_json,
+                  output, quiet):
+    """Identify the arm's rigid-body model and each joint's friction from one whole-arm log.
+
+    LOG is a long-format log of every moving joint of the URDF (as fricli import writes it) with
+    q, qd, qdd (or derivable) and tau_m. The URDF's masses, centres of mass and inertias, a reflected
+    rotor inertia per joint and Fv, Fc, offset per joint are fitted together by weighted least
+    squares with a prior at the CAD values: what the run does not excite stays at CAD and is
+    reported. Writes the calibrated URDF and a JSON report (friction, fit, excitation, checks).
+    See docs/calibration.md.
+
+    \b
+    Example:
+      fricli calibrate run.parquet --urdf ur10e.urdf -o ur10e-cal.urdf
+      fricli import other.csv --mapping docs/ur10e-mapping.toml --urdf ur10e-cal.urdf -o other.parquet
+    """
+    import json
+
+    from fricli.atomic import atomic_write_bytes
+    from fricli.cli.options import _json_safe
+    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table
+    from fricli.robot import calibration as cb
+    from fricli.robot.dynamics import load_model
+    from fricli.robot.mapping import Mapping
+
+    names = {}
+    for pair in urdf_pairs:
+        joint, sep, urdf_name = pair.partition("=")
+        if not sep or not joint or not urdf_name:
+            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
+        names[joint] = urdf_name
+    if names and match is None:
+        match = "name"
+    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=tuple(gravity)))
+    table, _ = read_table(log)
+    name = "stdin" if log == "-" else log
+    motion = cb.read_motion(table, name, robot, match=match, urdf_names=names,
+                            cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce", friction=friction)
+    report = {"log": name, "urdf": urdf, "output": output, **cal.report}
+    for line in _summary(report):
+        say(line, quiet)
+    enforced = report["consistency_enforced"]
+    if enforced:
+        warn(f"warning: the linear estimate was physically inconsistent ({'; '.join(enforced['inconsistent_before'])}): "
+             "fitted again over consistent parameters only")
+    for line in report["consistency"]["warnings"] + report["suspicious"]:
+        warn(f"warning: {line}")
+    cb.refuse_inconsistent(cal)
+    with open(urdf, encoding="utf-8") as fh:
+        text = cb.calibrated_urdf(fh.read(), urdf, cal)
+    where = report_file or report_path(output)
+    report["report"] = where
+    body = json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
+    atomic_write_bytes(where, body.encode())
+    atomic_write_bytes(output, text.encode())
+    say(f"calibrated {len(cal.joints)} joints of {urdf} on {report['rows']:,} rows of {name} -> {output} "
+        f"(report: {where})", quiet)
+    if as_json:
+        emit_json(report)
+
+
+def _summary(report: dict) -> list[str]:
+    ex = report["excitation"]
+    lines = [f"excitation: {ex['base_parameters']} base parameters of {ex['parameters']} "
+             f"({ex['structurally_unidentifiable']} combinations no joint-torque data can separate stay at CAD); "
+             f"condition number {ex['condition_number']:.3g} ({ex['condition_number_scaled']:.3g} with scaled columns)"]
+    if ex["undetermined"]:
+        lines.append(f"excitation: this run leaves {len(ex['undetermined'])} direction"
+                     f"{'s' if len(ex['undetermined']) != 1 else ''} undetermined (kept near CAD):")
+        for d in ex["undetermined"][:8]:
+            combo = " ".join(f"{p['weight']:+.2g} {p['parameter']}" for p in d["combination"])
+            lines.append(f"  {combo} (information {d['information']:.2g} x the prior's)")
+        if len(ex["undetermined"]) > 8:
+            lines.append(f"  ... and {len(ex['undetermined']) - 8} more (see the report)")
+    lines.append("fit: RMS of tau_m minus the model [Nm], CAD + friction -> calibrated:")
+    for joint, f in report["fit"].items():
+        fr = report["friction"]["joints"][joint]
+        extra = f", Fs {fr['Fs']:.4g}, vs {fr['vs']:.3g}" if "Fs" in fr else ""
+        lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} "
+                     f"(Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, offset {fr['offset']:.4g})")
+    return lines

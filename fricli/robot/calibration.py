@@ -1,0 +1,629 @@
+"""Identify a robot's rigid-body model together with its joint friction from one whole-arm log.
+
+The inverse dynamic model, linear in its parameters (IDIM):
+
+    tau_m = Y(q, qd, qdd) pi + diag(qdd) a + sum_j [qd_j, sign(qd_j), 1] f_j
+
+``Y``: Pinocchio's joint-torque regressor (``computeJointTorqueRegressor``, gravity included),
+``pi``: the 10 standard inertial parameters of every moving body (Pinocchio's order
+m, m c, inertia at the joint origin), ``a``: the reflected rotor inertia (armature) per joint,
+``f_j = (Fv, Fc, offset)``: joint j's linear friction (optionally with the LuGre static curve's
+Stribeck bump, linear for a given Stribeck velocity, which alternates with the fit).
+
+The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
+CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
+standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
+inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: the larger of
+``prior`` x its prior value and the joint's CAD mass-matrix diagonal at q = 0; friction: loose).
+Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
+(iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
+little: directions the run does not excite stay at CAD, and the report names them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import xml.etree.ElementTree as ET
+
+import numpy as np
+
+from fricli import logs
+from fricli.errors import DataError, FitError, LogError, ModelFileError
+
+PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
+FRICTION = ("Fv", "Fc", "offset")
+DEFAULT_PRIOR = 0.5        # prior std of an inertial parameter, relative to its scale
+DEFAULT_EDGE_S = 0.5       # rows dropped at each end [s]: the zero-phase filter's and differences' transients
+MIN_LENGTH = 0.1           # m: the length scale of a body whose CAD centre of mass is closer to its joint
+SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is flagged
+UNDETERMINED = 1.0         # a direction whose data information is below the prior's stays at CAD
+NUMERIC_ZERO = 1e-10       # ... or below this share of the best-determined direction's
+MAX_ITERATIONS = 30
+STRIBECK_ALTERNATIONS = 4
+STRIBECK_GRID = np.geomspace(0.005, 0.5, 25)   # Stribeck velocities searched, x the joint's top speed
+TOLERANCE = 1e-9           # relative: a body on the boundary of consistency (a thin rod, a point) passes
+OTHER_CAUSES = ("a drive gain off by a similar share on the joints that carry it", "a cable or hose pulling on the arm",
+                "a counterbalance spring", "a tool or payload not in the URDF")
+
+
+@dataclasses.dataclass
+class Motion:
+    """A whole-arm log in the URDF's joint order: arrays of shape (n, joints)."""
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    names: list            # the log's joint names, in URDF order
+    rotor_inertia: np.ndarray  # (joints,) recorded by import/dynamics, NaN where unknown
+
+
+def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[str, str] | None = None,
+                cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ) -> Motion:
+    """The log's joints matched to ``robot`` (a ``RobotModel``): ``match`` "name"/"order", or None for
+    the matching recorded by ``fricli import``/``fricli dynamics`` in the log's metadata."""
+    names = logs.joints_of(table, name)
+    if names is None or names == [None]:
+        raise LogError(f"{name}: the log has no 'joint' column: calibration needs every joint of the arm")
+    record = _robot_record(table)
+    urdf_names = dict(urdf_names or {})
+    unknown = sorted(set(urdf_names) - {str(j) for j in names})
+    if unknown:
+        raise LogError(f"{name}: no joint {unknown[0]} in the log (it holds {', '.join(str(j) for j in names)})")
+    if match is None:
+        if not record.get("joints"):
+            raise LogError(f"{name}: the log does not record how its joints match the URDF's: give --match name|order")
+        match = "name"
+        urdf_names = {**record["joints"], **urdf_names}
+    per_joint = [logs.from_table(table, name=name, joint=j, cutoff_hz=cutoff_hz) for j in names]
+    t = per_joint[0].signals["t"]
+    for log in per_joint[1:]:
+        if len(log) != len(t) or not np.array_equal(log.signals["t"], t):
+            raise LogError(f"{name}: joints {names[0]} and {log.joint} are not sampled at the same times")
+    if per_joint[0].axis != "rotary" and any(k == "rotary" for k in robot.kinds):
+        raise LogError(f"{name}: the log's units are linear, the URDF's joints rotary")
+    order = robot.match([urdf_names.get(str(j), str(j)) for j in names], match)
+    by_urdf = [order.index(k) for k in range(len(order))]
+    stack = lambda c: np.column_stack([per_joint[i].signals[c] for i in by_urdf])  # noqa: E731
+    recorded = record.get("rotor_inertia") or {}
+    rotor = np.array([recorded.get(str(names[i]), np.nan) for i in by_urdf], dtype=float)
+    return Motion(t=t, q=stack("q"), qd=stack("qd"), qdd=stack("qdd"), tau=stack("tau_m"),
+                  names=[names[i] for i in by_urdf], rotor_inertia=rotor)
+
+
+def _robot_record(table) -> dict:
+    meta = table.schema.metadata or {}
+    for key in (b"fricli.dynamics", b"fricli.import"):
+        if key in meta:
+            try:
+                record = json.loads(meta[key])
+            except ValueError:
+                continue
+            record = record.get("robot", record) if key == b"fricli.import" else record
+            if isinstance(record, dict):
+                return record
+    return {}
+
+
+def edge_rows(t: np.ndarray, edge_s: float) -> np.ndarray:
+    """Rows at least ``edge_s`` seconds from either end, (n,) bool."""
+    return (t >= t[0] + edge_s) & (t <= t[-1] - edge_s)
+
+
+# --------------------------------------------------------------------------- the regressor
+
+
+def bodies(robot) -> list[str]:
+    """The URDF link moved by each joint (the body Pinocchio merges fixed children into)."""
+    model = robot.pin_model
+    out = []
+    for i in range(1, model.njoints):
+        joint_frame = model.getFrameId(model.names[i])
+        link = next((f.name for f in model.frames if f.parentJoint == i and f.name != model.names[i]
+                     and getattr(f, "parentFrame", None if hasattr(f, "parentFrame") else f.previousFrame) == joint_frame),
+                    model.names[i])
+        out.append(link)
+    return out
+
+
+def parameter_names(robot, stribeck: bool = False) -> list[str]:
+    """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset (and JOINT.Fs-Fc)."""
+    return ([f"{b}.{p}" for b in bodies(robot) for p in PARAMS] + [f"{j}.armature" for j in robot.joints]
+            + [f"{j}.{f}" for j in robot.joints for f in FRICTION] + ([f"{j}.Fs-Fc" for j in robot.joints]
+                                                                       if stribeck else []))
+
+
+def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vs: np.ndarray | None = None) -> np.ndarray:
+    """The full observation matrix, shape (n * joints, 14 * joints): the rows of sample k are
+    k * joints ... (k + 1) * joints - 1 (joint order of the URDF); columns as ``parameter_names``.
+    With Stribeck velocities ``vs`` (joints,) one more column per joint, ``stribeck_columns``."""
+    pin = _pin()
+    model = robot.pin_model
+    data = model.createData()
+    config = robot.configuration(q)
+    n, nj = q.shape
+    out = np.zeros((n, nj, 14 * nj))
+    for k in range(n):
+        out[k, :, :10 * nj] = pin.computeJointTorqueRegressor(model, data, config[k], qd[k], qdd[k])
+    idx = np.arange(nj)
+    out[:, idx, 10 * nj + idx] = qdd
+    out[:, idx, 11 * nj + 3 * idx] = qd
+    out[:, idx, 11 * nj + 3 * idx + 1] = np.sign(qd)
+    out[:, idx, 11 * nj + 3 * idx + 2] = 1.0
+    out = out.reshape(n * nj, 14 * nj)
+    return out if vs is None else np.hstack([out, stribeck_columns(qd, vs)])
+
+
+def stribeck_columns(qd: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """The Stribeck bump sign(qd_j) exp(-(qd_j / vs_j)^2) of each joint in its own rows, (n * joints, joints)."""
+    n, nj = qd.shape
+    out = np.zeros((n, nj, nj))
+    idx = np.arange(nj)
+    out[:, idx, idx] = np.sign(qd) * np.exp(-np.square(qd / vs))
+    return out.reshape(n * nj, nj)
+
+
+def _pin():
+    from fricli.robot.dynamics import pinocchio
+
+    return pinocchio()
+
+
+def cad_parameters(robot) -> np.ndarray:
+    """The URDF's inertial parameters (10 per body), (10 * joints,)."""
+    model = robot.pin_model
+    return np.concatenate([model.inertias[i].toDynamicParameters() for i in range(1, model.njoints)])
+
+
+def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.ndarray,
+                 tau_rms: np.ndarray, prior: float) -> np.ndarray:
+    """Prior standard deviation of every parameter, (14 * joints,) (see the module docstring);
+    ``qd_rms`` and ``tau_rms``: each joint's RMS velocity and torque, (joints,)."""
+    pin = _pin()
+    nj = len(robot.joints)
+    masses = pi_cad[0::10]
+    m_floor = max(1e-3, 0.01 * float(masses.sum()))
+    scale = []
+    for b in range(nj):
+        m = max(masses[b], m_floor)
+        c = pi_cad[10 * b + 1:10 * b + 4] / masses[b] if masses[b] > 0 else np.zeros(3)
+        length = max(float(np.linalg.norm(c)), MIN_LENGTH)
+        scale += [m] + [m * length] * 3 + [m * length ** 2] * 6
+    model = robot.pin_model
+    diag = np.diag(pin.crba(model, model.createData(), pin.neutral(model)))
+    diag = diag - np.asarray(model.armature)
+    arm = np.maximum(armature0, diag)
+    fric = []
+    for j in range(nj):
+        loose = 10.0 * max(tau_rms[j], 1e-6)
+        fric += [loose / max(qd_rms[j], 1e-6), loose, loose]
+    return np.concatenate([prior * np.asarray(scale), prior * np.maximum(arm, 1e-9), fric])
+
+
+# --------------------------------------------------------------------------- identification
+
+
+@dataclasses.dataclass
+class Calibration:
+    """The identified parameters and the report (plain JSON types)."""
+
+    x: np.ndarray              # every parameter, (14 or 15 * joints,): inertial, armature, friction (, Fs - Fc)
+    x0: np.ndarray             # the prior's centre (CAD, prior armature, zero friction)
+    names: list[str]
+    bodies: list[str]
+    joints: list[str]          # URDF joints
+    report: dict
+
+
+def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
+              enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
+    """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion``.
+    ``enforce``: when the linear estimate is physically inconsistent, fit again over consistent
+    parameters only (``consistent_fit``). ``seed`` fixes the random configurations of the
+    structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
+    or "stribeck" (and the bump (Fs - Fc) sign(qd) exp(-(qd / vs)^2) of the LuGre static curve, vs
+    per joint alternated with the linear fit by a search on a grid)."""
+    if friction not in ("linear", "stribeck"):
+        raise ValueError(f"unknown friction kind {friction!r}")
+    nj = len(robot.joints)
+    keep = edge_rows(motion.t, edge_s)
+    moving = np.abs(motion.qd[keep]).max(axis=0) if keep.any() else np.zeros(nj)
+    if keep.sum() < 20:
+        raise DataError(f"the log has {int(keep.sum())} rows more than {edge_s:g} s from its ends: too few to calibrate")
+    still = [str(motion.names[j]) for j in range(nj) if moving[j] == 0]
+    if still:
+        raise DataError(f"joint {still[0]} does not move in the log: its friction cannot be identified")
+    q, qd, qdd, tau = motion.q[keep], motion.qd[keep], motion.qdd[keep], motion.tau[keep]
+    n = len(q)
+    Phi = regressor(robot, q, qd, qdd)
+    y = tau.reshape(-1)
+    stribeck = friction == "stribeck"
+    names = parameter_names(robot, stribeck)
+    pi_cad = cad_parameters(robot)
+    urdf_armature = robot.armature
+    armature0 = np.where(np.isnan(urdf_armature), np.nan_to_num(motion.rotor_inertia), urdf_armature)
+    x0 = np.concatenate([pi_cad, armature0, np.zeros(3 * nj)])
+    tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
+    s = prior_scales(robot, pi_cad, armature0, np.sqrt(np.mean(qd ** 2, axis=0)), tau_rms, prior)
+
+    # before: the CAD model (with the prior armature) and each joint's friction fitted alone
+    r0 = (y - Phi @ x0).reshape(n, nj)
+    before = np.empty((n, nj))
+    fric_before = {}
+    for j in range(nj):
+        cols = np.column_stack([qd[:, j], np.sign(qd[:, j]), np.ones(n)])
+        coef = np.linalg.lstsq(cols, r0[:, j], rcond=None)[0]
+        before[:, j] = r0[:, j] - cols @ coef
+        fric_before[j] = coef
+    sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
+
+    rows_of = np.tile(np.arange(nj), n)
+    vs = None
+    if stribeck:
+        top = np.abs(qd).max(axis=0)
+        vs = 0.1 * top
+        x0 = np.concatenate([x0, np.zeros(nj)])
+        s = np.concatenate([s, 10.0 * np.maximum(tau_rms, 1e-6)])
+        for _ in range(STRIBECK_ALTERNATIONS):
+            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs)])
+            x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms)
+            own = (Phi_s[:, 11 * nj:] * x[11 * nj:]).reshape(n, nj, -1).sum(axis=2)  # friction part, (n, nj)
+            for j in range(nj):
+                target = resid[:, j] + own[:, j]
+                vs[j] = min(top[j] * STRIBECK_GRID, key=lambda v: _stribeck_rss(qd[:, j], target, v))
+        Phi = np.hstack([Phi, stribeck_columns(qd, vs)])
+    x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms)
+
+    A = (Phi / sigma[rows_of, None]) * s
+    excitation = _excitation(robot, A, Phi, s, names, seed, vs)
+    linear = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report={})
+    broken = consistency(linear)["problems"]
+    enforced = None
+    if broken and enforce:
+        x = consistent_fit(Phi / sigma[rows_of, None], y / sigma[rows_of], x, x0, s, nj)
+        resid = (y - Phi @ x).reshape(n, nj)
+        enforced = {"inconsistent_before": broken, "rms_linear": {str(motion.names[j]): float(sigma[j])
+                                                                  for j in range(nj)}}
+    report = {
+        "rows": int(n), "rows_dropped_at_ends": int((~keep).sum()), "edge_s": edge_s,
+        "prior": prior, "iterations": iteration,
+        "excitation": excitation,
+        "fit": {str(motion.names[j]): {"urdf_joint": robot.joints[j],
+                                       "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
+                                       "rms_after": float(np.sqrt(np.mean(resid[:, j] ** 2))),
+                                       "noise_std": float(sigma[j])} for j in range(nj)},
+        "friction": _friction_report(robot, motion, x, vs),
+        "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k]) for k, f in enumerate(FRICTION)}
+                              for j in range(nj)},
+        "consistency_enforced": enforced,
+        "armature": {robot.joints[j]: {"prior": float(armature0[j]), "identified": float(x[10 * nj + j])}
+                     for j in range(nj)},
+    }
+    cal = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report=report)
+    report["links"] = link_table(cal)
+    report["consistency"] = consistency(cal)
+    report["suspicious"] = suspicious(cal)
+    return cal
+
+
+def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
+    """Maximum a posteriori estimate, rows weighted by each joint's residual std, re-estimated until
+    the weights settle: (x, sigma (joints,), residuals (n, joints), iterations)."""
+    nj = len(sigma)
+    for iteration in range(1, MAX_ITERATIONS + 1):
+        A = (Phi / sigma[rows_of, None]) * s
+        z = np.linalg.lstsq(np.vstack([A, np.eye(len(s))]),
+                            np.concatenate([(y - Phi @ x0) / sigma[rows_of], np.zeros(len(s))]), rcond=None)[0]
+        x = x0 + s * z
+        resid = (y - Phi @ x).reshape(-1, nj)
+        new = np.maximum(np.sqrt(np.mean(resid ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
+        settled = np.max(np.abs(np.log(new / sigma))) < 0.01
+        sigma = new
+        if settled:
+            break
+    return x, sigma, resid, iteration
+
+
+def _stribeck_rss(qd: np.ndarray, target: np.ndarray, vs: float) -> float:
+    cols = np.column_stack([qd, np.sign(qd), np.sign(qd) * np.exp(-np.square(qd / vs)), np.ones_like(qd)])
+    coef = np.linalg.lstsq(cols, target, rcond=None)[0]
+    return float(np.sum(np.square(target - cols @ coef)))
+
+
+def _friction_report(robot, motion: Motion, x: np.ndarray, vs: np.ndarray | None) -> dict:
+    nj = len(robot.joints)
+    rotary = robot.kinds[0] == "rotary"
+    units = {"Fv": "Nm s/rad", "Fc": "Nm", "offset": "Nm"} if rotary else {"Fv": "N s/m", "Fc": "N", "offset": "N"}
+    joints = {}
+    for j in range(nj):
+        row = {"urdf_joint": robot.joints[j], **{f: float(x[11 * nj + 3 * j + k]) for k, f in enumerate(FRICTION)}}
+        if vs is not None:
+            row.update(Fs=row["Fc"] + float(x[14 * nj + j]), vs=float(vs[j]), delta=2.0)
+        joints[str(motion.names[j])] = row
+    if vs is None:
+        return {"kind": "linear", "model": "Fv*qd + Fc*sign(qd) + offset", "units": units, "joints": joints}
+    units.update(Fs=units["Fc"], vs="rad/s" if rotary else "m/s", delta="-")
+    return {"kind": "stribeck", "model": "Fv*qd + (Fc + (Fs - Fc) exp(-|qd/vs|^delta)) sign(qd) + offset",
+            "units": units, "joints": joints}
+
+
+def pseudo_inertia(pi: np.ndarray) -> np.ndarray:
+    """The 4x4 pseudo-inertia [[Sigma, m c], [m c^T, m]] of 10 dynamic parameters, Sigma =
+    tr(I_o)/2 - I_o: positive definite exactly for a physically consistent body (positive mass,
+    positive-definite inertia, triangle inequality)."""
+    m, h = pi[0], pi[1:4]
+    i_o = np.array([[pi[4], pi[5], pi[7]], [pi[5], pi[6], pi[8]], [pi[7], pi[8], pi[9]]])
+    out = np.empty((4, 4))
+    out[:3, :3] = 0.5 * np.trace(i_o) * np.eye(3) - i_o
+    out[:3, 3] = out[3, :3] = h
+    out[3, 3] = m
+    return out
+
+
+def _from_pseudo(j: np.ndarray) -> np.ndarray:
+    sigma = j[:3, :3]
+    i_o = np.trace(sigma) * np.eye(3) - sigma
+    return np.array([j[3, 3], *j[:3, 3], i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2], i_o[2, 2]])
+
+
+_TRIL = np.tril_indices(4)
+
+
+def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.ndarray, s: np.ndarray,
+                   nj: int) -> np.ndarray:
+    """The same weighted least squares with the same prior (``A`` (rows, 14 nj) and ``b`` weighted),
+    over physically consistent parameters only: each body's pseudo-inertia as L L^T (L lower
+    triangular), each armature as u^2. Starts from ``x_start`` with eigenvalues clipped; returns x."""
+    from scipy import linalg, optimize
+
+    q, r = linalg.qr(A, mode="economic")
+    c = q.T @ b            # |A x - b|^2 = |r x - c|^2 + a constant
+    theta = []
+    for k in range(nj):
+        w, v = np.linalg.eigh(pseudo_inertia(x_start[10 * k:10 * k + 10]))
+        w = np.maximum(w, 1e-6 * max(w.max(), 1e-12))
+        theta.append(np.linalg.cholesky((v * w) @ v.T)[_TRIL])
+    arm = x_start[10 * nj:11 * nj]
+    theta = np.concatenate(theta + [np.sqrt(np.maximum(arm, 1e-6 * s[10 * nj:11 * nj])), x_start[11 * nj:]])
+
+    def params(th):
+        pis = []
+        for k in range(nj):
+            low = np.zeros((4, 4))
+            low[_TRIL] = th[10 * k:10 * k + 10]
+            pis.append(_from_pseudo(low @ low.T))
+        return np.concatenate(pis + [th[10 * nj:11 * nj] ** 2, th[11 * nj:]])
+
+    def dparams(th):   # d x / d theta: block diagonal
+        out = np.zeros((len(th), len(th)))
+        for k in range(nj):
+            low = np.zeros((4, 4))
+            low[_TRIL] = th[10 * k:10 * k + 10]
+            for e, (a, b) in enumerate(zip(*_TRIL)):
+                d = np.zeros((4, 4))
+                d[a] = low[:, b]          # E_ab L^T + L E_ba: row a and column a of L's column b
+                d = d + d.T
+                out[10 * k:10 * k + 10, 10 * k + e] = _from_pseudo(d)
+        idx = np.arange(10 * nj, 11 * nj)
+        out[idx, idx] = 2 * th[idx]
+        idx = np.arange(11 * nj, len(th))
+        out[idx, idx] = 1.0
+        return out
+
+    stacked = np.vstack([r, np.diag(1.0 / s)])
+    fit = optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), theta,
+                                 jac=lambda th: stacked @ dparams(th), x_scale="jac", method="lm",
+                                 xtol=1e-8, ftol=1e-6, max_nfev=2000)
+    if not np.all(np.isfinite(fit.x)):
+        raise FitError("the physically consistent fit did not converge")
+    return params(fit.x)
+
+
+def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int,
+                vs: np.ndarray | None = None) -> dict:
+    """How well the run determines the parameters.
+
+    Structural: the base parameters (QR with column pivoting of the regressor at random states,
+    identical for every trajectory). This run: the condition number of its base regressor, and the
+    directions of the identifiable parameters whose data information (eigenvalue of the
+    prior-whitened information matrix, 1 = as much as the prior's) is below ``UNDETERMINED``."""
+    from scipy import linalg
+
+    R_ = _random_regressor(robot, seed, vs) * s
+    _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    rank = int(np.sum(d > 1e-9 * d[0]))
+    base = np.sort(piv[:rank])
+    # the identifiable subspace (whitened coordinates): right singular vectors of the random regressor
+    _, sv, vt = np.linalg.svd(R_, full_matrices=False)
+    U = vt[:rank].T
+    sv_run = np.linalg.svd(Phi[:, base], compute_uv=False)
+    sv_scaled = np.linalg.svd(A[:, base] / np.linalg.norm(A[:, base], axis=0), compute_uv=False)
+    g, V = np.linalg.eigh(U.T @ (A.T @ A) @ U)
+    cut = max(UNDETERMINED, NUMERIC_ZERO * float(g.max()))
+    undetermined = []
+    for i in np.flatnonzero(g < cut):
+        w = U @ V[:, i]
+        w = w / np.abs(w).max()
+        order = np.argsort(-np.abs(w))
+        parts = [{"parameter": names[c], "weight": round(float(w[c]), 3)} for c in order[:4] if abs(w[c]) >= 0.2]
+        undetermined.append({"information": float(max(g[i], 0.0)), "combination": parts})
+    return {
+        "parameters": len(s), "base_parameters": rank, "structurally_unidentifiable": len(s) - rank,
+        "base": [names[c] for c in base],
+        "condition_number": float(sv_run[0] / sv_run[-1]) if sv_run[-1] > 0 else math.inf,
+        "condition_number_scaled": float(sv_scaled[0] / sv_scaled[-1]) if sv_scaled[-1] > 0 else math.inf,
+        "undetermined": undetermined,
+    }
+
+
+def _random_regressor(robot, seed: int, vs: np.ndarray | None = None) -> np.ndarray:
+    """The regressor at random states (positions uniform in [-pi, pi], standard normal velocities
+    and accelerations): enough rows to show every structural dependency."""
+    nj = len(robot.joints)
+    rng = np.random.default_rng(seed)
+    k = max(60, 30 * nj)
+    qd = rng.normal(size=(k, nj)) * (1.0 if vs is None else 2 * vs)
+    return regressor(robot, rng.uniform(-np.pi, np.pi, (k, nj)), qd, rng.normal(size=(k, nj)), vs)
+
+
+def base_parameters(robot, x: np.ndarray, seed: int = 0) -> tuple[np.ndarray, list[str]]:
+    """The identifiable combinations of ``x`` (14 * joints,): base parameters ``x_B + beta x_D`` from
+    QR with column pivoting of the unscaled regressor at random states; and their leading names."""
+    from scipy import linalg
+
+    R_ = _random_regressor(robot, seed)
+    _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
+    d = np.abs(np.diag(r))
+    rank = int(np.sum(d > 1e-9 * d[0]))
+    beta = linalg.solve_triangular(r[:rank, :rank], r[:rank, rank:])
+    names = parameter_names(robot)
+    return x[piv[:rank]] + beta @ x[piv[rank:]], [names[c] for c in piv[:rank]]
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def body_inertias(cal: Calibration, x: np.ndarray | None = None) -> list:
+    """pin.Inertia of every body for parameters ``x`` (default the identified ones)."""
+    pin = _pin()
+    x = cal.x if x is None else x
+    return [pin.Inertia.FromDynamicParameters(np.asarray(x[10 * b:10 * b + 10], dtype=float))
+            for b in range(len(cal.bodies))]
+
+
+def link_table(cal: Calibration) -> dict:
+    """Mass [kg], centre of mass [m] and inertia at the centre of mass [kg m^2] of every body, CAD and identified."""
+    out = {}
+    for body, cad, new in zip(cal.bodies, body_inertias(cal, cal.x0), body_inertias(cal)):
+        out[body] = {"mass_cad": float(cad.mass), "mass": float(new.mass),
+                     "com_cad": cad.lever.tolist(), "com": new.lever.tolist(),
+                     "inertia_cad": cad.inertia.tolist(), "inertia": new.inertia.tolist()}
+    return out
+
+
+def consistency(cal: Calibration) -> dict:
+    """Physical consistency: ``problems`` (each body's mass positive, its inertia at the centre of mass
+    positive definite with principal moments satisfying the triangle inequality; each armature not
+    negative) and ``warnings`` (negative friction coefficients)."""
+    problems, warnings = [], []
+    nj = len(cal.joints)
+    for body, inertia in zip(cal.bodies, body_inertias(cal)):
+        m = float(inertia.mass)
+        if not m > 0:
+            problems.append(f"link {body}: mass {m:.4g} kg is not positive")
+            continue
+        moments = np.sort(np.linalg.eigvalsh(inertia.inertia))
+        text = ", ".join(f"{v:.4g}" for v in moments)
+        pseudo = np.linalg.eigvalsh(pseudo_inertia(inertia.toDynamicParameters()))
+        if moments[0] <= -TOLERANCE * abs(moments[-1]):
+            problems.append(f"link {body}: inertia at the centre of mass is not positive definite "
+                            f"(principal moments {text} kg m^2)")
+        elif pseudo[0] < -TOLERANCE * pseudo[-1]:   # with the above: the triangle inequality
+            problems.append(f"link {body}: principal moments {text} kg m^2 break the triangle inequality "
+                            "(no real body has them)")
+    for j, joint in enumerate(cal.joints):
+        a = float(cal.x[10 * nj + j])
+        if a < 0:
+            problems.append(f"joint {joint}: armature {a:.4g} kg m^2 is negative")
+        fv, fc = cal.x[11 * nj + 3 * j], cal.x[11 * nj + 3 * j + 1]
+        if fv < 0 or fc < 0:
+            warnings.append(f"joint {joint}: friction Fv {fv:.4g}, Fc {fc:.4g}: a negative coefficient "
+                            "makes the joint gain energy")
+        if len(cal.x) == 15 * nj and fc + cal.x[14 * nj + j] < 0:
+            warnings.append(f"joint {joint}: friction Fs {fc + cal.x[14 * nj + j]:.4g} at zero speed is negative")
+    return {"ok": not problems, "problems": problems, "warnings": warnings}
+
+
+def suspicious(cal: Calibration) -> list[str]:
+    """Parameters far (> SUSPICIOUS) from CAD or from the prior armature, with the other causes
+    that give the same torque shape."""
+    out = []
+    causes = "; ".join(OTHER_CAUSES)
+    for body, cad, new in zip(cal.bodies, body_inertias(cal, cal.x0), body_inertias(cal)):
+        if cad.mass > 0 and abs(new.mass / cad.mass - 1) > SUSPICIOUS:
+            out.append(f"link {body}: mass {cad.mass:.4g} -> {new.mass:.4g} kg ({100 * (new.mass / cad.mass - 1):+.0f} %); "
+                       f"also consistent with: {causes}")
+    nj = len(cal.joints)
+    for j, joint in enumerate(cal.joints):
+        a0, a = cal.x0[10 * nj + j], cal.x[10 * nj + j]
+        if a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS:
+            out.append(f"joint {joint}: armature {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
+                       "also consistent with: a drive gain off on that joint; inertia of the link's own axis "
+                       "that the data cannot tell from the armature")
+    return out
+
+
+# --------------------------------------------------------------------------- the calibrated URDF
+
+
+def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
+    """``urdf_text`` with the identified inertial parameters of every moving link (its own inertia
+    plus the identified change of its body: fixed children keep theirs) and the armature as
+    Pinocchio's ``<rotor_params>`` (gear_ratio 1, mass = armature)."""
+    pin = _pin()
+    root = ET.fromstring(urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
+    links = {link.get("name"): link for link in root.findall("link")}
+    nj = len(cal.joints)
+    for b, body in enumerate(cal.bodies):
+        link = links.get(body)
+        if link is None:
+            raise ModelFileError(f"{name}: no link {body!r} for joint {cal.joints[b]}")
+        own = _link_parameters(pin, link)
+        delta = cal.x[10 * b:10 * b + 10] - cal.x0[10 * b:10 * b + 10]
+        inertia = pin.Inertia.FromDynamicParameters(own + delta)
+        _set_inertial(link, inertia)
+    for old in root.findall("rotor_params"):
+        root.remove(old)
+    if len(root):
+        root[-1].tail = "\n  "
+    rotor = ET.SubElement(root, "rotor_params")
+    rotor.text, rotor.tail = "\n    ", "\n"
+    for j, joint in enumerate(cal.joints):
+        element = ET.SubElement(rotor, "joint", {"name": joint, "mass": repr(float(cal.x[10 * nj + j])),
+                                                 "gear_ratio": "1"})
+        element.tail = "\n    " if j < nj - 1 else "\n  "
+    return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _link_parameters(pin, link) -> np.ndarray:
+    """A URDF link's own inertial parameters in its frame, (10,)."""
+    inertial = link.find("inertial")
+    if inertial is None:
+        return np.zeros(10)
+    mass = float(inertial.find("mass").get("value")) if inertial.find("mass") is not None else 0.0
+    origin = inertial.find("origin")
+    xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
+    rpy = np.array([float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()])
+    el = inertial.find("inertia")
+    get = (lambda k: float(el.get(k, 0.0))) if el is not None else (lambda k: 0.0)
+    tensor = np.array([[get("ixx"), get("ixy"), get("ixz")], [get("ixy"), get("iyy"), get("iyz")],
+                       [get("ixz"), get("iyz"), get("izz")]])
+    rot = pin.rpy.rpyToMatrix(rpy)
+    return pin.Inertia(mass, xyz, rot @ tensor @ rot.T).toDynamicParameters()
+
+
+def _set_inertial(link, inertia) -> None:
+    """Write ``inertia`` (a pin.Inertia in the link frame) as the link's <inertial>, rpy = 0."""
+    inertial = link.find("inertial")
+    if inertial is None:
+        inertial = ET.SubElement(link, "inertial")
+    for child in list(inertial):
+        inertial.remove(child)
+    c, tensor = inertia.lever, inertia.inertia
+    inertial.text = "\n      "
+    ET.SubElement(inertial, "mass", {"value": repr(float(inertia.mass))}).tail = "\n      "
+    ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"}).tail = "\n      "
+    ET.SubElement(inertial, "inertia", {k: repr(float(tensor[a, b])) for k, (a, b) in (
+        ("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2)))}).tail = "\n    "
+
+
+def refuse_inconsistent(cal: Calibration) -> None:
+    """FitError (exit 5) when the identified model is physically impossible."""
+    problems = cal.report["consistency"]["problems"]
+    if problems:
+        raise FitError(f"the identified model is physically inconsistent: {'; '.join(problems)}; excite the arm "
+                       "more, tighten the prior (--prior) or enforce consistency (--consistency enforce)")
