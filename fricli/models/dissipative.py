@@ -235,13 +235,16 @@ class DissipativeFriction(FrictionModel):
                 x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, nets[0].dtype)
                 if sliding:
                     x[2] = 1.0
-                total = np.zeros(stop - start)
                 for k, net in enumerate(nets):
                     if ws[k] is None or ws[k].n != stop - start:
                         ws[k] = net.workspace(stop - start, backward=False)
                     ws[k].set_inputs(x)
-                    total += net.forward(ws[k])[0]
-                np.multiply(total, self.y_scale_ / len(nets), out=out[start:stop])
+                    if k == 0:
+                        np.multiply(net.forward(ws[k])[0], self.y_scale_, out=out[start:stop])
+                    else:
+                        out[start:stop] += net.forward(ws[k])[0] * self.y_scale_
+                if len(nets) > 1:
+                    out[start:stop] /= len(nets)
                 if self.v_max_ is not None:
                     qd = signals["qd"][start:stop]
                     beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
