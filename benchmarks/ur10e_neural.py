@@ -91,11 +91,13 @@ def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) ->
     runs = [import_run(data, work, name) for name in BASE_VALIDATION]
     lugre, nn = os.path.join(work, "base-lugre"), os.path.join(work, f"base-nn-s{seed}")
     fricli("identify", fit, "-o", lugre, "-q")
-    fricli("train-base", fit, "--seed", str(seed), *options, "-o", nn, "-q")
+    trained = fricli("train-base", fit, "--seed", str(seed), *options, "-o", nn, "--json", "-q", json_out=True)
     rows = []
     for j in JOINTS:
         a, b = moving_error(lugre, runs, j), moving_error(nn, runs, j)
-        rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a})
+        fit_j = trained["joints"][str(j)]
+        rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a, "step": fit_j["best_step"],
+                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation")})
     return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "train_base_options": list(options),
             "joints": rows}
 
@@ -122,9 +124,9 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
 
 
 def base_table(result: dict) -> str:
-    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre |", "|---|---:|---:|---:|"]
+    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |", "|---|---:|---:|---:|---:|"]
     for r in result["joints"]:
-        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} |")
+        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |")
     return "\n".join(lines)
 
 

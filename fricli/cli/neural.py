@@ -59,13 +59,13 @@ def _check_outputs(output: str, as_json: bool) -> None:
         raise click.UsageError("-o - and --json both write to stdout: choose one")
 
 
-def _rows_used(summary: dict) -> str:
+def _rows_used(summary: dict, tau: str) -> str:
     """How train-base chose its rows, for its message."""
     mode, val = summary["velocity_groups"], summary["val_rows"]
     cv = summary.get("cross_validation")
     if mode == "moving" and cv is not None:
         return (f"rows in motion (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
-                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g}; "
+                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g} {tau}; "
                 "no steady velocity levels in the log)")
     if mode == "moving":
         return (f"rows in motion ({val} for validation in {summary['groups']} of "
@@ -191,7 +191,7 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
         rows = summary["train_rows"] + summary["val_rows"]
         models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary)} of {the_log.name}{where} in "
+        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary, the_log.units['tau'])} of {the_log.name}{where} in "
             f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]
