@@ -215,7 +215,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
             full[usable] = labels
             labels = full
         if mode != "levels":
-            return _moving(usable if moving is None else np.asarray(moving, dtype=bool), val_fraction, max_samples, rng)
+            rows = usable if moving is None else np.asarray(moving, dtype=bool)
+            return _in_time_blocks(rows, val_fraction, max_samples, rng)
     else:
         labels, mode = np.where(usable, 0, -1).astype(np.int64), "all"
     # runs: constant-velocity stretches for discrete levels, else stretches of usable rows
@@ -234,7 +235,7 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
     return Selection(train=train_rows, val=val_rows, blocks=blocks, mode=mode, groups=groups)
 
 
-def _moving(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
+def _in_time_blocks(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
     """Mode "moving": the rows ``moving`` (bool (n,)) of whole time blocks (``time_blocks``)."""
     val_mask = time_blocks(moving.size, val_fraction, rng)
     train_rows, val_rows = np.flatnonzero(moving & ~val_mask), np.flatnonzero(moving & val_mask)
