@@ -70,7 +70,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               presliding_speed: float | None = None, folds: bool = True,
+               folds: bool = True,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
@@ -80,8 +80,8 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     (summary "velocity_groups": "moving"); there the dissipative network (with ``folds``) is the
     mean of one network per fold of ``training_data.time_folds``, every one stopped at the step
     of the least validation loss pooled over the folds (``cross_validated_steps``; summary
-    "cross_validation"), while the other networks validate on one fold. At rest the friction is held by the bristles and
-    depends on the motion before, not on (tau_g, qd). ``velocity_input``
+    "cross_validation"), while the other networks validate on one fold. At rest the friction
+    is held by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
     always sees asinh(|qd| / v0)). Returns (model,
@@ -116,12 +116,10 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     if sel.mode == "moving":
         check_motion(log.name, sig["qd"], moving, "train-base")
 
-    extra = {} if presliding_speed is None else {"presliding_speed": float(presliding_speed)}
-
     def new_model(n_steps: int) -> FrictionModel:
         return ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=n_steps, lr=lr,
                            batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
-                           velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"), **extra)
+                           velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
 
     cv = None
     if sel.mode == "moving" and sel.val.size and folds and arch == "dissipative":
@@ -141,8 +139,8 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
         length = min(fold.history_train_.size for fold in members)
         model.history_train_ = np.mean([fold.history_train_[:length] for fold in members], axis=0)
         model.history_val_ = cv.pop("curve") / model.y_scale_ ** 2
-        model.best_step_, model.eval_every_, model.n_train_, model.n_val_ = cv["step"], members[0].eval_every_, rows.size, 0
-        model.steps_ = max(fold.steps_ for fold in members)
+        model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
+        model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
     else:
         model = new_model(steps)
@@ -163,13 +161,6 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     return model, summary
 
 
-def _target_scale(model: FrictionModel) -> float:
-    """[Nm] per unit of the network's output: its training loss times this squared is in Nm^2."""
-    if hasattr(model, "y_std_"):
-        return float(model.y_std_.scale_[0])
-    return float(model.y_scale_)
-
-
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
                           target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
                           rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
@@ -177,8 +168,9 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
 
     ``rows`` (sorted indices) are the rows to use, ``blocks`` (n,) the time block of every row
     and ``folds`` the blocks each fold holds out. Fold k fits ``new_model(steps)`` (with
-    ``fit_kwargs``) on the rows outside its blocks, recording its validation loss; the curves,
-    in Nm^2 and weighted by their validation rows, are pooled into the mean squared error over
+    ``fit_kwargs``; a model whose validation loss is that of target / ``y_scale_``) on the rows
+    outside its blocks, recording its validation loss; the curves, in Nm^2 and weighted by their
+    validation rows, are pooled into the mean squared error over
     every held-out row, and the step of its least value is chosen. Returns "folds" (K), "step"
     (the step chosen), "record" (its index in the loss records), "held_out_rmse" [Nm] (the
     pooled curve's least value, rooted), "fold_best_steps" (each fold's own best step),
@@ -199,7 +191,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
         model.fit(subset(sig, train), target[train], subset(sig, val), target[val], rng=rng, on_eval=fold_eval,
                   **fit_kwargs)
         done += steps
-        curves.append(np.asarray(model.history_val_) * _target_scale(model) ** 2)
+        curves.append(np.asarray(model.history_val_) * model.y_scale_ ** 2)
         weights.append(val.size)
         fitted.append(model)
     if not curves:

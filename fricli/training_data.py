@@ -235,7 +235,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
     return Selection(train=train_rows, val=val_rows, blocks=blocks, mode=mode, groups=groups)
 
 
-def _in_time_blocks(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
+def _in_time_blocks(moving: np.ndarray, val_fraction: float, max_samples: int | None,
+                    rng: np.random.Generator) -> Selection:
     """Mode "moving": the rows ``moving`` (bool (n,)) of whole time blocks (``time_blocks``)."""
     val_mask = time_blocks(moving.size, val_fraction, rng)
     train_rows, val_rows = np.flatnonzero(moving & ~val_mask), np.flatnonzero(moving & val_mask)

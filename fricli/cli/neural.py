@@ -191,7 +191,8 @@ def train_base(log, output, arch, hidden, schedule, steps, patience, lr, batch_s
         rows = summary["train_rows"] + summary["val_rows"]
         models.save_for_log(out, model, the_log, rows_used=rows, seed=seed, fit=summary, job=job)
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary, the_log.units['tau'])} of {the_log.name}{where} in "
+        rows_used = _rows_used(summary, the_log.units["tau"])
+        say(f"trained {arch} on {summary['train_rows']} {rows_used} of {the_log.name}{where} in "
             f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]
