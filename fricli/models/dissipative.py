@@ -347,7 +347,7 @@ class DissipativeFriction(FrictionModel):
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
         held = (f"{self.n_val_} for validation" if len(self.nets_) == 1 else
-                "each network validated on its fold of them, the others trained on")
+                "each network trained on all but one fold of them, validated on that one")
         lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
                      f"({held}); weights kept from step {self.best_step_}")
         return "\n".join(lines)
