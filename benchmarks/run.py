@@ -697,7 +697,10 @@ def export_rows(add, paths: dict[str, str], log: logs.Log, reps: int, quick: boo
     compiler at -O2 and timed in CPU time over the rows of ``log``, next to ns per sample of
     ``model.predict`` in double precision (the same arithmetic) on the same rows."""
     from fricli import models
-    from fricli.export import c, check
+    sys.path.insert(0, os.path.join(ROOT, "tests"))   # the compile-and-run helper the tests use
+    import export_check as check
+
+    from fricli.export import c
 
     if check.compiler() is None:
         add("export", "exported C step", None, "", "skipped: no C compiler")

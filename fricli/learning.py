@@ -216,8 +216,8 @@ def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]
     return {k: v[:keep] for k, v in sig.items()}
 
 
-def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int = 200, batch_size: int = 64,
-          lr: float = 0.01, seed: int = 0, val_fraction: float = 0.2, max_seconds: float | None = None,
+def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] = (30,), epochs: int = 200,
+          batch_size: int = 64, lr: float = 0.01, seed: int = 0, val_fraction: float = 0.2, max_seconds: float | None = None,
           min_speed: float | None = None, on_eval: Callable | None = None,
           base_envelope=None) -> tuple[FrictionModel, dict]:
     """NN_add on the residual of ``base`` over ``log`` (paper, L_add); returns (model, summary).
@@ -254,7 +254,8 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
     target = logs.friction_target(sig)
     rng = np.random.default_rng(seed)
     sel = training_data.select(qd, val_fraction=val_fraction, max_samples=None, rng=rng, keep=moving)
-    model = ResidualFriction(base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr,
+    hidden = (hidden,) if isinstance(hidden, int) else tuple(hidden)   # NN_add's layer widths
+    model = ResidualFriction(base, hidden_sizes=hidden, epochs=epochs, batch_size=batch_size, lr=lr,
                              min_speed=float(min_speed), units=log.units)
     base_pred = base.predict(sig)[0]
     model.fit(sig, target, sel.train, sel.val, rng=rng, on_eval=on_eval, base_pred=base_pred)
@@ -271,7 +272,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int = 30, epochs: int =
         summary["base_val"] = _errors(target, base_pred, sel.val)
     if val_fraction > 0:
         def fit_predict(train: np.ndarray) -> np.ndarray:
-            fold = ResidualFriction(base, hidden_sizes=(hidden,), epochs=epochs, batch_size=batch_size, lr=lr,
+            fold = ResidualFriction(base, hidden_sizes=hidden, epochs=epochs, batch_size=batch_size, lr=lr,
                                     min_speed=float(min_speed), units=log.units)
             fold.fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred)
             return fold.on_base(sig, base_pred)

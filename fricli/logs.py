@@ -546,6 +546,3 @@ def table_from_arrays(columns: dict[str, np.ndarray], units: dict[str, str]) -> 
         arrays.append(arr)
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 
-
-def file_exists(path: str) -> bool:
-    return path != "-" and os.path.exists(path)

@@ -61,6 +61,14 @@ def source(path: str) -> Source:
     return Source(path, {j: path for j in covers(meta)})
 
 
+def paired(source: Source, table, log_name: str, requested=None) -> dict:
+    """{joint: model file} of a run that applies ``source``'s models to the joints of the log
+    ``table`` (``--joint`` ``requested``): the joint rule's pairing (``joints.pair``)."""
+    from fricli import logs
+
+    return dict(pair(source, logs.joints_of(table, log_name), requested, log_name))
+
+
 def output_folder(output: str, covered: list, log_joints: list | None, log_name: str) -> str | None:
     """The folder to write one model per joint into, or None for one model file at ``output``.
 

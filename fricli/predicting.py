@@ -19,7 +19,6 @@ import dataclasses
 import math
 import os
 import queue
-import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Iterator
@@ -221,32 +220,55 @@ class _Stream:
 _ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart
 
 
+@dataclasses.dataclass(frozen=True)
+class Reading:
+    """How ``run_models`` reads a log: the joint rule's ``joint``, ``kt`` [Nm/A], ``cutoff_hz``
+    and ``drop_invalid`` as ``logs.from_table``, the time ``window`` (fricli.timewindow) and the
+    rows per record batch."""
+
+    joint: object = None
+    kt: float | None = None
+    cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ
+    drop_invalid: bool = False
+    window: timewindow.Window | None = None
+    batch_rows: int = DEFAULT_BATCH_ROWS
+    zero: tuple = ()               # robot-model columns declared zero (logs.from_table)
+
+
+@dataclasses.dataclass(frozen=True)
+class Outputs:
+    """What ``run_models`` adds besides ``tau_f_pred``: ``tau_ext_pred`` when ``external``
+    (low-passed at ``lowpass_hz`` [Hz] when given), and the boolean column ``extrapolating`` (the
+    row lies outside its model's training envelope) when ``flag_extrapolation``."""
+
+    external: bool = False
+    lowpass_hz: float | None = None
+    flag_extrapolation: bool = False
+
+
 def run(model: FrictionModel, meta: dict, log_path: str, out_path: str, *, model_name: str = "model",
-        **kwargs) -> Result:
-    """``run_models`` with one model in memory (its recorded joint applies, docs/joints.md)."""
+        outputs: Outputs = Outputs(), warn: Callable[[str], None] | None = None, **reading) -> Result:
+    """``run_models`` with one model in memory (its recorded joint applies, docs/joints.md);
+    ``reading``: the fields of ``Reading``."""
     source = joints.Source(model_name, {meta.get("joint"): model_name})
-    return run_models(source, log_path, out_path, load=lambda _path: (model, meta), **kwargs)
+    return run_models(source, log_path, out_path, reading=Reading(**reading), outputs=outputs, warn=warn,
+                      load=lambda _path: (model, meta))
 
 
-def run_models(source: joints.Source, log_path: str, out_path: str, *, external: bool = False,
-               lowpass_hz: float | None = None, joint=None, kt: float | None = None,
-               cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_invalid: bool = False,
-               warn: Callable[[str], None] | None = None, batch_rows: int = DEFAULT_BATCH_ROWS,
-               progress: bool = False, load: Callable[[str], tuple] = models.load,
-               flag_extrapolation: bool = False, window: timewindow.Window | None = None,
-               zero: tuple = ()) -> Result:
+def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: Reading = Reading(),
+               outputs: Outputs = Outputs(), warn: Callable[[str], None] | None = None,
+               on_rows: Callable[[int, int], None] | None = None,
+               load: Callable[[str], tuple] = models.load) -> Result:
     """Predict friction on the log at ``log_path`` with each joint's model of ``source`` (a model
-    file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` added to
-    ``out_path`` (``-``: stdout), plus ``tau_ext_pred`` when ``external`` and the boolean column
-    ``extrapolating`` (the row lies outside its model's training envelope) when ``flag_extrapolation``.
-    Rows keep their order;
-    rows of joints the run does not cover are left out, and rows outside ``window`` (the time
-    window, fricli.timewindow). ``zero``: robot-model columns declared zero (``logs.from_table``);
-    a log without tau_g or tau_dyn is refused otherwise. Returns the figures."""
-    from tqdm import tqdm
-
+    file or a model set, paired by the joint rule) and write it with ``tau_f_pred`` (and
+    ``outputs``) added to ``out_path`` (``-``: stdout). Rows keep their order; rows of joints the
+    run does not cover are left out, and rows outside ``reading.window``. A log without tau_g or
+    tau_dyn is refused unless ``reading.zero`` declares it zero. ``on_rows(rows, total)``
+    is called as each record batch of ``rows`` of the log's ``total`` is read (progress).
+    Returns the figures."""
+    joint, window, batch_rows = reading.joint, reading.window, reading.batch_rows
     pf, name = open_log(log_path)
-    logs.require_robot_model(pf.schema_arrow, name, zero)
+    logs.require_robot_model(pf.schema_arrow, name, reading.zero)
     limits = timewindow.limits_of_file(pf, window, name) if window else None
     found = file_joints(pf, name)
     streams = {}
@@ -257,7 +279,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
         streams[j] = _Stream(j, model, meta, path, env=models.envelope(meta, path))
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
-    reason = whole_reason(pf.schema_arrow, lowpass_hz if external else None)
+    reason = whole_reason(pf.schema_arrow, outputs.lowpass_hz if outputs.external else None)
     if reason is None and any(getattr(st.model, "partners", None) for st in streams.values()):
         reason = "the joints of a coupled group are predicted together"
     warnings: list[str] = []
@@ -267,19 +289,19 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
     has_ext = False
     total = pf.metadata.num_rows
     for st in streams.values():
-        if flag_extrapolation and st.env is None:
+        if outputs.flag_extrapolation and st.env is None:
             raise ModelFileError(f"{st.model_name}: the model file records no training envelope (written by an "
                                  "older fricli): --flag-extrapolation needs one")
     any_env = any(st.env is not None for st in streams.values())
-    with atomic_open(out_path) as fh, tqdm(total=total, unit="rows", disable=not progress, file=sys.stderr,
-                                            leave=False) as bar, ThreadPoolExecutor(max_workers=1) as io:
+    with atomic_open(out_path) as fh, ThreadPoolExecutor(max_workers=1) as io:
         # the next batch is read and the last one written (pyarrow releases the GIL while it
         # decompresses and compresses) while this one is checked and predicted
         writer = pending = None
-        reading = _Prefetch(_batches(pf, name, batch_rows, reason is not None))
+        batches_read = _Prefetch(_batches(pf, name, batch_rows, reason is not None))
         try:
-            for offset, table in reading:
-                bar.update(table.num_rows)
+            for offset, table in batches_read:
+                if on_rows is not None:
+                    on_rows(table.num_rows, total)
                 if limits is not None:
                     table = timewindow.slice_batch(table, *limits)
                 if several:
@@ -292,10 +314,9 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                         part = table.filter(pc.equal(jcol, pa.scalar(j, jcol.type)))
                     if part.num_rows == 0:
                         continue
-                    partners = _partner_signals(st, table, name, kt, cutoff_hz, drop_invalid)
-                    out, n_in = _predict_part(st, part, offset, name, total, reason, external, lowpass_hz, kt,
-                                              cutoff_hz, drop_invalid, warn, warnings, flag_extrapolation, zero,
-                                              partners)
+                    partners = _partner_signals(st, table, name, reading)
+                    out, n_in = _predict_part(st, part, offset, name, total, reason, reading, outputs, warn,
+                                              warnings, partners)
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -315,7 +336,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                 raise LogError(f"{name}: the log is empty")
             pending.result()
         finally:
-            reading.close()
+            batches_read.close()
             if pending is not None:
                 pending.exception()   # wait: the writer must not close under a write
             if writer is not None:
@@ -343,15 +364,15 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, external:
                                                           "share": n_outside / rows if rows else 0.0})
 
 
-def _partner_signals(st: _Stream, table: pa.Table, name: str, kt, cutoff_hz, drop_invalid) -> dict:
+def _partner_signals(st: _Stream, table: pa.Table, name: str, reading: Reading) -> dict:
     """{signal name: (t, qd)} of the other joints of a coupled group's member model (none for others)."""
     from fricli.models.coupled import partner_key
 
     out = {}
     for p in getattr(st.model, "partners", None) or []:
         try:
-            sig = logs.from_table(table, name=name, joint=p, kt=kt, cutoff_hz=cutoff_hz,
-                                  drop_invalid=drop_invalid).signals
+            sig = logs.from_table(table, name=name, joint=p, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
+                                  drop_invalid=reading.drop_invalid, zero=reading.zero).signals
         except LogError:
             raise LogError(f"{name}: the friction of joint {st.joint} depends on joint {p} (they share motors), "
                            f"and the log has no usable rows of joint {p}") from None
@@ -359,11 +380,9 @@ def _partner_signals(st: _Stream, table: pa.Table, name: str, kt, cutoff_hz, dro
     return out
 
 
-def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, external: bool,
-                  lowpass_hz, kt, cutoff_hz, drop_invalid, warn, warnings: list,
-                  flag_extrapolation: bool = False, zero: tuple = (),
-                  partners: dict | None = None) -> tuple[pa.Table, int]:
-    """One joint's rows of one batch with tau_f_pred (and tau_ext_pred) added; the rows it had."""
+def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, reading: Reading,
+                  outputs: Outputs, warn, warnings: list, partners: dict | None = None) -> tuple[pa.Table, int]:
+    """One joint's rows of one batch with tau_f_pred (and ``outputs``) added; the rows it had."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
     jpos = table.schema.get_field_index("joint")
     jfield = table.schema.field(jpos) if jpos >= 0 else None
@@ -371,8 +390,8 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         jcol = table.column(jpos)
         table = table.remove_column(jpos)
     try:
-        log = logs.from_table(table, name=name, kt=kt, cutoff_hz=cutoff_hz, drop_invalid=drop_invalid,
-                              warn=warnings.append, zero=zero)
+        log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
+                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero)
     except LogError as exc:
         if reason is None and (offset or table.num_rows < total):
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
@@ -402,15 +421,15 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
                              pa.repeat(pa.scalar(st.joint, jfield.type), out.num_rows))
     out = logs.with_column(out, "tau_f_pred", tau_f, unit)
     st.fric.add(logs.friction_target(sig), tau_f)
-    if external:
-        est = external_estimate(sig, tau_f, lowpass_hz, warn)
+    if outputs.external:
+        est = external_estimate(sig, tau_f, outputs.lowpass_hz, warn)
         out = logs.with_column(out, "tau_ext_pred", est, unit)
         if "tau_ext" in sig:
             st.ext.add(sig["tau_ext"], est)
     if st.env is not None:
         outside = st.env.outside(sig)
         st.outside += int(outside.sum())
-        if flag_extrapolation:
+        if outputs.flag_extrapolation:
             out = out.append_column(pa.field("extrapolating", pa.bool_()), pa.array(outside))
     if _ROW in out.column_names:   # keep it last, where the joints' pieces expect it
         col = out.column(_ROW)

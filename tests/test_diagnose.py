@@ -276,7 +276,7 @@ def test_lugre_base_carries_direction_as_its_own_parameters(rng):
 # --------------------------------------------------------------------------- simulated acceptance
 
 SIM_EFFECTS = {  # simulator effect -> the name diagnose must give it
-    "ripple": "position", "temperature": "temperature", "drift": "drift", "asymmetry": "direction",
+    "position": "position", "temperature": "temperature", "drift": "drift", "direction": "direction",
     "inertia": "acceleration", "load": "load", "velocity": "velocity", "level": "level", "offset": "offset",
     "column": "column:humidity",
 }
@@ -306,7 +306,7 @@ def _ripple_phase_is_per_log(t2, t3) -> bool:
     from fricli import sim
 
     def phases(table):
-        return [e["params"]["phases"] for e in sim.metadata(table)["effects"] if e["name"] == "ripple"]
+        return [e["params"]["phases"] for e in sim.metadata(table)["effects"] if e["name"] == "position"]
 
     return phases(t2) != phases(t3)
 
@@ -320,7 +320,7 @@ def test_simulated_effect_is_ranked_first_and_fixed(lugre_base, effect):
     assert d.added[0] == SIM_EFFECTS[effect]
     fixed = augment(lugre_base, d, log2)
     assert diagnose(fixed, log2).added == []
-    if effect == "ripple" and _ripple_phase_is_per_log(t2, t3):
+    if effect == "position" and _ripple_phase_is_per_log(t2, t3):
         pytest.skip("the simulator draws the ripple's phase per seed, so no model can predict the ripple "
                     "of another log (a gear's ripple is fixed to its position)")
     before, after = _mae(lugre_base, log3), _mae(fixed, log3)
@@ -337,7 +337,7 @@ def test_simulated_clean_log_adds_nothing(lugre_base):
 HARD_CASES = {  # simulator effects -> the effects diagnose must add, in any order
     ("gravity",): {"gravity"},
     ("quadrant",): {"quadrant"},
-    ("temperature", "ripple"): {"temperature", "position"},
+    ("temperature", "position"): {"temperature", "position"},
 }
 
 
@@ -430,7 +430,7 @@ def files(tmp_path_factory, lugre_base):
     t1, log1 = _sim(1)
     models.save_for_log(str(base), lugre_base, log1, rows_used=len(log1))
     out = {"dir": folder, "model": str(base)}
-    for name, effs in (("asym", ("asymmetry",)), ("clean", ())):
+    for name, effs in (("asym", ("direction",)), ("clean", ())):
         table, _ = _sim(2, *effs)
         path = folder / f"{name}.parquet"
         logs.write_table(table, str(path))

@@ -283,7 +283,7 @@ def test_an_ensemble_file_round_trips(ensemble):
 
 
 def test_an_ensemble_exports_to_c_as_predict_computes(ensemble, tmp_path):
-    from fricli.export import check
+    import export_check as check
     from test_export import _compare
 
     if check.compiler() is None:

@@ -216,7 +216,7 @@ int main(int argc, char **argv) {
 def _build_group(header, prefix, exe, cxx):
     import subprocess
 
-    from fricli.export import check
+    import export_check as check
     src = f"{exe}.c"
     with open(src, "w") as fh:
         fh.write(GROUP_DRIVER.replace("HEADER", str(header)).replace("PREFIX", prefix))
@@ -229,7 +229,7 @@ def _build_group(header, prefix, exe, cxx):
 def test_exported_group_matches_predict_double(cxx, tmp_path, arm_logs):
     import subprocess
 
-    from fricli.export import check
+    import export_check as check
     if check.compiler(cxx) is None:
         pytest.skip("no compiler")
     folder, _ = arm_logs
@@ -523,7 +523,7 @@ def test_motor_stribeck_curve_reaches_the_noise_floor_where_the_linear_motor_mod
 def test_exported_stribeck_group_matches_predict_double(tmp_path, stribeck_logs):
     import subprocess
 
-    from fricli.export import check
+    import export_check as check
     if check.compiler() is None:
         pytest.skip("no compiler")
     folder, _ = stribeck_logs

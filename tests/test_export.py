@@ -16,10 +16,12 @@ import pytest
 from click.testing import CliRunner
 from conftest import SAMPLE, shared_data
 
+import export_check as check
+
 from fricli import logs, models
 from fricli.cli import cli
+from fricli.export import c, network
 from fricli.models import terms as T
-from fricli.export import c, check, network
 from fricli.models.augmented import AugmentedModel
 from fricli.models.dissipative import DissipativeFriction
 from fricli.models.lugre import LuGreModel

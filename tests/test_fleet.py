@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from fricli import errors
+from fricli import errors, logs, metrics, models
 from fricli.fleet import history, manifest, trend
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -233,7 +233,7 @@ def test_trend_flags_the_wearing_joint_only(tmp_path, rng):
 
 
 def test_trend_history_keeps_units_and_reads_with_pandas(tmp_path, rng):
-    import pandas as pd
+    pd = pytest.importorskip("pandas")   # any Parquet dataset reader; fricli itself does not use pandas
 
     synthetic_history(tmp_path / "h", rng, days=3)
     table = history.read(str(tmp_path / "h"))
@@ -293,19 +293,79 @@ def test_job_with_diagnose_records_effects_in_process(fleet_dir, tmp_path):
 
 
 def test_manifest_options_over_the_command_defaults(tmp_path):
+    from fricli import optionspec
     from fricli.fleet import pipelines
 
     (tmp_path / "logs").mkdir()
     (tmp_path / "logs" / "2026-05-04.parquet").write_bytes(b"")
     (tmp_path / "m.toml").write_text('[options.identify]\ncutoff = 20\nhold = 0.5\n\n'
-                                     '[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [2]\n'
-                                     '[[robot]]\nname = "r2"\nlogs = "logs/*.parquet"\noptions = { travle = 1.0 }\n')
-    first, second = manifest.load(str(tmp_path / "m.toml")).jobs
-    assert first.date == "2026-05-04" and first.joint == "2" and first.model.endswith("models/r1/joint2/2026-05-04.npz")
-    opts = pipelines.options_of(first)
-    # the command's own defaults (what `fricli identify` records in its job), with the manifest's
-    assert opts == dict(pipelines.defaults("identify"), joint="2", cutoff=20.0, hold=0.5)
+                                     '[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [2]\n')
+    (job,) = manifest.load(str(tmp_path / "m.toml")).jobs
+    assert job.date == "2026-05-04" and job.joint == "2" and job.model.endswith("models/r1/joint2/2026-05-04.npz")
+    opts = pipelines.options_of(job)
+    # the options every command of the pipeline records at their defaults, with the manifest's
+    assert opts == dict(optionspec.defaults("identify"), joint="2", cutoff=20.0, hold=0.5)
     assert {"kt": None, "drop_invalid": False, "travel": 0.002, "refine": False}.items() <= opts.items()
     assert isinstance(opts["cutoff"], float)
-    result = pipelines.run(second)
-    assert result["status"] == "failed" and "unknown identify option 'travle'" in result["reason"]
+
+
+@pytest.mark.parametrize("options, needle", [
+    ('samples = "foo"', "identify option samples = 'foo': expected one of auto, steady, settled"),
+    ("hold = -1", "identify option hold = -1.0: expected a number > 0"),
+    ("refine = 1", "identify option refine = 1: expected true or false"),
+    ("travle = 1.0", "unknown identify option 'travle' (known: "),
+    ("joint = 3", "option 'joint' is set by joints = [...]"),
+    ("coupling = true", "option 'coupling' fits several joints into one model; a fleet job fits one joint"),
+])
+def test_a_wrong_manifest_option_is_one_line_naming_robot_key_and_expectation(tmp_path, options, needle):
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "2026-05-04.parquet").write_bytes(b"")
+    (tmp_path / "m.toml").write_text(f'[[robot]]\nname = "r7"\nlogs = "logs/*.parquet"\noptions = {{ {options} }}\n')
+    with pytest.raises(manifest.ManifestError) as info:
+        manifest.load(str(tmp_path / "m.toml"))
+    assert str(info.value).startswith(f"{tmp_path / 'm.toml'}: robot r7: ") and needle in str(info.value)
+    res = invoke("fleet", "m.toml", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and len(res.stderr.splitlines()) == 1 and needle in res.stderr
+
+
+# A fleet job and the command make the same model from the same log and options: every pipeline,
+# every joint of a two-joint log (the command writes the joints into a folder).
+SAME_RUNS = {"identify": ({"hold": 0.3}, ["--hold", "0.3"]),
+             "train-base": ({"steps": 15, "max_samples": 200, "hidden": "4,4", "seed": 2},
+                            ["--steps", "15", "--max-samples", "200", "--hidden", "4,4", "--seed", "2"]),
+             "adapt": ({"epochs": 2, "hidden": "3,3"}, ["--epochs", "2", "--hidden", "3,3"])}
+
+
+@pytest.mark.parametrize("pipeline", sorted(SAME_RUNS))
+def test_fleet_job_and_command_write_the_same_bytes(tmp_path, pipeline):
+    from test_joints import write_log
+
+    from fricli.fleet import pipelines
+
+    log = write_log(tmp_path / "arm.parquet", [2, 4])
+    given, flags = SAME_RUNS[pipeline]
+    bases = tmp_path / "bases"
+    args = []
+    if pipeline == "adapt":
+        assert invoke("identify", log, "-o", bases, "-q", cwd=tmp_path).returncode == 0
+        args = [bases]
+    res = invoke(pipeline, *args, log, "-o", tmp_path / "cmd", *flags, "-q", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    for joint in ("2", "4"):
+        job = manifest.Job(robot="r1", joint=joint, log=log, date="2026-01-01", pipeline=pipeline,
+                           model=str(tmp_path / "fleet" / f"joint{joint}.npz"), options=tuple(sorted(given.items())),
+                           base=str(bases / f"joint_{joint}.npz") if pipeline == "adapt" else None)
+        result = pipelines.run(job)
+        assert result["status"] == "ok", result
+        # the history's error figures: over the rows in motion, whatever the pipeline
+        data = logs.load_log(log, joint=joint)
+        model = models.load(job.model)[0]
+        moving = metrics.in_motion(data.signals["qd"])
+        want = metrics.errors(logs.friction_target(data.signals)[moving], model.predict(data.signals)[0][moving])
+        assert result["errors"] == pytest.approx(want)
+        command_file = tmp_path / "cmd" / f"joint_{joint}.npz"
+        assert (tmp_path / "fleet" / f"joint{joint}.npz").read_bytes() == command_file.read_bytes()
+    # and each is up to date for the other
+    again = invoke(pipeline, *args, log, "-o", tmp_path / "fleet" / "joint4.npz", "--joint", "4", *flags,
+                   "--if-changed", cwd=tmp_path)
+    assert again.returncode == errors.UNCHANGED, again.stderr

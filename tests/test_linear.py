@@ -107,7 +107,7 @@ def fitted(tmp_path_factory):
 def test_export_matches_predict(kind, fitted, tmp_path):
     from test_export import _compare
 
-    from fricli.export import check
+    import export_check as check
 
     if check.compiler() is None:
         pytest.skip("no C compiler")

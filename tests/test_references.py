@@ -17,11 +17,13 @@ from click.testing import CliRunner
 from conftest import declare_zero, write
 from test_export import ABS, REL, _train, needs_cc
 
+import export_check as check
+
 from fricli import errors, evaluation, logs, metrics, modelfile, models, report, sim
 from fricli.cli import cli
 from fricli.diagnosis import effects as E
 from fricli.diagnosis.driver import residual
-from fricli.export import c, check
+from fricli.export import c
 from fricli.models import terms as T
 from fricli.models.augmented import AugmentedModel
 from fricli.models.lugre import LuGreModel

@@ -6,7 +6,7 @@ import os
 
 import click
 
-from fricli import joints, logs, metrics, modelset, models
+from fricli import logs, modelset, models
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 read_log, reading_kwargs, say)
@@ -151,25 +151,23 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     del reading["joint"]
     table_, digest = read_log(log)
     name = "stdin" if log == "-" else log
-    pairs = dict(joints.pair(source, logs.joints_of(table_, name), joint, name))
+    pairs = modelset.paired(source, table_, name, joint)
     several = len(pairs) > 1
 
-    def one(data, out, job, model_path):
-        base, meta = models.load(model_path)
-        models.check_log(meta, data, model_path)
-        result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                                 max_effects=max_effects, accept_implausible=accept_implausible)
+    def show(result, data, model_path) -> None:
         if not as_json:
             if several:
                 click.echo(f"joint {data.joint} ({model_path}):")
             click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
                        + ("\n" if several else ""))
-        if fix:
-            _write_fixed(base, result, data, out, job, model_path, no_carry, quiet)
-        return result.to_json()
 
     if fix:
-        results, folder_run = fit_joints(log, output, joint, reading, one, if_changed=if_changed, quiet=quiet,
+        def report(made):
+            show(made.diagnosis, made.data, made.base)
+            _say_fixed(made, quiet)
+            return made.diagnosis.to_json()
+
+        results, folder_run = fit_joints("diagnose", log, output, report, if_changed=if_changed, quiet=quiet,
                                          source=source, read=(table_, digest))
     else:
         results, folder_run = {}, several
@@ -179,24 +177,24 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         def work(j):
             data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
             data.signals.update(coupled.partner_signals(table_, j, name, **reading))   # the coupling effect's
-            results[j] = one(data, None, None, pairs[j])
+            base, meta = models.load(pairs[j])
+            models.check_log(meta, data, pairs[j])
+            results[j] = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
+                                         max_effects=max_effects, accept_implausible=accept_implausible)
+            show(results[j], data, pairs[j])
+            results[j] = results[j].to_json()
 
         modelset.each_joint(list(pairs), work, what="results")
     if as_json:
         emit_results(results, folder_run)
 
 
-def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -> None:
-    from fricli.diagnosis.fix import augment
-
-    fixed = augment(base, result, data, carry=not no_carry)
-    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-               carried=fixed.carried, refitted=fixed.refitted)
-    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
-                        base={"path": model_path, "kind": base.kind})
+def _say_fixed(made, quiet: bool) -> None:
+    """The stderr line of a model written by --fix."""
+    result, fixed, fit = made.diagnosis, made.model, made.summary
     if quiet:
         return
+    base_kind = made.base_meta.get("kind")
     if result.added:
         carried = f"; carried by the LuGre parameters: {', '.join(fixed.carried)}" if fixed.carried else ""
         if fixed.errors:
@@ -205,8 +203,8 @@ def _write_fixed(base, result, data, output, job, model_path, no_carry, quiet) -
             carried += f"; refitted with them: {', '.join(fixed.refitted)}"
         if result.suspected:
             carried += f"; not added, implausible: {', '.join(result.suspected)}"
-        say(f"wrote {output}: {base.kind} + {', '.join(result.added)}{carried} "
+        say(f"wrote {made.output}: {base_kind} + {', '.join(result.added)}{carried} "
             f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
     else:
         held = f" (not added, implausible: {', '.join(result.suspected)})" if result.suspected else ""
-        say(f"wrote {output}: nothing added{held}, same predictions as {model_path}")
+        say(f"wrote {made.output}: nothing added{held}, same predictions as {made.base}")

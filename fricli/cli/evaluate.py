@@ -69,8 +69,9 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @click.argument("model", type=click.Path())
 @click.argument("log")
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Folder for the figures and index.html.")
-@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=5.0, show_default=True,
-              help="Zero-phase low-pass [Hz] on the external-torque estimate.")
+@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Zero-phase low-pass [Hz] on the external-torque estimate (default: none, as in evaluate and "
+                   "estimate-ext; --lowpass 5 smooths it).")
 @log_reading
 @common
 def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, quiet):
@@ -86,7 +87,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
-    from fricli import joints, modelset, report  # matplotlib loads only for this command
+    from fricli import modelset, report  # matplotlib loads only for this command
 
     source = modelset.source(model)
     table, digest = read_log(log)
@@ -94,7 +95,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
     runs = [(path, logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs))
-            for j, path in joints.pair(source, logs.joints_of(table, name), joint, name)]
+            for j, path in modelset.paired(source, table, name, joint).items()]
     summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))

@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import sys
-from typing import Iterator
 
 import click
 
-from fricli import errors, jobs, timewindow
-from fricli.logs import DEFAULT_CUTOFF_HZ
+from fricli import errors, timewindow
 
 
 def _set_debug(ctx: click.Context, _param, value: bool) -> bool:
@@ -37,8 +34,10 @@ def _window_bound(ctx: click.Context, param, value: str | None) -> None:
 
 
 def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
+    from fricli import optionspec
+
     if value:
-        ctx.meta.setdefault("fricli.zero", []).append({"no_gravity": "tau_g", "no_dynamics": "tau_dyn"}[param.name])
+        ctx.meta.setdefault("fricli.zero", []).append(optionspec.ZERO_FLAGS[param.name])
     return value
 
 
@@ -58,16 +57,13 @@ def log_reading(f):
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
-    for flag, what in (("--no-dynamics", "tau_dyn (inertia and Coriolis torque) as 0"),
-                       ("--no-gravity", "tau_g as 0: the joint carries no gravity load")):
-        f = click.option(flag, is_flag=True, expose_value=False, callback=_declare_zero,
-                         help=f"When the log has no {what.split(' ')[0]} column, take {what}.")(f)
-    f = click.option("--drop-invalid", is_flag=True,
-                     help="Drop rows with NaN or infinite values (with a warning) instead of refusing the log.")(f)
-    f = click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=DEFAULT_CUTOFF_HZ,
-                     show_default=True, help="Low-pass cut-off [Hz] used when qd/qdd are derived from q.")(f)
-    f = click.option("--kt", type=float, default=None, help="Motor torque constant [Nm/A] when the log has i_m instead of tau_m.")(f)
-    f = click.option("--joint", default=None, help="Joint to use when the log holds several.")(f)
+    from fricli.optionspec import READING, ZERO_FLAGS
+
+    for opt in reversed(READING):
+        if opt.name in ZERO_FLAGS:   # read by declared_zero, like --from/--until by time_window
+            f = click.option(opt.flag, is_flag=True, expose_value=False, callback=_declare_zero, help=opt.help)(f)
+        else:
+            f = _click_option(opt)(f)
     return f
 
 
@@ -77,6 +73,16 @@ def json_flag(f):
 
 def output_option(required: bool = True, help: str = "Output file (- for stdout)."):
     return click.option("-o", "--output", required=required, help=help)
+
+
+def check_outputs(output: str, as_json: bool) -> None:
+    """-o - (the model on stdout) and --json cannot share stdout."""
+    if output == "-" and as_json:
+        raise click.UsageError("-o - and --json both write to stdout: choose one")
+
+
+def wrote(output: str) -> str:
+    return "wrote the model to stdout" if output == "-" else f"wrote {output}"
 
 
 def say(message: str, quiet: bool = False) -> None:
@@ -140,87 +146,122 @@ def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
 
 
 # Options that do not change the model a command writes (arguments are files: the log is
-# recorded by its sha256, input models through ``model_job(inputs=...)``).
+# recorded by its sha256, input models by theirs, ``fricli.runs.record``).
 _NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix"}
 
 
-def shaping_defaults(command: str) -> dict:
-    """The options of ``command`` that shape the model it writes, at their defaults: the
-    ``options`` of the job record the command makes when none is given (see ``model_job``)."""
-    from fricli.cli import cli
+def _click_option(opt):
+    """A click option from a ``fricli.optionspec.Option``."""
+    from fricli import optionspec
 
-    ctx = click.Context(cli)
-    cmd = cli.get_command(ctx, command)
-    return {p.name: p.get_default(ctx) for p in cmd.params
-            if isinstance(p, click.Option) and p.expose_value and p.name not in _NOT_SHAPING}
+    kwargs = {"help": opt.help, "metavar": opt.metavar}
+    if opt.type == "flag":
+        return click.option(opt.flag, is_flag=True, help=opt.help)
+    if opt.type == "choice":
+        kwargs["type"] = click.Choice(list(opt.choices))
+    elif opt.type == "sizes":
+        def sizes(_ctx, _param, value):
+            parsed = None if value is None else optionspec.parse_sizes(value)
+            if value is not None and parsed is None:
+                raise click.BadParameter(f"expected {opt.expects()}, got {value!r}")
+            return parsed
+
+        kwargs["callback"] = sizes
+        default = None if opt.default is None else ",".join(map(str, opt.default))
+        return click.option(opt.flag, default=default, show_default=default is not None, **kwargs)
+    elif opt.type in ("float", "int"):
+        bounded = opt.low is not None or opt.high is not None
+        if opt.type == "float":
+            kwargs["type"] = (click.FloatRange(min=opt.low, max=opt.high, min_open=opt.low_open) if bounded
+                              else float)
+        else:
+            kwargs["type"] = click.IntRange(min=opt.low, max=opt.high) if bounded else int
+    return click.option(opt.flag, default=opt.default, show_default=opt.default is not None, **kwargs)
+
+
+def spec_options(pipeline: str):
+    """The click options of ``pipeline``'s model-shaping options (``fricli.optionspec.PIPELINES``)."""
+    from fricli import optionspec
+
+    def decorate(f):
+        for opt in reversed(optionspec.PIPELINES[pipeline]):
+            f = _click_option(opt)(f)
+        return f
+
+    return decorate
 
 
 def if_changed_option(f):
-    """--if-changed, for commands that write a model (see ``model_job``)."""
+    """--if-changed, for commands that write a model (see ``fit_joints``)."""
     return click.option("--if-changed", is_flag=True,
                         help=f"Do nothing and exit with code {errors.cite(errors.UNCHANGED)} when the output model was "
                              "made from the same log "
                              "bytes (sha256) with the same options and input models (for cron jobs).")(f)
 
 
-@contextlib.contextmanager
-def model_job(output: str, log, *, if_changed: bool, quiet: bool,
-              inputs: dict[str, str] | None = None, exit_unchanged: bool = True) -> Iterator[dict | None]:
-    """Hold the lock on OUTPUT for the block (LOCKED, exit 8, when another job holds it); with
-    --if-changed exit UNCHANGED (9) and touch nothing when OUTPUT is up to date (or, with
-    ``exit_unchanged=False``, yield None: one joint of a whole-arm run is skipped).
+def command_options(pipeline: str) -> dict:
+    """The options of the running command that shape the model ``pipeline`` writes
+    (``fricli.runs.options``; a wrong combination is a usage error on the option it names)."""
+    from fricli import optionspec, runs
 
-    Yields the job record (command, shaping options, input model hashes) to save in the
-    model's provenance as ``job=``. ``inputs``: name -> path of input model files."""
     ctx = click.get_current_context()
     arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
-    options = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING and k not in arguments}
-    if time_window():
-        options["window"] = time_window().to_json()
-    job = jobs.job_record(ctx.command.name, options, inputs)
-    with jobs.output_lock(output):
-        if if_changed and jobs.up_to_date(output, log.sha256, job):
-            same = "options and input models" if inputs else "options"
-            say(f"{output} is up to date: made from the same log ({log.sha256[:12]}...) with the same {same}; "
-                "nothing to do", quiet)
-            if exit_unchanged:
-                ctx.exit(errors.UNCHANGED)
-            yield None
-            return
-        yield job
+    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments}
+    given.update({flag: True for flag, column in optionspec.ZERO_FLAGS.items() if column in declared_zero()})
+    try:
+        return runs.options(pipeline, given)
+    except optionspec.OptionError as exc:
+        message = str(exc).split(": ", 1)[-1]
+        raise click.BadParameter(message, param_hint="--" + exc.option.replace("_", "-")) from None
 
 
-def fit_joints(log: str, output: str, joint, reading: dict, fit_one, *, if_changed: bool, quiet: bool,
-               source=None, input_name: str = "model", read=None) -> tuple[dict, bool]:
-    """Run ``fit_one(data, out_path, job, model_path)`` for every joint LOG's run covers (the
-    joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the folder OUTPUT.
+def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
+    same = "options and input models" if inputs else "options"
+    return f"{out} is up to date: made from the same log ({digest[:12]}...) with the same {same}; nothing to do"
+
+
+def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool,
+               source=None, read=None, progress=None) -> tuple[dict, bool]:
+    """Run ``pipeline`` (``fricli.runs.run``) with the command's options for every joint LOG's run
+    covers (the joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the
+    folder OUTPUT; ``report(made)`` prints what was made and returns its JSON result.
 
     ``source``: the input models (``joints.Source``) of a command that starts from a model, each
-    joint paired with its own; ``read``: (table, sha256) of LOG when already read. Returns
-    ({joint: what fit_one returned} for the joints fitted, whether OUTPUT is a folder); exits
-    UNCHANGED (9) when --if-changed finds every output up to date."""
-    from fricli import logs, modelset
+    joint paired with its own; ``read``: (table, sha256) of LOG when already read; ``progress(data)``:
+    a trainer progress callback with ``close()``. Returns ({joint: result} for the joints fitted,
+    whether OUTPUT is a folder). With --if-changed an up-to-date output is left untouched; exits
+    UNCHANGED (9) when every output is up to date. LOCKED (8) when another job holds an output."""
+    from fricli import logs, modelset, runs
 
+    ctx = click.get_current_context()
+    opts = command_options(pipeline)
+    window = time_window()
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
-    logs.require_robot_model(table.schema, name, reading.get("zero", ()))
-    pairs, folder = modelset.plan(logs.joints_of(table, name), joint, output, name, source)
+    runs.check_table(table, name, opts)
+    pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
     results: dict = {}
-    reading = {k: v for k, v in reading.items() if k != "joint"}
 
     def work(j):
-        data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn)
         out = modelset.path_for(folder, data.joint) if folder else output
-        model_path = pairs[j]
-        inputs = {input_name: model_path} if model_path else None
-        with model_job(out, data, if_changed=if_changed, quiet=quiet, inputs=inputs,
-                       exit_unchanged=folder is None) as job:
-            if job is not None:
-                results[j] = fit_one(data, out, job, model_path)
+        on_eval = progress(data) if progress else None
+        try:
+            made = runs.run(pipeline, data, out, opts, base=pairs[j], if_changed=if_changed, on_eval=on_eval,
+                            window=window.to_json() if window else None)
+        finally:
+            if on_eval is not None:
+                on_eval.close()
+        if made is None:
+            say(up_to_date_line(out, digest, bool(pairs[j])), quiet)
+            if folder is None:
+                ctx.exit(errors.UNCHANGED)
+            return
+        results[j] = report(made)
 
     modelset.each_joint(list(pairs), work)
     if folder and not results:
-        click.get_current_context().exit(errors.UNCHANGED)
+        ctx.exit(errors.UNCHANGED)
     return results, folder is not None
 
 

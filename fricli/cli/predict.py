@@ -42,11 +42,25 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         model, meta = models.load(path)
         return models.set_precision(model, precision), meta
 
-    result = predicting.run_models(modelset.source(model_path), log, output, external=external, lowpass_hz=lowpass,
-                                   joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid, warn=warn,
-                                   batch_rows=batch_rows, progress=progress_enabled(quiet),
-                                   flag_extrapolation=flag_extrapolation, load=load, window=time_window(),
-                                   zero=declared_zero())
+    reading = predicting.Reading(joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid,
+                                 window=time_window(), batch_rows=batch_rows, zero=declared_zero())
+    outputs = predicting.Outputs(external=external, lowpass_hz=lowpass, flag_extrapolation=flag_extrapolation)
+    bar = None
+    if progress_enabled(quiet):
+        from tqdm import tqdm
+
+        bar = tqdm(unit="rows", leave=False)
+
+    def on_rows(rows: int, total: int) -> None:
+        bar.total = total
+        bar.update(rows)
+
+    try:
+        result = predicting.run_models(modelset.source(model_path), log, output, reading=reading, outputs=outputs,
+                                       warn=warn, on_rows=on_rows if bar is not None else None, load=load)
+    finally:
+        if bar is not None:
+            bar.close()
     if not quiet:
         where = f" of joint {result.joint}" if result.joint is not None else ""
         if result.per_joint:

@@ -39,7 +39,9 @@ def _fleet_size(ctx, param, value):
 @click.option("--load", type=click.Choice(simulator.LOADS), default="none", show_default=True,
               help="External payload measured as tau_ext (not in tau_g): sym zero-mean, asym one-sided.")
 @click.option("--effect", "effect_specs", multiple=True, metavar="NAME[=STRENGTH]", callback=_effects,
-              help=f"Add an undeclared effect (repeatable): {_EFFECT_HELP}. See docs/simulator.md.")
+              help=f"Add an undeclared effect (repeatable): {_EFFECT_HELP}; named as fricli diagnose names what it "
+                   f"finds ({', '.join(f'{a} is {n}' for a, n in fx.ALIASES.items())}, the older names, are "
+                   "accepted). See docs/simulator.md.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed.")
 @click.option("--rate", type=click.FloatRange(min=1.0, max=10000.0), default=100.0, show_default=True,
               help="Output sample rate [Hz] (friction is integrated at >= 1 kHz).")
@@ -69,7 +71,7 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     \b
     Example:
       fricli simulate --scenario base --joint 2 --seed 1 -o base.parquet
-      fricli simulate --scenario extended --load asym --effect ripple --effect drift=0.5 -o ext.parquet
+      fricli simulate --scenario extended --load asym --effect position --effect drift=0.5 -o ext.parquet
       fricli simulate --scenario adapt -o - | fricli predict lugre.npz - -o pred.parquet
     """
     if fleet_size is not None:

@@ -42,7 +42,9 @@ SCHEMA = pa.schema(
      _field("model", pa.string(), doc="model file written"),
      _field("seconds", pa.float64(), "s", "run time of the job")]
     + [_field(name, pa.float64(), unit, f"identified LuGre parameter {name}") for name, unit in PARAMETERS.items()]
-    + [_field(name, pa.float64(), unit, f"friction fit error ({name}) over the log") for name, unit in ERRORS.items()]
+    + [_field(name, pa.float64(), unit, f"friction error ({name}) of the model over the log's rows in motion "
+                                        "(fricli.metrics.in_motion), every pipeline alike")
+       for name, unit in ERRORS.items()]
     + [_field("effects", pa.string(), doc="effects the model misses, comma-separated (diagnose; empty when not run)")]
 )
 

@@ -11,7 +11,7 @@
     joints = [1, 2, 3, 4, 5, 6]
 
     [options.identify]           # options of each pipeline, as the command's long options
-    hold = 0.2
+    hold = 0.2                   # (fricli.optionspec; checked when the manifest is read)
 
     [[robot]]
     name = "robot001"
@@ -31,6 +31,7 @@ import os
 import re
 import tomllib
 
+from fricli import optionspec
 from fricli.errors import FricliError, NOTHING_RAN
 
 PIPELINES = ("identify", "train-base", "adapt")
@@ -147,6 +148,17 @@ def load(path: str) -> Manifest:
             raise ManifestError(f"{where}: diagnose must be true or false")
         options = _check_options(where, all_options.get(pipeline, {}))
         options.update(_check_options(where, robot.get("options", {})))
+        if "joint" in options:
+            raise ManifestError(f"{where}: option 'joint' is set by joints = [...], not by the options")
+        whole = sorted(set(options) & optionspec.WHOLE_LOG)
+        if whole:
+            raise ManifestError(f"{where}: option {whole[0]!r} fits several joints into one model; a fleet job "
+                                "fits one joint (use fricli identify --coupling)")
+        try:
+            checked = optionspec.check(pipeline, options)
+        except optionspec.OptionError as exc:
+            raise ManifestError(f"{where}: {exc}") from None
+        options = {k: checked[k] for k in options}   # as the command passes them (50 -> 50.0)
         for joint in joint_list:
             jname = "" if joint is None else str(joint)
             files = sorted({os.path.abspath(f) for p in patterns

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from fricli import logs
+from fricli import logs, metrics
 from fricli.errors import DataError, FitError, ModelFileError
 from fricli.models import register
 from fricli.models.base import FrictionModel
@@ -122,7 +122,7 @@ class CoupledModel(FrictionModel):
                 continue
             speed = np.abs(w[:, i])
             best = None
-            for vs in np.geomspace(*np.percentile(speed[speed > 0], [2, 60]), VS_GRID):
+            for vs in np.geomspace(*np.percentile(speed[metrics.in_motion(speed)], [2, 60]), VS_GRID):
                 ab = np.column_stack([a, s * np.exp(-np.square(w[:, i] / vs))])
                 coef, *_ = np.linalg.lstsq(ab, y[:, i], rcond=None)
                 sse = float(np.sum(np.square(ab @ coef - y[:, i])))

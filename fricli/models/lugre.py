@@ -144,13 +144,6 @@ class LuGreModel(FrictionModel):
                 raise DataError("the model depends on temperature but the log has no 'temp' column")
         return v, tau_g, temp
 
-    def stribeck_curve(self, v: np.ndarray, tau_g: np.ndarray | None = None,
-                       temp: np.ndarray | None = None) -> np.ndarray:
-        """g(v, tau_l) (n,) [Nm], the magnitude of sliding friction without the viscous part."""
-        v = np.asarray(v, dtype=np.float64)
-        fc, fs, _ = self._levels(v, tau_g, temp)
-        return np.maximum(physics.stribeck(v, fc, fs, self.vs, self.delta), _G_MIN)
-
     def steady_state(self, v: np.ndarray, tau_g: np.ndarray | None = None,
                      temp: np.ndarray | None = None) -> np.ndarray:
         """Friction (n,) [Nm] in steady sliding at constant velocity v (n,): sign(v)*g + Fv*v."""

@@ -97,7 +97,7 @@ RIPPLE_PHASES = {2: (0.7, 2.1), 4: (1.9, 0.4)}  # [rad] of the fundamental and s
 
 
 class Ripple(Effect):
-    name, unit = "ripple", "Nm"
+    name, unit = "position", "Nm"
     help = "position-periodic torque (gear ripple) of this amplitude, with a second harmonic"
 
     def default(self, j):
@@ -112,7 +112,7 @@ class Ripple(Effect):
 
 
 class Asymmetry(Effect):
-    name, unit = "asymmetry", "-"
+    name, unit = "direction", "-"
     help = "Coulomb, static and viscous friction scaled by 1+r for v > 0 and 1-r for v < 0"
 
     def default(self, j):
@@ -120,7 +120,7 @@ class Asymmetry(Effect):
 
     def check(self, strength):
         if not -1 < strength < 1:
-            raise ValueError("asymmetry must be between -1 and 1")
+            raise ValueError("the direction asymmetry must be between -1 and 1")
 
     def apply(self, scene, strength, rng):
         factor = 1.0 + strength * scene.sign
@@ -319,12 +319,22 @@ class Payload(Effect):
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Payload(), Temperature(), Column(), Ripple(), Asymmetry(), Drift(), Inertia(), Offset(), Level(),
     Load(), Velocity(), Quadrant(), Gravity(), Disturbance())}
+# The effects are named as ``fricli diagnose`` names what it finds (fricli.diagnosis.effects);
+# the simulator's earlier names stay accepted.
+ALIASES = {"ripple": "position", "asymmetry": "direction"}
+
+
+def canonical(name: str) -> str:
+    """An effect's name, an alias (``ALIASES``) replaced by the name it stands for."""
+    name = name.strip().lower()
+    return ALIASES.get(name, name)
 
 
 def parse(spec: str) -> tuple[str, float | None]:
-    """``NAME`` or ``NAME=STRENGTH`` -> (name, strength or None for the default)."""
+    """``NAME`` or ``NAME=STRENGTH`` -> (name, strength or None for the default); ``NAME`` may be
+    an alias (``ALIASES``)."""
     name, sep, value = spec.partition("=")
-    name = name.strip().lower()
+    name = canonical(name)
     if name not in EFFECTS:
         raise ValueError(f"unknown effect {name!r} (choose from {', '.join(sorted(EFFECTS))})")
     if not sep:

@@ -112,7 +112,7 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
     """Effects as (name, strength or None) from ``NAME[=STRENGTH]`` strings or pairs; no repeats."""
     out: dict[str, float | None] = {}
     for spec in specs:
-        name, strength = fx.parse(spec) if isinstance(spec, str) else (spec[0], spec[1])
+        name, strength = fx.parse(spec) if isinstance(spec, str) else (fx.canonical(spec[0]), spec[1])
         if name not in fx.EFFECTS:
             raise ValueError(f"unknown effect {name!r} (choose from {', '.join(sorted(fx.EFFECTS))})")
         if name in out:

@@ -1,5 +1,6 @@
 """Compile an exported header with a small driver and run it over signals: what the tests and the
-benchmark use to compare the C code with ``fricli predict`` and to time its step function.
+benchmark (benchmarks/run.py) use to compare the C code with ``fricli predict`` and to time its
+step function. Not part of the installed package.
 
 The driver (C99 and C++) reads rows of doubles (PREFIX_N_SIGNALS per row, in the step
 function's order, native byte order) and writes one double per row, or times the step function.

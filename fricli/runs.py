@@ -1,0 +1,216 @@
+"""One job: a model of one joint of one log written to one file, the one way the commands
+(identify, train-base, adapt, diagnose --fix) and the fleet make a model.
+
+``run`` holds the lock on the output (``fricli.jobs.output_lock``), skips the work when the
+output was made from the same log bytes by the same job (``if_changed``, ``jobs.up_to_date``),
+fits, and saves the model with its job record (``jobs.job_record``) in the provenance. The
+record holds every option that shapes the model (``fricli.optionspec``; diagnose: the options
+the command gives) and the joint the model is of, so a command and a fleet job on the same log
+with the same options write the same bytes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Callable
+
+import numpy as np
+
+from fricli import jobs, logs, metrics, models, optionspec
+
+PIPELINES = ("identify", "train-base", "adapt", "diagnose")
+INPUT_NAME = {"adapt": "base", "diagnose": "model"}   # how a job records its input model
+
+
+@dataclasses.dataclass
+class Made:
+    """What a job wrote: ``summary`` is the fit figures saved as the model's ``fit``;
+    ``base``/``base_meta`` the input model of adapt and diagnose; ``diagnosis`` diagnose's
+    ``fricli.diagnosis.driver.Diagnosis``; ``seconds`` the fit and save time [s]."""
+
+    pipeline: str
+    output: str
+    data: logs.Log
+    model: object
+    summary: dict
+    seconds: float = 0.0
+    base: str | None = None
+    base_meta: dict | None = None
+    diagnosis: object = None
+
+
+def options(pipeline: str, given: dict) -> dict:
+    """Every option of ``pipeline`` (``given`` over the defaults, checked: ``optionspec.check``);
+    diagnose's options are taken as given."""
+    if pipeline == "diagnose":
+        return dict(given)
+    out = optionspec.check(pipeline, given)
+    if pipeline == "train-base":
+        check_train_base(out)
+    return out
+
+
+def check_train_base(opts: dict) -> None:
+    """OptionError for train-base options that do not go together."""
+    from fricli import learning
+
+    try:  # e.g. selmic needs one layer of more than 10 units (its jump units)
+        learning.ARCHS[opts["arch"]](hidden_sizes=tuple(opts["hidden"] or learning.DEFAULT_HIDDEN[opts["arch"]]))
+    except ValueError as exc:
+        raise optionspec.OptionError(f"train-base option hidden: {exc}", "hidden") from None
+    if opts["arch"] == "dissipative" and opts["velocity_input"] != "asinh":
+        raise optionspec.OptionError("train-base option velocity_input: the dissipative network always sees "
+                                     "asinh(|qd| / v0); use --arch mlp", "velocity_input")
+
+
+def zero(opts: dict) -> tuple[str, ...]:
+    """The robot-model columns the options declare zero (--no-gravity, --no-dynamics)."""
+    return tuple(column for flag, column in optionspec.ZERO_FLAGS.items() if opts.get(flag))
+
+
+def check_table(table, name: str, opts: dict) -> None:
+    """LogError when the log lacks tau_g or tau_dyn and the options do not declare it zero
+    (checked once, before any joint)."""
+    logs.require_robot_model(table.schema, name, zero(opts))
+
+
+def read(table, digest: str, name: str, opts: dict, joint=None, warn=None) -> logs.Log:
+    """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options."""
+    return logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
+                           kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], warn=warn,
+                           zero=zero(opts))
+
+
+def record(pipeline: str, opts: dict, data: logs.Log, base: str | None = None, window: dict | None = None) -> dict:
+    """The job record of a model of ``data``'s joint: the options with the joint fitted (as
+    text; None for a log without a joint column), the time window (``Window.to_json``) when one
+    is given, and the sha256 of the input model."""
+    recorded = dict(opts, joint=None if data.joint is None else str(data.joint))
+    if window:
+        recorded["window"] = window
+    inputs = {INPUT_NAME[pipeline]: base} if base else None
+    return jobs.job_record(pipeline, recorded, inputs)
+
+
+def run(pipeline: str, data: logs.Log, output: str, opts: dict, *, base: str | None = None,
+        if_changed: bool = False, window: dict | None = None, on_eval: Callable | None = None) -> Made | None:
+    """Fit ``pipeline`` on ``data`` and write the model to ``output`` ("-": stdout); None when
+    ``if_changed`` and ``output`` is up to date (nothing touched). ``opts``: the pipeline's
+    options (``options``); ``base``: the input model file of adapt and diagnose; ``on_eval``:
+    the trainer's progress callback (train-base, adapt). LockedError when another job holds
+    ``output``."""
+    if pipeline not in PIPELINES:
+        raise ValueError(f"unknown pipeline {pipeline!r}")
+    opts = options(pipeline, opts)
+    job = record(pipeline, opts, data, base, window)
+    with jobs.output_lock(output):
+        if if_changed and jobs.up_to_date(output, data.sha256, job):
+            return None
+        start = time.perf_counter()
+        made = _FIT[pipeline](data, output, opts, job, base, on_eval)
+        made.seconds = time.perf_counter() - start
+    return made
+
+
+def run_group(datas: list, transmission, output: str, opts: dict, *, if_changed: bool = False,
+              window: dict | None = None) -> Made | None:
+    """identify --coupling for one coupled group: the joints of ``datas`` (their logs, rows at the
+    same times, in the order of ``transmission``'s joints) into one model of kind coupled
+    (``fricli.models.coupled``) at ``output``; None when up to date. ``Made.data`` is the first
+    joint's log, ``Made.summary`` the fit figures per joint."""
+    from fricli.models import coupled
+
+    opts = options("identify", opts)
+    recorded = dict(opts, joint=[str(j) for j in transmission.joints])
+    if window:
+        recorded["window"] = window
+    job = jobs.job_record("identify", recorded)
+    with jobs.output_lock(output):
+        if if_changed and jobs.up_to_date(output, datas[0].sha256, job):
+            return None
+        start = time.perf_counter()
+        model, fit = coupled.fit_group(datas, transmission, stribeck=opts["motor_stribeck"])
+        coupled.save_group(output, model, datas[0], fit=fit, job=job)
+    return Made("identify", output, datas[0], model, fit, seconds=time.perf_counter() - start)
+
+
+def moving_errors(made: Made) -> dict:
+    """MAE, RMSE, max [Nm or N] of the written model against the friction target over the rows
+    in motion (``metrics.in_motion``): the one figure the fleet history keeps for every pipeline."""
+    sig = made.data.signals
+    moving = metrics.in_motion(sig["qd"])
+    pred = made.model.predict(sig)[0]
+    return metrics.errors(logs.friction_target(sig)[moving], np.asarray(pred)[moving])
+
+
+def _identify(data, output, opts, job, _base, _on_eval) -> Made:
+    if opts["kind"] != "lugre":
+        from fricli.models import linear
+
+        model, fit = linear.fit(data.signals, asymmetric=opts["kind"] == "linear-asymmetric", axis=data.axis)
+        models.save_for_log(output, model, data, rows_used=fit["moving"]["n"], fit=fit, job=job)
+        return Made("identify", output, data, model, fit)
+    from fricli.identify import LuGreIdentifier
+
+    idf = LuGreIdentifier(hold=opts["hold"], travel=opts["travel"], refine=opts["refine"], samples=opts["samples"],
+                          settle=opts["settle"]).fit(data.signals, units=data.units, axis=data.axis)
+    models.save_for_log(output, idf.model_, data, rows_used=len(data), fit=idf.fit_, job=job)
+    return Made("identify", output, data, idf.model_, idf.fit_)
+
+
+def _train_base(data, output, opts, job, _base, on_eval) -> Made:
+    from fricli import learning
+
+    model, summary = learning.train_base(
+        data, arch=opts["arch"], hidden=opts["hidden"], steps=opts["steps"], schedule=opts["schedule"],
+        patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
+        val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
+        max_samples=opts["max_samples"], velocity_input=opts["velocity_input"], velocity_scale=opts["velocity_scale"],
+        on_eval=on_eval)
+    models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
+                        seed=opts["seed"], fit=summary, job=job)
+    return Made("train-base", output, data, model, summary)
+
+
+def _load_base(base: str, data) -> tuple:
+    model, meta = models.load(base)
+    models.check_log(meta, data, base)
+    return model, meta
+
+
+def _adapt(data, output, opts, job, base, on_eval) -> Made:
+    from fricli import learning
+
+    base_model, base_meta = _load_base(base, data)
+    model, summary = learning.adapt(
+        base_model, data, hidden=opts["hidden"], epochs=opts["epochs"], batch_size=opts["batch_size"],
+        lr=opts["lr"], seed=opts["seed"], val_fraction=opts["val_fraction"], max_seconds=opts["max_seconds"],
+        min_speed=opts["min_speed"], on_eval=on_eval, base_envelope=models.envelope(base_meta, base))
+    models.save_for_log(output, model, data, rows_used=summary["rows_used"], seed=opts["seed"], fit=summary, job=job,
+                        envelope=base_meta.get("envelope"),
+                        base={"path": base, "kind": base_meta.get("kind"),
+                              "provenance": base_meta.get("provenance", {})})
+    return Made("adapt", output, data, model, summary, base=base, base_meta=base_meta)
+
+
+def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
+    """diagnose --fix: the base model augmented with the effects it misses on ``data``."""
+    from fricli.diagnosis import driver
+    from fricli.diagnosis.fix import augment
+
+    base_model, base_meta = _load_base(base, data)
+    result = driver.diagnose(base_model, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
+                             only=opts["only"], max_effects=opts["max_effects"],
+                             accept_implausible=opts["accept_implausible"])
+    fixed = augment(base_model, result, data, carry=not opts["no_carry"])
+    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+               carried=fixed.carried, refitted=fixed.refitted)
+    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
+                        base={"path": base, "kind": base_model.kind})
+    return Made("diagnose", output, data, fixed, fit, base=base, base_meta=base_meta, diagnosis=result)
+
+
+_FIT = {"identify": _identify, "train-base": _train_base, "adapt": _adapt, "diagnose": _diagnose}
+
