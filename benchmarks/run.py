@@ -4,6 +4,7 @@
     python benchmarks/run.py                   full sizes (several minutes on 2 cores)
     python benchmarks/run.py --quick           tiny sizes, about 15 s (what the tests run)
     python benchmarks/run.py --json            the figures as JSON on stdout
+    python benchmarks/run.py --only identify   only identify on 100,000 rows (library and command)
     python benchmarks/run.py --plot docs/img/performance-scaling.png
                                                also measure how cost grows with log length and
                                                network size, and plot it
@@ -23,6 +24,7 @@ import json
 import math
 import os
 import platform
+import resource
 import statistics
 import subprocess
 import sys
@@ -38,7 +40,7 @@ import numpy as np  # noqa: E402
 from fricli import learning, logs, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.nn import activations as acts  # noqa: E402
-from fricli.blas import _openblas, single_threaded  # noqa: E402
+from fricli.threads import blas_threads, single_threaded  # noqa: E402
 from fricli.nn.network import Network  # noqa: E402
 from fricli.nn.training import Standardizer, Trainer  # noqa: E402
 
@@ -72,14 +74,25 @@ def median_time(fn, repeats: int) -> float:
 
 def run_cli(args: list[str], repeats: int, quiet: bool = True) -> float:
     """Median wall time [s] of ``python -m fricli ARGS`` (quiet), start-up included."""
+    return run_cli_times(args, repeats, quiet)[0]
+
+
+def run_cli_times(args: list[str], repeats: int, quiet: bool = True) -> tuple[float, float]:
+    """Median wall time and median CPU time (user + system) [s] of ``python -m fricli ARGS``
+    (quiet), start-up included. The CPU time moves less with the host's load than the wall time."""
     cmd = [sys.executable, "-m", "fricli", *args, *(["--quiet"] if quiet else [])]
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
-
-    def once():
+    walls, cpus = [], []
+    for _ in range(repeats):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        start = time.perf_counter()
         proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
+        walls.append(time.perf_counter() - start)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        cpus.append(after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime)
         if proc.returncode != 0:
             raise RuntimeError(f"{' '.join(args)} failed ({proc.returncode}): {proc.stderr.strip()}")
-    return median_time(once, repeats)
+    return statistics.median(walls), statistics.median(cpus)
 
 
 def say(msg: str) -> None:
@@ -522,6 +535,24 @@ def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
     return paths
 
 
+def bench_identify(add, tmp: str, size: dict, reps: int) -> None:
+    """identify on a simulated base log of ``identify_rows`` rows (the sample log when None):
+    the library call on the loaded log, and the whole command."""
+    from fricli import identify
+    if size["identify_rows"]:
+        id_path = os.path.join(tmp, "identify.parquet")
+        rate = size["identify_rows"] / 351.0
+        simulate(id_path, ["--scenario", "base", "--rate", f"{rate:.6g}", "--seed", "1"])
+    else:
+        id_path = BASE_LOG
+    id_log = logs.load_log(id_path)
+    add("lugre", f"identify (library), {len(id_log):,} rows",
+        median_time(lambda: identify.identify(id_log), reps), "s", "target < 5")
+    wall, cpu = run_cli_times(["identify", id_path, "-o", os.path.join(tmp, "id.npz")], reps)
+    add("lugre", f"identify command (wall), {len(id_log):,} rows", wall, "s", "target <= 1")
+    add("lugre", f"identify command (CPU, user + system), {len(id_log):,} rows", cpu, "s")
+
+
 def main(argv=None) -> dict:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["--torch-worker"]:
@@ -536,13 +567,15 @@ def main(argv=None) -> dict:
     ap.add_argument("--threads", type=int, default=2, help="PyTorch threads (fricli uses at most 2)")
     ap.add_argument("--plot", default=None, metavar="PNG", help="also measure scaling and plot it to PNG")
     ap.add_argument("--skip-torch", action="store_true", help="do not measure PyTorch even if installed")
+    ap.add_argument("--only", choices=["identify"], default=None,
+                    help="measure only this case (identify: the library call and the whole command)")
     args = ap.parse_args(argv)
     size = dict(QUICK if args.quick else FULL)
     reps = args.repeats or size["repeats"]
     torch = None if args.skip_torch else torch_version()
     res: dict = {"machine": {"python": platform.python_version(), "numpy": np.__version__, "cpus": os.cpu_count(),
                              "processor": platform.processor() or platform.machine(),
-                             "blas_threads": (_openblas()[0]() if _openblas() else None),
+                             "blas_threads": max(blas_threads().values(), default=None),
                              "torch": torch, "torch_threads": args.threads,
                              "quick": args.quick, "repeats": reps},
                  "rows": []}
@@ -551,6 +584,13 @@ def main(argv=None) -> dict:
     def add(group, name, value, unit, note=""):
         rows.append({"group": group, "name": name, "value": value, "unit": unit, "note": note})
         say(f"  {group:<9} {name:<52} {fmt(value):>12} {unit} {note}")
+
+    if args.only == "identify":
+        with tempfile.TemporaryDirectory() as tmp:
+            say("lugre")
+            bench_identify(add, tmp, size, reps)
+        print(json.dumps(res, indent=1) if args.json else format_table(res))
+        return res
 
     with tempfile.TemporaryDirectory() as tmp:
         base_log = logs.load_log(BASE_LOG)
@@ -629,18 +669,7 @@ def main(argv=None) -> dict:
         secs = median_time(lambda: model_l.predict(sig_l), max(reps, 5))
         add("lugre", f"LuGreModel.predict (t, qd), {nl:,} samples", nl / secs, "samples/s")
 
-        from fricli import identify
-        if size["identify_rows"]:
-            id_path = os.path.join(tmp, "identify.parquet")
-            rate = size["identify_rows"] / 351.0
-            simulate(id_path, ["--scenario", "base", "--rate", f"{rate:.6g}", "--seed", "1"])
-        else:
-            id_path = BASE_LOG
-        id_log = logs.load_log(id_path)
-        add("lugre", f"identify (library), {len(id_log):,} rows",
-            median_time(lambda: identify.identify(id_log), reps), "s", "target < 5")
-        add("lugre", f"identify command (wall), {len(id_log):,} rows",
-            run_cli(["identify", id_path, "-o", os.path.join(tmp, "id.npz")], reps), "s", "target <= 1")
+        bench_identify(add, tmp, size, reps)
 
         # ---- prediction
         say("predict")

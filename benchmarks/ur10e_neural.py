@@ -4,6 +4,7 @@ days, and adapt on one run of a day scored on another run of the same day.
     python benchmarks/ur10e_neural.py                 # both tables (about 10 minutes on 2 cores)
     python benchmarks/ur10e_neural.py --part base     # the train-base table only
     python benchmarks/ur10e_neural.py --part adapt --json out.json
+    python benchmarks/ur10e_neural.py --part base --train-base-option=--no-folds   # one network, one fold
 
 Every model comes from the fricli command line (the commands are printed on stderr and listed
 at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
@@ -85,17 +86,20 @@ def moving_error(model_dir: str, runs: list[str], joint: int) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
 
-def base_part(data: str, work: str, seed: int) -> dict:
+def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) -> dict:
     fit = import_run(data, work, BASE_FIT)
     runs = [import_run(data, work, name) for name in BASE_VALIDATION]
     lugre, nn = os.path.join(work, "base-lugre"), os.path.join(work, f"base-nn-s{seed}")
     fricli("identify", fit, "-o", lugre, "-q")
-    fricli("train-base", fit, "--seed", str(seed), "-o", nn, "-q")
+    trained = fricli("train-base", fit, "--seed", str(seed), *options, "-o", nn, "--json", "-q", json_out=True)
     rows = []
     for j in JOINTS:
         a, b = moving_error(lugre, runs, j), moving_error(nn, runs, j)
-        rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a})
-    return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "joints": rows}
+        fit_j = trained["joints"][str(j)]
+        rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a, "step": fit_j["best_step"],
+                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation")})
+    return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "train_base_options": list(options),
+            "joints": rows}
 
 
 def adapt_part(data: str, work: str, seed: int) -> dict:
@@ -120,9 +124,9 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
 
 
 def base_table(result: dict) -> str:
-    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre |", "|---|---:|---:|---:|"]
+    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |", "|---|---:|---:|---:|---:|"]
     for r in result["joints"]:
-        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} |")
+        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |")
     return "\n".join(lines)
 
 
@@ -151,6 +155,9 @@ def main() -> None:
     parser.add_argument("--part", choices=("base", "adapt", "both"), default="both")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--json", default=None, help="also write the figures to this file")
+    parser.add_argument("--train-base-option", action="append", default=[], metavar="OPT",
+                        help="add OPT to the base part's train-base command (repeatable), e.g. "
+                             "--train-base-option=--no-folds")
     args = parser.parse_args()
     if not os.path.isdir(os.path.join(args.data, "identification")):
         raise SystemExit(f"no UR10e data at {args.data}")
@@ -159,7 +166,7 @@ def main() -> None:
         os.makedirs(work, exist_ok=True)
         out = {}
         if args.part in ("base", "both"):
-            out["base"] = base_part(args.data, work, args.seed)
+            out["base"] = base_part(args.data, work, args.seed, tuple(args.train_base_option))
             print(f"## train-base on {BASE_FIT}, in-motion RMS on the runs of other days\n")
             print(base_table(out["base"]) + "\n")
         if args.part in ("adapt", "both"):

@@ -1,6 +1,7 @@
 """Identify the extended LuGre model from a log (``fricli identify``).
 
-Two stages, both bounded Levenberg-Marquardt fits (``fricli.least_squares``):
+Two stages, both bounded nonlinear least-squares fits (``scipy.optimize.least_squares``, trust
+region reflective, x_scale='jac'):
 
 1. Static parameters (Fc, Fs, vs, delta, Fv, kc, ks) on the steady-state samples, where the
    friction is the static curve sign(v)*g(v, tau_g) + Fv*v. The start comes from the data: for a
@@ -32,10 +33,12 @@ import math
 
 import numpy as np
 
-from fricli import least_squares, logs, metrics, physics
+from fricli import lazy, logs, metrics, physics
 from fricli.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
-from fricli.blas import single_threaded
+from fricli.threads import single_threaded
+
+optimize = lazy.module("scipy.optimize")
 
 
 MIN_STEADY_PER_DIRECTION = 20
@@ -43,6 +46,9 @@ MIN_STRIBECK_LEVELS = 6
 TAU1_MAX = 0.01           # upper bound on sigma1/sigma0 [s]
 _DELTAS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0)
 _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cache for no better start)
+NOISE_FLOOR = 1e-3        # velocity tolerance of the static-curve selection: at least this share of the top speed
+MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
+TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
 
 
 def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, travel: float = 0.002,
@@ -81,7 +87,7 @@ def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, trave
         ok[:before] = False                                # the window must not run off the log
         ok[n - after:] = False
         mask |= rows & ok
-    return mask & (speed > max(abs_tol, 1e-3 * top))
+    return mask & (speed > max(abs_tol, NOISE_FLOOR * top))
 
 
 def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
@@ -111,9 +117,9 @@ def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
 
 
 def _noise_tol(qd: np.ndarray, top: float) -> float:
-    """Velocity tolerance: 1e-3 of the top speed or four times the sample-to-sample noise."""
+    """Velocity tolerance: NOISE_FLOOR of the top speed or four times the sample-to-sample noise."""
     jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
-    return max(1e-3 * top, 4 * jitter)
+    return max(NOISE_FLOOR * top, 4 * jitter)
 
 
 def window_extreme(x: np.ndarray, before: int, after: int, op=np.maximum) -> np.ndarray:
@@ -226,7 +232,7 @@ class LuGreIdentifier:
         vu = units["qd"]
         if not top > 0:
             raise DataError("the joint does not move (qd is zero everywhere)")
-        moving = np.abs(v) > 1e-3 * top
+        moving = metrics.in_motion(v)
         if not (v[moving] < 0).any():
             raise DataError("no samples with negative velocity: identify needs motion in both directions")
         if not (v[moving] > 0).any():
@@ -339,7 +345,7 @@ class LuGreIdentifier:
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "static parameters")
         params = layout.decode(res.x, fixed)
         return params, {"nfev": int(res.nfev), "cost": float(res.cost), "stribeck": stribeck,
-                        "load": layout.load}
+                        "load": layout.load, "at_bounds": _at_bounds(layout.names, res)}
 
     # ----------------------------------------------------------------- stage 2
 
@@ -357,7 +363,7 @@ class LuGreIdentifier:
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
-        costs = [least_squares.sumsq(residual(x)) for x in grid]
+        costs = [_sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
@@ -393,7 +399,7 @@ class LuGreIdentifier:
         lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
         ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
         x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        start_cost = 0.5 * least_squares.sumsq(residual(x0))
+        start_cost = 0.5 * _sumsq(residual(x0))
         try:
             res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement", partial=True)
         except FitError as exc:
@@ -405,16 +411,66 @@ class LuGreIdentifier:
         if not res.cost < start_cost:
             self.notes_.append("joint refinement did not lower the error: kept the two-stage estimate")
             return params, {"nfev": int(res.nfev), "cost": start_cost, "kept": "two-stage"}
-        return p, {"nfev": int(res.nfev), "cost": float(res.cost)}
+        return p, {"nfev": int(res.nfev), "cost": float(res.cost), "at_bounds": _at_bounds(layout.names, res)}
+
+    # ----------------------------------------------------------- plausibility
+
+    def _plausibility(self, signals: dict, steady: np.ndarray, model: LuGreModel, fit: dict,
+                      units: dict) -> list[str]:
+        """Warnings (str) about a fit that converged but looks implausible, each with what to try.
+        ``steady``: the static-curve rows (n,) bool; ``fit``: the error figures and stages of ``_fit``."""
+        out = []
+        p, tau, vu = model.parameters(), units.get("tau", ""), units["qd"]
+        stages = fit["stages"]
+        joint = stages.get("joint", {})
+        bounds = joint["at_bounds"] if "at_bounds" in joint else stages["static"]["at_bounds"]
+        tail = TAIL * math.sqrt(2 * math.log(max(fit["n"], 2))) * fit["rmse"]
+        if bounds and fit["max"] > tail:
+            which = " and ".join(_BOUND_TEXT[name][side] for name, side in bounds.items())
+            out.append(f"{which} (at the bound of the fit) with a max error of {fit['max']:.3g} {tau}, "
+                       f"{fit['max'] / fit['rmse']:.0f} times the RMS error: the static curve cannot follow some "
+                       "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
+                       "settled, --drop-invalid for bad rows, or a model kind with the missing effect")
+        speed = np.abs(signals["qd"][steady])
+        load = _typical(signals, "tau_g", steady)                     # typical |tau_g| [Nm]
+        fc, fs = p["fc"] + p["kc"] * load, p["fs"] + p["ks"] * load   # the levels at that load
+        top = float(speed.max())
+        left = math.exp(-(0.5 * top / p["vs"]) ** p["delta"])       # share of Fs - Fc still to come at top/2
+        if stages["static"]["stribeck"] and fs - fc > MINOR * fs and left > MINOR:
+            out.append(f"the Stribeck velocity vs = {p['vs']:.3g} {vu} spans the speeds of the log (top steady "
+                       f"speed {top:.3g} {vu}): at half that speed {100 * left:.0f} % of the Stribeck drop Fs - Fc "
+                       "is still to come, so the curve shapes the velocity dependence instead of the breakaway "
+                       "at low speed. Log constant-velocity levels well below vs, or try a neural model with a "
+                       "free velocity law (fricli train-base)")
+        slow = float(np.percentile(speed, 5))
+        scale = max(fs, float(model.steady_state(np.array([slow]), np.array([load]))[0]))
+        if fc < MINOR * scale:
+            level = "Fc + kc |tau_g| at the median |tau_g|" if stages["static"]["load"] else "Fc"
+            out.append(f"the Coulomb level vanishes: {level} = {fc:.3g} {tau} is {100 * fc / scale:.1f} % of "
+                       f"{'Fs' if scale == fs else 'the friction at the slowest steady speeds'} ({scale:.3g} {tau}). "
+                       "Check the sign and scale of tau_m (--kt) and that tau_g and tau_dyn are not counted "
+                       "twice; log slow constant-velocity motion in both directions")
+        slopes = [k for k in ("kc", "ks") if p[k] > 0 and k not in bounds]
+        if stages["static"]["load"] and slopes:
+            lo, hi = np.percentile(np.abs(signals["tau_g"][steady]), [5, 95])
+            if hi - lo < MINOR * fc:
+                which = " and ".join(f"{k} = {p[k]:.3g}" for k in slopes)
+                out.append(f"load slope {which} fitted while |tau_g| varies by only {hi - lo:.3g} {tau} over the "
+                           f"static-curve rows ({100 * (hi - lo) / fc:.1f} % of the Coulomb level): the joint "
+                           "carries (nearly) no changing gravity torque. If it carries none, leave tau_g out of the "
+                           "log (kc = ks = 0 then); otherwise log poses with other gravity torques")
+        return out
 
     # --------------------------------------------------------------------- fit
 
     def fit(self, signals: dict[str, np.ndarray], units: dict | None = None, axis: str = "rotary") -> "LuGreIdentifier":
         """Fit on a log's signals (canonical units, see ``fricli.logs``).
 
-        numpy's BLAS runs on one thread meanwhile: its threaded reductions (over the log's rows)
-        round differently for each thread count, and the fit would not give the same bytes
-        under OMP_NUM_THREADS=1 and 2. It costs nothing measurable here."""
+        The BLAS libraries (numpy's and scipy's) run on one thread meanwhile: threaded
+        reductions (over the log's rows) round differently for each thread count, and the fit
+        would not give the same bytes under OMP_NUM_THREADS=1 and 2. It costs nothing
+        measurable here. scipy is imported first: its own BLAS must be loaded to be pinned."""
+        optimize.least_squares  # noqa: B018  (the import)
         with single_threaded():
             return self._fit(signals, units, axis)
 
@@ -446,6 +502,8 @@ class LuGreIdentifier:
         fit["steady_rows"] = int(steady.sum())
         fit["stages"] = stages
         fit["notes"] = list(self.notes_)
+        self.warnings_ = self._plausibility(signals, steady, model, fit, units)
+        fit["warnings"] = list(self.warnings_)
         self.fit_ = fit
         return self
 
@@ -472,20 +530,47 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     except np.linalg.LinAlgError:
         coef = np.linalg.lstsq(gram / np.outer(scale, scale), ry / scale, rcond=None)[0]
     coef = coef / scale
-    sse = least_squares.sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
+    sse = _sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
     return coef, max(sse, 0.0)
 
 
-def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False) -> least_squares.Result:
-    """``least_squares.solve``; failures become FitError. With ``partial``, a fit stopped at
-    ``max_nfev`` returns its last (best) iterate instead."""
+_BOUND_TEXT = {"fs": {"lower": "Fs = Fc"}, "delta": {"lower": "delta = 0.2", "upper": "delta = 5"},
+               "fv": {"lower": "Fv = 0"}, "kc": {"lower": "kc = 0"}, "ks": {"lower": "ks = 0"}}
+
+
+def _at_bounds(names: list[str], res) -> dict[str, str]:
+    """{name: "lower" or "upper"} of the bounded static parameters ``names`` that a fit ``res``
+    (scipy's result) left at a bound, from its active_mask (the bristle parameters, listed after
+    them, have notes of their own)."""
+    return {name: "lower" if a < 0 else "upper" for name, a in zip(names, res.active_mask)
+            if a and name in _BOUND_TEXT}
+
+
+def _typical(signals: dict, name: str, rows: np.ndarray) -> float:
+    """Median |signals[name]| over ``rows``; 0 without the column."""
+    col = signals.get(name)
+    return float(np.median(np.abs(col[rows]))) if col is not None else 0.0
+
+
+def _sumsq(r: np.ndarray) -> float:
+    """Sum of squares of r (n,)."""
+    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
+    return float(np.einsum("i,i->", r, r))
+
+
+def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False):
+    """``scipy.optimize.least_squares`` (trf, x_scale='jac') of fun from x0 within bounds;
+    failures become FitError. With ``partial``, a fit stopped at ``max_nfev`` returns its last
+    iterate (trf accepts only steps that lower the cost: the best one) instead."""
     try:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            res = least_squares.solve(fun, x0, bounds, max_nfev=max_nfev)
-    except ValueError as exc:
+            res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
+    except (ValueError, np.linalg.LinAlgError) as exc:
         raise FitError(f"fitting the {what} failed: {exc}") from None
     if res.status == 0 and not partial:
         raise FitError(f"fitting the {what} did not converge within {max_nfev} evaluations")
+    if res.status < 0 or not np.isfinite(res.x).all():
+        raise FitError(f"fitting the {what} failed: {res.message}")
     return res
 
 

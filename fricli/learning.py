@@ -70,14 +70,18 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
+               folds: bool = True,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
     A log of constant-velocity sweeps trains on its velocity levels (``training_data``), rows
     slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
     trains on its rows in motion (``metrics.in_motion``) and validates on whole blocks of time
-    (summary "velocity_groups": "moving"). At rest the friction is held by the bristles and
-    depends on the motion before, not on (tau_g, qd). ``velocity_input``
+    (summary "velocity_groups": "moving"); there the dissipative network (with ``folds``) is the
+    mean of one network per fold of ``training_data.time_folds``, every one stopped at the step
+    of the least validation loss pooled over the folds (``cross_validated_steps``; summary
+    "cross_validation"), while the other networks validate on one fold. At rest the friction
+    is held by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
     always sees asinh(|qd| / v0)). Returns (model,
@@ -111,22 +115,93 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                                rng=rng, keep=sweeping, moving=moving)
     if sel.mode == "moving":
         check_motion(log.name, sig["qd"], moving, "train-base")
-    model = ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=steps, lr=lr,
-                        batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
-                        velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
-    model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
-              on_eval=on_eval)
+
+    def new_model(n_steps: int) -> FrictionModel:
+        return ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=n_steps, lr=lr,
+                           batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
+                           velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
+
+    cv = None
+    if sel.mode == "moving" and sel.val.size and folds and arch == "dissipative":
+        # continuous excitation: one network per fold of time blocks, all stopped at the step
+        # of the least mean validation loss, and the model their mean
+        rows = np.union1d(sel.train, sel.val)
+        model = new_model(steps)
+        model.set_scales(subset(sig, rows), target[rows])
+        cv = cross_validated_steps(new_model, steps, sig, target, rows, sel.blocks,
+                                   training_data.time_folds(val_fraction, rng), rng, on_eval,
+                                   scales_from=model, snapshots=True)
+        members = cv.pop("models")
+        for fold in members:
+            fold.net_.theta[...] = fold.snapshots_[cv["record"]]
+            fold.snapshots_ = None
+        model.set_members([fold.net_ for fold in members], sig["qd"][rows])
+        length = min(fold.history_train_.size for fold in members)
+        model.history_train_ = np.mean([fold.history_train_[:length] for fold in members], axis=0)
+        model.history_val_ = cv.pop("curve") / model.y_scale_ ** 2
+        model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
+        model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
+        sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+    else:
+        model = new_model(steps)
+        model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
+                  on_eval=on_eval)
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
                "schedule": schedule, "max_steps": int(steps),
                "velocity_input": velocity_input, "v0": model.v0_,
                "train": _errors(target, pred, sel.train), "moving": _errors(target, pred, np.flatnonzero(moving)),
                "log": metrics.errors(target, pred)}
+    if cv is not None:
+        summary["cross_validation"] = cv
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
     if getattr(model, "v_ps_", None) is not None:
         summary["presliding_speed"] = model.v_ps_
     return model, summary
+
+
+def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
+                          target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
+                          rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
+    """The number of training steps, chosen on the mean validation curve of K networks.
+
+    ``rows`` (sorted indices) are the rows to use, ``blocks`` (n,) the time block of every row
+    and ``folds`` the blocks each fold holds out. Fold k fits ``new_model(steps)`` (with
+    ``fit_kwargs``; a model whose validation loss is that of target / ``y_scale_``) on the rows
+    outside its blocks, recording its validation loss; the curves, in Nm^2 and weighted by their
+    validation rows, are pooled into the mean squared error over
+    every held-out row, and the step of its least value is chosen. Returns "folds" (K), "step"
+    (the step chosen), "record" (its index in the loss records), "held_out_rmse" [Nm] (the
+    pooled curve's least value, rooted), "fold_best_steps" (each fold's own best step),
+    "curve" (the pooled curve [Nm^2]) and "models" (the K fitted models).
+    """
+    done = 0
+    curves, weights, fitted = [], [], []
+    for held in folds:
+        is_val = np.isin(blocks[rows], held)
+        train, val = rows[~is_val], rows[is_val]
+        if not train.size or not val.size:
+            continue
+        model = new_model(steps)
+        fold_eval = None
+        if on_eval is not None:
+            def fold_eval(step, total, train_loss, val_loss, offset=done):
+                on_eval(offset + step, len(folds) * steps, train_loss, val_loss)
+        model.fit(subset(sig, train), target[train], subset(sig, val), target[val], rng=rng, on_eval=fold_eval,
+                  **fit_kwargs)
+        done += steps
+        curves.append(np.asarray(model.history_val_) * model.y_scale_ ** 2)
+        weights.append(val.size)
+        fitted.append(model)
+    if not curves:
+        raise DataError("no fold of time blocks holds both training and validation rows")
+    length = min(c.size for c in curves)
+    pooled = np.average([c[:length] for c in curves], axis=0, weights=weights)
+    best = int(np.argmin(pooled))
+    step = min((best + 1) * fitted[0].eval_every_, steps)
+    return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
+            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted}
 
 
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:

@@ -13,8 +13,8 @@ interval (zero-order hold), which is stable at any stiffness:
     z_ss = sign(v) * g / sigma0.
 
 That is a linear recurrence z[k] = a[k] z[k-1] + b[k], solved in one call as a unit lower
-bidiagonal system (BLAS ``dtbsv``, ``fricli.blas.recurrence``), with no Python loop over
-samples. These functions are the one implementation of the equations: the LuGre model, the
+bidiagonal system (BLAS ``dtbsv`` through ``scipy.linalg.blas``, ``recurrence``), with no
+Python loop over samples. These functions are the one implementation of the equations: the LuGre model, the
 simulator and identification call them.
 """
 
@@ -24,7 +24,9 @@ import math
 
 import numpy as np
 
-from fricli import blas
+from fricli import lazy
+
+scipy_blas = lazy.module("scipy.linalg.blas")
 
 _RATE_DT_MAX = 700.0   # exp(-700) is the smallest decay used: the state has reached z_ss
 
@@ -97,7 +99,7 @@ def lugre_friction(v: np.ndarray, g: np.ndarray, fv: np.ndarray | float, sigma0:
     # z[k] = a[k] z[k-1] + b[k]: a unit lower bidiagonal system
     np.negative(a[1:], out=band[1, :-1])
     band[1, -1] = 0.0
-    blas.recurrence(band, b)
+    recurrence(band, b)
     z_last = float(out[-1])
     # tau = sigma0 z + sigma1 dz/dt + fv v, with dz/dt = v - rate z
     rate *= out
@@ -108,6 +110,24 @@ def lugre_friction(v: np.ndarray, g: np.ndarray, fv: np.ndarray | float, sigma0:
     np.multiply(fv, v, out=a)
     out += a
     return out, z_last
+
+
+def recurrence(band: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Solve z[k] = a[k] z[k-1] + b[k] (z[-1] = 0) in place in b (n,) float64; returns b.
+
+    band: (2, n) float64, BLAS ``dtbsv``'s band storage of the unit lower bidiagonal matrix:
+    band[1, k] = -a[k+1] for k < n-1 (row 0 and band[1, n-1] are not read); Fortran order
+    avoids a copy. ValueError for any other shape."""
+    n = len(b)
+    if np.ndim(b) != 1 or np.shape(band) != (2, n):
+        raise ValueError(f"recurrence: band must have shape (2, {n}) for b of shape ({n},), "
+                         f"not {np.shape(band)} and {np.shape(b)}")
+    if n == 0:
+        return b
+    z = scipy_blas.dtbsv(1, band, b, lower=1, diag=1, overwrite_x=1)
+    if not np.shares_memory(z, b):     # b was copied (not contiguous float64): copy back
+        b[:] = z
+    return b
 
 
 def intervals(t: np.ndarray, t_prev: float | None = None) -> np.ndarray:

@@ -24,7 +24,8 @@ every level keeps training rows and the validation rows come in whole stretches 
 In mode "moving" the validation rows are whole blocks of time instead (``time_blocks``): the
 log cut into ten blocks of equal duration, round(10 * val_fraction) of them held out, so the
 validation rows follow other harmonics' phases than the training rows, not the neighbours of
-training rows.
+training rows. ``time_folds`` groups the ten blocks into folds for cross-validation (five folds
+of two blocks for a validation fraction of 0.2).
 """
 
 from __future__ import annotations
@@ -157,6 +158,16 @@ def time_blocks(n: int, val_fraction: float, rng: np.random.Generator) -> np.nda
     return np.isin(time_block(n), rng.choice(PIECES, size=held_blocks(val_fraction), replace=False))
 
 
+def time_folds(val_fraction: float, rng: np.random.Generator) -> list[np.ndarray]:
+    """The PIECES time blocks in folds of ``held_blocks(val_fraction)`` blocks each, drawn at
+    random: PIECES // held folds (five for 0.2, every block held out once), no block in two."""
+    held = held_blocks(val_fraction)
+    if held == 0:
+        return []
+    order = rng.permutation(PIECES)
+    return [np.sort(order[k * held:(k + 1) * held]) for k in range(PIECES // held)]
+
+
 def _at_most(rows: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     """At most n of ``rows`` (sorted), drawn at random."""
     return rows if rows.size <= n else np.sort(rng.choice(rows, size=n, replace=False))
@@ -204,7 +215,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
             full[usable] = labels
             labels = full
         if mode != "levels":
-            return _moving(usable if moving is None else np.asarray(moving, dtype=bool), val_fraction, max_samples, rng)
+            rows = usable if moving is None else np.asarray(moving, dtype=bool)
+            return _in_time_blocks(rows, val_fraction, max_samples, rng)
     else:
         labels, mode = np.where(usable, 0, -1).astype(np.int64), "all"
     # runs: constant-velocity stretches for discrete levels, else stretches of usable rows
@@ -223,7 +235,8 @@ def select(qd: np.ndarray, *, val_fraction: float = 0.2, max_samples: int | None
     return Selection(train=train_rows, val=val_rows, blocks=blocks, mode=mode, groups=groups)
 
 
-def _moving(moving: np.ndarray, val_fraction: float, max_samples: int | None, rng: np.random.Generator) -> Selection:
+def _in_time_blocks(moving: np.ndarray, val_fraction: float, max_samples: int | None,
+                    rng: np.random.Generator) -> Selection:
     """Mode "moving": the rows ``moving`` (bool (n,)) of whole time blocks (``time_blocks``)."""
     val_mask = time_blocks(moving.size, val_fraction, rng)
     train_rows, val_rows = np.flatnonzero(moving & ~val_mask), np.flatnonzero(moving & val_mask)

@@ -239,3 +239,53 @@ def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
     modelfile.write(path, meta, arrays)
     older = models.load(path)[0]
     assert older.v_max_ is None and "beyond" not in older.describe() and "beyond" in model.describe()
+
+
+# ---------------------------------------------------------------------------- an ensemble of folds
+
+
+@pytest.fixture(scope="module")
+def ensemble(tmp_path_factory):
+    from test_neural import harmonic_log
+
+    d = tmp_path_factory.mktemp("ensemble")
+    log_path = write(harmonic_log(seed=8, seconds=30.0), d / "harmonic.parquet")
+    log = logs.load_log(str(log_path))
+    model, summary = learning.train_base(log, steps=150, seed=1)
+    path = str(d / "ensemble.npz")
+    models.save_for_log(path, model, log, rows_used=summary["train_rows"], seed=1, fit=summary)
+    return {"log": str(log_path), "model": model, "summary": summary, "path": path}
+
+
+def test_train_base_on_continuous_excitation_averages_one_network_per_fold(ensemble):
+    import copy
+
+    model, sig = ensemble["model"], logs.load_log(ensemble["log"]).signals
+    assert len(model.nets_) == ensemble["summary"]["cross_validation"]["folds"] == 5
+    members = []
+    for net in model.nets_:
+        one = copy.copy(model)
+        one.nets_ = [net]
+        members.append(one.predict(sig)[0])
+    pred = model.predict(sig)[0]
+    np.testing.assert_allclose(pred, np.mean(members, axis=0), rtol=1e-5, atol=1e-5)
+    assert np.all(pred * sig["qd"] >= 0)     # still never along the motion
+    b1 = np.array([net.weights[-1][1, -1] for net in model.nets_], dtype=np.float64)
+    assert model.load_slope() == pytest.approx(model.y_scale_ * np.mean(acts.softplus(b1)) / model.g_scale_)
+
+
+def test_an_ensemble_file_round_trips(ensemble):
+    loaded, meta = models.load(ensemble["path"])
+    assert meta["model"]["params"]["members"] == 5 and len(loaded.nets_) == 5
+    sig = logs.load_log(ensemble["log"]).signals
+    np.testing.assert_array_equal(loaded.predict(sig)[0], ensemble["model"].predict(sig)[0])
+    assert "the mean of 5 such networks" in loaded.describe()
+
+
+def test_an_ensemble_exports_to_c_as_predict_computes(ensemble, tmp_path):
+    import export_check as check
+    from test_export import _compare
+
+    if check.compiler() is None:
+        pytest.skip("no C compiler")
+    assert _compare(ensemble["path"], ensemble["log"], tmp_path) <= 1.0

@@ -28,6 +28,12 @@ ALLOWED = {
     ("models/residual.py", "exact zero velocity"):
         "the smallest speed the training rows reach sets the pre-sliding scale v_ps (a scale, not a choice "
         "of rows)",
+    ("models/dissipative.py", "exact zero velocity"):
+        "the training rows' speeds set the velocity scale v0 (a scale, not a choice of rows; the rows are "
+        "chosen by train-base)",
+    ("training_data.py", "a speed threshold"):
+        "the lowest bin of the velocity histogram that finds a sweep's levels (LOW, below the in-motion share: "
+        "a sweep's slowest levels), not a choice of rows in motion",
 }
 
 

@@ -13,7 +13,7 @@ PACKAGE = Path(ROOT) / "fricli"
 LAYERS = [
     ("contracts and files", {"errors", "atomic", "lazy", "modelfile", "logs", "joints", "timewindow", "jobs",
                              "modelset", "metrics", "envelope", "robot.transmission"}),
-    ("numerics", {"blas", "physics", "least_squares", "nn"}),
+    ("numerics", {"threads", "physics", "nn"}),
     ("models", {"models"}),
     ("fitting", {"identify", "training_data", "learning", "diagnosis", "optionspec", "runs"}),
     ("applying", {"predicting", "evaluation", "report", "emps"}),

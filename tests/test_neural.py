@@ -469,7 +469,8 @@ def test_train_base_on_continuous_excitation_uses_the_moving_rows_in_time_blocks
     assert summary["velocity_groups"] == "moving"
     sel = training_data.select(sig["qd"], rng=np.random.default_rng(0), keep=metrics.in_motion(sig["qd"], training_data.LOW),
                                moving=metrics.in_motion(sig["qd"]))
-    assert sel.mode == "moving" and sel.train.size == summary["train_rows"] and sel.val.size == summary["val_rows"]
+    # the folds validate on these blocks and others; the model written trains on all of the rows
+    assert sel.mode == "moving" and sel.train.size + sel.val.size == summary["train_rows"]
     assert metrics.in_motion(sig["qd"])[np.concatenate([sel.train, sel.val])].all()
     assert np.intersect1d(sel.train, sel.val).size == 0
     # the validation rows lie in two of ten blocks of time, none of them trained on
@@ -485,6 +486,12 @@ def test_train_base_says_it_trains_on_the_moving_rows(harmonic, tmp_path):
     result = run("train-base", harmonic["log"], "-o", tmp_path / "m.npz", "--steps", 20)
     assert result.exit_code == 0, result.stderr
     assert "rows in motion" in result.stderr and "no steady velocity levels" in result.stderr
+    assert "the mean of 5 networks, each validated on 2 of 10 time blocks" in result.stderr
+    one = run("train-base", harmonic["log"], "-o", tmp_path / "one.npz", "--steps", 20, "--no-folds", "--json")
+    assert one.exit_code == 0, one.stderr
+    out = json.loads(one.stdout)
+    assert "cross_validation" not in out and out["val_rows"] > 0 and "validation in 2 of 10 time blocks" in one.stderr
+    assert len(models.load(str(tmp_path / "one.npz"))[0].nets_) == 1
     levels = run("train-base", write(motion_log(LEVELS, seed=1), tmp_path / "b.parquet"), "-o", tmp_path / "b.npz",
                  "--steps", 20)
     assert "velocity levels" in levels.stderr and "rows in motion" not in levels.stderr
@@ -515,3 +522,57 @@ def test_adapt_keeps_a_residual_that_helps(harmonic, tmp_path):
     assert out["held_out"]["adapted_rmse"] < 0.5 * out["held_out"]["base_rmse"]
     assert "the residual network is kept" in result.stderr
     assert models.load(str(tmp_path / "a.npz"))[1]["fit"]["adapted"] is True
+
+
+class _Curve:
+    """A stand-in network whose validation loss, one record per 10 steps, is (i - m)^2 + 1 with m
+    set by the first time block it validates on; it notes the rows it trained and validated on."""
+
+    made = []
+
+    def __init__(self, steps):
+        self.steps = steps
+
+    def fit(self, sig, target, val_sig, val_target, *, rng, on_eval=None):
+        first = int(training_data.time_block(1000)[int(val_sig["t"][0])])
+        m = {0: 1, 2: 1}.get(first, 8)
+        self.history_val_ = (np.arange(self.steps // 10) - m) ** 2 + 1.0
+        self.y_scale_, self.eval_every_ = 1.0, 10
+        self.best_step_ = 10 * (int(np.argmin(self.history_val_)) + 1)
+        self.rows = (sig["t"].astype(int), val_sig["t"].astype(int))
+        _Curve.made.append(self)
+        return self
+
+
+def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds():
+    _Curve.made.clear()
+    n = 1000
+    sig = {"t": np.arange(n, dtype=float)}
+    blocks = training_data.time_block(n)
+    drawn = training_data.time_folds(0.2, np.random.default_rng(3))
+    assert len(drawn) == 5 and np.array_equal(np.sort(np.concatenate(drawn)), np.arange(training_data.PIECES))
+    folds = [np.array([k, k + 1]) for k in range(0, training_data.PIECES, 2)]
+    cv = learning.cross_validated_steps(_Curve, 100, sig, np.zeros(n), np.arange(n), blocks, folds,
+                                        np.random.default_rng(0))
+    # every fold validates on its own blocks and trains on all the others
+    for fold, held in zip(_Curve.made, folds):
+        train, val = fold.rows
+        assert np.array_equal(val, np.flatnonzero(np.isin(blocks, held)))
+        assert np.array_equal(train, np.flatnonzero(~np.isin(blocks, held)))
+    # two folds are best at step 20, three at step 90; the mean curve (i - m)^2 is least at the
+    # mean m = 5.2, record 5, step 60: the step of no single fold
+    assert cv["folds"] == 5 and sorted(cv["fold_best_steps"]) == [20, 20, 90, 90, 90]
+    pooled_least = np.mean((5 - np.array([1, 1, 8, 8, 8])) ** 2) + 1
+    assert cv["step"] == 60 and cv["held_out_rmse"] == pytest.approx(np.sqrt(pooled_least))
+
+
+def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves_step(harmonic):
+    summary, model = harmonic["summary"], harmonic["model"]
+    cv = summary["cross_validation"]
+    assert cv["folds"] == len(model.nets_) == 5 and len(cv["fold_best_steps"]) == 5
+    # the weights are those of the step chosen on the pooled curve (recorded as the model's
+    # validation history), not each fold's own best
+    assert summary["best_step"] == cv["step"] == model.eval_every_ * (int(np.argmin(model.history_val_)) + 1)
+    assert cv["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
+    # every selected row served for training (in four folds of five) and none is set apart
+    assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]

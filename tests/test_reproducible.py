@@ -3,31 +3,38 @@ separate processes and whatever the BLAS thread count (OMP_NUM_THREADS / OPENBLA
 1 and 2).
 
 Two processes run the same commands in two folders, one with one BLAS thread and one with two
-(numpy's OpenBLAS caps the count at the number of cores, so on a one-core machine both have
-one). Every file and every stdout they produce must be byte for byte the same. Why it holds:
-training pins numpy's BLAS to one thread and splits large full batches over two worker
-threads in a fixed way (fricli/nn/training.py); identify pins the BLAS to one thread too (its
-threaded reductions round differently per thread count); model files have fixed zip
+(OpenBLAS caps the count at the number of cores, so on a one-core machine both have one).
+Every file and every stdout they produce must be byte for byte the same. Why it holds:
+training pins every loaded BLAS to one thread (``fricli.threads.single_threaded``, through
+threadpoolctl, whichever BLAS numpy and scipy use) and splits large full batches over two
+worker threads in a fixed way (fricli/nn/training.py); identify pins the BLAS to one thread
+too (its threaded reductions round differently per thread count); model files have fixed zip
 timestamps and sorted JSON; Parquet output carries no time stamps.
 """
 
+import json
 import os
 import subprocess
 import sys
+import threading
 
+import numpy as np
 import pyarrow.parquet as pq
+import pytest
+import threadpoolctl
 
 from conftest import ROOT, SAMPLE
+from fricli.threads import blas_threads, single_threaded
 
 SCRIPT = r"""
 import contextlib, io, os, sys
+import numpy
 from fricli.cli import cli
-from fricli import blas
+from fricli.threads import blas_threads
 
 sample = sys.argv[1]
-funcs = blas._openblas()
 with open("threads.txt", "w") as fh:
-    fh.write(str(funcs[0]() if funcs else 1))
+    fh.write(str(max(blas_threads().values())))
 runs = {
     "simulate": ["simulate", "--scenario", "adapt", "--joint", "4", "--seed", "5", "-o", "sim.parquet"],
     "identify": ["identify", f"{sample}/joint2_base.parquet", "-o", "lugre.npz", "--json"],
@@ -90,3 +97,79 @@ def test_same_bytes_in_separate_processes_and_across_blas_thread_counts(tmp_path
         if name.endswith(".parquet"):
             assert pq.read_table(one / name).equals(pq.read_table(two / name))
     assert '"fit"' in (one / "identify.stdout").read_text()  # stdout was captured, not lost
+
+
+@pytest.fixture
+def two_blas_threads():
+    """Every loaded BLAS (numpy's and scipy's) on two threads during the test, so that a limit to
+    one is visible whatever the environment says."""
+    import scipy.linalg  # noqa: F401
+
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: BLAS caps its thread count at one")
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        assert set(blas_threads().values()) == {2}
+        yield
+
+
+def test_single_threaded_pins_every_blas_and_restores_it(two_blas_threads):
+    with single_threaded():
+        assert set(blas_threads().values()) == {1}
+        with single_threaded():
+            assert set(blas_threads().values()) == {1}
+        assert set(blas_threads().values()) == {1}      # the inner block does not lift the limit
+    assert set(blas_threads().values()) == {2}
+
+
+def test_single_threaded_holds_until_the_last_thread_leaves(monkeypatch):
+    # a recording stand-in for threadpoolctl: the threads' order of entry and exit is forced
+    calls = []
+
+    class Limits:
+        def __init__(self, limits, user_api):
+            calls.append(("set", limits, user_api))
+
+        def restore_original_limits(self):
+            calls.append(("restore",))
+
+    monkeypatch.setattr(threadpoolctl, "threadpool_limits", Limits)
+    entered, leave = threading.Event(), threading.Event()
+
+    def first():
+        with single_threaded():
+            entered.set()
+            leave.wait(10)
+
+    worker = threading.Thread(target=first)
+    worker.start()
+    assert entered.wait(10)
+    with single_threaded():
+        leave.set()
+        worker.join(10)                     # the first thread leaves while this one is inside
+        assert calls == [("set", 1, "blas")]
+    assert calls == [("set", 1, "blas"), ("restore",)]
+
+
+_PINNED = """
+import json
+from fricli import identify, logs
+from fricli.threads import blas_threads
+
+seen = []
+fit = identify.LuGreIdentifier._fit
+identify.LuGreIdentifier._fit = lambda self, *a: seen.append(blas_threads()) or fit(self, *a)
+identify.identify(logs.load_log({path!r}))
+import scipy.optimize  # noqa: E402,F401
+print(json.dumps([seen[0], blas_threads()]))
+"""
+
+
+def test_identify_pins_scipys_blas_too():
+    # a fresh interpreter, where identify itself imports scipy (and scipy's own BLAS library)
+    code = _PINNED.format(path=str(SAMPLE / "joint2_base.parquet"))
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="2", PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    inside, loaded = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert sorted(inside) == sorted(loaded)          # scipy's BLAS library was loaded before the fit
+    assert set(inside.values()) == {1}

@@ -9,7 +9,6 @@ import click
 import pytest
 
 from conftest import ROOT
-from fricli import blas
 from fricli.cli import COMMANDS, cli
 
 HEAVY = ("scipy", "pandas", "matplotlib", "pyarrow")
@@ -63,16 +62,3 @@ def test_unknown_command_is_a_usage_error():
 
     res = CliRunner().invoke(cli, ["no-such-command"])
     assert res.exit_code == 2 and "No such command" in res.output
-
-
-@pytest.mark.skipif(blas._symbol("cblas_dtbsv") is None,
-                    reason="this numpy bundles no OpenBLAS: the LuGre recurrence falls back to scipy")
-def test_identify_and_lugre_prediction_need_no_scipy(tmp_path):
-    # scipy.optimize alone takes about half a second to import: identify must not need it
-    log, model = str(tmp_path / "base.parquet"), str(tmp_path / "lugre.npz")
-    from click.testing import CliRunner
-
-    assert CliRunner().invoke(cli, ["simulate", "--scenario", "base", "--rate", "100", "-o", log]).exit_code == 0
-    runs = [["identify", log, "-o", model], ["predict", model, log, "-o", str(tmp_path / "pred.parquet")]]
-    assert heavy_imports_after(runs) == ["pyarrow"]
-    assert (tmp_path / "pred.parquet").exists()

@@ -79,19 +79,21 @@ def _report_linear(data, model, fit, out, quiet: bool) -> dict:
 
 
 def _report(data, model, fit, output, quiet) -> None:
-    if quiet:
-        return
-    unit = data.units["tau"]
-    where = f"joint {data.joint}, " if data.joint is not None else ""
-    say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
-        f"{fit['steady_rows']:,} steady-state)")
-    for name, value in model.parameters().items():
-        say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
-    say(f"fit error, all rows:          {_figures(fit, unit)}")
-    say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
-    for note in fit["notes"]:
-        say(f"note: {note}")
-    say(wrote(output))
+    """Parameters, errors and notes (unless quiet), then the plausibility warnings (always)."""
+    if not quiet:
+        unit = data.units["tau"]
+        where = f"joint {data.joint}, " if data.joint is not None else ""
+        say(f"identified the extended LuGre model on {data.name} ({where}{len(data):,} rows, "
+            f"{fit['steady_rows']:,} steady-state)")
+        for name, value in model.parameters().items():
+            say(f"  {name:<7} {value:>12.6g} {unit_of(name, data.axis):<9} {PARAM_INFO[name][2]}")
+        say(f"fit error, all rows:          {_figures(fit, unit)}")
+        say(f"fit error, steady-state rows: {_figures(fit['steady'], unit)}")
+        for note in fit["notes"]:
+            say(f"note: {note}")
+    for warning in fit["warnings"]:
+        warn(f"warning: {warning}")
+    say(wrote(output), quiet)
 
 
 def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool) -> tuple[dict, bool]:

@@ -40,9 +40,14 @@ def _mae(summary: dict, key: str) -> str:
     return f"{summary[key]['mae']:.3f}" if key in summary else "-"
 
 
-def _rows_used(summary: dict) -> str:
+def _rows_used(summary: dict, tau: str) -> str:
     """How train-base chose its rows, for its message."""
     mode, val = summary["velocity_groups"], summary["val_rows"]
+    cv = summary.get("cross_validation")
+    if mode == "moving" and cv is not None:
+        return (f"rows in motion (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
+                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g} {tau}; "
+                "no steady velocity levels in the log)")
     if mode == "moving":
         return (f"rows in motion ({val} for validation in {summary['groups']} of "
                 f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
@@ -83,7 +88,9 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every
     level are held out for validation, and the weights with the lowest validation loss are kept.
     A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
-    rows in motion instead and holds out whole blocks of time; stderr says which.
+    rows in motion instead and holds out whole blocks of time; stderr says which. There the
+    dissipative network is the mean of five networks, each validated on other blocks, all
+    stopped at the step of the least validation loss over every block.
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
@@ -103,7 +110,8 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
     def report(made):
         the_log, summary, out, seconds = made.data, made.summary, made.output, made.seconds
         where = f" (joint {the_log.joint})" if the_log.joint is not None else ""
-        say(f"trained {arch} on {summary['train_rows']} {_rows_used(summary)} of {the_log.name}{where} in "
+        rows_used = _rows_used(summary, the_log.units["tau"])
+        say(f"trained {arch} on {summary['train_rows']} {rows_used} of {the_log.name}{where} in "
             f"{seconds:.1f} s; weights from step {summary['best_step']} of "
             f"{summary['steps']}{'' if summary['steps'] == summary['max_steps'] else ' (stopped early)'}", quiet)
         tau = the_log.units["tau"]

@@ -46,24 +46,29 @@ def neural(model, name: str, ctx: Context) -> Part:
 @emitter("dissipative")
 def dissipative(model, name: str, ctx: Context) -> Part:
     """tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale), r0 the
-    network's first output for (u, sign(qd)); b1, the bias of its second, is a constant."""
+    network's first output for (u, sign(qd)); b1, the bias of its second, is a constant. An
+    ensemble of K networks: the mean of the K magnitudes (K network evaluations)."""
     if model.net_ is None:
         raise ModelFileError("cannot export a network that is not fitted")
-    b1 = float(model.net_.weights[-1][1, -1])
+    nets = model.nets_
+    b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
     qd, tau_g = ctx.signal("qd"), ctx.signal("tau_g")
-    lines = [network.dense(model.net_, f"{name}_net", output=0),
+    names = [f"{name}_net" if k == 0 else f"{name}_net{k}" for k in range(len(nets))]
+    softplus = "log(1.0 + exp(-fabs(r_))) + (r_ > 0.0 ? r_ : 0.0)"   # softplus(r_), to 1e-16 absolute
+    lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names)),
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
-             "    double x[2], r0, s_;",
+             "    double x[2], r0, r_, s_;",
              (f"    s_ = fabs(qd) / {num(model.v0_)};" if model.v_max_ is None else
               f"    s_ = fmin(fabs(qd), qd > 0.0 ? {num(model.v_max_[0])} : {num(model.v_max_[1])}) / {num(model.v0_)};"),
              "    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
              "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
              f"    x[0] = (s_ - {num(model.u_mean_)}) / {num(model.u_scale_)};",
              f"    x[1] = {ctx.sgn}(qd);",
-             f"    r0 = {name}_net(x);",
-             "    r0 = log(1.0 + exp(-fabs(r0))) + (r0 > 0.0 ? r0 : 0.0);   /* softplus(r0), to 1e-16 absolute */",
-             f"    r0 = r0 + {num(acts.softplus(np.float64(b1)))} * (fabs({tau_g}) / {num(model.g_scale_)});",
+             "    r0 = 0.0;",
+             *(f"    r_ = {net_name}(x); r0 += {softplus};" for net_name in names),
+             *([] if len(nets) == 1 else [f"    r0 = r0 / {num(float(len(nets)))};"]),
+             f"    r0 = r0 + {num(b1)} * (fabs({tau_g}) / {num(model.g_scale_)});",
              *([] if model.v_max_ is None else [   # linear beyond the top training speeds
                  f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
                  f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),

@@ -78,9 +78,18 @@ class DissipativeFriction(FrictionModel):
         self.steps, self.epochs, self.lr, self.batch_size = steps, epochs, lr, batch_size
         self.eval_every, self.units = eval_every, dict(units or {})
         self.velocity_scale, self.presliding_speed = velocity_scale, presliding_speed
-        self.net_: HeadedNetwork | None = None
+        self.nets_: list[HeadedNetwork] | None = None   # one network, or the members of an ensemble
         self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
         self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
+
+    @property
+    def net_(self) -> HeadedNetwork | None:
+        """The (first) network."""
+        return self.nets_[0] if self.nets_ else None
+
+    @net_.setter
+    def net_(self, net: HeadedNetwork | None) -> None:
+        self.nets_ = None if net is None else [net]
 
     # ------------------------------------------------------------------ inputs
 
@@ -116,11 +125,47 @@ class DissipativeFriction(FrictionModel):
 
     def fit(self, sig: dict[str, np.ndarray], target: np.ndarray, val_sig: dict[str, np.ndarray] | None = None,
             val_target: np.ndarray | None = None, *, rng: np.random.Generator,
-            on_eval: Callable | None = None) -> "DissipativeFriction":
-        """Train on signals ``sig`` (moving rows already selected) against ``target`` (n,) [Nm]."""
+            on_eval: Callable | None = None, scales_from: "DissipativeFriction | None" = None,
+            snapshots: bool = False) -> "DissipativeFriction":
+        """Train on signals ``sig`` (moving rows already selected) against ``target`` (n,) [Nm].
+
+        ``scales_from``: a model whose scales (``set_scales``) to take instead of fitting them
+        on ``sig``; ``snapshots``: keep the weights at every loss record in ``snapshots_``
+        (one theta per record of ``history_val_``).
+        """
         target = np.asarray(target, dtype=np.float64)
         if target.size == 0:
             raise DataError("no training samples")
+        if scales_from is None:
+            self.set_scales(sig, target)
+        else:
+            for key in self._SCALARS:
+                setattr(self, f"{key}_", getattr(scales_from, f"{key}_"))
+        net = self.new_network().init(rng)
+        x = self._rows(sig)
+        y = (target / self.y_scale_)[None, :]
+        xv = tv = None
+        if val_sig is not None and val_target is not None and len(val_target):
+            xv = self._rows(val_sig)
+            tv = (np.asarray(val_target, dtype=np.float64) / self.y_scale_)[None, :]
+        self.snapshots_ = []
+        record = on_eval
+        if snapshots:
+            def record(*args):
+                self.snapshots_.append(net.theta.copy())
+                if on_eval is not None:
+                    on_eval(*args)
+        trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
+                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=record,
+                          schedule=self.schedule, patience=self.patience)
+        trainer.fit(net, x, y, xv, tv, rng=rng)
+        self.net_ = net
+        record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])
+        self._fit_extrapolation(np.asarray(sig["qd"], dtype=np.float64))
+        return self
+
+    def set_scales(self, sig: dict[str, np.ndarray], target: np.ndarray) -> None:
+        """v0, v_ps, g_scale, u_mean, u_scale and y_scale from the training rows ``sig`` and ``target`` (n,) [Nm]."""
         speed = np.abs(np.asarray(sig["qd"], dtype=np.float64))
         moving = speed[speed > 0]
         if not moving.size:
@@ -135,23 +180,14 @@ class DissipativeFriction(FrictionModel):
         self.g_scale_ = float(g.mean()) if g.mean() > 0 else 1.0
         u = np.arcsinh(speed / self.v0_)
         self.u_mean_, self.u_scale_ = float(u.mean()), float(u.std()) if u.std() > 1e-12 else 1.0
-        rms = float(np.sqrt(np.mean(target ** 2)))
+        rms = float(np.sqrt(np.mean(np.asarray(target, dtype=np.float64) ** 2)))
         self.y_scale_ = rms if rms > 0 else 1.0
-        net = self.new_network().init(rng)
-        x = self._rows(sig)
-        y = (target / self.y_scale_)[None, :]
-        xv = tv = None
-        if val_sig is not None and val_target is not None and len(val_target):
-            xv = self._rows(val_sig)
-            tv = (np.asarray(val_target, dtype=np.float64) / self.y_scale_)[None, :]
-        trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
-                          batch_size=self.batch_size, eval_every=self.eval_every, on_eval=on_eval,
-                          schedule=self.schedule, patience=self.patience)
-        trainer.fit(net, x, y, xv, tv, rng=rng)
-        self.net_ = net
-        record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])
-        self._fit_extrapolation(np.asarray(sig["qd"], dtype=np.float64))
-        return self
+
+    def set_members(self, nets: list[HeadedNetwork], qd: np.ndarray) -> None:
+        """Make the model the mean of ``nets`` (networks of ``new_network`` trained on this model's
+        scales); the extrapolation from the training velocities qd (n,)."""
+        self.nets_, self.v_max_, self.slope_ = list(nets), None, None
+        self._fit_extrapolation(np.asarray(qd, dtype=np.float64))
 
     def _fit_extrapolation(self, qd: np.ndarray) -> None:
         """v_max_ and slope_ from the training velocities qd (n,) (see the module doc)."""
@@ -171,8 +207,8 @@ class DissipativeFriction(FrictionModel):
 
     def load_slope(self) -> float:
         """k [Nm/Nm]: the growth of the friction magnitude per |tau_g|."""
-        b1 = float(self.net_.weights[-1][1, -1])
-        return self.y_scale_ * float(acts.softplus(np.array(b1))) / self.g_scale_
+        b1 = np.array([float(net.weights[-1][1, -1]) for net in self.nets_])
+        return self.y_scale_ * float(np.mean(acts.softplus(b1))) / self.g_scale_
 
     def magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
@@ -190,19 +226,25 @@ class DissipativeFriction(FrictionModel):
         n = len(signals["qd"]) if "qd" in signals else 0
         if self.precision not in ("single", "double"):
             raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
-        net = self.net_.astype(np.float64) if self.precision == "double" else self.net_
+        nets = [net.astype(np.float64) if self.precision == "double" else net for net in self.nets_]
         out = np.empty(n, dtype=np.float64)
 
         def run(part: list[tuple[int, int]]) -> None:
-            ws = None
+            ws = [None] * len(nets)
             for start, stop in part:
-                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, net.dtype)
+                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, nets[0].dtype)
                 if sliding:
                     x[2] = 1.0
-                if ws is None or ws.n != stop - start:
-                    ws = net.workspace(stop - start, backward=False)
-                ws.set_inputs(x)
-                np.multiply(net.forward(ws)[0], self.y_scale_, out=out[start:stop])
+                for k, net in enumerate(nets):
+                    if ws[k] is None or ws[k].n != stop - start:
+                        ws[k] = net.workspace(stop - start, backward=False)
+                    ws[k].set_inputs(x)
+                    if k == 0:
+                        np.multiply(net.forward(ws[k])[0], self.y_scale_, out=out[start:stop])
+                    else:
+                        out[start:stop] += net.forward(ws[k])[0] * self.y_scale_
+                if len(nets) > 1:
+                    out[start:stop] /= len(nets)
                 if self.v_max_ is not None:
                     qd = signals["qd"][start:stop]
                     beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
@@ -226,6 +268,8 @@ class DissipativeFriction(FrictionModel):
                   "units": self.units}
         if self.net_ is not None:
             params["network"] = self.net_.spec()
+            if len(self.nets_) > 1:
+                params["members"] = len(self.nets_)
             params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
             if self.v_max_ is not None:
                 params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
@@ -235,7 +279,7 @@ class DissipativeFriction(FrictionModel):
     def get_arrays(self) -> dict[str, np.ndarray]:
         if self.net_ is None:
             return {}
-        arrays = {f"W{i}": w.copy() for i, w in enumerate(self.net_.weights)}
+        arrays = {f"{_member(k)}W{i}": w.copy() for k, net in enumerate(self.nets_) for i, w in enumerate(net.weights)}
         arrays.update(training_arrays(self))
         return arrays
 
@@ -256,13 +300,19 @@ class DissipativeFriction(FrictionModel):
             if key != "u_mean" and not value > 0:
                 raise ValueError(f"scale {key} must be positive")
             setattr(model, f"{key}_", float(value))
-        net = model.new_network()
-        if params.get("network", {}).get("head") != net.head.name:
-            raise ValueError("the network does not match the model")
-        net.set_weights([arrays[f"W{i}"] for i in range(len(net.shapes))])
-        if net.theta[net.frozen].any():
-            raise ValueError("the load slope depends on the speed")
-        model.net_ = net
+        members = params.get("members", 1)
+        if not isinstance(members, int) or isinstance(members, bool) or members < 1:
+            raise ValueError(f"damaged member count {members!r}")
+        nets = []
+        for k in range(members):
+            net = model.new_network()
+            if params.get("network", {}).get("head") != net.head.name:
+                raise ValueError("the network does not match the model")
+            net.set_weights([arrays[f"{_member(k)}W{i}"] for i in range(len(net.shapes))])
+            if net.theta[net.frozen].any():
+                raise ValueError("the load slope depends on the speed")
+            nets.append(net)
+        model.nets_ = nets
         extra = params.get("extrapolation")
         if extra is not None:
             v_max, slope = extra.get("v_max"), extra.get("slope")
@@ -283,7 +333,10 @@ class DissipativeFriction(FrictionModel):
                  f"{' | '.join(f'{n} {act}' for n in self.hidden_sizes)}; linear output"]
         if self.net_ is None:
             return "\n".join(lines + ["  (not fitted)"])
-        lines += [f"  {self.net_.n_params} parameters",
+        if len(self.nets_) > 1:
+            lines.append(f"  the mean of {len(self.nets_)} such networks (r0 and b1 each), trained on "
+                         "different blocks of the log")
+        lines += [f"  {sum(net.n_params for net in self.nets_)} parameters",
                   f"  v0 {self.v0_:.4g} {v}, pre-sliding speed v_ps {self.v_ps_:.4g} {v}, "
                   f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}",
                   f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"]
@@ -293,9 +346,16 @@ class DissipativeFriction(FrictionModel):
                          f"{self.y_scale_ * self.slope_[1]:.4g} {tau} per {v}")
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
+        held = (f"{self.n_val_} for validation" if len(self.nets_) == 1 else
+                "each network trained on all but one fold of them, validated on that one")
         lines.append(f"  trained with Adam (lr {self.lr:g}) for {how} on {self.n_train_} samples "
-                     f"({self.n_val_} for validation); weights kept from step {self.best_step_}")
+                     f"({held}); weights kept from step {self.best_step_}")
         return "\n".join(lines)
+
+
+def _member(k: int) -> str:
+    """Prefix of member k's arrays: none for the first (a single network's file), "M{k}_" after."""
+    return f"M{k}_" if k else ""
 
 
 def _pair(value) -> bool:

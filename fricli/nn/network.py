@@ -31,7 +31,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from fricli.blas import single_threaded
+from fricli.threads import single_threaded
 from fricli.nn import activations as acts
 from fricli.nn.activations import Activation
 

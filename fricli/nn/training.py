@@ -22,7 +22,7 @@ import numpy as np
 
 from fricli.errors import FitError
 from fricli.nn.adam import Adam
-from fricli.blas import single_threaded
+from fricli.threads import single_threaded
 from fricli.nn.network import PREDICT_CHUNK, Network
 
 CHUNK_MIN = 8192          # full batches this large are split over two threads
