@@ -34,6 +34,12 @@ ALLOWED = {
     ("training_data.py", "a speed threshold"):
         "the lowest bin of the velocity histogram that finds a sweep's levels (LOW, below the in-motion share: "
         "a sweep's slowest levels), not a choice of rows in motion",
+    ("identify.py", "a speed threshold"):
+        "the velocity noise floor of steady-state and settled detection (NOISE_FLOOR, or four times the "
+        "sample-to-sample velocity noise): rows whose velocity is known well enough to lie on the static "
+        "curve, a stricter test applied after in_motion, not a choice of rows in motion",
+    ("identify.py", "a share of the top speed"):
+        "the same velocity noise floor of steady-state detection",
 }
 
 
