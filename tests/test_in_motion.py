@@ -37,7 +37,7 @@ ALLOWED = {
     ("identify.py", "a speed threshold"):
         "the velocity noise floor of steady-state and settled detection (NOISE_FLOOR, or four times the "
         "sample-to-sample velocity noise): rows whose velocity is known well enough to lie on the static "
-        "curve, a stricter test applied after in_motion, not a choice of rows in motion",
+        "curve (steady or settled), a question other than which rows move",
     ("identify.py", "a share of the top speed"):
         "the same velocity noise floor of steady-state detection",
 }
