@@ -59,9 +59,9 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     """
     import json
 
-    from fricli.atomic import atomic_write_bytes
+    from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.options import _json_safe
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping

@@ -6,13 +6,14 @@ import os
 
 import click
 
-from fricli import logs, modelset, models
+from fricli import models
+from fricli.core import logs, modelset
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
                                 read_log, reading_kwargs, say)
-from fricli.diagnosis import driver
-from fricli.diagnosis import effects as E
-from fricli.errors import OutputError
+from fricli.fitting.diagnosis import driver
+from fricli.fitting.diagnosis import effects as E
+from fricli.core.errors import OutputError
 
 
 def _effect_names(ctx, param, value):

@@ -9,7 +9,7 @@ import click
 
 from fricli.cli import cli
 from fricli.cli.options import common, output_option, say, warn
-from fricli.errors import LogError
+from fricli.core.errors import LogError
 
 
 def urdf_options(f):
@@ -96,7 +96,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
       fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
       fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
     from fricli.robot import mapping as mp
     from fricli.robot import rosbag
     from fricli.robot.importing import build_log, import_files, import_recording
@@ -194,7 +194,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.dynamics import load_model
     from fricli.robot.logterms import add_terms
