@@ -57,6 +57,17 @@ def _where(entry: dict, unit: str) -> str:
     return f"{unit}{'s' if entry['count'] != 1 else ''} {shown}{more}"
 
 
+
+def urdf_joint_names(pairs) -> dict[str, str]:
+    """--urdf-joint JOINT=NAME pairs as {log joint: URDF joint name}."""
+    names = {}
+    for pair in pairs:
+        joint, sep, urdf_name = pair.partition("=")
+        if not sep or not joint or not urdf_name:
+            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
+        names[joint] = urdf_name
+    return names
+
 @cli.command("import")
 @click.argument("recordings", nargs=-1, required=True, metavar="RECORDING...")
 @click.option("--mapping", "mapping_path", default=None, metavar="MAP.toml",
@@ -201,12 +212,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
 
     if match is None:
         raise click.UsageError("choose how the log's joints match the URDF's: --match name|order")
-    names = {}
-    for pair in urdf_pairs:
-        joint, sep, urdf_name = pair.partition("=")
-        if not sep or not joint or not urdf_name:
-            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
-        names[joint] = urdf_name
+    names = urdf_joint_names(urdf_pairs)
     payload = None
     if payload_mass is not None or payload_com is not None or payload_frame is not None:
         payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
