@@ -15,10 +15,11 @@ import sys
 
 import numpy as np
 
-from fricli import logs, metrics, sim
-from fricli.diagnosis import diagnose
-from fricli.diagnosis.fix import augment
-from fricli.identify import identify
+from fricli import sim
+from fricli.core import logs, metrics
+from fricli.fitting.diagnosis import diagnose
+from fricli.fitting.diagnosis.fix import augment
+from fricli.fitting.identify import identify
 
 CASES = [("ripple",), ("temperature",), ("drift",), ("asymmetry",), ("inertia",), ("load",), ("velocity",),
          ("level",), ("offset",), ("column",), ("gravity",), ("quadrant",), ("temperature", "ripple"),

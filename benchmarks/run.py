@@ -37,12 +37,14 @@ if ROOT not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from fricli import learning, logs, physics  # noqa: E402
+from fricli.core import logs
+from fricli.fitting import learning
+from fricli.numerics import physics# noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
-from fricli.nn import activations as acts  # noqa: E402
-from fricli.threads import blas_threads, single_threaded  # noqa: E402
-from fricli.nn.network import Network  # noqa: E402
-from fricli.nn.training import Standardizer, Trainer  # noqa: E402
+from fricli.numerics.nn import activations as acts  # noqa: E402
+from fricli.numerics.threads import blas_threads, single_threaded  # noqa: E402
+from fricli.numerics.nn.network import Network  # noqa: E402
+from fricli.numerics.nn.training import Standardizer, Trainer  # noqa: E402
 
 SAMPLE = os.path.join(ROOT, "sample_data")
 BASE_LOG = os.path.join(SAMPLE, "joint2_base.parquet")
@@ -116,7 +118,7 @@ def training_arrays(log: logs.Log, seed: int = 0):
 
 def _train_rows(log: logs.Log, seed: int):
     try:
-        from fricli import training_data
+        from fricli.fitting import training_data
         sig = log.signals
         speed = np.abs(sig["qd"])
         moving = speed > training_data.LOW * float(speed.max())
@@ -200,7 +202,7 @@ def torch_worker(folder: str, steps: int, batch: int, repeats: int, threads: int
     Adam with a cosine learning rate from 0.01 to 0 over ``steps`` full-batch steps, the
     validation loss (xv.npy, tv.npy) every k steps and a copy of the best weights; ``arch`` mlp
     (inputs tau_g, qd) or dissipative (rows u, sign qd, c, g: y = c (softplus(r0) + softplus(b1) g),
-    r0 the network's output, b1 one more parameter, as fricli.nn.heads)."""
+    r0 the network's output, b1 one more parameter, as fricli.numerics.nn.heads)."""
     import torch
 
     torch.set_num_threads(threads)
@@ -514,9 +516,10 @@ def bench_predict_files(add, tmp: str, paths: dict, big_path: str, rows: int, re
 
 def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
     """One model file per kind, trained briefly (prediction cost does not depend on the fit)."""
-    from fricli import identify, models
-    from fricli.diagnosis import driver
-    from fricli.diagnosis.fix import augment
+    from fricli import models
+    from fricli.fitting import identify
+    from fricli.fitting.diagnosis import driver
+    from fricli.fitting.diagnosis.fix import augment
 
     steps = 20 if quick else 200
     lugre = identify.identify(base_log).model_
@@ -538,7 +541,7 @@ def build_models(tmp: str, base_log: logs.Log, quick: bool) -> dict[str, str]:
 def bench_identify(add, tmp: str, size: dict, reps: int) -> None:
     """identify on a simulated base log of ``identify_rows`` rows (the sample log when None):
     the library call on the loaded log, and the whole command."""
-    from fricli import identify
+    from fricli.fitting import identify
     if size["identify_rows"]:
         id_path = os.path.join(tmp, "identify.parquet")
         rate = size["identify_rows"] / 351.0
@@ -697,7 +700,7 @@ def main(argv=None) -> dict:
                                "--duration", f"{size['diagnose_rows'] / 100.0:g}"])
         else:
             dg_path = EXT_LOG
-        from fricli.diagnosis import driver
+        from fricli.fitting.diagnosis import driver
         dg_log = logs.load_log(dg_path)
         lugre, _ = models.load(paths["lugre"])
         add("diagnose", f"diagnose (library), lugre model, {len(dg_log):,} rows",
@@ -825,7 +828,7 @@ def plot(sc: dict, path: str) -> None:
     fig.tight_layout()
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
-    from fricli.atomic import atomic_open
+    from fricli.core.atomic import atomic_open
     with atomic_open(path) as fh:
         fig.savefig(fh, format="png", dpi=110)
     plt.close(fig)

@@ -6,10 +6,13 @@ import json
 import os
 from typing import Callable
 
-from fricli import evaluation, learning, logs, models, report
-from fricli.atomic import atomic_write_bytes
-from fricli.identify import LuGreIdentifier
-from fricli.predicting import external_estimate
+from fricli import models
+from fricli.applying import evaluation, report
+from fricli.core import logs
+from fricli.fitting import learning
+from fricli.core.atomic import atomic_write_bytes
+from fricli.fitting.identify import LuGreIdentifier
+from fricli.applying.predicting import external_estimate
 from fricli.sim.samples import sample_path
 
 ROWS = (("LuGre", "lugre"), ("NN_base", "nn_base"), ("Selmic", "selmic"), ("NNACM", "nnacm"),

@@ -4,7 +4,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from fricli.logs import table_from_arrays
+from fricli.core.logs import table_from_arrays
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "sample_data"
@@ -29,7 +29,7 @@ def declare_zero(table, *columns):
 def no_inertia(table):
     """``table`` with a tau_dyn column of zeros in tau_m's unit: a synthetic log whose tau_m holds no
     inertia torque (a missing tau_dyn is unknown, not zero)."""
-    from fricli import logs
+    from fricli.core import logs
 
     if "tau_dyn" in table.column_names:
         return table

@@ -1,4 +1,4 @@
-"""Atomic writes (fricli/atomic.py): writers of one output never remove each other's temporary
+"""Atomic writes (fricli/core/atomic.py): writers of one output never remove each other's temporary
 files, a dead writer's leftover is removed, and the process umask is never touched."""
 
 from __future__ import annotations
@@ -14,14 +14,14 @@ import types
 import pytest
 
 from conftest import ROOT
-from fricli import atomic
-from fricli.errors import OutputError
+from fricli.core import atomic
+from fricli.core.errors import OutputError
 
 # Writer A in its own process: creates its temporary file, writes half of its content, says so,
 # waits for the word "go" on stdin, then writes the rest and renames.
 WRITER = """
 import sys
-from fricli.atomic import atomic_open
+from fricli.core.atomic import atomic_open
 with atomic_open(sys.argv[1]) as fh:
     fh.write(b"A" * 50_000)
     fh.flush()

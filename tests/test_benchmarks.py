@@ -54,7 +54,7 @@ def test_quick_run_prints_every_measurement(quick_run):
 
 def test_python_loop_reference_matches_the_library():
     bench = _load()
-    from fricli import physics
+    from fricli.numerics import physics
 
     rng = np.random.default_rng(0)
     n = 500

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
-from fricli import errors, logs
+from fricli.core import errors, logs
 
 pin = pytest.importorskip("pinocchio")
 

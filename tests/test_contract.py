@@ -8,11 +8,14 @@ import numpy as np
 import pytest
 from test_joints import write_log
 
-from fricli import joints, learning, logs, modelfile, models, modelset, predicting
+from fricli import models
+from fricli.applying import predicting
+from fricli.core import joints, logs, modelfile, modelset
+from fricli.fitting import learning
 
 
 def _lugre(log):
-    from fricli.identify import LuGreIdentifier
+    from fricli.fitting.identify import LuGreIdentifier
 
     return LuGreIdentifier().fit(log.signals, units=log.units, axis=log.axis).model_
 
@@ -35,8 +38,8 @@ def _residual(log):
 
 
 def _augmented(log):
-    from fricli.diagnosis import driver
-    from fricli.diagnosis.fix import augment
+    from fricli.fitting.diagnosis import driver
+    from fricli.fitting.diagnosis.fix import augment
 
     base = _linear(log)
     model = augment(base, driver.diagnose(base, log, only=["direction", "load"]), log, carry=False)
@@ -48,7 +51,7 @@ def _coupled(path: str):
     """The coupled wrist of the simulated arm (fricli.sim.coupled): (the log of the group's first
     joint, with the partner's velocity; the view that predicts that joint; the arm's log file)."""
     from fricli.models import coupled
-    from fricli.robot import transmission
+    from fricli.core import transmission
     from fricli.sim.coupled import simulate_coupled
 
     table = simulate_coupled(duration=3.0, rate_hz=400.0, rng=np.random.default_rng(3)).table

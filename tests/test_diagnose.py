@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from fricli import logs, metrics, models
+from fricli import models
+from fricli.core import logs, metrics
 from fricli.cli import cli
-from fricli.diagnosis import diagnose
-from fricli.diagnosis import effects as E
-from fricli.diagnosis import driver, selection, structure
+from fricli.fitting.diagnosis import diagnose
+from fricli.fitting.diagnosis import effects as E
+from fricli.fitting.diagnosis import driver, selection, structure
 from fricli.cli.diagnose import table
 from fricli.models import terms as T
-from fricli.diagnosis.fix import augment
-from fricli.errors import ModelFileError
+from fricli.fitting.diagnosis.fix import augment
+from fricli.core.errors import ModelFileError
 from fricli.models.augmented import AugmentedModel
 from fricli.models.base import FrictionModel
 
@@ -213,7 +214,7 @@ def test_column_effect_needs_the_column_and_is_found(rng):
 
 
 def test_too_short_log_is_refused(rng):
-    from fricli.errors import DataError
+    from fricli.core.errors import DataError
 
     with pytest.raises(DataError, match="too few rows"):
         diagnose(CoulombViscous(), synthetic(rng, n=100))
@@ -293,7 +294,7 @@ def _sim(seed, *effects, duration=60.0):
 def lugre_base():
     """The LuGre model identified on a clean base log (seed 1)."""
     from fricli import sim
-    from fricli.identify import identify
+    from fricli.fitting.identify import identify
 
     return identify(logs.from_table(sim.simulate("base", joint=2, seed=1), name="base seed 1")).model_
 

@@ -7,14 +7,16 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import no_inertia, write
-from fricli import learning, logs, models
+from fricli import models
+from fricli.core import logs
+from fricli.fitting import learning
 from fricli.cli import cli
-from fricli.logs import table_from_arrays
+from fricli.core.logs import table_from_arrays
 from fricli.models.dissipative import DissipativeFriction
 from fricli.models.residual import ResidualFriction
-from fricli.nn import activations as acts
-from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.training import Trainer
+from fricli.numerics.nn import activations as acts
+from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
+from fricli.numerics.nn.training import Trainer
 from test_neural import UNITS, motion_log, static_friction
 
 
@@ -139,7 +141,7 @@ def test_residual_files_without_the_form_are_additive(base_log, tmp_path):
     adapted, _ = learning.adapt(model, adapt_log, epochs=2, seed=0)
     path = str(tmp_path / "a.npz")
     models.save_for_log(path, adapted, adapt_log, rows_used=1)
-    from fricli import modelfile
+    from fricli.core import modelfile
 
     meta, arrays = modelfile.read(path)
     del meta["model"]["params"]["combine"]               # as written before the dissipative form
@@ -161,7 +163,7 @@ def test_dissipative_round_trip_and_describe(base_log, trained, tmp_path):
     assert f"load slope k = y_scale softplus(b1) / g_scale = {model.load_slope():.4g} Nm/Nm" in loaded.describe()
     assert not model.net_.theta[model.net_.frozen].any()    # the slope does not depend on the speed
     meta["model"]["params"]["scales"]["v_ps"] = -1.0
-    from fricli import modelfile
+    from fricli.core import modelfile
 
     _, arrays = modelfile.read(path)
     modelfile.write(path, meta, arrays)
@@ -232,7 +234,7 @@ def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
     np.testing.assert_array_equal(loaded.predict(sig)[0], model.predict(sig)[0])
     assert_dissipative(loaded, sig, loaded.v_ps_)
     # files written without the records extrapolate as the network does
-    from fricli import modelfile
+    from fricli.core import modelfile
 
     meta, arrays = modelfile.read(path)
     del meta["model"]["params"]["extrapolation"]

@@ -7,10 +7,11 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
-from fricli import logs, models
+from fricli import models
+from fricli.core import logs
 from fricli.cli import cli
 from fricli.models.coupled import CoupledModel, fit_group, group_rows
-from fricli.robot.transmission import Transmission, of_schema
+from fricli.core.transmission import Transmission, of_schema
 from fricli.sim.coupled import default_arm, simulate_coupled
 
 WRIST = [4, 5]   # indices of joints 5 and 6
@@ -185,7 +186,7 @@ def test_coupling_needs_a_transmission(tmp_path, arm_logs):
 def test_coupled_fit_refuses_a_motor_that_does_not_move():
     qd = np.zeros((100, 2))
     qd[:, 0] = np.linspace(-1, 1, 100)
-    from fricli.errors import FitError
+    from fricli.core.errors import FitError
     with pytest.raises(FitError, match="motor 1"):
         CoupledModel.fit([5, 6], [[1.0, 0.0], [0.0, 1.0]], qd[:, ::-1], np.zeros((100, 2)))
 

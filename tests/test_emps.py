@@ -12,7 +12,9 @@ import pytest
 from click.testing import CliRunner
 from conftest import shared_data
 
-from fricli import emps, logs, models
+from fricli import models
+from fricli.applying import emps
+from fricli.core import logs
 from fricli.cli import cli
 
 # ----------------------------------------------------------------- processing (no data needed)

@@ -9,10 +9,11 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import no_inertia, write
-from fricli import logs, modelfile, models
+from fricli import models
+from fricli.core import logs, modelfile
 from fricli.cli import cli
-from fricli.envelope import Envelope
-from fricli.logs import table_from_arrays
+from fricli.core.envelope import Envelope
+from fricli.core.logs import table_from_arrays
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "tau_m": "Nm", "tau_g": "Nm", "tau_ext": "Nm"}
 
@@ -162,7 +163,7 @@ def test_old_files_without_an_envelope(files, tmp_path):
 
 
 def test_report_shades_the_uncovered_region(files, tmp_path):
-    from fricli import report
+    from fricli.applying import report
 
     summary = report.write_report(str(files["model"]), logs.load_log(files["fast"]), str(tmp_path / "r"))
     assert summary["extrapolation"]["share"] > 0.3

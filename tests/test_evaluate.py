@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 import test_report
 from conftest import SAMPLE
-from fricli import metrics
+from fricli.core import metrics
 from fricli.cli import cli
 
 ASYM = str(SAMPLE / "joint2_extended_asym.parquet")
@@ -92,7 +92,7 @@ def test_evaluate_reports_rms_beside_mae(fitted, tmp_path):
     """The table's RMS cells are the JSON's rmse, which is the root mean square of predict's error."""
     import pyarrow.parquet as pq
 
-    from fricli import logs
+    from fricli.core import logs
 
     runner = CliRunner()
     args = ["evaluate", "--model", f"lugre={fitted['lugre']}", "--log", f"asym={ASYM}"]

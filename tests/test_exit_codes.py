@@ -1,5 +1,5 @@
 """Every exit code that the docs, README.md and ``--help`` texts state agrees with
-``fricli.errors.TABLE``, and the shell recipes in the docs act on the codes as they say."""
+``fricli.core.errors.TABLE``, and the shell recipes in the docs act on the codes as they say."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import sys
 import pytest
 from click.testing import CliRunner
 
-from fricli import errors
+from fricli.core import errors
 from fricli.cli import COMMANDS, cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -18,7 +18,8 @@ from conftest import SAMPLE, shared_data
 
 import export_check as check
 
-from fricli import logs, models
+from fricli import models
+from fricli.core import logs
 from fricli.cli import cli
 from fricli.export import c, network
 from fricli.models import terms as T
@@ -309,7 +310,7 @@ def test_the_elu_without_library_calls_is_within_rounding_of_numpy(tmp_path):
     """The exported ELU computes e^u by a Pade approximant and squaring, in passes: e^u - 1
     within 2e-14 of numpy's float64 ELU (its documented error bound, 1e-14, with room for the
     platform's rounding), v itself for v >= 0, past the clamp too."""
-    from fricli.nn import activations as acts
+    from fricli.numerics.nn import activations as acts
 
     rng = np.random.default_rng(3)
     x = np.r_[-1e3, -40.5, -40.0, -39.9, -1e-300, -0.0, 0.0, 1e-300, 2.5, 1e3, -rng.exponential(3.0, 4000),

@@ -14,7 +14,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from fricli import errors, logs, metrics, models
+from fricli import models
+from fricli.core import errors, logs, metrics
 from fricli.fleet import history, manifest, trend
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -293,7 +294,7 @@ def test_job_with_diagnose_records_effects_in_process(fleet_dir, tmp_path):
 
 
 def test_manifest_options_over_the_command_defaults(tmp_path):
-    from fricli import optionspec
+    from fricli.fitting import optionspec
     from fricli.fleet import pipelines
 
     (tmp_path / "logs").mkdir()

@@ -20,9 +20,11 @@ from conftest import no_inertia
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fricli import logs, modelfile, models, predicting
+from fricli import models
+from fricli.applying import predicting
+from fricli.core import logs, modelfile
 from fricli.cli import cli
-from fricli.errors import FricliError
+from fricli.core.errors import FricliError
 from fricli.models.lugre import LuGreModel
 
 EXAMPLES = int(os.environ.get("FRICLI_FUZZ_EXAMPLES", "0"))

@@ -10,9 +10,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from conftest import ROOT, shared_data
-from fricli import errors
-from fricli.errors import DataError
-from fricli.logs import friction_target, from_table
+from fricli.core import errors
+from fricli.core.errors import DataError
+from fricli.core.logs import friction_target, from_table
 from fricli.robot import recording
 from fricli.robot.importing import import_recording
 from fricli.robot.mapping import apply_overrides, parse_mapping, parse_overrides

@@ -10,7 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import no_inertia
-from fricli import errors, logs, models, modelset
+from fricli import models
+from fricli.core import errors, logs, modelset
 from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
 

@@ -18,7 +18,8 @@ import time
 from click.testing import CliRunner
 
 from conftest import ROOT, make_table, write
-from fricli import errors, models
+from fricli import models
+from fricli.core import errors
 from fricli.cli import cli
 
 

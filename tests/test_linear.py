@@ -9,7 +9,8 @@ import pytest
 from click.testing import CliRunner
 from conftest import SAMPLE, no_inertia, write
 
-from fricli import logs, models
+from fricli import models
+from fricli.core import logs
 from fricli.cli import cli
 from fricli.models.linear import LinearFriction, fit
 
@@ -57,7 +58,7 @@ def test_identify_recovers_the_parameters_exactly(params, tmp_path):
 
 def test_the_fit_refuses_motion_in_one_direction():
     qd = np.linspace(0.1, 1.0, 100)
-    from fricli.errors import DataError
+    from fricli.core.errors import DataError
 
     with pytest.raises(DataError, match="negative velocity"):
         fit({"t": np.arange(100.0), "qd": qd, "tau_m": qd})

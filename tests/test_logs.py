@@ -6,8 +6,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from conftest import make_table
-from fricli import logs
-from fricli.errors import DataError, LogError
+from fricli.core import logs
+from fricli.core.errors import DataError, LogError
 
 
 def test_reads_si_log():

@@ -8,10 +8,12 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE, shared_data
-from fricli import errors, logs, metrics, models, physics
+from fricli import models
+from fricli.core import errors, logs, metrics
+from fricli.numerics import physics
 from fricli.cli import cli
-from fricli.errors import DataError, FitError, ModelFileError
-from fricli.identify import LuGreIdentifier, speed_levels, steady_state_mask
+from fricli.core.errors import DataError, FitError, ModelFileError
+from fricli.fitting.identify import LuGreIdentifier, speed_levels, steady_state_mask
 from fricli.models import lugre
 from fricli.models.lugre import LuGreModel
 
@@ -37,7 +39,7 @@ def _friction_log(t, q, v, p, amp, sub, noise, rng) -> dict:
 
 def sweep_signals(seed=0, levels=None, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, both=True,
                   q_start=-1.2):
-    """A constant-velocity sweep log made with fricli.physics (not with the model under test):
+    """A constant-velocity sweep log made with fricli.numerics.physics (not with the model under test):
     each level once in each direction, smooth ramps, gravity amplitude*sin(q), friction integrated
     at sub*rate and sampled at rate, Gaussian noise on tau_m."""
     rng = np.random.default_rng(seed)
@@ -80,7 +82,7 @@ def fitted(sweep):
 
 
 def reference(model, sig):
-    """The friction straight from fricli.physics."""
+    """The friction straight from fricli.numerics.physics."""
     v = sig["qd"]
     fc, fs, fv = model._levels(v, sig.get("tau_g") if model.loaded else None,
                                sig.get("temp") if model.thermal else None)
@@ -333,7 +335,7 @@ def test_few_speed_levels_give_a_coulomb_viscous_fit():
 
 def harmonic_signals(seed=0, rate=100.0, sub=10, noise=0.25, amp=43.0, p=TRUE, period=50.0, n_harm=14):
     """A continuous excitation log (sum of n_harm harmonics of 1/period, no constant-velocity
-    holds) made with fricli.physics, as the sweep: gravity amplitude*sin(q), noise on tau_m."""
+    holds) made with fricli.numerics.physics, as the sweep: gravity amplitude*sin(q), noise on tau_m."""
     rng = np.random.default_rng(seed)
     fs_int = rate * sub
     t = np.arange(int(2 * period * fs_int)) / fs_int
@@ -367,7 +369,7 @@ def test_continuous_log_without_tau_dyn_keeps_the_holds():
 
 
 def test_refinement_that_does_not_converge_keeps_its_best_estimate():
-    from fricli.identify import _Layout
+    from fricli.fitting.identify import _Layout
     sig = sweep_signals(seed=3)
     idf = LuGreIdentifier().fit(sig)
     start = idf.model_.parameters()
@@ -557,7 +559,7 @@ def test_emps_coulomb_viscous_fit(tmp_path):
 
 @pytest.mark.parametrize("n, before, after", [(1, 1, 1), (5, 3, 1), (37, 1, 4), (1000, 57, 14), (300, 1200, 300)])
 def test_window_extreme_matches_a_direct_window(n, before, after):
-    from fricli.identify import window_extreme
+    from fricli.fitting.identify import window_extreme
 
     x = np.random.default_rng(n).standard_normal(n)
     for op in (np.maximum, np.minimum):

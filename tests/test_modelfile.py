@@ -7,9 +7,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from fricli import modelfile
-from fricli.atomic import atomic_open, atomic_write_bytes
-from fricli.errors import ModelFileError
+from fricli.core import modelfile
+from fricli.core.atomic import atomic_open, atomic_write_bytes
+from fricli.core.errors import ModelFileError
 
 META = {"format": modelfile.FORMAT, "format_version": modelfile.FORMAT_VERSION, "kind": "x", "a": 1.5}
 

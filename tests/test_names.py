@@ -6,7 +6,7 @@ from click.testing import CliRunner
 
 from fricli import models, sim
 from fricli.cli import COMMANDS, cli
-from fricli.diagnosis import effects as diagnosis_effects
+from fricli.fitting.diagnosis import effects as diagnosis_effects
 from fricli.sim import effects as sim_effects
 
 

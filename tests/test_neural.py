@@ -7,13 +7,15 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE, no_inertia, shared_data, write
-from fricli import learning, logs, metrics, modelfile, models, training_data
+from fricli import models
+from fricli.core import logs, metrics, modelfile
+from fricli.fitting import learning, training_data
 from fricli.cli import cli
-from fricli.errors import DataError
-from fricli.logs import table_from_arrays
+from fricli.core.errors import DataError
+from fricli.core.logs import table_from_arrays
 from fricli.models.neural import MLPFriction, NNACMFriction, SelmicFriction, feature
 from fricli.models.residual import ResidualFriction
-from fricli.nn.network import PREDICT_CHUNK, predict_in_chunks, prediction_threads
+from fricli.numerics.nn.network import PREDICT_CHUNK, predict_in_chunks, prediction_threads
 
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_f_true": "Nm"}
 LEVELS = (0.02, 0.05, 0.1, 0.2, 0.4)

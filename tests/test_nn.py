@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from fricli.errors import FitError
-from fricli.nn import activations as acts
-from fricli.nn.adam import Adam
-from fricli.nn import network as network_module
-from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.network import Groups, Network
-from fricli.nn.training import CHUNK_MIN, Standardizer, Trainer, _sse_and_grad, sse
+from fricli.core.errors import FitError
+from fricli.numerics.nn import activations as acts
+from fricli.numerics.nn.adam import Adam
+from fricli.numerics.nn import network as network_module
+from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
+from fricli.numerics.nn.network import Groups, Network
+from fricli.numerics.nn.training import CHUNK_MIN, Standardizer, Trainer, _sse_and_grad, sse
 
 
 def finite_difference(f, x, eps=1e-6):

@@ -12,7 +12,9 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import ROOT, make_table
-from fricli import errors, logs, metrics, models, predicting
+from fricli import models
+from fricli.applying import predicting
+from fricli.core import errors, logs, metrics
 from fricli.cli import cli
 from fricli.models import register
 from fricli.models.base import FrictionModel

@@ -19,10 +19,12 @@ from test_export import ABS, REL, _train, needs_cc
 
 import export_check as check
 
-from fricli import errors, evaluation, logs, metrics, modelfile, models, report, sim
+from fricli import models, sim
+from fricli.applying import evaluation, report
+from fricli.core import errors, logs, metrics, modelfile
 from fricli.cli import cli
-from fricli.diagnosis import effects as E
-from fricli.diagnosis.driver import residual
+from fricli.fitting.diagnosis import effects as E
+from fricli.fitting.diagnosis.driver import residual
 from fricli.export import c
 from fricli.models import terms as T
 from fricli.models.augmented import AugmentedModel

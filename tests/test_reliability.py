@@ -18,7 +18,8 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import no_inertia
-from fricli import errors, jobs, logs, modelfile, models
+from fricli import models
+from fricli.core import errors, jobs, logs, modelfile
 from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
 

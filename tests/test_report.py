@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import SAMPLE
 
-from fricli import report
+from fricli.applying import report
 from fricli.cli import cli
 
 ASYM = str(SAMPLE / "joint2_extended_asym.parquet")

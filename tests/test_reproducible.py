@@ -5,9 +5,9 @@ separate processes and whatever the BLAS thread count (OMP_NUM_THREADS / OPENBLA
 Two processes run the same commands in two folders, one with one BLAS thread and one with two
 (OpenBLAS caps the count at the number of cores, so on a one-core machine both have one).
 Every file and every stdout they produce must be byte for byte the same. Why it holds:
-training pins every loaded BLAS to one thread (``fricli.threads.single_threaded``, through
+training pins every loaded BLAS to one thread (``fricli.numerics.threads.single_threaded``, through
 threadpoolctl, whichever BLAS numpy and scipy use) and splits large full batches over two
-worker threads in a fixed way (fricli/nn/training.py); identify pins the BLAS to one thread
+worker threads in a fixed way (fricli/numerics/nn/training.py); identify pins the BLAS to one thread
 too (its threaded reductions round differently per thread count); model files have fixed zip
 timestamps and sorted JSON; Parquet output carries no time stamps.
 """
@@ -24,13 +24,13 @@ import pytest
 import threadpoolctl
 
 from conftest import ROOT, SAMPLE
-from fricli.threads import blas_threads, single_threaded
+from fricli.numerics.threads import blas_threads, single_threaded
 
 SCRIPT = r"""
 import contextlib, io, os, sys
 import numpy
 from fricli.cli import cli
-from fricli.threads import blas_threads
+from fricli.numerics.threads import blas_threads
 
 sample = sys.argv[1]
 with open("threads.txt", "w") as fh:
@@ -152,8 +152,9 @@ def test_single_threaded_holds_until_the_last_thread_leaves(monkeypatch):
 
 _PINNED = """
 import json
-from fricli import identify, logs
-from fricli.threads import blas_threads
+from fricli.core import logs
+from fricli.fitting import identify
+from fricli.numerics.threads import blas_threads
 
 seen = []
 fit = identify.LuGreIdentifier._fit

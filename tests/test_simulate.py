@@ -10,7 +10,8 @@ import pytest
 from click.testing import CliRunner
 
 from conftest import SAMPLE
-from fricli import logs, physics
+from fricli.core import logs
+from fricli.numerics import physics
 from fricli.cli import cli
 from fricli.sim import EFFECTS, JOINTS, metadata, simulate, true_params
 from fricli.sim import effects as fx

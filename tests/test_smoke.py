@@ -17,7 +17,8 @@ from click.testing import CliRunner
 
 import test_urdf
 from conftest import ROOT, SAMPLE
-from fricli import errors, logs, models
+from fricli import models
+from fricli.core import errors, logs
 from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
 
@@ -188,7 +189,7 @@ def test_trend_figures_creates_its_folder(tmp_path, rng):
 
 
 def _model_folder(folder):
-    from fricli import modelset
+    from fricli.core import modelset
 
     folder.mkdir()
     for joint in (1, 2):
@@ -211,7 +212,7 @@ def test_inspect_reads_a_model_folder_as_export_does(tmp_path):
 def test_deploy_doc_names_the_files_and_symbols_the_code_writes(tmp_path):
     """The per-joint file names and C symbols docs/deploy.md quotes are those of fricli's own model
     folder and export, and the header and the doc say that linking needs -lm."""
-    from fricli import modelset
+    from fricli.core import modelset
     from fricli.export import c
 
     doc = (ROOT / "docs" / "deploy.md").read_text()

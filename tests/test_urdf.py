@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from conftest import ROOT, shared_data
-from fricli import errors
+from fricli.core import errors
 from fricli.robot.mapping import Payload, parse_mapping
 
 # two-link planar arm, both axes along z: masses [kg], lengths [m], centre-of-mass distances
@@ -213,7 +213,7 @@ def test_import_with_urdf_writes_the_analytic_terms(tmp_path, rng):
 
 def test_derived_acceleration_is_recorded_and_follows_the_log_contract(tmp_path, rng):
     pytest.importorskip("pinocchio")
-    from fricli.logs import derive_motion
+    from fricli.core.logs import derive_motion
 
     t, q, qd, _ = write_case(tmp_path, rng, qdd=False)
     res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "two_link.urdf", "--cutoff", "10",

@@ -1,4 +1,4 @@
-"""--from/--until: a time window on every command that reads a log (fricli.timewindow)."""
+"""--from/--until: a time window on every command that reads a log (fricli.core.timewindow)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ import pytest
 from click.testing import CliRunner
 from conftest import SAMPLE, make_table, write
 
-from fricli import errors, logs, models, timewindow
+from fricli import models
+from fricli.core import errors, logs, timewindow
 from fricli.cli import cli
 
 BASE = str(SAMPLE / "joint2_base.parquet")

@@ -20,7 +20,7 @@ from click.testing import CliRunner
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from fricli import logs
+from fricli.core import logs
 from fricli.cli import cli
 from fricli.sim.coupled import default_arm, simulate_coupled
 

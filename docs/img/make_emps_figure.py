@@ -18,10 +18,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from click.testing import CliRunner  # noqa: E402
 
-from fricli import emps, logs, models  # noqa: E402
+from fricli import models
+from fricli.applying import emps
+from fricli.core import logs# noqa: E402
 from fricli.cli import cli  # noqa: E402
-from fricli.diagnosis import diagnose  # noqa: E402
-from fricli.diagnosis.fix import augment  # noqa: E402
+from fricli.fitting.diagnosis import diagnose  # noqa: E402
+from fricli.fitting.diagnosis.fix import augment  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data" / "emps" / "emps.parquet"

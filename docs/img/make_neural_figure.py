@@ -23,7 +23,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from fricli import learning, logs, physics  # noqa: E402
+from fricli.core import logs
+from fricli.fitting import learning
+from fricli.numerics import physics# noqa: E402
 from fricli.sim import simulator  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]

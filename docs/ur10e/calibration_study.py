@@ -25,7 +25,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
-from fricli import logs, metrics  # noqa: E402
+from fricli.core import logs, metrics# noqa: E402
 
 DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "ur10e")
 MAPPING = os.path.join(ROOT, "docs", "ur10e-mapping.toml")
@@ -116,7 +116,7 @@ def residuals(paths, joint, predict) -> dict:
 def unconstrained(fit_log, cad):
     """The calibration's linear (maximum a posteriori) estimate without the consistency step, and the
     robot model to predict with it."""
-    from fricli.logs import read_table
+    from fricli.core.logs import read_table
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping

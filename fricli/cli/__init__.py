@@ -11,7 +11,7 @@ import sys
 import click
 
 from fricli import __version__
-from fricli import errors
+from fricli.core import errors
 
 
 # Every command: name -> "module:function". A command's module is imported only when the

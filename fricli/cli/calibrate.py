@@ -59,19 +59,15 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     """
     import json
 
-    from fricli.atomic import atomic_write_bytes
+    from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.options import _json_safe
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table
+    from fricli.cli.robot import urdf_joint_names
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
 
-    names = {}
-    for pair in urdf_pairs:
-        joint, sep, urdf_name = pair.partition("=")
-        if not sep or not joint or not urdf_name:
-            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
-        names[joint] = urdf_name
+    names = urdf_joint_names(urdf_pairs)
     if names and match is None:
         match = "name"
     robot = load_model(urdf, Mapping(time=None, joints=[], gravity=tuple(gravity)))

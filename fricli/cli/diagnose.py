@@ -6,13 +6,14 @@ import os
 
 import click
 
-from fricli import logs, modelset, models
+from fricli import models
+from fricli.core import logs, modelset
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, read_log, reading_kwargs, say, warn)
-from fricli.diagnosis import driver
-from fricli.diagnosis import effects as E
-from fricli.errors import FricliError, OutputError
+from fricli.fitting.diagnosis import driver
+from fricli.fitting.diagnosis import effects as E
+from fricli.core.errors import FricliError, OutputError
 
 
 def _effect_names(ctx, param, value):
@@ -225,10 +226,11 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 def _fix_refitted(table, digest: str, name: str, output: str, source, report) -> dict:
     """--fix after --calibrate: each joint's base model refitted on the recomputed log
     (``fix.refit``), diagnosed and fixed there, written under the job's record and lock as
-    ``fricli.runs`` writes a fixed model; {joint: report(made)}."""
-    from fricli import jobs, metrics, runs
+    ``fricli.fitting.runs`` writes a fixed model; {joint: report(made)}."""
+    from fricli.core import jobs, metrics
+    from fricli.fitting import runs
     from fricli.cli.options import command_options
-    from fricli.diagnosis.fix import augment, refit
+    from fricli.fitting.diagnosis.fix import augment, refit
 
     opts = command_options("diagnose")
     pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
@@ -271,7 +273,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
     import json
 
-    from fricli.atomic import atomic_write_bytes
+    from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.calibrate import report_path
     from fricli.cli.options import _json_safe
     from fricli.robot import calibration as cb

@@ -6,7 +6,8 @@ import os
 
 import click
 
-from fricli import evaluation, logs
+from fricli.applying import evaluation
+from fricli.core import logs
 from fricli.cli import cli
 from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
                                 reading_kwargs, say)
@@ -87,7 +88,8 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
-    from fricli import modelset, report  # matplotlib loads only for this command
+    from fricli.applying import report
+    from fricli.core import modelset# matplotlib loads only for this command
 
     source = modelset.source(model)
     table, digest = read_log(log)

@@ -30,7 +30,7 @@ def export_cmd(model, output, prefix, quiet):
       fricli export lugre.npz -o friction.h
       fricli export models/ --prefix arm -o arm_friction.h
     """
-    from fricli.atomic import atomic_write_bytes
+    from fricli.core.atomic import atomic_write_bytes
     from fricli.export import c
 
     try:

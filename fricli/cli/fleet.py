@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import click
 
-from fricli import errors
+from fricli.core import errors
 from fricli.cli import cli
 from fricli.cli.options import common, emit_json, json_flag, progress_enabled, say
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fricli import models, modelset
+from fricli import models
+from fricli.core import modelset
 from fricli.cli import cli
 from fricli.cli.options import common, emit_json
 

@@ -6,7 +6,7 @@ import os
 
 import click
 
-from fricli import errors
+from fricli.core import errors
 from fricli.cli import cli
 from fricli.cli.options import (check_outputs, command_options, common, emit_results, fit_joints, if_changed_option,
                                 json_flag, log_reading, output_option, read_log, say, spec_options, time_window,
@@ -99,10 +99,11 @@ def _report(data, model, fit, output, quiet) -> None:
 def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool) -> tuple[dict, bool]:
     """``fit_joints`` for identify --coupling: a joint of a coupled group of the log's transmission
     brings its whole group into one model (DIR/joints_<a>_<b>.npz); the other joints get theirs."""
-    from fricli import joints, logs, modelset, runs
-    from fricli.errors import LogError
+    from fricli.core import joints, logs, modelset
+    from fricli.fitting import runs
+    from fricli.core.errors import LogError
     from fricli.models import coupled
-    from fricli.robot import transmission
+    from fricli.core import transmission
 
     opts = command_options("identify")
     window = time_window()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fricli import learning, training_data
+from fricli.fitting import learning, training_data
 from fricli.cli import cli
 from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, output_option, progress_enabled, say, spec_options, wrote)
@@ -156,7 +156,7 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
       fricli adapt lugre.npz sample_data/joint2_adapt.parquet --max-seconds 40 -o lugre_adapted.npz
     """
     check_outputs(output, as_json)
-    from fricli import modelset
+    from fricli.core import modelset
 
     def report(made):
         the_log, summary, out, base_path = made.data, made.summary, made.output, made.base

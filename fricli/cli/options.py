@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from fricli import errors, timewindow
+from fricli.core import errors, timewindow
 
 
 def _set_debug(ctx: click.Context, _param, value: bool) -> bool:
@@ -34,7 +34,7 @@ def _window_bound(ctx: click.Context, param, value: str | None) -> None:
 
 
 def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
-    from fricli import optionspec
+    from fricli.fitting import optionspec
 
     if value:
         ctx.meta.setdefault("fricli.zero", []).append(optionspec.ZERO_FLAGS[param.name])
@@ -50,14 +50,14 @@ def declared_zero() -> tuple[str, ...]:
 def log_reading(f):
     """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
     docs/log-format.md); --from, --until: the rows read (``time_window``, ``read_log``;
-    fricli.timewindow)."""
+    fricli.core.timewindow)."""
     for name in ("until", "from"):
         f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
                          callback=_window_bound,
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
-    from fricli.optionspec import READING, ZERO_FLAGS
+    from fricli.fitting.optionspec import READING, ZERO_FLAGS
 
     for opt in reversed(READING):
         if opt.name in ZERO_FLAGS:   # read by declared_zero, like --from/--until by time_window
@@ -134,7 +134,7 @@ def time_window() -> timewindow.Window:
 def read_log(log: str):
     """(table, sha256) of LOG (- for stdin) with the rows of --from/--until; the sha256 is the
     whole file's (the window is recorded with the options, ``model_job``)."""
-    from fricli import logs
+    from fricli.core import logs
 
     table, digest = logs.read_table(log)
     return timewindow.slice_table(table, time_window(), "stdin" if log == "-" else log), digest
@@ -146,13 +146,13 @@ def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
 
 
 # Options that do not change the model a command writes (arguments are files: the log is
-# recorded by its sha256, input models by theirs, ``fricli.runs.record``).
+# recorded by its sha256, input models by theirs, ``fricli.fitting.runs.record``).
 _NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix"}
 
 
 def _click_option(opt):
-    """A click option from a ``fricli.optionspec.Option``."""
-    from fricli import optionspec
+    """A click option from a ``fricli.fitting.optionspec.Option``."""
+    from fricli.fitting import optionspec
 
     kwargs = {"help": opt.help, "metavar": opt.metavar}
     if opt.type == "flag":
@@ -180,8 +180,8 @@ def _click_option(opt):
 
 
 def spec_options(pipeline: str):
-    """The click options of ``pipeline``'s model-shaping options (``fricli.optionspec.PIPELINES``)."""
-    from fricli import optionspec
+    """The click options of ``pipeline``'s model-shaping options (``fricli.fitting.optionspec.PIPELINES``)."""
+    from fricli.fitting import optionspec
 
     def decorate(f):
         for opt in reversed(optionspec.PIPELINES[pipeline]):
@@ -201,8 +201,8 @@ def if_changed_option(f):
 
 def command_options(pipeline: str) -> dict:
     """The options of the running command that shape the model ``pipeline`` writes
-    (``fricli.runs.options``; a wrong combination is a usage error on the option it names)."""
-    from fricli import optionspec, runs
+    (``fricli.fitting.runs.options``; a wrong combination is a usage error on the option it names)."""
+    from fricli.fitting import optionspec, runs
 
     ctx = click.get_current_context()
     arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
@@ -222,8 +222,8 @@ def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
 
 def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool,
                source=None, read=None, progress=None) -> tuple[dict, bool]:
-    """Run ``pipeline`` (``fricli.runs.run``) with the command's options for every joint LOG's run
-    covers (the joint rule, fricli.joints): one model file at OUTPUT, or one per joint in the
+    """Run ``pipeline`` (``fricli.fitting.runs.run``) with the command's options for every joint LOG's run
+    covers (the joint rule, fricli.core.joints): one model file at OUTPUT, or one per joint in the
     folder OUTPUT; ``report(made)`` prints what was made and returns its JSON result.
 
     ``source``: the input models (``joints.Source``) of a command that starts from a model, each
@@ -231,7 +231,8 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
     a trainer progress callback with ``close()``. Returns ({joint: result} for the joints fitted,
     whether OUTPUT is a folder). With --if-changed an up-to-date output is left untouched; exits
     UNCHANGED (9) when every output is up to date. LOCKED (8) when another job holds an output."""
-    from fricli import logs, modelset, runs
+    from fricli.core import logs, modelset
+    from fricli.fitting import runs
 
     ctx = click.get_current_context()
     opts = command_options(pipeline)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import click
 
-from fricli import modelset, predicting
+from fricli.applying import predicting
+from fricli.core import modelset
 from fricli.cli import cli
 from fricli.cli.options import (common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
                                 output_option, progress_enabled, say, time_window, warn)

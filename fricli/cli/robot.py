@@ -9,7 +9,7 @@ import click
 
 from fricli.cli import cli
 from fricli.cli.options import common, output_option, say, warn
-from fricli.errors import LogError
+from fricli.core.errors import LogError
 
 
 def urdf_options(f):
@@ -57,6 +57,17 @@ def _where(entry: dict, unit: str) -> str:
     return f"{unit}{'s' if entry['count'] != 1 else ''} {shown}{more}"
 
 
+
+def urdf_joint_names(pairs) -> dict[str, str]:
+    """--urdf-joint JOINT=NAME pairs as {log joint: URDF joint name}."""
+    names = {}
+    for pair in pairs:
+        joint, sep, urdf_name = pair.partition("=")
+        if not sep or not joint or not urdf_name:
+            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
+        names[joint] = urdf_name
+    return names
+
 @cli.command("import")
 @click.argument("recordings", nargs=-1, required=True, metavar="RECORDING...")
 @click.option("--mapping", "mapping_path", default=None, metavar="MAP.toml",
@@ -96,7 +107,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
       fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
       fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
     from fricli.robot import mapping as mp
     from fricli.robot import rosbag
     from fricli.robot.importing import build_log, import_files, import_recording
@@ -194,19 +205,14 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.dynamics import load_model
     from fricli.robot.logterms import add_terms
 
     if match is None:
         raise click.UsageError("choose how the log's joints match the URDF's: --match name|order")
-    names = {}
-    for pair in urdf_pairs:
-        joint, sep, urdf_name = pair.partition("=")
-        if not sep or not joint or not urdf_name:
-            raise click.UsageError(f"--urdf-joint: expected JOINT=NAME, got {pair!r}")
-        names[joint] = urdf_name
+    names = urdf_joint_names(urdf_pairs)
     payload = None
     if payload_mass is not None or payload_com is not None or payload_frame is not None:
         payload = _payload(mp, None, payload_mass, payload_com, payload_frame)

@@ -30,8 +30,8 @@ from typing import Callable
 import numpy as np
 
 from fricli import __version__
-from fricli.errors import ModelFileError
-from fricli.logs import REFERENCES
+from fricli.core.errors import ModelFileError
+from fricli.core.logs import REFERENCES
 from fricli.models.base import FrictionModel
 
 # signals in the order the step function takes them; other columns follow in name order
@@ -111,7 +111,7 @@ class Context:
 
     def signal(self, name: str) -> str:
         """The C expression of signal ``name`` inside a step function (argument ``in``); a
-        reference column (``fricli.logs.REFERENCES``) is refused."""
+        reference column (``fricli.core.logs.REFERENCES``) is refused."""
         if name in REFERENCES:
             raise ModelFileError(f"the model reads the reference column {name!r}, which a controller does not have")
         if name not in self.fields:

@@ -1,10 +1,10 @@
-"""C code of a dense network (``fricli.nn.Network``): layers, biases and activations.
+"""C code of a dense network (``fricli.numerics.nn.Network``): layers, biases and activations.
 
 ``dense(net, name)`` defines ``static inline double <name>(const double *x)``: the network's
 single output for the standardised inputs x (n_in inputs, then n_skip inputs that go straight
 to the output layer), in double precision. Weights are function-local const tables (flat), stored
 input-major so the compiler can vectorise over a layer's units. Activations are written by
-the functions in ``ACTIVATIONS``, one per activation name, mirroring ``fricli.nn.activations``:
+the functions in ``ACTIVATIONS``, one per activation name, mirroring ``fricli.numerics.nn.activations``:
 C statements turning ``v`` into the unit's output, or a list of statements run as successive
 passes over the layer's units, carrying a scratch value ``t`` per unit from pass to pass; only
 the last pass changes ``v``. The body is written once, as ``<name>_body``; ``<name>`` calls its
@@ -18,9 +18,9 @@ import re
 
 import numpy as np
 
-from fricli.errors import ModelFileError
+from fricli.core.errors import ModelFileError
 from fricli.export.c import AVX2, array, num
-from fricli.nn import activations as acts
+from fricli.numerics.nn import activations as acts
 
 
 EXP_SQUARINGS = 5   # e^-y = R(y / 2^5)^(2^5), R the (4, 4) Pade approximant of e^-x

@@ -5,17 +5,17 @@ the dense network, and the output scaling
 
 with the velocity input asinh(qd / v0) when the model has a velocity scale; and of the
 dissipative network (``fricli.models.dissipative``), its first output through the head of
-``fricli.nn.heads``. Stateless.
+``fricli.numerics.nn.heads``. Stateless.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from fricli.errors import ModelFileError
+from fricli.core.errors import ModelFileError
 from fricli.export import network
 from fricli.export.c import Context, Part, emitter, num
-from fricli.nn import activations as acts
+from fricli.numerics.nn import activations as acts
 
 
 def feature(model, name: str, ctx: Context) -> str:

@@ -9,7 +9,7 @@ A new factor kind needs one entry here.
 
 from __future__ import annotations
 
-from fricli.errors import ModelFileError
+from fricli.core.errors import ModelFileError
 from fricli.export.c import Context, num
 
 def gear(ctx: Context) -> str:

@@ -12,8 +12,8 @@ import os
 
 import pyarrow as pa
 
-from fricli import atomic
-from fricli.errors import LogError, OutputError
+from fricli.core import atomic
+from fricli.core.errors import LogError, OutputError
 
 # LuGre parameters kept as columns (NaN for model kinds without them), with their units for a rotary joint.
 PARAMETERS = {"fc": "Nm", "fs": "Nm", "vs": "rad/s", "delta": "-", "fv": "Nm s/rad", "kc": "Nm/Nm",
@@ -43,7 +43,7 @@ SCHEMA = pa.schema(
      _field("seconds", pa.float64(), "s", "run time of the job")]
     + [_field(name, pa.float64(), unit, f"identified LuGre parameter {name}") for name, unit in PARAMETERS.items()]
     + [_field(name, pa.float64(), unit, f"friction error ({name}) of the model over the log's rows in motion "
-                                        "(fricli.metrics.in_motion), every pipeline alike")
+                                        "(fricli.core.metrics.in_motion), every pipeline alike")
        for name, unit in ERRORS.items()]
     + [_field("effects", pa.string(), doc="effects the model misses, comma-separated (diagnose; empty when not run)")]
 )

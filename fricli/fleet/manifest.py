@@ -11,7 +11,7 @@
     joints = [1, 2, 3, 4, 5, 6]
 
     [options.identify]           # options of each pipeline, as the command's long options
-    hold = 0.2                   # (fricli.optionspec; checked when the manifest is read)
+    hold = 0.2                   # (fricli.fitting.optionspec; checked when the manifest is read)
 
     [[robot]]
     name = "robot001"
@@ -31,8 +31,8 @@ import os
 import re
 import tomllib
 
-from fricli import optionspec
-from fricli.errors import FricliError, NOTHING_RAN
+from fricli.fitting import optionspec
+from fricli.core.errors import FricliError, NOTHING_RAN
 
 PIPELINES = ("identify", "train-base", "adapt")
 _ROBOT_KEYS = {"name", "logs", "joints", "pipeline", "base", "options", "diagnose"}

@@ -1,5 +1,5 @@
 """One fleet job: a pipeline (identify, train-base, adapt) on one (robot, joint, log), run by
-``fricli.runs`` like the command of the same name: a model written by the fleet is up to date
+``fricli.fitting.runs`` like the command of the same name: a model written by the fleet is up to date
 for ``fricli identify ... --if-changed`` with the same options, and the other way round."""
 
 from __future__ import annotations
@@ -7,17 +7,18 @@ from __future__ import annotations
 import os
 import time
 
-from fricli import errors, logs, runs
+from fricli.core import errors, logs
+from fricli.fitting import runs
 from fricli.fleet.manifest import Job
 
 
 def options_of(job: Job) -> dict:
-    """The job's options over the pipeline's defaults (``fricli.optionspec``), its joint included."""
+    """The job's options over the pipeline's defaults (``fricli.fitting.optionspec``), its joint included."""
     return runs.options(job.pipeline, dict(job.options, joint=job.joint or None))
 
 
 def _diagnose(model, data) -> tuple[list, str]:
-    from fricli.diagnosis import driver
+    from fricli.fitting.diagnosis import driver
 
     try:
         return list(driver.diagnose(model, data).added), ""
@@ -31,7 +32,7 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
     Returns {"status": ok | unchanged | failed, "reason": one line or "", "seconds",
     "kind", "parameters", "errors", "sha256", "effects"}: "errors" are the MAE, RMSE and max
     over the log's rows in motion (``runs.moving_errors``). With ``job.diagnose`` the effects the
-    new model misses are looked for (``fricli.diagnosis``); when that fails the job stays ok and
+    new model misses are looked for (``fricli.fitting.diagnosis``); when that fails the job stays ok and
     the reason says why."""
     start = time.perf_counter()
     out = {"status": "failed", "reason": "", "kind": None, "parameters": {}, "errors": {}, "sha256": "",

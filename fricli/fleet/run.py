@@ -11,7 +11,7 @@ import os
 import secrets
 from typing import Callable, Iterator
 
-from fricli import errors
+from fricli.core import errors
 from fricli.fleet import history, pipelines
 from fricli.fleet.manifest import Manifest
 

@@ -133,7 +133,7 @@ def figure(t: JointTrend, rule: WearRule, path: str) -> None:
     level limit (matplotlib's object API: no pyplot state)."""
     from matplotlib.figure import Figure
 
-    from fricli import atomic
+    from fricli.core import atomic
 
     dates = [dt.date.fromisoformat(d) for d in t.dates]
     fig = Figure(figsize=(7, 3.8), layout="constrained")
@@ -158,7 +158,7 @@ def figures(result: list[JointTrend], rule: WearRule, folder: str) -> list[str]:
     ``<robot>-joint<joint>.png``; returns the paths written."""
     import os
 
-    from fricli.errors import OutputError
+    from fricli.core.errors import OutputError
 
     try:
         os.makedirs(folder, exist_ok=True)

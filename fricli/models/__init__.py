@@ -11,8 +11,8 @@ import importlib
 
 import numpy as np
 
-from fricli import modelfile
-from fricli.errors import ModelFileError
+from fricli.core import modelfile
+from fricli.core.errors import ModelFileError
 from fricli.models.base import FrictionModel
 
 _KIND_MODULES = ("lugre", "linear", "neural", "dissipative", "residual", "augmented", "coupled")
@@ -127,9 +127,9 @@ def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict
 
 
 def envelope(meta: dict, name: str = "model"):
-    """The training envelope (``fricli.envelope.Envelope``) recorded in a model file's meta, or
+    """The training envelope (``fricli.core.envelope.Envelope``) recorded in a model file's meta, or
     None for files without one."""
-    from fricli.envelope import Envelope
+    from fricli.core.envelope import Envelope
 
     try:
         return Envelope.from_meta(meta.get("envelope"))
@@ -141,7 +141,7 @@ def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: 
                  fit: dict | None = None, envelope: dict | None = None, **extra) -> dict:
     """``save`` with joint, units and provenance taken from the log the model was fitted on; the
     training envelope is the log's over the model's inputs unless ``envelope`` is given."""
-    from fricli.envelope import Envelope
+    from fricli.core.envelope import Envelope
 
     if envelope is None:
         envelope = Envelope.fit(log.signals, model.required_inputs()).to_meta()

@@ -10,7 +10,7 @@ import numpy as np
 class FrictionModel:
     """A friction model: ``predict`` maps a log's signals to tau_f [Nm] (positive along motion).
 
-    Signals are float64 arrays of shape (n,) in canonical units (see ``fricli.logs``).
+    Signals are float64 arrays of shape (n,) in canonical units (see ``fricli.core.logs``).
     ``state`` carries history (e.g. the LuGre bristle state) from one batch of rows to the
     next; stateless kinds ignore it and return None.
     """

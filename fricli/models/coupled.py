@@ -1,6 +1,6 @@
 """Friction where it lives: one model for a group of joints that share motors (kind ``coupled``).
 
-For the k joints of a coupled group with transmission R (k, k) (``fricli.robot.transmission``):
+For the k joints of a coupled group with transmission R (k, k) (``fricli.core.transmission``):
 
     theta_d = R q_d                                        motor velocities [rad/s], (k,) per sample
     f_i     = Fv_i theta_d_i + Fc_i sign(theta_d_i) + o_i  motor i's friction [Nm] (motor side)
@@ -26,11 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from fricli import logs, metrics
-from fricli.errors import DataError, FitError, ModelFileError
+from fricli.core import logs, metrics
+from fricli.core.errors import DataError, FitError, ModelFileError
 from fricli.models import register
 from fricli.models.base import FrictionModel
-from fricli.robot.transmission import Transmission
+from fricli.core.transmission import Transmission
 
 FEATURES = ("fv", "fc", "offset")
 STRIBECK = ("fs", "vs")
@@ -207,7 +207,7 @@ def figures(err: np.ndarray) -> dict:
 
 
 def group_rows(table, group, name: str, **reading) -> tuple[np.ndarray, list]:
-    """The times t (n,) [s] and the ``fricli.logs.Log`` of every joint of ``group`` in ``table``
+    """The times t (n,) [s] and the ``fricli.core.logs.Log`` of every joint of ``group`` in ``table``
     (long format); refused unless every joint has rows at the same times."""
     quiet = {k: v for k, v in reading.items() if k != "warn"}   # the log's notes once, with the first joint
     datas = [logs.from_table(table, name=name, joint=j, **(reading if i == 0 else quiet)) for i, j in enumerate(group)]
@@ -235,7 +235,8 @@ def fit_group(datas: list, transmission: Transmission, *, stribeck: bool = False
 def save_group(path: str, model: CoupledModel, data, *, fit: dict, **provenance) -> dict:
     """Write ``model`` to ``path``: a model file that records its joints as ``joints`` (``joint``
     null), with units and provenance from ``data``, the log of one of the group's joints."""
-    from fricli import modelfile, models
+    from fricli import models
+    from fricli.core import modelfile
 
     spec, arrays = models.to_parts(model)
     meta = modelfile.base_meta()
@@ -252,7 +253,7 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     direction ``sign_motor@<m>`` of each motor m that turns with ``joint`` and another joint (a
     motor is named by the joint of its row of R); {} when the log records no transmission or the
     joint shares no motor."""
-    from fricli.robot import transmission
+    from fricli.core import transmission
 
     try:
         tr = transmission.of_schema(table.schema.metadata)

@@ -35,7 +35,7 @@ Models written without these records extrapolate as the network does.
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
 PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
 training target. Training minimises the mean squared error of tau_f / y_scale with the
-trainer of ``fricli.nn.training`` (the head is part of the network, ``fricli.nn.heads``).
+trainer of ``fricli.numerics.nn.training`` (the head is part of the network, ``fricli.numerics.nn.heads``).
 """
 
 from __future__ import annotations
@@ -44,15 +44,15 @@ from typing import Callable
 
 import numpy as np
 
-from fricli.errors import DataError
+from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
                                   training_arrays, training_params)
-from fricli.nn import activations as acts
-from fricli.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.nn.network import predict_in_chunks
-from fricli.nn.training import Trainer
+from fricli.numerics.nn import activations as acts
+from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
+from fricli.numerics.nn.network import predict_in_chunks
+from fricli.numerics.nn.training import Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
 

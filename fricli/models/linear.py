@@ -9,7 +9,7 @@ difference of the two Coulomb levels),
 
 the model of the inverse-dynamics identification literature (e.g. the EMPS benchmark). Both are
 linear in their parameters: ``fit`` is ordinary least squares on the rows in motion
-(``fricli.metrics.in_motion``) against the friction target (``fricli.logs.friction_target``).
+(``fricli.core.metrics.in_motion``) against the friction target (``fricli.core.logs.friction_target``).
 Stateless. A linear axis uses the same equations in m/s and N.
 """
 
@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from fricli import logs, metrics
-from fricli.errors import DataError, FitError
+from fricli.core import logs, metrics
+from fricli.core.errors import DataError, FitError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 

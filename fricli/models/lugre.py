@@ -9,7 +9,7 @@ In steady sliding (constant v) tau_f = sign(v)*g(v) + Fv*v. Optional effects, ab
 default: direction asymmetry (``fc_neg``, ``fs_neg``, ``fv_neg`` used for v < 0) and
 temperature dependence (Fc, Fs scaled by 1 - alpha_c*(T - t_ref), Fv by exp(-alpha_v*(T - t_ref))).
 The bristle state is integrated exactly for v and g held over each sample interval (the update of
-``fricli.physics``, a linear recurrence solved with BLAS ``dtbsv``; see docs/lugre.md). A linear
+``fricli.numerics.physics``, a linear recurrence solved with BLAS ``dtbsv``; see docs/lugre.md). A linear
 axis uses the same equations in m, m/s and N.
 """
 
@@ -20,8 +20,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from fricli import physics
-from fricli.errors import DataError
+from fricli.numerics import physics
+from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 

@@ -26,13 +26,13 @@ from typing import Callable
 
 import numpy as np
 
-from fricli import logs, metrics
-from fricli.errors import DataError
+from fricli.core import logs, metrics
+from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
-from fricli.nn import activations as acts
-from fricli.nn.network import Network, predict_in_chunks
-from fricli.nn.training import Standardizer, Trainer
+from fricli.numerics.nn import activations as acts
+from fricli.numerics.nn.network import Network, predict_in_chunks
+from fricli.numerics.nn.training import Standardizer, Trainer
 
 FEATURES = ("qd", "tau_g", "sign(qd)", "pos(qd)", "neg(qd)")
 VELOCITY_QUANTILE = 0.05   # velocity_scale="auto": v0 = this quantile of |qd| over the training rows

@@ -33,7 +33,7 @@ import numpy as np
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import MLPFriction
-from fricli.nn.activations import softplus
+from fricli.numerics.nn.activations import softplus
 
 ADD_INPUTS = ("tau_g", "sign(qd)")
 COMBINE = ("dissipative", "additive")

@@ -30,7 +30,7 @@ The load the gear holds is what the motor puts in minus what the motor-side fric
 inertia take: tau_l = tau_m - tau_dyn - p, with the base model's friction p; that is gravity plus
 any external load (tau_g - tau_ext where both are known) from what a controller has
 (docs/diagnose.md). Terms read inputs only
-(``fricli.logs.INPUTS``), never a reference column such as tau_ext; the factors ``gear``,
+(``fricli.core.logs.INPUTS``), never a reference column such as tau_ext; the factors ``gear``,
 ``absgear``, ``payloadgear`` and ``heldgear`` of older model files read tau_ext and are refused
 (``check``).
 """
@@ -39,8 +39,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from fricli import logs
-from fricli.errors import DataError, ModelFileError
+from fricli.core import logs
+from fricli.core.errors import DataError, ModelFileError
 
 
 def factor_inputs(factor: dict) -> set[str]:

@@ -29,8 +29,8 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from fricli import logs
-from fricli.errors import DataError, FitError, LogError, ModelFileError
+from fricli.core import logs
+from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
 FRICTION = ("Fv", "Fc", "offset")

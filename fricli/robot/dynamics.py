@@ -18,7 +18,7 @@ import hashlib
 
 import numpy as np
 
-from fricli.errors import MissingDependencyError, ModelFileError
+from fricli.core.errors import MissingDependencyError, ModelFileError
 from fricli.robot.mapping import Payload
 
 INSTALL = "pip install 'fricli[robot]'"

@@ -14,9 +14,9 @@ import json
 
 import numpy as np
 
-from fricli import logs
-from fricli.errors import LogError, ModelFileError
-from fricli.robot import transmission
+from fricli.core import logs
+from fricli.core.errors import LogError, ModelFileError
+from fricli.core import transmission
 from fricli.robot.mapping import Mapping
 from fricli.robot.recording import KINDS, Recording, read_recording
 
@@ -50,7 +50,7 @@ def _signals(mapping: Mapping, rec: Recording, name: str) -> tuple[np.ndarray, l
 
 def to_joints(tr, per_joint: list[dict]) -> None:
     """Replace the motor-side signals theta, theta_d, tau_motor (n,) of each joint by the joint-side
-    q, qd, tau_m of the transmission ``tr`` (fricli.robot.transmission), in place."""
+    q, qd, tau_m of the transmission ``tr`` (fricli.core.transmission), in place."""
     for motor, joint_side, convert in (("theta", "q", tr.joint_positions), ("theta_d", "qd", tr.joint_velocities),
                                        ("tau_motor", "tau_m", tr.joint_torques)):
         if all(motor in sig for sig in per_joint):

@@ -13,7 +13,7 @@ import dataclasses
 
 import numpy as np
 
-from fricli.errors import LogError
+from fricli.core.errors import LogError
 from fricli.robot.mapping import Column, JointMap, Mapping
 from fricli.robot.recording import Defect, Recording, ranges, read_recording
 

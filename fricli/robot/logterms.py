@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 
-from fricli import logs
-from fricli.errors import LogError
+from fricli.core import logs
+from fricli.core.errors import LogError
 from fricli.robot.importing import robot_terms
 from fricli.robot.mapping import JointMap, Mapping
 

@@ -24,8 +24,8 @@ import dataclasses
 import math
 import tomllib
 
-from fricli.errors import LogError
-from fricli.logs import column_unit
+from fricli.core.errors import LogError
+from fricli.core.logs import column_unit
 
 # per-joint signals a mapping may name, with their default unit
 SIGNALS = {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "i_m": "A", "tau_m": "Nm",
@@ -102,7 +102,7 @@ class Mapping:
     payload: Payload | None = None
     files: tuple[str, ...] = ()       # labels of the input files, in the order they are given
     join: str = "rows"                # how several files' rows pair up: "rows" (row by row) or "time"
-    transmission: object = None       # fricli.robot.transmission.Transmission of motor-side signals
+    transmission: object = None       # fricli.core.transmission.Transmission of motor-side signals
 
     def joint(self, name: str) -> JointMap:
         """The joint whose log name reads ``name``."""
@@ -179,7 +179,7 @@ def _transmission(spec, joints: list, where: str):
     """The [transmission] table: ``gear_ratios`` (k,) signed, or ``ratio`` (k, k) (rows: motors,
     columns: joints, both in the order of [[joints]]); ``offset`` (k,) the motor angles at joint
     zero [rad] and ``rotor_inertia`` (k,) motor-side [kg m^2], both optional."""
-    from fricli.robot.transmission import Transmission
+    from fricli.core.transmission import Transmission
 
     if not isinstance(spec, dict):
         _fail(where, "expected a table")

@@ -20,7 +20,7 @@ import re
 
 import numpy as np
 
-from fricli.errors import LogError
+from fricli.core.errors import LogError
 from fricli.robot.mapping import Mapping
 
 KINDS = {

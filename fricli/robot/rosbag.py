@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fricli.errors import LogError, MissingDependencyError
+from fricli.core.errors import LogError, MissingDependencyError
 from fricli.robot.mapping import Column, JointMap, Mapping, effort_column
 from fricli.robot.recording import KINDS, Defect, Recording, consistent_rows, ranges
 

@@ -1,6 +1,6 @@
 """A simulated arm whose friction lives in its motors, with a coupled wrist.
 
-Six rotary joints driven by six motors through a transmission ``fricli.robot.transmission``:
+Six rotary joints driven by six motors through a transmission ``fricli.core.transmission``:
 joints 1-4 each through a signed gear ratio, joints 5 and 6 through a coupled wrist (motor 6
 turns with joint 5 as well as joint 6, as in wrists whose last two axes share gearing):
 
@@ -27,7 +27,7 @@ import json
 
 import numpy as np
 
-from fricli.robot.transmission import META_KEY, Transmission
+from fricli.core.transmission import META_KEY, Transmission
 
 JOINTS = (1, 2, 3, 4, 5, 6)
 
@@ -122,7 +122,7 @@ def trajectories(t: np.ndarray, k: int, rng: np.random.Generator, harmonics: int
 def simulate_coupled(arm: CoupledArm | None = None, *, duration: float = 20.0, rate_hz: float = 2000.0,
                      rng: np.random.Generator) -> CoupledRun:
     """Simulate ``arm`` (default: ``default_arm()``) for ``duration`` [s] sampled at ``rate_hz``."""
-    from fricli import logs
+    from fricli.core import logs
 
     arm = arm or default_arm()
     tr = arm.transmission

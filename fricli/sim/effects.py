@@ -319,7 +319,7 @@ class Payload(Effect):
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Payload(), Temperature(), Column(), Ripple(), Asymmetry(), Drift(), Inertia(), Offset(), Level(),
     Load(), Velocity(), Quadrant(), Gravity(), Disturbance())}
-# The effects are named as ``fricli diagnose`` names what it finds (fricli.diagnosis.effects);
+# The effects are named as ``fricli diagnose`` names what it finds (fricli.fitting.diagnosis.effects);
 # the simulator's earlier names stay accepted.
 ALIASES = {"ripple": "position", "asymmetry": "direction"}
 

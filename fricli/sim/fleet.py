@@ -19,7 +19,7 @@ import os
 
 import numpy as np
 
-from fricli import atomic
+from fricli.core import atomic
 from fricli.sim import joints, simulator
 
 DAY_SD = 0.02              # day-to-day variation of the friction levels (relative sd)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from fricli.errors import DataError
+from fricli.core.errors import DataError
 
 # Parameter -> unit, for the parameters written into a simulated log's metadata.
 PARAM_UNITS = {

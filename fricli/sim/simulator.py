@@ -6,7 +6,7 @@ Joint dynamics (log contract: friction tau_f positive along the motion):
 
 with c the coupling torque from the other joints' motion (known to the robot model). The
 friction is integrated at an internal rate of at least 1 kHz (an integer multiple of the
-output rate) with the exact bristle update of ``fricli.physics`` and logged at the output
+output rate) with the exact bristle update of ``fricli.numerics.physics`` and logged at the output
 rate. Every random draw comes from ``numpy.random.default_rng([seed, stream])`` with one stream
 per purpose (motion, configuration, noise, each effect), so adding an effect or a load leaves
 the motion and the noise of the same seed unchanged.
@@ -18,8 +18,9 @@ import json
 import math
 
 import numpy as np
-from fricli import lazy, logs, physics
-from fricli.logs import table_from_arrays
+from fricli.core import lazy, logs
+from fricli.numerics import physics
+from fricli.core.logs import table_from_arrays
 from fricli.sim import effects as fx
 from fricli.sim import joints, trajectories
 
@@ -212,7 +213,7 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
 
 
 def write(table: pa.Table, path: str) -> None:
-    """Write a simulated log atomically (``-`` for stdout); see ``fricli.logs.write_table``."""
+    """Write a simulated log atomically (``-`` for stdout); see ``fricli.core.logs.write_table``."""
     logs.write_table(table, path)
 
 

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from fricli.errors import DataError
+from fricli.core.errors import DataError
 from fricli.sim.joints import Joint
 
 A_MAX = 2.0          # peak acceleration of velocity ramps [rad/s^2]

@@ -6,9 +6,10 @@ import dataclasses
 
 import numpy as np
 
-from fricli import logs, metrics, models
-from fricli.envelope import share_outside
-from fricli.predicting import external_estimate
+from fricli import models
+from fricli.core import logs, metrics
+from fricli.core.envelope import share_outside
+from fricli.applying.predicting import external_estimate
 
 
 @dataclasses.dataclass
@@ -44,9 +45,9 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
              read_kwargs: dict | None = None, read=logs.read_table) -> list[Result]:
     """Every model on every log. A model is a file or a model set folder; which model applies to
-    which joint of a log follows the joint rule (fricli.joints): a result per model, log and joint.
+    which joint of a log follows the joint rule (fricli.core.joints): a result per model, log and joint.
     ``read``: path -> (table, sha256) of a log (e.g. with a time window)."""
-    from fricli import joints, modelset
+    from fricli.core import joints, modelset
 
     sources = {name: modelset.source(path) for name, path in model_paths.items()}
     tables = {name: read(path) for name, path in log_paths.items()}

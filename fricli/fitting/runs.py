@@ -1,10 +1,10 @@
 """One job: a model of one joint of one log written to one file, the one way the commands
 (identify, train-base, adapt, diagnose --fix) and the fleet make a model.
 
-``run`` holds the lock on the output (``fricli.jobs.output_lock``), skips the work when the
+``run`` holds the lock on the output (``fricli.core.jobs.output_lock``), skips the work when the
 output was made from the same log bytes by the same job (``if_changed``, ``jobs.up_to_date``),
 fits, and saves the model with its job record (``jobs.job_record``) in the provenance. The
-record holds every option that shapes the model (``fricli.optionspec``; diagnose: the options
+record holds every option that shapes the model (``fricli.fitting.optionspec``; diagnose: the options
 the command gives) and the joint the model is of, so a command and a fleet job on the same log
 with the same options write the same bytes.
 """
@@ -17,7 +17,9 @@ from typing import Callable
 
 import numpy as np
 
-from fricli import jobs, logs, metrics, models, optionspec
+from fricli import models
+from fricli.core import jobs, logs, metrics
+from fricli.fitting import optionspec
 
 PIPELINES = ("identify", "train-base", "adapt", "diagnose")
 INPUT_NAME = {"adapt": "base", "diagnose": "model"}   # how a job records its input model
@@ -27,7 +29,7 @@ INPUT_NAME = {"adapt": "base", "diagnose": "model"}   # how a job records its in
 class Made:
     """What a job wrote: ``summary`` is the fit figures saved as the model's ``fit``;
     ``base``/``base_meta`` the input model of adapt and diagnose; ``diagnosis`` diagnose's
-    ``fricli.diagnosis.driver.Diagnosis``; ``seconds`` the fit and save time [s]."""
+    ``fricli.fitting.diagnosis.driver.Diagnosis``; ``seconds`` the fit and save time [s]."""
 
     pipeline: str
     output: str
@@ -53,7 +55,7 @@ def options(pipeline: str, given: dict) -> dict:
 
 def check_train_base(opts: dict) -> None:
     """OptionError for train-base options that do not go together."""
-    from fricli import learning
+    from fricli.fitting import learning
 
     try:  # e.g. selmic needs one layer of more than 10 units (its jump units)
         learning.ARCHS[opts["arch"]](hidden_sizes=tuple(opts["hidden"] or learning.DEFAULT_HIDDEN[opts["arch"]]))
@@ -151,7 +153,7 @@ def _identify(data, output, opts, job, _base, _on_eval) -> Made:
         model, fit = linear.fit(data.signals, asymmetric=opts["kind"] == "linear-asymmetric", axis=data.axis)
         models.save_for_log(output, model, data, rows_used=fit["moving"]["n"], fit=fit, job=job)
         return Made("identify", output, data, model, fit)
-    from fricli.identify import LuGreIdentifier
+    from fricli.fitting.identify import LuGreIdentifier
 
     idf = LuGreIdentifier(hold=opts["hold"], travel=opts["travel"], refine=opts["refine"], samples=opts["samples"],
                           settle=opts["settle"]).fit(data.signals, units=data.units, axis=data.axis)
@@ -160,7 +162,7 @@ def _identify(data, output, opts, job, _base, _on_eval) -> Made:
 
 
 def _train_base(data, output, opts, job, _base, on_eval) -> Made:
-    from fricli import learning
+    from fricli.fitting import learning
 
     model, summary = learning.train_base(
         data, arch=opts["arch"], hidden=opts["hidden"], steps=opts["steps"], schedule=opts["schedule"],
@@ -180,7 +182,7 @@ def _load_base(base: str, data) -> tuple:
 
 
 def _adapt(data, output, opts, job, base, on_eval) -> Made:
-    from fricli import learning
+    from fricli.fitting import learning
 
     base_model, base_meta = _load_base(base, data)
     model, summary = learning.adapt(
@@ -196,8 +198,8 @@ def _adapt(data, output, opts, job, base, on_eval) -> Made:
 
 def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
     """diagnose --fix: the base model augmented with the effects it misses on ``data``."""
-    from fricli.diagnosis import driver
-    from fricli.diagnosis.fix import augment
+    from fricli.fitting.diagnosis import driver
+    from fricli.fitting.diagnosis.fix import augment
 
     base_model, base_meta = _load_base(base, data)
     result = driver.diagnose(base_model, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],

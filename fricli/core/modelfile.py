@@ -18,8 +18,8 @@ import zipfile
 import numpy as np
 
 from fricli import __version__
-from fricli.atomic import atomic_write_bytes
-from fricli.errors import FitError, ModelFileError
+from fricli.core.atomic import atomic_write_bytes
+from fricli.core.errors import FitError, ModelFileError
 
 FORMAT = "fricli-model"
 FORMAT_VERSION = 1

@@ -28,9 +28,9 @@ import tempfile
 import weakref
 
 import numpy as np
-from fricli import joints, lazy
-from fricli.atomic import atomic_open
-from fricli.errors import DataError, LogError
+from fricli.core import joints, lazy
+from fricli.core.atomic import atomic_open
+from fricli.core.errors import DataError, LogError
 
 pa = lazy.module("pyarrow")
 pq = lazy.module("pyarrow.parquet")
@@ -439,7 +439,7 @@ def joints_of(table: pa.Table, name: str = "log") -> list | None:
 
 
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
-    """Rows of one joint by the joint rule (``fricli.joints``): ``joint=None`` means the only
+    """Rows of one joint by the joint rule (``fricli.core.joints``): ``joint=None`` means the only
     joint; several need a choice; ``--joint`` on a log without a joint column is refused."""
     found = joints_of(table, name)
     if found is None:

@@ -10,7 +10,7 @@ Every command decides through this module (docs/joints.md):
   a known different joint B is refused (``JointMismatch``, exit code 4, naming both). A model
   with no recorded joint, or a log without a joint column, never conflicts.
 - A single model file on a log of several joints applies to its own joint (or ``--joint``); a
-  model set (a folder, ``fricli.modelset``) applies each joint's model to that joint's rows.
+  model set (a folder, ``fricli.core.modelset``) applies each joint's model to that joint's rows.
 - A model may cover a group of joints (joints that share motors, ``fricli.models.coupled``): its
   file records them as ``joints``, and it applies to each of their rows (``covers``).
 
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from fricli.errors import LogError, ModelFileError
+from fricli.core.errors import LogError, ModelFileError
 
 
 class JointMismatch(ModelFileError):
@@ -90,7 +90,7 @@ def check(model_joint, log_joint, model_name: str, log_name: str) -> None:
 @dataclasses.dataclass
 class Source:
     """Where models come from: one file (``paths`` = {its joint or None: path}) or a model set
-    folder (``folder`` true, one path per recorded joint; see fricli.modelset)."""
+    folder (``folder`` true, one path per recorded joint; see fricli.core.modelset)."""
 
     name: str
     paths: dict                    # joint (as recorded; None: no joint) -> model file

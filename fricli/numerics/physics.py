@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from fricli import lazy
+from fricli.core import lazy
 
 scipy_blas = lazy.module("scipy.linalg.blas")
 

@@ -7,11 +7,11 @@ import dataclasses
 
 import numpy as np
 
-from fricli import logs
-from fricli.diagnosis import effects as E
-from fricli.diagnosis import selection, structure
+from fricli.core import logs
+from fricli.fitting.diagnosis import effects as E
+from fricli.fitting.diagnosis import selection, structure
 from fricli.models import terms as T
-from fricli.errors import DataError, ModelFileError
+from fricli.core.errors import DataError, ModelFileError
 
 DEFAULT_FOLDS = 10
 DEFAULT_MIN_GAIN = 0.1

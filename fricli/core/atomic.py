@@ -28,7 +28,7 @@ import secrets
 import sys
 from typing import BinaryIO, Callable, Iterator
 
-from fricli.errors import OutputError
+from fricli.core.errors import OutputError
 
 _CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC | os.O_NOFOLLOW
 _PROBE = os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC | os.O_NOFOLLOW

@@ -5,7 +5,7 @@ batch against the log contract (``t`` strictly increasing across batch boundarie
 with the model's state carried from one batch to the next (e.g. the LuGre bristle state), and
 streams the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All
 columns and their field and schema metadata are carried through. On a log of several joints
-each joint covered gets its own model (the joint rule, fricli/joints.py), state and time check;
+each joint covered gets its own model (the joint rule, fricli/core/joints.py), state and time check;
 the rows keep their order.
 
 The log is read whole instead, as one batch, when a batch-wise reading would change the result:
@@ -25,11 +25,12 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from fricli import joints, lazy, logs, models, timewindow
-from fricli.atomic import atomic_open
-from fricli.errors import LogError, ModelFileError
+from fricli import models
+from fricli.core import joints, lazy, logs, timewindow
+from fricli.core.atomic import atomic_open
+from fricli.core.errors import LogError, ModelFileError
 from fricli.models.base import FrictionModel
-from fricli.nn.network import prediction_threads
+from fricli.numerics.nn.network import prediction_threads
 
 pa = lazy.module("pyarrow")
 pc = lazy.module("pyarrow.compute")
@@ -40,7 +41,7 @@ DEFAULT_BATCH_ROWS = 262_144
 
 class ErrorSums:
     """MAE, RMSE and max of y_pred - y accumulated over batches (same figures as
-    ``fricli.metrics.errors`` on the concatenated arrays)."""
+    ``fricli.core.metrics.errors`` on the concatenated arrays)."""
 
     def __init__(self):
         self.n = 0
@@ -208,7 +209,7 @@ class _Stream:
     model: FrictionModel
     meta: dict
     model_name: str
-    env: object = None             # the training envelope (fricli.envelope), None for older files
+    env: object = None             # the training envelope (fricli.core.envelope), None for older files
     state: object = None
     t_last: float | None = None
     outside: int = 0
@@ -223,7 +224,7 @@ _ROW = "__fricli_row"   # original row numbers while the rows of several joints 
 @dataclasses.dataclass(frozen=True)
 class Reading:
     """How ``run_models`` reads a log: the joint rule's ``joint``, ``kt`` [Nm/A], ``cutoff_hz``
-    and ``drop_invalid`` as ``logs.from_table``, the time ``window`` (fricli.timewindow) and the
+    and ``drop_invalid`` as ``logs.from_table``, the time ``window`` (fricli.core.timewindow) and the
     rows per record batch."""
 
     joint: object = None

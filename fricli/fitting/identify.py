@@ -33,10 +33,11 @@ import math
 
 import numpy as np
 
-from fricli import lazy, logs, metrics, physics
-from fricli.errors import DataError, FitError
+from fricli.core import lazy, logs, metrics
+from fricli.numerics import physics
+from fricli.core.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
-from fricli.threads import single_threaded
+from fricli.numerics.threads import single_threaded
 
 optimize = lazy.module("scipy.optimize")
 
@@ -464,7 +465,7 @@ class LuGreIdentifier:
     # --------------------------------------------------------------------- fit
 
     def fit(self, signals: dict[str, np.ndarray], units: dict | None = None, axis: str = "rotary") -> "LuGreIdentifier":
-        """Fit on a log's signals (canonical units, see ``fricli.logs``).
+        """Fit on a log's signals (canonical units, see ``fricli.core.logs``).
 
         The BLAS libraries (numpy's and scipy's) run on one thread meanwhile: threaded
         reductions (over the log's rows) round differently for each thread count, and the fit

@@ -23,8 +23,8 @@ import dataclasses
 import numpy as np
 from scipy import signal as sps
 
-from fricli import logs
-from fricli.errors import DataError
+from fricli.core import logs
+from fricli.core.errors import DataError
 
 CUTOFF_HZ = 100.0       # Butterworth cut-off used by the benchmark
 ORDER = 4

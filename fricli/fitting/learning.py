@@ -8,9 +8,10 @@ from typing import Callable
 
 import numpy as np
 
-from fricli import logs, metrics, training_data
-from fricli.envelope import share_outside
-from fricli.errors import DataError
+from fricli.core import logs, metrics
+from fricli.fitting import training_data
+from fricli.core.envelope import share_outside
+from fricli.core.errors import DataError
 from fricli.models.base import FrictionModel
 from fricli.models.dissipative import DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
@@ -88,7 +89,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     summary); summary holds the row selection and the MAE/RMSE/max [Nm] on the training rows,
     the validation rows, the moving rows and the whole log. ``schedule`` is a key of SCHEDULES;
     ``steps`` None takes its number of steps; ``patience`` stops training after that many
-    steps without improvement of the validation loss (see ``fricli.nn.Trainer``).
+    steps without improvement of the validation loss (see ``fricli.numerics.nn.Trainer``).
     """
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown schedule {schedule!r}")
@@ -234,7 +235,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     discrete velocities (the paper's one velocity out and back), only the rows at those
     velocities are used, not the accelerations between them. When predicting, rows at rest get
     sign(qd) = 0, between the network's two directions. ``base_envelope`` (the base's training
-    envelope, ``fricli.envelope.Envelope``): the summary gives the share of the log outside it.
+    envelope, ``fricli.core.envelope.Envelope``): the summary gives the share of the log outside it.
     """
     sig = first_seconds(log, max_seconds)
     qd = sig["qd"]

@@ -20,10 +20,10 @@ from typing import Callable
 
 import numpy as np
 
-from fricli.errors import FitError
-from fricli.nn.adam import Adam
-from fricli.threads import single_threaded
-from fricli.nn.network import PREDICT_CHUNK, Network
+from fricli.core.errors import FitError
+from fricli.numerics.nn.adam import Adam
+from fricli.numerics.threads import single_threaded
+from fricli.numerics.nn.network import PREDICT_CHUNK, Network
 
 CHUNK_MIN = 8192          # full batches this large are split over two threads
 EVAL_POINTS = 2000        # default number of loss records over a run given in steps

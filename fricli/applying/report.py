@@ -12,12 +12,13 @@ import os
 import numpy as np
 from matplotlib.figure import Figure
 
-from fricli import logs, metrics, models
-from fricli.atomic import atomic_write_bytes
-from fricli.errors import OutputError
-from fricli.envelope import share_outside
-from fricli.evaluation import static_friction
-from fricli.predicting import external_estimate
+from fricli import models
+from fricli.core import logs, metrics
+from fricli.core.atomic import atomic_write_bytes
+from fricli.core.errors import OutputError
+from fricli.core.envelope import share_outside
+from fricli.applying.evaluation import static_friction
+from fricli.applying.predicting import external_estimate
 
 MEASURED = "#9aa7b5"
 MODEL = "#c0392b"
@@ -286,7 +287,7 @@ def write_reports(runs: list[tuple[str, logs.Log]], folder: str, *, lowpass_hz: 
                   seed: int = 0) -> dict:
     """One report per (model file, joint's log) in ``folder/joint_<name>/`` and an index.html
     linking them with each joint's errors; a single run is written into ``folder`` itself."""
-    from fricli.modelset import file_name
+    from fricli.core.modelset import file_name
 
     if len(runs) == 1:
         return {str(runs[0][1].joint): write_report(runs[0][0], runs[0][1], folder, lowpass_hz=lowpass_hz, seed=seed)}

@@ -34,7 +34,7 @@ import dataclasses
 
 import numpy as np
 
-from fricli.errors import DataError
+from fricli.core.errors import DataError
 
 FINE_BINS = 150          # per direction, logarithmic
 LOW = 1e-3               # lowest binned speed, relative to the top speed

@@ -14,9 +14,9 @@ import os
 import re
 from typing import Callable
 
-from fricli import modelfile
-from fricli.errors import FricliError, LogError, ModelFileError, OutputError
-from fricli.joints import Source, covers, listed, pair, same, select, several
+from fricli.core import modelfile
+from fricli.core.errors import FricliError, LogError, ModelFileError, OutputError
+from fricli.core.joints import Source, covers, listed, pair, same, select, several
 
 
 def file_name(joint) -> str:
@@ -64,7 +64,7 @@ def source(path: str) -> Source:
 def paired(source: Source, table, log_name: str, requested=None) -> dict:
     """{joint: model file} of a run that applies ``source``'s models to the joints of the log
     ``table`` (``--joint`` ``requested``): the joint rule's pairing (``joints.pair``)."""
-    from fricli import logs
+    from fricli.core import logs
 
     return dict(pair(source, logs.joints_of(table, log_name), requested, log_name))
 

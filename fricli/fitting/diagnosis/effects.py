@@ -26,9 +26,9 @@ import dataclasses
 
 import numpy as np
 
-from fricli import metrics
+from fricli.core import metrics
 from fricli.models import terms as T
-from fricli.logs import KNOWN
+from fricli.core.logs import KNOWN
 
 # ---------------------------------------------------------------------------- context
 

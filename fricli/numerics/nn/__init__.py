@@ -1,7 +1,7 @@
 """A small neural-network core in numpy: activations, dense networks, Adam, training loops."""
 
-from fricli.nn.adam import Adam
-from fricli.nn.network import Network, Workspace
-from fricli.nn.training import Standardizer, Trainer
+from fricli.numerics.nn.adam import Adam
+from fricli.numerics.nn.network import Network, Workspace
+from fricli.numerics.nn.training import Standardizer, Trainer
 
 __all__ = ["Adam", "Network", "Workspace", "Standardizer", "Trainer"]

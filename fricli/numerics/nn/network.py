@@ -31,9 +31,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from fricli.threads import single_threaded
-from fricli.nn import activations as acts
-from fricli.nn.activations import Activation
+from fricli.numerics.threads import single_threaded
+from fricli.numerics.nn import activations as acts
+from fricli.numerics.nn.activations import Activation
 
 PREDICT_CHUNK = 4096    # columns per forward pass when predicting: the layers stay in the cache
 REPEATS_WORTHWHILE = 0.5  # a fixed-input workspace groups samples when at most this share of columns is distinct

@@ -2,16 +2,16 @@
 
 The command line derives its click options from ``PIPELINES`` (``fricli.cli.options.spec_options``)
 and the fleet manifest checks its ``[options.PIPELINE]`` tables against them (``check``), so a
-command and a fleet job given the same options record the same job (``fricli.runs``).
+command and a fleet job given the same options record the same job (``fricli.fitting.runs``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-from fricli import learning
-from fricli.errors import USAGE, FricliError
-from fricli.logs import DEFAULT_CUTOFF_HZ
+from fricli.fitting import learning
+from fricli.core.errors import USAGE, FricliError
+from fricli.core.logs import DEFAULT_CUTOFF_HZ
 
 
 class OptionError(FricliError):

@@ -23,9 +23,9 @@ import math
 
 import numpy as np
 
-from fricli import logs, metrics
+from fricli.core import logs, metrics
 from fricli.models import terms as T
-from fricli.diagnosis.driver import Diagnosis
+from fricli.fitting.diagnosis.driver import Diagnosis
 from fricli.models.augmented import AugmentedModel
 
 CARRY_TOLERANCE = 0.02
@@ -66,8 +66,8 @@ CARRIED_PARAMS = {"level": ("fc", "fs", "fv", "kc", "ks"),
 def _final_params(model: AugmentedModel, diagnosis: Diagnosis, log: logs.Log) -> dict:
     """The added effects' parameters as the model now holds them: the LuGre parameters for
     carried effects, the effect's reading of the refitted coefficients for the others."""
-    from fricli.diagnosis import effects as E
-    from fricli.diagnosis.driver import column_units
+    from fricli.fitting.diagnosis import effects as E
+    from fricli.fitting.diagnosis.driver import column_units
     from fricli.models.lugre import unit_of
 
     sig = log.signals
@@ -243,7 +243,7 @@ def refit(model, log: logs.Log):
     """``model``'s kind fitted again on ``log`` (LuGre and linear, as ``identify`` fits them; other kinds
     are returned unchanged): the friction of a log whose robot-model terms changed."""
     if model.kind == "lugre":
-        from fricli.identify import LuGreIdentifier
+        from fricli.fitting.identify import LuGreIdentifier
 
         return LuGreIdentifier().fit(log.signals, units=log.units, axis=log.axis).model_
     if model.kind == "linear":

@@ -14,8 +14,8 @@ import dataclasses
 
 import numpy as np
 
-from fricli import lazy, logs
-from fricli.errors import DataError
+from fricli.core import lazy, logs
+from fricli.core.errors import DataError
 
 pa = lazy.module("pyarrow")
 

@@ -1,11 +1,11 @@
 """A network whose linear outputs pass through a fixed, differentiable head before the loss.
 
-    raw = Network(x)                      (k, n)  the dense layers of ``fricli.nn.network``
+    raw = Network(x)                      (k, n)  the dense layers of ``fricli.numerics.nn.network``
     y   = head(raw, aux)                  (1, n)  elementwise, no trainable parameters
 
 ``aux`` are per-sample values the head needs besides the network's outputs (a smooth sign of
 the velocity, the load); they ride along as extra input rows after the network's inputs, so
-the trainer of ``fricli.nn.training`` batches them with the inputs and trains a
+the trainer of ``fricli.numerics.nn.training`` batches them with the inputs and trains a
 ``HeadedNetwork`` like any ``Network``: ``forward`` returns y, ``backward`` takes dL/dy.
 
     dissipative  aux = (c, g), raw = (r0, r1):
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fricli.nn.network import Groups, Network, Workspace
+from fricli.numerics.nn.network import Groups, Network, Workspace
 
 _CLIP = 60.0
 

@@ -9,8 +9,8 @@ import json
 import os
 from typing import Iterator
 
-from fricli import modelfile
-from fricli.errors import FricliError, LockedError, ModelFileError, OutputError
+from fricli.core import modelfile
+from fricli.core.errors import FricliError, LockedError, ModelFileError, OutputError
 
 
 @contextlib.contextmanager

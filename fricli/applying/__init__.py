@@ -1,0 +1,1 @@
+"""Applying models: prediction, evaluation, reports, the EMPS benchmark."""

@@ -1,0 +1,1 @@
+"""Fitting: identification, training, adaptation, diagnosis, the job runner."""

@@ -1,0 +1,1 @@
+"""Numerics: the LuGre recurrence, least squares, the numpy networks."""
