@@ -227,17 +227,22 @@ class LuGreIdentifier:
 
     # ------------------------------------------------------------------ checks
 
-    def _check(self, sig: dict, units: dict) -> np.ndarray:
-        v = sig["qd"]
-        top = float(np.max(np.abs(v)))
-        vu = units["qd"]
-        if not top > 0:
+    def _require_motion(self, v: np.ndarray) -> np.ndarray:
+        """The rows in motion (n,) bool; DataError unless the joint moves both ways."""
+        if not float(np.max(np.abs(v))) > 0:
             raise DataError("the joint does not move (qd is zero everywhere)")
         moving = metrics.in_motion(v)
         if not (v[moving] < 0).any():
             raise DataError("no samples with negative velocity: identify needs motion in both directions")
         if not (v[moving] > 0).any():
             raise DataError("no samples with positive velocity: identify needs motion in both directions")
+        return moving
+
+    def _static_rows(self, sig: dict, units: dict, moving: np.ndarray) -> np.ndarray:
+        """The rows that sample the static curve (n,) bool: constant-velocity holds or settled
+        rows (``samples``); DataError when they cannot separate the friction terms."""
+        v = sig["qd"]
+        vu = units["qd"]
         if self.samples not in ("auto", "steady", "settled"):
             raise ValueError(f"samples must be 'auto', 'steady' or 'settled', not {self.samples!r}")
         steady = steady_state_mask(sig["t"], v, hold=self.hold, travel=self.travel, rel_tol=self.rel_tol)
@@ -340,10 +345,7 @@ class LuGreIdentifier:
             m = LuGreModel(**layout.decode(x, fixed))
             return m.steady_state(v, tg) - y
 
-        x0 = layout.encode(start)
-        lb, ub = layout.bounds()
-        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9) if np.isfinite(lb).any() else x0
-        res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "static parameters")
+        res = _least_squares(residual, layout.encode(start), layout.bounds(), self.max_nfev, "static parameters")
         params = layout.decode(res.x, fixed)
         return params, {"nfev": int(res.nfev), "cost": float(res.cost), "stribeck": stribeck,
                         "load": layout.load, "at_bounds": _at_bounds(layout.names, res)}
@@ -353,14 +355,13 @@ class LuGreIdentifier:
     def _fit_dynamic(self, sig: dict, y: np.ndarray, static: dict) -> tuple[dict, dict]:
         """sigma0, sigma1 on the whole log, as x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
         g_typ = static["fc"] + static["kc"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
+        if not g_typ > 0:
+            raise FitError(f"the static fit gave no Coulomb friction (Fc {g_typ:.3g}): the bristle stiffness "
+                           "cannot be scaled; check the sign of tau_m (--kt, the mapping)")
         response = LuGreModel(**dict(static, sigma0=1.0, sigma1=0.0)).bristle_response(sig)
 
-        def bristles(x):
-            s0 = math.exp(x[0])
-            return s0, s0 * math.exp(x[1])
-
         def residual(x):
-            return response(*bristles(x)) - y
+            return response(*_bristles(x)) - y
 
         grid = [(math.log(g_typ / zd), math.log(tau1)) for zd in np.geomspace(1e-7, 1e-1, 13)
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
@@ -369,9 +370,8 @@ class LuGreIdentifier:
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
         lb = np.array([math.log(g_typ), math.log(1e-7)])
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
-        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
-        sigma0, sigma1 = bristles(res.x)
+        sigma0, sigma1 = _bristles(res.x)
         names = ("bristle deflection g/sigma0", "micro-damping time constant sigma1/sigma0")
         for i, what in enumerate(names):
             for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
@@ -386,8 +386,7 @@ class LuGreIdentifier:
 
         def decode(x):
             p = layout.decode(x[:n_static], fixed)
-            p["sigma0"] = math.exp(x[n_static])
-            p["sigma1"] = p["sigma0"] * math.exp(x[n_static + 1])
+            p["sigma0"], p["sigma1"] = _bristles(x[n_static:])
             return p
 
         def residual(x):
@@ -399,8 +398,7 @@ class LuGreIdentifier:
         x0 = np.concatenate([layout.encode(params), [s0, tau1]])
         lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
         ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
-        x0 = np.clip(x0, lb + 1e-9, ub - 1e-9)
-        start_cost = 0.5 * _sumsq(residual(x0))
+        start_cost = 0.5 * _sumsq(residual(_inside(x0, lb, ub)))
         try:
             res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement", partial=True)
         except FitError as exc:
@@ -480,7 +478,7 @@ class LuGreIdentifier:
         self.notes_: list[str] = []
         sig = {k: signals[k] for k in ("t", "qd", "tau_g") if k in signals}
         y = logs.friction_target(signals)
-        steady = self._check(signals, units)
+        steady = self._static_rows(signals, units, self._require_motion(signals["qd"]))
         v = signals["qd"]
         tau_g = sig.get("tau_g")
         static, info1 = self._fit_static(v[steady], y[steady], None if tau_g is None else tau_g[steady], units)
@@ -559,10 +557,22 @@ def _sumsq(r: np.ndarray) -> float:
     return float(np.einsum("i,i->", r, r))
 
 
+def _bristles(x) -> tuple[float, float]:
+    """(sigma0 [Nm/rad], sigma1 [Nm s/rad]) from x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
+    s0 = math.exp(x[0])
+    return s0, s0 * math.exp(x[1])
+
+
+def _inside(x0: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
+    """A start point strictly inside the bounds (least squares starts from an interior point)."""
+    return np.clip(x0, lb + 1e-9, ub - 1e-9)
+
+
 def _least_squares(fun, x0, bounds, max_nfev: int, what: str, partial: bool = False):
     """``scipy.optimize.least_squares`` (trf, x_scale='jac') of fun from x0 within bounds;
     failures become FitError. With ``partial``, a fit stopped at ``max_nfev`` returns its last
     iterate (trf accepts only steps that lower the cost: the best one) instead."""
+    x0 = _inside(x0, *bounds)
     try:
         with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
             res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
