@@ -22,7 +22,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import run as bench  # noqa: E402
 
-from fricli.core import logs# noqa: E402
+from fricli.core import logs  # noqa: E402
 
 
 def main(argv=None) -> None:

@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 
 from fricli.core import logs
 from fricli.fitting import learning
-from fricli.numerics import physics# noqa: E402
+from fricli.numerics import physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.numerics.nn import activations as acts  # noqa: E402
 from fricli.numerics.threads import blas_threads, single_threaded  # noqa: E402

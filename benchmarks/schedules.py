@@ -27,7 +27,7 @@ if ROOT not in sys.path:
 import numpy as np  # noqa: E402
 
 from fricli.core import logs
-from fricli.fitting import learning# noqa: E402
+from fricli.fitting import learning  # noqa: E402
 from fricli.sim import simulator  # noqa: E402
 
 RUNS = (("paper: constant 0.01", dict(schedule="paper", steps=50_000)),

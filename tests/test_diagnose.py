@@ -665,6 +665,16 @@ def test_a_position_range_of_a_few_samples_is_not_tested():
     assert reason.startswith("the position range 0.0001 rad is under two periods") and "(0.0012 rad)" in reason
 
 
+def test_no_payload_on_a_joint_that_gravity_does_not_load(rng):
+    # a vertical axis: tau_g is zero up to rounding, so a payload cannot load the gear; the gear load
+    # tau_m - tau_dyn - p would only echo the residual (before: payload kc ~ 1 Nm/Nm "explained" it)
+    log = _with_tau_g(rng, lambda s: 1e-15 * np.sin(s["t"]),
+                      friction=lambda s: CoulombViscous().predict(s)[0] * (1 + 0.5 * np.sin(0.3 * s["t"])))
+    d = diagnose(CoulombViscous(), log)
+    assert "payload" not in d.added
+    assert "gravity" in d.skipped["payload"] or "tau_g" in d.skipped["payload"]
+
+
 # ---------------------------------------------------------------- a whole arm whose CAD masses are off
 
 

@@ -16,7 +16,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from conftest import ROOT  # noqa: E402
-from fricli.core import errors# noqa: E402
+from fricli.core import errors  # noqa: E402
 from fricli.robot.importing import build_log, import_recording  # noqa: E402
 from fricli.robot.mapping import parse_bag_mapping, parse_mapping  # noqa: E402
 from fricli.robot.rosbag import read_bag  # noqa: E402

@@ -20,7 +20,7 @@ from click.testing import CliRunner  # noqa: E402
 
 from fricli import models
 from fricli.applying import emps
-from fricli.core import logs# noqa: E402
+from fricli.core import logs  # noqa: E402
 from fricli.cli import cli  # noqa: E402
 from fricli.fitting.diagnosis import diagnose  # noqa: E402
 from fricli.fitting.diagnosis.fix import augment  # noqa: E402

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from fricli.core import logs
 from fricli.fitting import learning
-from fricli.numerics import physics# noqa: E402
+from fricli.numerics import physics  # noqa: E402
 from fricli.sim import simulator  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]

@@ -25,7 +25,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
-from fricli.core import logs, metrics# noqa: E402
+from fricli.core import logs, metrics  # noqa: E402
 
 DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "ur10e")
 MAPPING = os.path.join(ROOT, "docs", "ur10e-mapping.toml")

@@ -33,7 +33,7 @@ def demo_cmd(output, data, joint, steps, seed, quiet):
       fricli demo -o demo-out
       fricli demo --joint 4 --steps 50000
     """
-    from fricli import demo# loads matplotlib, scipy.optimize: only when run
+    from fricli import demo  # loads matplotlib, scipy.optimize: only when run
 
     summary = demo.run(output, data=data, joint=int(joint), steps=steps, seed=seed,
                        say=lambda s: say(s, quiet))

@@ -89,7 +89,7 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
     from fricli.applying import report
-    from fricli.core import modelset# matplotlib loads only for this command
+    from fricli.core import modelset  # matplotlib loads only for this command
 
     source = modelset.source(model)
     table, digest = read_log(log)

@@ -393,7 +393,10 @@ class Payload(Effect):
     description = "friction growing with |tau_l| - |tau_g|: the gear carries a load tau_g lacks (a payload)"
 
     def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "(|tau_l| - |tau_g|)*sign(qd)")
+        # a payload loads the gear through gravity: where tau_g cannot load it, neither can a payload,
+        # and the gear load tau_l would only echo the model's own residual
+        return (_needs_tau_g(ctx) or _ratio_reach(Load(), ctx, "|tau_g|*sign(qd)")
+                or _ratio_reach(self, ctx, "(|tau_l| - |tau_g|)*sign(qd)"))
 
     def terms(self, ctx, residual):
         return [T.term("(|tau_l|-|tau_g|)*sign", T.OVERLOAD, T.SIGN)]
