@@ -673,3 +673,67 @@ def test_no_payload_on_a_joint_that_gravity_does_not_load(rng):
     d = diagnose(CoulombViscous(), log)
     assert "payload" not in d.added
     assert "gravity" in d.skipped["payload"] or "tau_g" in d.skipped["payload"]
+
+
+# ---------------------------------------------------------------- a whole arm whose CAD masses are off
+
+
+@pytest.fixture(scope="module")
+def arm_with_cad_errors(tmp_path_factory):
+    """A four-joint arm simulated with masses and centres of mass up to 30 % off the URDF's, imported
+    with the CAD URDF (``fricli dynamics``), and a linear friction model per joint fitted on it."""
+    pytest.importorskip("pinocchio")
+    import test_calibrate as arm
+
+    root = tmp_path_factory.mktemp("arm")
+    rng = np.random.default_rng(11)
+    model, _ = arm.true_model(rng, scale=0.3)
+    t, q, qd, qdd = arm.harmonics(rng, 2000, (0.2, 0.45, 0.7, 1.1), 0.25)
+    raw = arm.write_log(root / "raw.parquet", t, q, qd, qdd, arm.simulate(model, t, q, qd, qdd, rng, noise=0.05))
+    (root / "cad.urdf").write_text(arm.URDF)
+    runner = CliRunner()
+    log = str(root / "arm.parquet")
+    for args in (["dynamics", raw, "--urdf", str(root / "cad.urdf"), "--match", "order", "-o", log, "-q"],
+                 ["identify", log, "--kind", "linear", "-o", str(root / "linear"), "-q"]):
+        done = runner.invoke(cli, args)
+        assert done.exit_code == 0, done.output
+    return root, log
+
+
+def test_whole_arm_robot_model_errors_point_to_calibration(arm_with_cad_errors):
+    root, log = arm_with_cad_errors
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--json"])
+    assert done.exit_code == 0, done.output
+    out = json.loads(done.stdout)
+    robot = out["robot_model"]
+    assert len(robot["joints"]) >= 2
+    assert robot["command"] == f"fricli calibrate {log} --urdf {root / 'cad.urdf'} -o CAL.urdf"
+    for j in robot["joints"]:
+        assert set(out["joints"][j]["added"] + out["joints"][j]["suspected"]) & {"gravity", "acceleration"}
+        assert robot["fit"][j]["rms_after"] < 0.5 * robot["fit"][j]["rms_before"]
+    text = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log]).stdout
+    assert text.count("robot-model errors on joints") == 1
+
+
+def test_fix_calibrate_writes_the_urdf_and_the_error_falls(arm_with_cad_errors):
+    root, log = arm_with_cad_errors
+    cal, fixed = root / "cal.urdf", root / "fixed"
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
+                                    "-o", str(fixed), "--json", "-q"])
+    assert done.exit_code == 0, done.output
+    robot = json.loads(done.stdout)["robot_model"]
+    assert cal.exists() and (root / "cal.calibration.json").exists()
+    assert len(robot["joints"]) >= 2
+    for j in robot["joints"]:
+        assert robot["mae"][j]["mae_after"] < 0.5 * robot["mae"][j]["mae_before"]
+        assert not {"gravity", "acceleration"} & set(robot["mae"][j]["model_errors_after"])
+    assert sorted(p.name for p in fixed.iterdir()) == [f"joint_{j}.npz" for j in (1, 2, 3, 4)]
+
+
+def test_calibrate_needs_fix_and_a_whole_arm(arm_with_cad_errors):
+    root, log = arm_with_cad_errors
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--calibrate", str(root / "c.urdf")])
+    assert done.exit_code == 2 and "--calibrate applies to --fix" in done.output
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear" / "joint_2.npz"), log, "--joint", "2", "--fix",
+                                    "--calibrate", str(root / "c.urdf"), "-o", str(root / "j2.npz")])
+    assert done.exit_code == 2 and "whole-arm log" in done.output

@@ -27,36 +27,73 @@ def _pct(x: float) -> str:
 
 def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     joints = res["joints"]
-    ratios = tab["ratios"]
-    mean_all, mean_mov = tab["mean_all"], tab["mean_moving"]
-    worst_all = max(zip(ratios["all"], joints), key=lambda p: p[0])
-    met_mean, met_each = mean_all <= 0.70, worst_all[0] <= 0.85
-    ext = {j: joints[j]["payload"]["fixed"] / joints[j]["payload"]["linear"] for j in (2, 3) if j in joints}
+    means = tab["means"]
     head = [] if full else ["> **Partial run** (a subset of joints or validation runs): the figures below are "
                             "not the case study's. Run the script without options for the full study.", ""]
+    missed = [j for j, ok in zip(joints, tab["met"]) if not ok]
+    met_mean = means["fixed"] <= 0.66 + 5e-3
 
     floor_rows = []
     for j, r in joints.items():
         lin = r["linear"]
         floor_rows.append(
-            f"| {j} | {lin['all']:.3f} | {lin['above_floor']:.3f} ({lin['above_floor'] / lin['all']:.2f}×) | "
-            f"{_pct(lin['rest_share'])} | {lin['moving']:.3f} | {lin['above_floor_moving']:.3f} "
-            f"({lin['above_floor_moving'] / lin['moving']:.2f}×) |")
+            f"| {j} | {lin['moving']:.3f} | {lin['above_floor_moving']:.3f} "
+            f"({lin['above_floor_moving'] / lin['moving']:.2f}×) | {_pct(lin['rest_share'])} | "
+            f"{r['fixed']['moving']:.3f} | {r['fixed']['above_floor_moving']:.3f} |")
 
     meaning_rows = []
     for j, r in joints.items():
         for name in r["diagnose"]["added"]:
             meaning_rows.append(f"- joint {j}, `{name}`: {MEANING.get(name, '')}.")
 
-    short = [f"joint {j} ({ra:.2f}×)" for ra, j in zip(ratios["all"], joints) if ra > 0.85]
-    ext_text = ", ".join(f"joint {j}: {v:.2f}×" for j, v in ext.items())
+    ext = {j: joints[j]["payload"]["fixed"] / joints[j]["payload"]["linear"] for j in (2, 3) if j in joints}
+    ext_idim = {j: joints[j]["payload"]["idim"] / joints[j]["payload"]["linear"] for j in (2, 3) if j in joints}
+    ext_text = ", ".join(f"joint {j}: {v:.2f}× (IDIM-LS {ext_idim[j]:.2f}×)" for j, v in ext.items())
+    ext_mean = sum(ext.values()) / len(ext) if ext else float("nan")
+    limit = []
+    if 3 in joints:
+        p3 = joints[3]["payload"]
+        extra = max(p3["fixed"] ** 2 - p3["fixed_unloaded"] ** 2, 0.0) ** 0.5
+        limit = [
+            f"What limits joint 3, measured: fricli's error on the payload run is {p3['fixed']:.3f} Nm; on the unloaded",
+            f"twin (the same trajectory without the payload) the same models leave {p3['fixed_unloaded']:.3f} Nm, so the",
+            f"payload adds {extra:.3f} Nm (root of the difference of squares), and only {p3['fixed_above_floor']:.3f} Nm of the",
+            "error lies above 2 Hz. That added error follows the payload torque itself: the estimate follows",
+            f"{_pct(1 + p3['fixed_gain'])} of it (least-squares slope), i.e. the measured torque on joint 3 rises by about that",
+            "share of what the declared 2.805 kg exert through the URDF. A drive gain (torque per ampere) off on",
+            "joint 3, or a payload centre of mass other than the assumed flange point, gives exactly this, and",
+            "neither is visible on the unloaded twin the models were fitted on: the calibration's forearm mass",
+            "change is flagged for the same reason (\"also consistent with a drive gain off\"). The linear",
+            f"model's error on joint 3 ({p3['linear']:.3f} Nm, the CAD model's errors partly cancelling the payload's)",
+            f"is small against the payload torque ({p3['reference_rms']:.2f} Nm RMS).",
+        ]
+
+    cal = res["calibration"]
+    suspicious = [f"- {line}" for line in cal["suspicious"]] or ["- none"]
+    robot_line = (res.get("robot_model") or {}).get("summary", "")
+    adapt = []
+    if tab.get("adapt"):
+        adapt = [
+            "## Same-day adaptation",
+            "",
+            "For each day with two runs, `fricli adapt fixed RUN.parquet -o adapted` (the fixed models as the",
+            "base, a residual network trained on one run of the day, both runs imported with the calibrated",
+            "URDF) is scored on the other run of the same day, against the fixed models there: RMS over the",
+            "rows in motion [Nm], base → adapted. `adapt` keeps the base when its held-out rows do not show",
+            "the residual helping (\"base kept\"); the pairs are those of `benchmarks/ur10e_neural.py`.",
+            "",
+            tab["adapt"],
+            "",
+        ]
     cmd_list = "\n".join(f"fricli {c}" for c in commands)
     v_runs = ", ".join(f"`{n}`" for n in res["validation_runs"])
+    cols = ", ".join(f"{label.strip('*')} with the {urdf} URDF" for label, urdf in
+                     (("published Fv, Fc, offset", "CAD"), ("LuGre", "CAD"), ("identify + diagnose --fix", "CAD")))
 
     return "\n".join(head + [
-        "# Case study: friction models for a UR10e arm from its own recordings",
+        "# Case study: the robot model and the friction of a UR10e arm from its own recordings",
         "",
-        "This document is written by `python docs/ur10e/run_case_study.py` (a few minutes; data at",
+        "This document is written by `python docs/ur10e/run_case_study.py` (about ten minutes; data at",
         "`../shared/data/ur10e`, see `../shared/data/README.md`). Every figure below comes from that run;",
         "the full list of fricli commands it ran is at the end, the numbers are also in",
         "`docs/ur10e-results.json`.",
@@ -67,127 +104,148 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "the manufacturer's URDF with CAD masses. Drive gains and reflected rotor inertias: the dataset",
         "authors' estimates, in `docs/ur10e-mapping.toml`.",
         "",
+        "On a real arm the largest error is often not friction but the robot model: CAD masses and centres",
+        "of mass, and rotor inertia the URDF does not hold. fricli corrects it where it lives, in the URDF",
+        "([calibration.md](calibration.md)), and then models each joint's friction on the corrected",
+        "torques.",
+        "",
         "## Protocol",
         "",
         "The fitting and validation runs were chosen before any validation figure was computed; no",
         "option below was tuned on the validation runs.",
         "",
         f"- **Fitting run**: `{res['fit_run']}` (19 Feb 2020), the longest unloaded run, and the unloaded",
-        "  twin of the payload run. Nothing else is used for fitting.",
+        "  twin of the payload run. Nothing else is used for fitting: not the friction, not the robot model.",
         f"- **Validation runs**: every identification run recorded on another day: {v_runs}.",
-        "- **Friction error**: RMS of `tau_m - tau_g - tau_dyn - tau_f_pred` (the friction target of the",
-        "  [log contract](log-format.md)) pooled over the validation runs, per joint: over all rows, and over",
-        "  the rows in motion (|qd| above 2 % of the run's top speed, as `fricli evaluate` counts them). At rest",
-        "  friction is statically indeterminate: stiction holds whatever torque the controller left.",
-        "- **Baseline**: the standard model `Fv·qd + Fc·sign(qd) + offset`, fitted by least squares on the",
-        "  same target of the same fitting run.",
-        "- **Published parameters**: the dataset authors' `Fv, Fc, offset` per joint (see below for what that",
-        "  comparison can show).",
+        "- **Error**: RMS of `tau_m − tau_g − tau_dyn − tau_f_pred` pooled over the validation runs, per",
+        "  joint, over the rows in motion (|qd| above 2 % of the run's top speed, as `fricli evaluate` counts",
+        "  them; at rest friction is statically indeterminate). `tau_g` and `tau_dyn` come from the URDF the",
+        "  model uses (the CAD one or the calibrated one), so this is the error of the whole model of the",
+        "  measured torque, comparable across robot models.",
+        "- **Baseline**: the CAD URDF with the standard model `Fv·qd + Fc·sign(qd) + offset`, fitted by least",
+        "  squares on the fitting run. Ratios below are to its error.",
+        "- **Floor**: the part of the baseline's error above 2 Hz (zero-phase high-pass): the excitation lies",
+        "  below 1 Hz, so no model of the state (q, qd, qdd, tau_g) follows it.",
+        "- **Target** per joint: halfway between the CAD path's ratio (identify + diagnose --fix with the",
+        "  CAD URDF) and the floor; for joint 2 also at most IDIM-LS's ratio; the mean at most 0.66.",
         "- `tau_dyn` uses `qdd` from the measured velocity, low-passed at 10 Hz (zero phase) and",
-        "  differentiated: ten times the excitation's bandwidth, a fifth of the Nyquist frequency (the",
-        "  default of 50 Hz would leave this 100 Hz recording unfiltered).",
+        "  differentiated: ten times the excitation's bandwidth, a fifth of the Nyquist frequency.",
         "",
-        "## From CSV and URDF to six models: three commands",
+        "## From CSV and URDF to calibrated dynamics and friction: three commands",
         "",
         "```sh",
         "fricli import ur-20_02_19_14harm50sec.csv --mapping docs/ur10e-mapping.toml --urdf ur10e.urdf --cutoff 10 -o fit.parquet",
         "fricli identify fit.parquet -o lugre",
-        "fricli diagnose lugre fit.parquet --fix -o fixed",
+        "fricli diagnose lugre fit.parquet --fix --calibrate ur10e-cal.urdf -o fixed",
         "```",
         "",
-        "`import` writes one long-format log of the six joints with `tau_g` and `tau_dyn` from the URDF.",
-        "`identify` fits the extended LuGre model of every joint (`lugre/joint_1.npz` ... `joint_6.npz`);",
-        "`diagnose --fix` finds what each model lacks on the same run (held-out over ten blocks of time),",
-        "adds it and writes the fixed models to `fixed/` ([joints.md](joints.md)). Validation runs are",
-        "imported the same way; a user predicts them with `fricli predict fixed RUN.parquet -o pred.parquet`,",
-        "the script computes the same prediction in-process (`fricli.models`, the code `predict` runs).",
+        "`import` writes one long-format log of the six joints with `tau_g` and `tau_dyn` from the CAD URDF.",
+        "`identify` fits the extended LuGre model of every joint. `diagnose` finds what each model lacks",
+        "(held-out over ten blocks of time); the gravity and inertia errors of several joints are the robot",
+        "model's, so `--calibrate` identifies the robot model (masses, centres of mass, inertias, armature",
+        "and linear friction together, IDIM-LS with a prior at CAD, as `fricli calibrate`), writes",
+        "`ur10e-cal.urdf`, recomputes `tau_g` and `tau_dyn` from it, refits each joint's LuGre model on",
+        "the recomputed torques and diagnoses and fixes them there (`fixed/joint_1.npz` ... `joint_6.npz`).",
+        "Other runs are imported with the calibrated URDF (`fricli import RUN.csv ... --urdf",
+        "ur10e-cal.urdf`) and predicted with `fricli predict fixed RUN.parquet`; the script computes the",
+        "same prediction in-process (`fricli.models`, the code `predict` runs).",
         "",
-        "## Friction error on runs of other days",
+        "What `diagnose --fix --calibrate` reports on the fitting run (the robot-model errors it found",
+        "with the CAD URDF, what the calibration changed in-sample, and the held-out MAE before and after):",
         "",
-        "RMS error [Nm]; ratio = fricli (identify + diagnose --fix) / linear model.",
+        "```text",
+        robot_line,
+        "```",
+        "",
+        "## Error on runs of other days",
+        "",
+        "Ratio to the baseline's error, in motion. Columns: " + cols + "; IDIM-LS: `fricli calibrate` alone",
+        "(the calibrated URDF with the linear friction it identifies with it); LuGre with the calibrated",
+        "URDF (`identify` on the fitting run imported with it); fricli: the three commands above.",
         "",
         tab["friction"],
         "",
-        "![friction error ratio per joint](img/ur10e-friction-ratio.png)",
+        "![error ratio per joint](img/ur10e-friction-ratio.png)",
         "",
-        f"**Targets** (at most 0.70× the linear model's error on average over the joints, at most 0.85× on",
-        f"every joint): the mean ratio is **{mean_all:.2f}** over all rows ({mean_mov:.2f} in motion): "
-        f"{'met' if met_mean else 'not met'}; the worst joint is joint {worst_all[1]} at {worst_all[0]:.2f}×: "
-        f"{'met' if met_each else 'not met'}" + (f" ({', '.join(short)} above 0.85×)." if short else "."),
+        f"**Targets**: the mean ratio is **{means['fixed']:.2f}** (target 0.66: {'met' if met_mean else 'not met'});",
+        ("every joint meets its target." if not missed else
+         f"joint{'s' if len(missed) > 1 else ''} {', '.join(str(j) for j in missed)} "
+         f"{'miss' if len(missed) > 1 else 'misses'} {'their' if len(missed) > 1 else 'its'} target (column *met*)."),
+        f"IDIM-LS alone averages {means['idim']:.2f}, the CAD path {means['fixed_cad']:.2f}: the calibration",
+        "removes the robot-model error on the large joints, the LuGre models and diagnose the friction",
+        "error the linear law leaves on every joint.",
         "",
-        "### What limits the figure: noise and standstill, measured",
+        "### What limits the figure: noise, measured",
         "",
-        "The excitation lies below 1 Hz, so whatever the linear model's error holds above 2 Hz is no friction",
-        "that a model of the state (q, qd, qdd, tau_g) can follow: current noise, the velocity controller's",
-        "own corrections, gear ripple. The table gives that part (zero-phase high-pass at 2 Hz of the",
-        "linear model's error on the validation runs) and the share of rows at rest:",
-        "",
-        "| joint | linear model, all rows [Nm] | of which above 2 Hz | rows at rest | linear model, in motion | of which above 2 Hz |",
+        "| joint | baseline, in motion [Nm] | of which above 2 Hz | rows at rest | fricli, in motion | of which above 2 Hz |",
         "|---|---|---|---|---|---|",
         *floor_rows,
         "",
-        "The ratio in brackets is the floor a perfect low-frequency model would reach against the linear",
-        "model. Where it is close to or above 0.85× (the wrists in motion), no friction model can meet the",
-        "per-joint target on this measure; over all rows the standstill rows weigh in, where the torque a",
-        "held gear carries depends on how it came to rest and cannot be predicted from the state alone.",
+        "Whatever the error holds above 2 Hz is no friction a model of the state can follow: current noise,",
+        "the velocity controller's own corrections, gear ripple. On the wrists it is most of the error.",
         "",
         "## What diagnose finds, per joint",
         "",
         tab["diagnose"],
         "",
-        "The gravity column gives the `gravity` candidate's estimate on every joint where the log's",
-        "`tau_g` varies; only an *added* one is a finding. A figure that was not added is a least-squares",
-        "slope on a small or nearly constant `tau_g` (the wrists carry a fraction of a newton-metre of",
-        "gravity torque) and says nothing about the masses. Joint 1 turns about the vertical base axis and",
-        "the URDF puts the last link's centre of mass on joint 6's axis, so both have no gravity torque",
-        "and the candidate is not tested there.",
+        "Effects marked implausible were chosen with parameters beyond ±30 % (a gravity scale, an inertia):",
+        "they are held back as suspicions, since a drive gain, a cable or a counterbalance spring would do",
+        "the same; the calibration's own report flags such changes the same way (below).",
         "",
         "What the added effects mean:",
         "",
-        *meaning_rows,
+        *(meaning_rows or ["- nothing was added after the calibration."]),
         "",
-        "The largest corrections are not friction at all but errors of the robot model that the friction",
-        "target holds: a gravity torque off by several per cent (the CAD masses) and inertia missing from",
-        "`tau_dyn` (the dataset lists a reflected rotor inertia of 0 for joints 1 and 3, which a geared",
-        "motor cannot have). `diagnose` reports them as robot-model errors and `--fix` corrects them in",
-        "the model, apart from the friction terms. The linear model cannot absorb them: a gravity error",
-        "depends on the pose, an inertia on the acceleration. This is why fricli's models beat the linear",
-        "model most on joints 1 to 3, which carry the large masses and inertias.",
+        "## The calibrated robot model next to the CAD one",
         "",
-        "## The dataset authors' published parameters",
+        f"Prior: {cal['prior']} times each parameter's scale ([calibration.md](calibration.md)); the fitting run",
+        f"determines {cal['excitation']['base_parameters']} base parameters of {cal['excitation']['parameters']},"
+        f" {len(cal['excitation']['undetermined'])} directions stay near CAD.",
         "",
-        "The published `Fv, Fc, offset` (column *published* above) give almost the same error as the",
-        "least-squares fit on the fitting run: the friction levels agree (for example joint 1:",
-        f"Fv {joints[1]['linear_coef'][0]:.2f} Nm s/rad and Fc {joints[1]['linear_coef'][1]:.2f} Nm fitted here, 21.26 and 12.55 published)."
-        if 1 in joints else "least-squares fit on the fitting run.",
-        "What this comparison can show: that the linear friction law, with either set of parameters,",
-        "leaves the same error on other days, so the gain comes from what fricli adds, not from a better",
-        "fit of the same law. What it cannot show: how good the authors' whole model is. They identified",
-        "friction jointly with their own rigid-body parameters, so their friction parameters complement",
-        "their inertial parameters, not the URDF's CAD values used here; on this target they are charged",
-        "with the CAD model's gravity and inertia errors that their own model did not have.",
+        tab["parameters"],
+        "",
+        "Changes the calibration flags (beyond ±30 % of CAD or of the prior armature), with the other causes",
+        "that fit the same data:",
+        "",
+        *suspicious,
+        "",
+        "The dataset lists a reflected rotor inertia of 0 for joints 1 and 3, which a geared motor cannot",
+        "have; the calibration finds one. A body's mass change is what the joint torques of this run see",
+        "of it: masses of bodies that only the same joints carry trade against each other and against",
+        "their centres of mass.",
         "",
         "## External torque of the 2.805 kg payload run",
         "",
         "`ur-20_02_19_14harm50secLoad.csv` repeats the fitting run's trajectory with 2.805 kg at the",
-        "flange. The models fitted on the unloaded twin estimate the external torque",
-        "(`fricli estimate-ext fixed/joint_J.npz load.parquet --joint J`, the run imported without the",
-        "payload); the reference is the payload's torque from the URDF with the payload added",
-        "(`fricli import ... --payload-mass 2.805 --payload-com 0 0 0 --payload-frame tool0`), as the",
-        "difference of the two imports' `tau_g + tau_dyn`. **Assumption**: the centre of mass at the",
-        "flange (the `tool0` origin) as a point mass; it is not published (\"close to the flange\"). The",
-        "linear model's estimate is `tau_g + tau_dyn + f_linear - tau_m` with the same logs.",
+        "flange. The models are those fitted on the unloaded twin (the fitting run). The payload enters",
+        "as a controller knows it: declared at import (`--payload-mass 2.805 --payload-com 0 0 0",
+        "--payload-frame tool0` with the calibrated URDF), so `tau_g` holds it and the LuGre models' load",
+        "terms see it; `fricli estimate-ext fixed/joint_J.npz load.parquet --joint J` then estimates what",
+        "is left, which should be nothing. Its error against the reference, and the estimate of the",
+        "payload torque it implies (the declared payload's torque plus what is left), are what the table",
+        "gives. Reference: the payload's torque from the URDF with the payload added, as the difference of",
+        "two imports' `tau_g + tau_dyn` (**assumption**: a point mass at the `tool0` origin; the centre",
+        "of mass is not published). The linear model (CAD URDF, no payload declared; its friction does not",
+        "depend on the load, so declaring it changes nothing for it) estimates",
+        "`tau_g + tau_dyn + f_linear − tau_m`.",
         "",
         tab["external"],
         "",
         "![payload external torque](img/ur10e-payload.png)",
         "",
-        f"**Target** (at most 0.80× the linear model's error on joints 2 and 3): {ext_text}"
-        + "; " + ", ".join(f"joint {j} {'met' if v <= 0.80 else 'not met'}" for j, v in ext.items()) + ".",
-        "The last two columns give the least-squares share of the reference torque each estimate",
-        "follows. Where both fall short of 100 % by a similar amount, the gap is common to both models",
-        "(payload centre of mass, the drive gain, friction that grows with the payload's load) and no",
-        "friction model fitted without the payload removes it.",
+        f"**Target** (at most 0.65× the linear model's error on average over joints 2 and 3): {ext_text};"
+        f" mean {ext_mean:.2f}: {'met' if ext_mean <= 0.65 + 5e-3 else 'not met'}.",
+        "",
+        *limit,
+        "",
+        *adapt,
+        "## The dataset authors' published parameters",
+        "",
+        "The published `Fv, Fc, offset` give about the same error as the least-squares fit on the fitting",
+        "run with the CAD URDF. They were identified jointly with the authors' own rigid-body parameters,",
+        "so on the CAD model's torques they carry its gravity and inertia errors; the comparison shows",
+        "that the linear law leaves the same error on other days with either set, not how good the",
+        "authors' whole model is.",
         "",
         "## Commands run",
         "",
@@ -198,4 +256,3 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "```",
         "",
     ])
-

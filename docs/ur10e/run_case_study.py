@@ -39,7 +39,13 @@ PAYLOAD = {"mass": 2.805, "com": (0.0, 0.0, 0.0), "frame": "tool0"}  # kg, m in 
 PUBLISHED = {1: (21.26, 12.55, 0.196), 2: (20.22, 13.27, -0.754), 3: (10.38, 4.99, 0.198),
              4: (3.58, 2.00, 0.055), 5: (2.49, 2.69, -0.010), 6: (3.03, 2.30, 0.043)}  # Fv, Fc, offset
 FLOOR_HZ = 2.0  # the error above this frequency is not friction a model of the state can follow
-TARGET_MEAN, TARGET_EACH, TARGET_EXT = 0.70, 0.85, 0.80
+TARGET_MEAN, TARGET_EXT = 0.66, 0.65   # mean ratio in motion; payload error ratio, joints 2 and 3
+# days with two runs: adapt on one, score on the other (as benchmarks/ur10e_neural.py)
+PAIRS = (("ur-19_10_01-14_04_13", "ur-19_10_01-14_04_41"),
+         ("ur-20_02_05-20sec_12harm", "ur-20_02_05-20sec_8harm"),
+         ("ur-20_02_06-20sec_10harm", "ur-20_02_06-20sec_5harm"),
+         ("ur-20_02_10-20sec_7harm", "ur-20_02_10-30sec_12harm"),
+         ("ur-20_02_12-40sec_12harm", "ur-20_02_12-50sec_12harm"))
 
 COMMANDS: list[str] = []
 
@@ -66,10 +72,11 @@ def validation_runs(data: str) -> list[str]:
     return [n for n in names if not n.startswith(day)]
 
 
-def import_run(data: str, work: str, name: str, payload: bool = False, keep: bool = False) -> str:
-    out = os.path.join(work, name + ("-payload" if payload else "") + ".parquet")
+def import_run(data: str, work: str, name: str, urdf: str, tag: str, payload: bool = False, keep: bool = False) -> str:
+    """``fricli import`` of one run with ``urdf`` (the CAD one or the calibrated one, ``tag``)."""
+    out = os.path.join(work, f"{name}-{tag}{'-payload' if payload else ''}.parquet")
     args = ["import", os.path.join(data, "identification", name + ".csv"), "--mapping", MAPPING,
-            "--urdf", os.path.join(data, "ur10e.urdf"), "--cutoff", str(CUTOFF_HZ), "-o", out, "-q"]
+            "--urdf", urdf, "--cutoff", str(CUTOFF_HZ), "-o", out, "-q"]
     if payload:
         args += ["--payload-mass", str(PAYLOAD["mass"]), "--payload-com", *map(str, PAYLOAD["com"]),
                  "--payload-frame", PAYLOAD["frame"]]
@@ -91,10 +98,12 @@ def rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x))))
 
 
-def friction_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
-    """RMS of (friction target - prediction) over all validation rows, over the rows in motion
-    and over those at rest; and the RMS of the error's part above FLOOR_HZ (zero-phase high-pass),
-    which no model of q, qd, qdd and tau_g follows: the excitation lies below 1 Hz."""
+def torque_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
+    """RMS of tau_m minus the whole model (tau_g + tau_dyn of the log's robot model + the friction
+    prediction) over all validation rows, over the rows in motion and over those at rest; and the RMS
+    of the error's part above FLOOR_HZ (zero-phase high-pass), which no model of q, qd, qdd and tau_g
+    follows: the excitation lies below 1 Hz. With the same robot model for two friction models this
+    is the RMS of their friction errors; it also compares logs of different robot models."""
     from scipy import signal
 
     every, moving, fast, fast_moving = [], [], [], []
@@ -115,7 +124,7 @@ def friction_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float
 
 def predicted(model: str, path: str, joint: int) -> np.ndarray:
     """tau_f_pred of ``model`` on one joint of a log: what ``fricli predict`` writes (same code,
-    called in-process: the validation takes 6 x 11 predictions)."""
+    called in-process: the validation takes 6 x 11 predictions per model)."""
     return predicting_model(model).predict(signals(path, joint))[0]
 
 
@@ -137,48 +146,114 @@ def estimated_external(model: str, path: str, joint: int, work: str) -> np.ndarr
     return np.asarray(table.column("tau_ext_pred").to_numpy(), dtype=np.float64)
 
 
-def study(data: str, work: str, joints, runs: int | None, keep: bool = False) -> dict:
+def linear_fit(path: str, joint: int) -> np.ndarray:
+    """The standard model's Fv, Fc, offset: least squares on the friction target of one run."""
+    sig = signals(path, joint)
+    return np.linalg.lstsq(linear_columns(sig), logs.friction_target(sig), rcond=None)[0]
+
+
+def study(data: str, work: str, joints, runs: int | None, keep: bool = False, adapt: bool = True) -> dict:
+    cad = os.path.join(data, "ur10e.urdf")
+    cal = os.path.join(work, "ur10e-cal.urdf")
     val_names = validation_runs(data)[:runs] if runs else validation_runs(data)
-    fit_log = import_run(data, work, FIT_RUN, keep=keep)
-    val_logs = [import_run(data, work, n, keep=keep) for n in val_names]
-    load_log = import_run(data, work, LOAD_RUN, keep=keep)
-    load_ref_log = import_run(data, work, LOAD_RUN, payload=True, keep=keep)
+    # the path: import with the CAD URDF, identify, diagnose --fix --calibrate (docs/diagnose.md)
+    fit_cad = import_run(data, work, FIT_RUN, cad, "cad", keep=keep)
+    lugre_cad, fixed_cad, fixed = (os.path.join(work, d) for d in ("lugre-cad", "fixed-cad", "fixed"))
+    fricli("identify", fit_cad, "-o", lugre_cad, "-q")
+    calibrated = fricli("diagnose", lugre_cad, fit_cad, "--fix", "--calibrate", cal, "-o", fixed, "--json",
+                        json_out=True)
+    with open(cal[:-5] + ".calibration.json", encoding="utf-8") as fh:
+        report = json.load(fh)
+    # for comparison: the same path without the calibration (the CAD URDF's tau_g, diagnose --fix alone)
+    diagnosed_cad = fricli("diagnose", lugre_cad, fit_cad, "--fix", "-o", fixed_cad, "--json", json_out=True)["joints"]
+    # runs of other days, imported with each URDF; the fitting run with the calibrated one (LuGre alone)
+    val_cad = [import_run(data, work, n, cad, "cad", keep=keep) for n in val_names]
+    val_cal = [import_run(data, work, n, cal, "cal") for n in val_names]
+    fit_cal = import_run(data, work, FIT_RUN, cal, "cal")
+    lugre_cal = os.path.join(work, "lugre-cal")
+    fricli("identify", fit_cal, "-o", lugre_cal, "-q")
+    # the payload run: imported with the calibrated URDF and the declared payload (what the controller
+    # knows); the reference payload torque from the CAD URDF with and without the payload
+    load_cad = import_run(data, work, LOAD_RUN, cad, "cad", keep=keep)
+    load_ref = import_run(data, work, LOAD_RUN, cad, "cad", payload=True, keep=keep)
+    load_cal = import_run(data, work, LOAD_RUN, cal, "cal", payload=True)
 
-    result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {}}
-    # the whole arm at once: one model per joint in a folder (docs/joints.md)
-    lugre_dir, fixed_dir = os.path.join(work, "lugre"), os.path.join(work, "fixed")
-    fricli("identify", fit_log, "-o", lugre_dir, "-q")
-    diagnosed = fricli("diagnose", lugre_dir, fit_log, "--fix", "-o", fixed_dir, "--json", json_out=True)["joints"]
+    result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {},
+              "calibration": {k: report[k] for k in ("fit", "friction", "armature", "links", "suspicious",
+                                                     "excitation", "prior")},
+              "robot_model": calibrated.get("robot_model")}
     for j in joints:
-        lugre = os.path.join(lugre_dir, f"joint_{j}.npz")
-        fixed = os.path.join(fixed_dir, f"joint_{j}.npz")
-        diag = diagnosed[str(j)]
-
-        fit_sig = signals(fit_log, j)
-        coef = np.linalg.lstsq(linear_columns(fit_sig), logs.friction_target(fit_sig), rcond=None)[0]
+        fr = report["friction"]["joints"][str(j)]
+        idim = np.array([fr["Fv"], fr["Fc"], fr["offset"]])
+        coef = linear_fit(fit_cad, j)
         published = np.asarray(PUBLISHED[j])
+
+        def model(folder):
+            path = os.path.join(folder, f"joint_{j}.npz")
+            return lambda p, s: predicted(path, p, j)
+
         row = {
-            "linear_coef": coef.tolist(),
-            "linear": friction_errors(lambda p, s: linear_columns(s) @ coef, val_logs, j),
-            "published": friction_errors(lambda p, s: linear_columns(s) @ published, val_logs, j),
-            "lugre": friction_errors(lambda p, s: predicted(lugre, p, j), val_logs, j),
-            "fixed": friction_errors(lambda p, s: predicted(fixed, p, j), val_logs, j),
-            "diagnose": diag,
+            "linear_coef": coef.tolist(), "idim_coef": idim.tolist(),
+            "linear": torque_errors(lambda p, s: linear_columns(s) @ coef, val_cad, j),
+            "published": torque_errors(lambda p, s: linear_columns(s) @ published, val_cad, j),
+            "lugre": torque_errors(model(lugre_cad), val_cad, j),
+            "fixed_cad": torque_errors(model(fixed_cad), val_cad, j),
+            "idim": torque_errors(lambda p, s: linear_columns(s) @ idim, val_cal, j),
+            "lugre_cal": torque_errors(model(lugre_cal), val_cal, j),
+            "fixed": torque_errors(model(fixed), val_cal, j),
+            "diagnose": calibrated["joints"][str(j)], "diagnose_cad": diagnosed_cad[str(j)],
         }
-        # external torque of the payload run, models fitted on its unloaded twin
-        sig = signals(load_log, j)
-        ref_sig = signals(load_ref_log, j)
+        # external torque of the payload run, models fitted on its unloaded twin (the fitting run)
+        sig, ref_sig, cal_sig = signals(load_cad, j), signals(load_ref, j), signals(load_cal, j)
         reference = -((ref_sig["tau_g"] + ref_sig["tau_dyn"]) - (sig["tau_g"] + sig["tau_dyn"]))
-        ext_fixed = estimated_external(fixed, load_log, j, work)
+        left = estimated_external(os.path.join(fixed, f"joint_{j}.npz"), load_cal, j, work)
+        ext_fixed = left + reference       # what is left beyond the declared payload, plus the payload's torque
+        ext_idim = logs.external_torque(cal_sig, linear_columns(cal_sig) @ idim) + reference
         ext_linear = logs.external_torque(sig, linear_columns(sig) @ coef)
-        row["payload"] = {"reference_rms": rms(reference), "fixed": rms(ext_fixed - reference),
-                          "linear": rms(ext_linear - reference),
-                          "fixed_gain": _gain(ext_fixed - reference, reference),
-                          "linear_gain": _gain(ext_linear - reference, reference)}
+        twin = logs.external_torque(signals(fit_cal, j), predicted(os.path.join(fixed, f"joint_{j}.npz"), fit_cal, j))
+        row["payload"] = {"reference_rms": rms(reference)}
+        for key, est in (("fixed", ext_fixed), ("idim", ext_idim), ("linear", ext_linear)):
+            err = est - reference
+            row["payload"][key] = rms(err)
+            row["payload"][key + "_gain"] = _gain(err, reference)
+            row["payload"][key + "_above_floor"] = _above_floor(err, sig["t"])
+        row["payload"]["fixed_unloaded"] = rms(twin)
         row["payload_series"] = {"t": sig["t"] - sig["t"][0], "reference": reference, "fixed": ext_fixed,
-                                 "linear": ext_linear}
+                                 "idim": ext_idim, "linear": ext_linear}
         result["joints"][j] = row
+    pairs = [p for p in PAIRS if set(p) <= set(val_names)]
+    imported = dict(zip(val_names, val_cal))
+    result["adapt"] = adapt_pairs(work, fixed, imported, joints, pairs) if adapt and pairs else None
     return result
+
+
+def adapt_pairs(work: str, base: str, imported: dict[str, str], joints, pairs) -> dict:
+    """Same-day adaptation (as benchmarks/ur10e_neural.py): for each day with two runs, ``adapt`` the
+    fixed models on one run, scored on the other (both imported with the calibrated URDF), against the
+    fixed models there: RMS over the rows in motion of the friction target minus the prediction."""
+    cases = []
+    for first, second in pairs:
+        for on, scored in ((first, second), (second, first)):
+            on_path, scored_path = imported[on], imported[scored]
+            out = os.path.join(work, f"adapted-{on}")
+            done = fricli("adapt", base, on_path, "--seed", "0", "-o", out, "--json", "-q", json_out=True)
+            for j in joints:
+                kept = done["joints"][str(j)].get("adapted", True)
+                errors = {}
+                for key, folder in (("base", base), ("adapted", out)):
+                    sig = signals(scored_path, j)
+                    e = logs.friction_target(sig) - predicted(os.path.join(folder, f"joint_{j}.npz"), scored_path, j)
+                    errors[key] = rms(e[metrics.in_motion(sig["qd"])])
+                cases.append({"adapted_on": on, "scored_on": scored, "joint": j, "residual_kept": kept,
+                              "base_error": errors["base"], "adapted_error": errors["adapted"]})
+    return {"cases": cases}
+
+
+def _above_floor(x: np.ndarray, t: np.ndarray) -> float:
+    from scipy import signal
+
+    sos = signal.butter(4, FLOOR_HZ, btype="high", fs=1.0 / np.median(np.diff(t)), output="sos")
+    return rms(signal.sosfiltfilt(sos, x))
 
 
 def _gain(error: np.ndarray, reference: np.ndarray) -> float:
@@ -195,55 +270,108 @@ def _fmt_effect(e: dict) -> str:
     return f"{e['name']} ({params})" if params else e["name"]
 
 
+MODEL_COLUMNS = (("published", "published Fv, Fc, offset", "CAD"), ("lugre", "LuGre (identify)", "CAD"),
+                 ("fixed_cad", "identify + diagnose --fix", "CAD"), ("idim", "IDIM-LS (fricli calibrate)", "calibrated"),
+                 ("lugre_cal", "LuGre (identify)", "calibrated"),
+                 ("fixed", "**fricli: diagnose --fix --calibrate**", "calibrated"))
+
+
+def targets(r: dict) -> dict:
+    """Per joint, in motion: the floor (the linear model's error above FLOOR_HZ, relative to it) and the
+    target, halfway between the CAD path's ratio (identify + diagnose --fix) and the floor."""
+    floor = r["linear"]["above_floor_moving"] / r["linear"]["moving"]
+    cad_path = r["fixed_cad"]["moving"] / r["linear"]["moving"]
+    return {"floor": floor, "target": 0.5 * (floor + cad_path)}
+
+
 def tables(res: dict) -> dict[str, str]:
-    rows, ratios = [], {"all": [], "moving": []}
+    head = " | ".join(f"{label} ({urdf} URDF)" for _, label, urdf in MODEL_COLUMNS)
+    rows, ratios, met = [], {k: [] for k, _, _ in MODEL_COLUMNS}, []
     for j, r in res["joints"].items():
-        ra, rm = r["fixed"]["all"] / r["linear"]["all"], r["fixed"]["moving"] / r["linear"]["moving"]
-        ratios["all"].append(ra)
-        ratios["moving"].append(rm)
-        rows.append(f"| {j} | {r['fixed']['all']:.3f} | {r['lugre']['all']:.3f} | {r['linear']['all']:.3f} | "
-                    f"{r['published']['all']:.3f} | **{ra:.2f}** | {r['fixed']['moving']:.3f} | "
-                    f"{r['linear']['moving']:.3f} | {r['published']['moving']:.3f} | **{rm:.2f}** |")
-    mean_all, mean_mov = float(np.mean(ratios["all"])), float(np.mean(ratios["moving"]))
-    rows.append(f"| mean | | | | | **{mean_all:.2f}** | | | | **{mean_mov:.2f}** |")
+        base = r["linear"]["moving"]
+        cells = []
+        for key, _, _ in MODEL_COLUMNS:
+            ratio = r[key]["moving"] / base
+            ratios[key].append(ratio)
+            cells.append(f"**{ratio:.2f}**" if key == "fixed" else f"{ratio:.2f}")
+        t = targets(r)
+        ok = ratios["fixed"][-1] <= t["target"] + 5e-3 and (j != 2 or ratios["fixed"][-1] <= ratios["idim"][-1])
+        met.append(ok)
+        rows.append(f"| {j} | {base:.3f} | " + " | ".join(cells) + f" | {t['floor']:.2f} | {t['target']:.2f} | "
+                    f"{'yes' if ok else 'no'} | {r['fixed']['all'] / r['linear']['all']:.2f} |")
+    means = {k: float(np.mean(v)) for k, v in ratios.items()}
+    rows.append("| mean | | " + " | ".join(f"**{means[k]:.2f}**" if k == "fixed" else f"{means[k]:.2f}"
+                                          for k, _, _ in MODEL_COLUMNS) + f" | | {TARGET_MEAN:.2f} | "
+                f"{'yes' if means['fixed'] <= TARGET_MEAN + 5e-3 else 'no'} | |")
     friction = "\n".join([
-        "| joint | fricli (identify + diagnose --fix) | LuGre alone | linear model | published | ratio | "
-        "fricli, in motion | linear, in motion | published, in motion | ratio, in motion |",
-        "|---|---|---|---|---|---|---|---|---|---|", *rows])
+        f"| joint | linear model, in motion [Nm] | {head} | floor (above {FLOOR_HZ:g} Hz) | target | met | "
+        "fricli, all rows |", "|---|---|" + "---|" * (len(MODEL_COLUMNS) + 4), *rows])
 
     diag_rows = []
     for j, r in res["joints"].items():
-        d = r["diagnose"]
-        added = [e for e in d["effects"] if e["name"] in d["added"]]
-        model_err = [_fmt_effect(e) for e in added if e.get("part") == "model"]
-        fric = [_fmt_effect(e) for e in added if e.get("part") != "model"]
-        unexplained = d.get("unexplained_share")
-        gravity = next((e for e in d["effects"] if e["name"] == "gravity"), None)
-        if gravity is None or gravity.get("params", {}).get("error", {}).get("value") is None:
-            grav = "not tested"
-        else:
-            grav = (f"{gravity['params']['error']['value']:+.1f} % "
-                    f"({'added' if 'gravity' in d['added'] else 'not added'}, gain {gravity['gain']:.0%})")
-        diag_rows.append(f"| {j} | {grav} | {'; '.join(model_err) or '–'} | {'; '.join(fric) or '–'} | "
-                         f"{d['mae_before']:.3f} → {d['mae_after']:.3f} | "
-                         f"{'' if unexplained is None else f'{unexplained:.0%}'} | "
-                         f"{r['lugre']['all']:.3f} → {r['fixed']['all']:.3f} |")
+        before, after = r["diagnose_cad"], r["diagnose"]
+        model_before = [e for e in before["effects"] if e.get("part") == "model"
+                        and (e["name"] in before["added"] or e["name"] in before.get("suspected", []))]
+        added = [e for e in after["effects"] if e["name"] in after["added"]]
+        diag_rows.append(
+            f"| {j} | {'; '.join(_fmt_effect(e) + (' (implausible, held back)' if e['name'] in before.get('suspected', []) else '') for e in model_before) or '–'} | "
+            f"{'; '.join(_fmt_effect(e) for e in added if e.get('part') == 'model') or '–'} | "
+            f"{'; '.join(_fmt_effect(e) for e in added if e.get('part') != 'model') or '–'} | "
+            f"{before['mae_before']:.3f} → {after['mae_after']:.3f} |")
     diagnose = "\n".join([
-        "| joint | gravity-model error (logged vs true) | robot-model errors added | friction effects added | held-out MAE on the fitting run [Nm] | "
-        "unexplained share left | RMS on other days, before → after [Nm] |",
-        "|---|---|---|---|---|---|---|", *diag_rows])
+        "| joint | robot-model errors with the CAD URDF | left after calibration | friction effects added | "
+        "held-out MAE on the fitting run, CAD + LuGre → calibrated + fixed [Nm] |",
+        "|---|---|---|---|---|", *diag_rows])
+
+    cal = res["calibration"]
+    link_rows = [f"| {name} | {v['mass_cad']:.3f} | {v['mass']:.3f} | {100 * (v['mass'] / v['mass_cad'] - 1):+.0f} % | "
+                 f"{_vec(v['com_cad'])} | {_vec(v['com'])} |" for name, v in cal["links"].items()]
+    arm_rows = [f"| {name} | {v['prior']:.4g} | {v['identified']:.4g} |" for name, v in cal["armature"].items()]
+    fit_rows = [f"| {j} | {f['rms_before']:.3f} | {f['rms_after']:.3f} |" for j, f in cal["fit"].items()]
+    parameters = "\n".join([
+        "| body (link) | mass, CAD [kg] | calibrated | change | centre of mass, CAD [m] | calibrated |",
+        "|---|---|---|---|---|---|", *link_rows, "",
+        "| joint | armature, prior (mapping's rotor inertia) [kg m²] | calibrated |", "|---|---|---|", *arm_rows, "",
+        "| joint | fitting run: RMS of tau_m − model, CAD + linear friction [Nm] | calibrated + linear friction |",
+        "|---|---|---|", *fit_rows])
 
     ext_rows = []
     for j, r in res["joints"].items():
         p = r["payload"]
-        ext_rows.append(f"| {j} | {p['reference_rms']:.2f} | {p['fixed']:.3f} | {p['linear']:.3f} | "
-                        f"**{p['fixed'] / p['linear']:.2f}** | {_share(p, 'fixed_gain')} | {_share(p, 'linear_gain')} |")
+        ext_rows.append(f"| {j} | {p['reference_rms']:.2f} | {p['linear']:.3f} | {p['idim']:.3f} | {p['fixed']:.3f} | "
+                        f"{p['idim'] / p['linear']:.2f} | **{p['fixed'] / p['linear']:.2f}** | "
+                        f"{_share(p, 'linear_gain')} | {_share(p, 'idim_gain')} | {_share(p, 'fixed_gain')} | "
+                        f"{p['fixed_above_floor']:.3f} | {p['fixed_unloaded']:.3f} |")
     external = "\n".join([
-        "| joint | payload torque (RMS) [Nm] | fricli error [Nm] | linear error [Nm] | ratio | "
-        "share of the payload torque fricli sees | linear sees |",
-        "|---|---|---|---|---|---|---|", *ext_rows])
-    return {"friction": friction, "diagnose": diagnose, "external": external,
-            "mean_all": mean_all, "mean_moving": mean_mov, "ratios": ratios}
+        "| joint | payload torque (RMS) [Nm] | linear error [Nm] | IDIM-LS error | fricli error | IDIM-LS / linear | "
+        "fricli / linear | linear sees | IDIM-LS sees | fricli sees | fricli error above 2 Hz | "
+        "fricli on the unloaded twin |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|", *ext_rows])
+    out = {"friction": friction, "diagnose": diagnose, "parameters": parameters, "external": external,
+           "means": means, "met": met}
+    if res.get("adapt"):
+        out["adapt"] = adapt_table(res["adapt"], list(res["joints"]))
+    return out
+
+
+def _vec(v) -> str:
+    return "(" + ", ".join(f"{x:.3f}" for x in v) + ")"
+
+
+def adapt_table(result: dict, joints) -> str:
+    cases = result["cases"]
+    lines = ["| adapted on | scored on | " + " | ".join(f"joint {j}" for j in joints) + " |",
+             "|---|---|" + "---|" * len(joints)]
+    for on, scored in dict.fromkeys((c["adapted_on"], c["scored_on"]) for c in cases):
+        cells = [f"{c['base_error']:.3f} → {c['adapted_error']:.3f}{'' if c['residual_kept'] else ' (base kept)'}"
+                 for c in cases if c["adapted_on"] == on and c["scored_on"] == scored]
+        lines.append(f"| {on[3:]} | {scored[3:]} | " + " | ".join(cells) + " |")
+    ratios = [c["adapted_error"] / c["base_error"] for c in cases]
+    kept = sum(c["residual_kept"] for c in cases)
+    worse = sum(c["adapted_error"] > c["base_error"] * (1 + 1e-9) for c in cases)
+    lines += ["", f"adapted / base on the other run: {min(ratios):.3f} to {max(ratios):.3f} (mean {np.mean(ratios):.3f}); "
+              f"residual kept in {kept} of {len(cases)} cases; worse than the base in {worse}"]
+    return "\n".join(lines)
 
 
 def _share(p: dict, key: str) -> str:
@@ -259,17 +387,19 @@ def figures(res: dict, img: str) -> list[str]:
 
     written = []
     joints = list(res["joints"])
-    fig, ax = plt.subplots(figsize=(7, 3.2))
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
     x = np.arange(len(joints))
-    for k, (key, label) in enumerate((("fixed", "fricli: identify + diagnose --fix"), ("lugre", "fricli: LuGre alone"),
-                                       ("published", "published parameters"))):
-        ratio = [res["joints"][j][key]["all"] / res["joints"][j]["linear"]["all"] for j in joints]
+    shown = (("fixed_cad", "CAD URDF: identify + diagnose --fix"), ("idim", "IDIM-LS (fricli calibrate alone)"),
+             ("fixed", "fricli: diagnose --fix --calibrate"))
+    for k, (key, label) in enumerate(shown):
+        ratio = [res["joints"][j][key]["moving"] / res["joints"][j]["linear"]["moving"] for j in joints]
         ax.bar(x + (k - 1) * 0.27, ratio, 0.27, label=label)
+    ax.plot(x, [targets(res["joints"][j])["floor"] for j in joints], "k_", ms=22, mew=2, label=f"floor (above {FLOOR_HZ:g} Hz)")
+    ax.plot(x, [targets(res["joints"][j])["target"] for j in joints], "r_", ms=22, mew=1.5, label="target")
     ax.axhline(1.0, color="k", lw=0.8)
-    ax.axhline(TARGET_EACH, color="r", lw=0.8, ls="--", label=f"target per joint ({TARGET_EACH})")
     ax.set_xticks(x, [f"joint {j}" for j in joints])
     ax.set_ylabel("RMS error / linear model's")
-    ax.set_title("Friction error on runs of other days (all rows)")
+    ax.set_title("Error on runs of other days, in motion (baseline: CAD URDF + linear friction)")
     ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()
     path = os.path.join(img, "ur10e-friction-ratio.png")
@@ -277,14 +407,14 @@ def figures(res: dict, img: str) -> list[str]:
     plt.close(fig)
     written.append(path)
 
-    shown = [j for j in (2, 3) if j in res["joints"]]
-    if shown:
-        fig, axes = plt.subplots(len(shown), 1, figsize=(7, 2.4 * len(shown)), sharex=True, squeeze=False)
-        for ax, j in zip(axes[:, 0], shown):
+    shown_j = [j for j in (2, 3) if j in res["joints"]]
+    if shown_j:
+        fig, axes = plt.subplots(len(shown_j), 1, figsize=(7, 2.4 * len(shown_j)), sharex=True, squeeze=False)
+        for ax, j in zip(axes[:, 0], shown_j):
             s = res["joints"][j]["payload_series"]
             ax.plot(s["t"], s["reference"], "k", lw=1.2, label="payload torque (URDF + 2.805 kg)")
-            ax.plot(s["t"], s["fixed"], lw=0.6, label="fricli estimate")
-            ax.plot(s["t"], s["linear"], lw=0.6, alpha=0.7, label="linear-model estimate")
+            ax.plot(s["t"], s["fixed"], lw=0.6, label="fricli (calibrated URDF, payload declared)")
+            ax.plot(s["t"], s["linear"], lw=0.6, alpha=0.7, label="linear model (CAD URDF)")
             ax.set_ylabel(f"joint {j} [Nm]")
         axes[0, 0].legend(fontsize=7, loc="upper right")
         axes[-1, 0].set_xlabel("t [s]")
@@ -317,6 +447,7 @@ def main(argv=None) -> None:
     ap.add_argument("--joints", default="1,2,3,4,5,6", help="joints to study, e.g. 6")
     ap.add_argument("--runs", type=int, default=None, help="use only the first N validation runs")
     ap.add_argument("--keep-imports", action="store_true", help="reuse the logs already imported into --work")
+    ap.add_argument("--no-adapt", action="store_true", help="leave out the same-day adaptation")
     ap.add_argument("--reuse", action="store_true",
                     help="rewrite the document from the figures of the last run in --work (no fricli commands)")
     args = ap.parse_args(argv)
@@ -331,19 +462,30 @@ def main(argv=None) -> None:
             with open(saved) as fh:
                 res, COMMANDS[:] = _from_json(json.load(fh))
         else:
-            res = study(args.data, work, joints, args.runs, keep=args.keep_imports)
+            res = study(args.data, work, joints, args.runs, keep=args.keep_imports, adapt=not args.no_adapt)
             atomic_write_bytes(saved, json.dumps({"result": res, "commands": COMMANDS}, default=_to_list).encode())
     pictures = figures(res, img)
     import case_study_text  # docs/ur10e/case_study_text.py: the words around the figures
 
-    shown = [c.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA")
-             .replace(ROOT + os.sep, "") for c in COMMANDS]
+    def paths(text: str) -> str:
+        return text.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA") \
+            .replace(ROOT + os.sep, "")
+
+    shown = [paths(c) for c in COMMANDS]
+    if res.get("robot_model"):
+        res["robot_model"]["summary"] = paths(res["robot_model"]["summary"])
     text = case_study_text.render(res, tables(res), shown, full=(len(res["joints"]) == 6 and res["validation_runs"] == validation_runs(args.data)))
     atomic_write_bytes(os.path.join(docs, "case-study-ur10e.md"), text.encode())
-    summary = {j: {k: r[k] for k in ("linear_coef", "linear", "published", "lugre", "fixed", "payload", "diagnose")}
-               for j, r in res["joints"].items()}
-    atomic_write_bytes(os.path.join(docs, "ur10e-results.json"),
-                       json.dumps({"validation_runs": res["validation_runs"], "joints": summary}, indent=1).encode())
+    digest = ("added", "suspected", "model_errors", "mae_before", "mae_after")
+    summary = {j: {k: ({d: v.get(d) for d in digest} if k.startswith("diagnose") else v) for k, v in r.items()
+                   if k != "payload_series"} for j, r in res["joints"].items()}
+    calibration = {k: v for k, v in res["calibration"].items() if k != "excitation"}
+    calibration["excitation"] = {k: res["calibration"]["excitation"][k] for k in ("parameters", "base_parameters")}
+    calibration["excitation"]["undetermined"] = len(res["calibration"]["excitation"]["undetermined"])
+    robot = {k: v for k, v in (res.get("robot_model") or {}).items() if k in ("joints", "summary", "mae")}
+    atomic_write_bytes(os.path.join(docs, "ur10e-results.json"), json.dumps(
+        {"validation_runs": res["validation_runs"], "joints": summary, "calibration": calibration,
+         "robot_model": robot, "adapt": res.get("adapt")}, indent=1).encode())
     print(f"wrote {os.path.join(docs, 'case-study-ur10e.md')} and {', '.join(pictures)}", file=sys.stderr)
 
 

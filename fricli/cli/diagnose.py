@@ -9,11 +9,11 @@ import click
 from fricli import models
 from fricli.core import logs, modelset
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_results, fit_joints, if_changed_option, json_flag, log_reading,
-                                read_log, reading_kwargs, say)
+from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
+                                log_reading, read_log, reading_kwargs, say, warn)
 from fricli.fitting.diagnosis import driver
 from fricli.fitting.diagnosis import effects as E
-from fricli.core.errors import OutputError
+from fricli.core.errors import FricliError, OutputError
 
 
 def _effect_names(ctx, param, value):
@@ -102,12 +102,19 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
 @click.option("--accept-implausible", is_flag=True,
               help="Add effects whose fitted parameters are out of plausible range (e.g. a gravity scale "
                    "beyond +-30 %) instead of reporting them as suspicious.")
+@click.option("--urdf", default=None, metavar="ROBOT.urdf",
+              help="The URDF LOG's tau_g and tau_dyn came from (default: the one its import recorded), for the "
+                   "robot-model check of a whole-arm log and --calibrate.")
+@click.option("--calibrate", "calibrated", default=None, metavar="CAL.urdf",
+              help="With --fix on a whole-arm log: calibrate the robot model (as fricli calibrate), write CAL.urdf "
+                   "and its report, recompute tau_g and tau_dyn from it, refit each joint's friction model and "
+                   "diagnose again.")
 @log_reading
 @if_changed_option
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
-                 joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
+                 urdf, calibrated, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -116,7 +123,10 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     (friction growing with |tau_g|), payload (a measured tau_ext loading the gear), quadrant
     (driving vs back-driven), velocity (curve shape), level, offset and column:NAME for any
     other numeric column. Gravity, acceleration and offset are errors of the robot model or
-    the measurement, not friction, and are reported as such. Effects are scored on held-out
+    the measurement, not friction, and are reported as such; on a whole-arm log imported with a
+    URDF, gravity or acceleration errors on several joints are reported once as errors of the
+    robot model, with the command that calibrates it and what that calibration changes, and
+    --fix --calibrate CAL.urdf performs it before fixing the friction. Effects are scored on held-out
     blocks of the log, tested for significance and added one at a time while the next one
     still removes enough of the residual (docs/diagnose.md). An effect the log cannot identify
     (e.g. tau_g nearly constant) is not tested; one chosen with implausible parameters (a gravity
@@ -143,6 +153,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("--fix writes a model file: give -o FILE.npz, not -")
     if if_changed and not fix:
         raise click.UsageError("--if-changed applies to --fix (the model it writes)")
+    if calibrated and not fix:
+        raise click.UsageError("--calibrate applies to --fix (it recomputes the log before fixing the friction)")
     if output:
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
@@ -155,6 +167,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     pairs = modelset.paired(source, table_, name, joint)
     several = len(pairs) > 1
 
+    if calibrated and not several:
+        raise click.UsageError("--calibrate needs a whole-arm log and a model folder (one model per joint)")
+
     def show(result, data, model_path) -> None:
         if not as_json:
             if several:
@@ -162,35 +177,177 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
             click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
                        + ("\n" if several else ""))
 
-    if fix:
-        def report(made):
-            show(made.diagnosis, made.data, made.base)
-            _say_fixed(made, quiet)
-            return made.diagnosis.to_json()
+    def report(made, refitted: bool = False):
+        show(made.diagnosis, made.data, made.base)
+        _say_fixed(made, quiet, refitted)
+        return made.diagnosis.to_json()
 
+    def diagnose_all(table, echo: bool = True) -> dict:
+        from fricli.models import coupled
+
+        found = {}
+
+        def work(j):
+            data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
+            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
+            base, meta = models.load(pairs[j])
+            models.check_log(meta, data, pairs[j])
+            result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
+                                     max_effects=max_effects, accept_implausible=accept_implausible)
+            if echo:
+                show(result, data, pairs[j])
+            found[j] = result.to_json()
+
+        modelset.each_joint(list(pairs), work, what="results")
+        return found
+
+    robot = None
+    if calibrated:
+        before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
+        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet)
+        results, folder_run = _fix_refitted(table_, digest, name, output, source, report), True
+        robot = _calibrated_record(before, results, cal, calibrated)
+    elif fix:
         results, folder_run = fit_joints("diagnose", log, output, report, if_changed=if_changed, quiet=quiet,
                                          source=source, read=(table_, digest))
     else:
-        results, folder_run = {}, several
-
-        from fricli.models import coupled
-
-        def work(j):
-            data = logs.from_table(table_, name=name, sha256=digest, joint=j, **reading)
-            data.signals.update(coupled.partner_signals(table_, j, name, **reading))   # the coupling effect's
-            base, meta = models.load(pairs[j])
-            models.check_log(meta, data, pairs[j])
-            results[j] = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                                         max_effects=max_effects, accept_implausible=accept_implausible)
-            show(results[j], data, pairs[j])
-            results[j] = results[j].to_json()
-
-        modelset.each_joint(list(pairs), work, what="results")
+        results, folder_run = diagnose_all(table_), several
+    if several and robot is None:
+        robot = _robot_model_check(results, table_, name, log, urdf, cutoff)
+    if robot is not None and not as_json:
+        click.echo(robot["summary"])
     if as_json:
-        emit_results(results, folder_run)
+        if robot is not None and folder_run:
+            emit_json({"joints": {str(j): r for j, r in results.items()}, "robot_model": robot})
+        else:
+            emit_results(results, folder_run)
 
 
-def _say_fixed(made, quiet: bool) -> None:
+def _fix_refitted(table, digest: str, name: str, output: str, source, report) -> dict:
+    """--fix after --calibrate: each joint's base model refitted on the recomputed log
+    (``fix.refit``), diagnosed and fixed there, written under the job's record and lock as
+    ``fricli.fitting.runs`` writes a fixed model; {joint: report(made)}."""
+    from fricli.core import jobs, metrics
+    from fricli.fitting import runs
+    from fricli.cli.options import command_options
+    from fricli.fitting.diagnosis.fix import augment, refit
+
+    opts = command_options("diagnose")
+    pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
+    results = {}
+
+    def work(j):
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn)
+        out = modelset.path_for(folder, data.joint)
+        base, meta = models.load(pairs[j])
+        base = refit(base, data)
+        job = runs.record("diagnose", opts, data, pairs[j])
+        with jobs.output_lock(out):
+            result = driver.diagnose(base, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
+                                     only=opts["only"], max_effects=opts["max_effects"],
+                                     accept_implausible=opts["accept_implausible"])
+            fixed = augment(base, result, data, carry=not opts["no_carry"])
+            fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+            fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+                       carried=fixed.carried, refitted=fixed.refitted)
+            models.save_for_log(out, fixed, data, rows_used=len(data), fit=fit, job=job,
+                                base={"path": pairs[j], "kind": base.kind, "refitted_on_calibrated_log": True})
+        results[j] = report(runs.Made("diagnose", out, data, fixed, fit, base=pairs[j], base_meta=meta,
+                                      diagnosis=result), refitted=True)
+
+    modelset.each_joint(list(pairs), work)
+    return results
+
+
+def _urdf_of(table, urdf: str | None) -> str | None:
+    """The URDF given, or the one the log's import recorded when it is still there."""
+    from fricli.robot import calibration as cb
+
+    if urdf:
+        return urdf
+    recorded = cb.recorded_urdf(table)
+    return recorded if recorded and os.path.isfile(recorded) else None
+
+
+def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool):
+    """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
+    import json
+
+    from fricli.core.atomic import atomic_write_bytes
+    from fricli.cli.calibrate import report_path
+    from fricli.cli.options import _json_safe
+    from fricli.robot import calibration as cb
+
+    path = _urdf_of(table, urdf)
+    if path is None:
+        raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
+    cal, text, new = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
+    atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
+                                          + "\n").encode())
+    atomic_write_bytes(output, text.encode())
+    for line in cal.report["suspicious"]:
+        warn(f"warning: {line}")
+    say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)
+    return cal, new
+
+
+def _fit_lines(cal, joints_: list) -> str:
+    fit = cal.report["fit"]
+    return ", ".join(f"joint {j} {fit[str(j)]['rms_before']:.3g} -> {fit[str(j)]['rms_after']:.3g} Nm"
+                     for j in joints_ if str(j) in fit)
+
+
+def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | None, cutoff) -> dict | None:
+    """Once per whole-arm log imported with a URDF: gravity or acceleration errors on several joints are the
+    robot model's; the calibration that fixes them and, when the URDF is at hand, what it changes."""
+    from fricli.robot import calibration as cb
+
+    if cb.recorded_urdf(table) is None and urdf is None:
+        return None
+    flagged = driver.robot_model_joints(results)
+    if len(flagged) < 2:
+        return None
+    path = _urdf_of(table, urdf)
+    who = ", ".join(str(j) for j in flagged)
+    command = f"fricli calibrate {log} --urdf {path or 'ROBOT.urdf'} -o CAL.urdf"
+    out = {"joints": [str(j) for j in flagged], "command": command, "fit": None}
+    summary = f"robot-model errors on joints {who}: calibrate the robot model: `{command}`"
+    if path is None:
+        summary += " (give --urdf to see what it changes)"
+        out["summary"] = summary
+        return out
+    try:
+        cal, _, _ = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    except FricliError as exc:       # the check is advice: the diagnosis stands without it
+        out["summary"] = f"{summary} (the calibration on this log fails: {exc})"
+        return out
+    out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
+    out["suspicious"] = cal.report["suspicious"]
+    out["summary"] = (f"{summary}; RMS of tau_m minus the robot model and linear friction on this log, CAD -> "
+                      f"calibrated: {_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction "
+                      "on it")
+    return out
+
+
+def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
+    """What --calibrate changed: per joint the held-out MAE with the CAD robot model and the friction model
+    given -> with the calibrated robot model, its refitted friction and the added effects."""
+    flagged = driver.robot_model_joints(before)
+    rows = {str(j): {"mae_before": before[j]["mae_before"], "mae_after": after[j]["mae_after"],
+                     "model_errors_before": before[j].get("model_errors", []),
+                     "model_errors_after": after[j].get("model_errors", [])} for j in after}
+    change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
+    fit = ", ".join(f"joint {j} {f['rms_before']:.3g} -> {f['rms_after']:.3g} Nm" for j, f in cal.report["fit"].items())
+    summary = (f"robot-model errors on joints {', '.join(str(j) for j in flagged) or 'none'}: calibrated the robot "
+               f"model -> {output} (RMS of tau_m minus the robot model and linear friction, CAD -> calibrated: {fit})\n"
+               f"held-out MAE, CAD robot model + friction model -> calibrated robot model + refitted and fixed "
+               f"friction: {change}")
+    return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],
+            "suspicious": cal.report["suspicious"], "mae": rows, "summary": summary}
+
+
+def _say_fixed(made, quiet: bool, refitted: bool = False) -> None:
     """The stderr line of a model written by --fix."""
     result, fixed, fit = made.diagnosis, made.model, made.summary
     if quiet:
@@ -208,4 +365,5 @@ def _say_fixed(made, quiet: bool) -> None:
             f"(in-sample MAE {fit['mae']:.4g} {result.tau_unit})")
     else:
         held = f" (not added, implausible: {', '.join(result.suspected)})" if result.suspected else ""
-        say(f"wrote {made.output}: nothing added{held}, same predictions as {made.base}")
+        same = f"{base_kind} refitted on the recomputed log" if refitted else f"same predictions as {made.base}"
+        say(f"wrote {made.output}: nothing added{held}, {same}")

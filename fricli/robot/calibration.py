@@ -627,3 +627,38 @@ def refuse_inconsistent(cal: Calibration) -> None:
     if problems:
         raise FitError(f"the identified model is physically inconsistent: {'; '.join(problems)}; excite the arm "
                        "more, tighten the prior (--prior) or enforce consistency (--consistency enforce)")
+
+
+# --------------------------------------------------------------------------- a log's robot model, calibrated
+
+
+def recorded_urdf(table) -> str | None:
+    """The URDF the log's tau_g and tau_dyn came from, as ``import``/``dynamics`` recorded it (None: none)."""
+    return _robot_record(table).get("urdf") or None
+
+
+def recalibrate(table, name: str, urdf: str, *, prior: float = DEFAULT_PRIOR, friction: str = "linear",
+                cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
+    """Calibrate the robot model of a whole-arm log imported with a URDF (the matching and gravity it
+    recorded) and recompute its tau_g and tau_dyn from the calibrated model.
+
+    Returns (Calibration, the calibrated URDF's text, the table with the new tau_g and tau_dyn).
+    A payload the import declared is fitted into the last body (and not added again)."""
+    from fricli.robot.dynamics import RobotModel, load_model
+    from fricli.robot.logterms import add_terms
+    from fricli.robot.mapping import Mapping
+
+    record = _robot_record(table)
+    if not record.get("joints"):
+        raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
+    gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
+    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity))
+    motion = read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
+    cal = calibrate(robot, motion, prior=prior, friction=friction)
+    refuse_inconsistent(cal)
+    with open(urdf, encoding="utf-8") as fh:
+        text = calibrated_urdf(fh.read(), urdf, cal)
+    new, _ = add_terms(table, RobotModel(text, urdf, gravity=gravity), name, match="name",
+                       urdf_names={str(k): v for k, v in record["joints"].items()}, gravity=gravity,
+                       cutoff_hz=cutoff_hz)
+    return cal, text, new

@@ -21,6 +21,8 @@ INTERVAL_LEVEL = 0.95
 WORST_GAIN = -1.0                  # gains are clipped here: an effect that doubles the residual or worse is "worse"
 #: effects that the same log may explain about equally, and what tells them apart
 TWINS = {("gravity", "quadrant"): "rests with a varying tau_g"}
+#: robot-model effects that a calibration of the URDF (``fricli calibrate``) corrects where they live
+CALIBRATED_EFFECTS = ("gravity", "acceleration")
 
 
 @dataclasses.dataclass
@@ -246,3 +248,11 @@ def _marginal_fit(design: selection.Design, chosen: list[str], names: list[str])
     for name in names:
         sub.add(name, design.cols[design.names.index(name)])
     return sub.fit(names)
+
+
+def robot_model_joints(results: dict) -> list:
+    """The joints of a whole-arm diagnosis (``{joint: Diagnosis.to_json()}``) whose gravity or
+    acceleration effect was chosen, added or held back as implausible: what the robot model gets
+    wrong there, rather than their friction."""
+    return [j for j, r in results.items()
+            if any(e in CALIBRATED_EFFECTS for e in list(r.get("added", [])) + list(r.get("suspected", [])))]

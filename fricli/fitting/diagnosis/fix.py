@@ -237,3 +237,17 @@ def _refine(build, knobs: dict, rest: list[dict], sig: dict, iterations: int = 4
         if not improved or np.all(np.abs(delta) <= 1e-6 * np.maximum(np.abs(theta), 1e-3)):
             break
     return model, coef
+
+
+def refit(model, log: logs.Log):
+    """``model``'s kind fitted again on ``log`` (LuGre and linear, as ``identify`` fits them; other kinds
+    are returned unchanged): the friction of a log whose robot-model terms changed."""
+    if model.kind == "lugre":
+        from fricli.fitting.identify import LuGreIdentifier
+
+        return LuGreIdentifier().fit(log.signals, units=log.units, axis=log.axis).model_
+    if model.kind == "linear":
+        from fricli.models import linear
+
+        return linear.fit(log.signals, asymmetric=bool(getattr(model, "asymmetric", False)), axis=log.axis)[0]
+    return model
