@@ -354,9 +354,11 @@ class LuGreIdentifier:
 
     def _fit_dynamic(self, sig: dict, y: np.ndarray, static: dict) -> tuple[dict, dict]:
         """sigma0, sigma1 on the whole log, as x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
-        g_typ = static["fc"] + static["kc"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
+        # the bristles deflect most at breakaway, where the static curve is at Fs (Fc when the log shows
+        # no Stribeck effect): that level scales the stiffness, so a vanishing Fc cannot shrink it
+        g_typ = static["fs"] + static["ks"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
         if not g_typ > 0:
-            raise FitError(f"the static fit gave no Coulomb friction (Fc {g_typ:.3g}): the bristle stiffness "
+            raise FitError(f"the static fit gave no breakaway friction (Fs {g_typ:.3g}): the bristle stiffness "
                            "cannot be scaled; check the sign of tau_m (--kt, the mapping)")
         response = LuGreModel(**dict(static, sigma0=1.0, sigma1=0.0)).bristle_response(sig)
 
