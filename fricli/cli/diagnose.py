@@ -227,10 +227,10 @@ def _fix_refitted(table, digest: str, name: str, output: str, source, report) ->
     """--fix after --calibrate: each joint's base model refitted on the recomputed log
     (``fix.refit``), diagnosed and fixed there, written under the job's record and lock as
     ``fricli.fitting.runs`` writes a fixed model; {joint: report(made)}."""
-    from fricli.core import jobs, metrics
+    from fricli.core import jobs
     from fricli.fitting import runs
     from fricli.cli.options import command_options
-    from fricli.fitting.diagnosis.fix import augment, refit
+    from fricli.fitting.diagnosis.fix import refit
 
     opts = command_options("diagnose")
     pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
@@ -243,17 +243,8 @@ def _fix_refitted(table, digest: str, name: str, output: str, source, report) ->
         base = refit(base, data)
         job = runs.record("diagnose", opts, data, pairs[j])
         with jobs.output_lock(out):
-            result = driver.diagnose(base, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
-                                     only=opts["only"], max_effects=opts["max_effects"],
-                                     accept_implausible=opts["accept_implausible"])
-            fixed = augment(base, result, data, carry=not opts["no_carry"])
-            fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-            fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-                       carried=fixed.carried, refitted=fixed.refitted)
-            models.save_for_log(out, fixed, data, rows_used=len(data), fit=fit, job=job,
-                                base={"path": pairs[j], "kind": base.kind, "refitted_on_calibrated_log": True})
-        results[j] = report(runs.Made("diagnose", out, data, fixed, fit, base=pairs[j], base_meta=meta,
-                                      diagnosis=result), refitted=True)
+            made = runs.fix_model(base, data, out, opts, job, pairs[j], meta, refitted_on_calibrated_log=True)
+        results[j] = report(made, refitted=True)
 
     modelset.each_joint(list(pairs), work)
     return results

@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import io
-import os
 import shutil
 import sys
 import tempfile

@@ -34,7 +34,6 @@ import math
 import numpy as np
 
 from fricli.core import lazy, logs, metrics
-from fricli.numerics import physics
 from fricli.core.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
 from fricli.numerics.threads import single_threaded

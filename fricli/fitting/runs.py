@@ -198,10 +198,17 @@ def _adapt(data, output, opts, job, base, on_eval) -> Made:
 
 def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
     """diagnose --fix: the base model augmented with the effects it misses on ``data``."""
+    base_model, base_meta = _load_base(base, data)
+    return fix_model(base_model, data, output, opts, job, base, base_meta)
+
+
+def fix_model(base_model, data, output: str, opts: dict, job: dict, base: str, base_meta: dict,
+              **base_record) -> Made:
+    """``base_model`` augmented with the effects it misses on ``data``, saved to ``output`` with
+    ``job``; ``base_record``: more about the base for the model's provenance."""
     from fricli.fitting.diagnosis import driver
     from fricli.fitting.diagnosis.fix import augment
 
-    base_model, base_meta = _load_base(base, data)
     result = driver.diagnose(base_model, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
                              only=opts["only"], max_effects=opts["max_effects"],
                              accept_implausible=opts["accept_implausible"])
@@ -210,7 +217,7 @@ def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
     fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
                carried=fixed.carried, refitted=fixed.refitted)
     models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
-                        base={"path": base, "kind": base_model.kind})
+                        base={"path": base, "kind": base_model.kind, **base_record})
     return Made("diagnose", output, data, fixed, fit, base=base, base_meta=base_meta, diagnosis=result)
 
 
