@@ -27,10 +27,9 @@ sys.path.insert(0, ROOT)
 
 from fricli.core import logs, metrics  # noqa: E402
 
-DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "ur10e")
-MAPPING = os.path.join(ROOT, "docs", "ur10e-mapping.toml")
-JOINTS = (1, 2, 3, 4, 5, 6)
-CUTOFF_HZ = 10.0          # qdd: zero-phase low-pass far above the excitation (< 1 Hz), as the case study
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from run_case_study import CUTOFF_HZ, DEFAULT_DATA, JOINTS, MAPPING  # noqa: E402  (the case study's settings)
+
 FIT_RUN = "ur-20_02_12-50sec_12harm"
 TWIN_RUN = "ur-20_02_19_14harm50sec"         # the payload run's unloaded twin (same trajectory, same day)
 LOAD_RUN = "ur-20_02_19_14harm50secLoad"

@@ -27,7 +27,7 @@ import tempfile
 import weakref
 
 import numpy as np
-from fricli.core import joints, lazy
+from fricli.core import files, joints, lazy
 from fricli.core.atomic import atomic_open
 from fricli.core.errors import DataError, LogError
 
@@ -115,15 +115,7 @@ def read_bytes(path: str) -> bytes:
     """Whole file (or stdin for ``-``) as bytes; stdin may be a pipe, so it is read first."""
     if path == "-":
         return sys.stdin.buffer.read()
-    try:
-        with open(path, "rb") as fh:
-            return fh.read()
-    except FileNotFoundError:
-        raise LogError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise LogError(f"{path}: is a folder, not a log") from None
-    except OSError as exc:
-        raise LogError(f"{path}: cannot read ({exc.strerror})") from None
+    return files.read_bytes(path, LogError, "file", "log")
 
 
 def parquet_file(data: bytes, name: str) -> pq.ParquetFile:

@@ -18,6 +18,7 @@ import zipfile
 import numpy as np
 
 from fricli import __version__
+from fricli.core import files
 from fricli.core.atomic import atomic_write_bytes
 from fricli.core.errors import FitError, ModelFileError
 
@@ -122,16 +123,7 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
 
 
 def read(path: str) -> tuple[dict, dict[str, np.ndarray]]:
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except FileNotFoundError:
-        raise ModelFileError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise ModelFileError(f"{path}: is a folder, not a model file") from None
-    except OSError as exc:
-        raise ModelFileError(f"{path}: cannot read ({exc.strerror})") from None
-    return loads(data, path)
+    return loads(files.read_bytes(path, ModelFileError, "file", "model file"), path)
 
 
 def write(path: str, meta: dict, arrays: dict[str, np.ndarray]) -> None:

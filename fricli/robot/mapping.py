@@ -24,6 +24,7 @@ import dataclasses
 import math
 import tomllib
 
+from fricli.core import files
 from fricli.core.errors import LogError
 from fricli.core.logs import column_unit
 
@@ -384,15 +385,9 @@ def parse_bag_mapping(doc: dict, name: str = "mapping") -> Mapping:
 def load_mapping(path: str, *, bag: bool = False) -> Mapping:
     """Read a TOML mapping file (of a ROS bag with ``bag``); LogError (exit 3) when it is missing
     or wrong."""
+    text = files.read_bytes(path, LogError, "mapping file", "mapping file")
     try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except FileNotFoundError:
-        raise LogError(f"{path}: no such mapping file") from None
-    except IsADirectoryError:
-        raise LogError(f"{path}: is a folder, not a mapping file") from None
-    except OSError as exc:
-        raise LogError(f"{path}: cannot read ({exc.strerror})") from None
+        doc = tomllib.loads(text.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise LogError(f"{path}: not a valid TOML mapping ({str(exc).splitlines()[0]})") from None
     return parse_bag_mapping(doc, path) if bag else parse_mapping(doc, path)
