@@ -52,7 +52,7 @@ def check(name, proc, code=0):
 
 
 COMMANDS = ["adapt", "calibrate", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
-            "import", "inspect", "predict", "report", "simulate", "train-base", "trend"]
+            "import", "inspect", "payload", "predict", "report", "simulate", "train-base", "trend"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():
@@ -111,6 +111,9 @@ def test_every_command_in_a_process(tmp_path):
         code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY,
                 "calibrate": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
         check(name, proc, code)
+    if has_pinocchio:
+        third = run_all({"payload": ["payload", "dyn.parquet", "--frame", "link2", "--edge", "0.05", "-q"]}, tmp_path)
+        check("payload", third["payload"])
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
                  "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet", "cal.urdf") if has_pinocchio else ()):
         assert (tmp_path / name).stat().st_size > 0, name

@@ -36,6 +36,7 @@ CUTOFF_HZ = 10.0  # qdd for the robot model: zero-phase low-pass, far above the 
 FIT_RUN = "ur-20_02_19_14harm50sec"          # the fitting run (19 Feb 2020)
 LOAD_RUN = "ur-20_02_19_14harm50secLoad"     # the same trajectory with the payload, same day
 PAYLOAD = {"mass": 2.805, "com": (0.0, 0.0, 0.0), "frame": "tool0"}  # kg, m in the flange frame
+SEEN_SPLIT = 0.5   # the payload the joints carry is identified before this share of the payload run
 PUBLISHED = {1: (21.26, 12.55, 0.196), 2: (20.22, 13.27, -0.754), 3: (10.38, 4.99, 0.198),
              4: (3.58, 2.00, 0.055), 5: (2.49, 2.69, -0.010), 6: (3.03, 2.30, 0.043)}  # Fv, Fc, offset
 FLOOR_HZ = 2.0  # the error above this frequency is not friction a model of the state can follow
@@ -72,14 +73,16 @@ def validation_runs(data: str) -> list[str]:
     return [n for n in names if not n.startswith(day)]
 
 
-def import_run(data: str, work: str, name: str, urdf: str, tag: str, payload: bool = False, keep: bool = False) -> str:
-    """``fricli import`` of one run with ``urdf`` (the CAD one or the calibrated one, ``tag``)."""
-    out = os.path.join(work, f"{name}-{tag}{'-payload' if payload else ''}.parquet")
+def import_run(data: str, work: str, name: str, urdf: str, tag: str, payload: dict | None = None,
+               keep: bool = False, suffix: str = "payload") -> str:
+    """``fricli import`` of one run with ``urdf`` (the CAD one or the calibrated one, ``tag``),
+    with ``payload`` (mass, com, frame) declared if given."""
+    out = os.path.join(work, f"{name}-{tag}{'-' + suffix if payload else ''}.parquet")
     args = ["import", os.path.join(data, "identification", name + ".csv"), "--mapping", MAPPING,
             "--urdf", urdf, "--cutoff", str(CUTOFF_HZ), "-o", out, "-q"]
     if payload:
-        args += ["--payload-mass", str(PAYLOAD["mass"]), "--payload-com", *map(str, PAYLOAD["com"]),
-                 "--payload-frame", PAYLOAD["frame"]]
+        args += ["--payload-mass", f"{payload['mass']:.6g}", "--payload-com", *(f"{c:.6g}" for c in payload["com"]),
+                 "--payload-frame", payload["frame"]]
     fricli(*args, skip=keep and os.path.exists(out))
     return out
 
@@ -175,8 +178,14 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
     # the payload run: imported with the calibrated URDF and the declared payload (what the controller
     # knows); the reference payload torque from the CAD URDF with and without the payload
     load_cad = import_run(data, work, LOAD_RUN, cad, "cad", keep=keep)
-    load_ref = import_run(data, work, LOAD_RUN, cad, "cad", payload=True, keep=keep)
-    load_cal = import_run(data, work, LOAD_RUN, cal, "cal", payload=True)
+    load_ref = import_run(data, work, LOAD_RUN, cad, "cad", payload=PAYLOAD, keep=keep)
+    load_cal = import_run(data, work, LOAD_RUN, cal, "cal", payload=PAYLOAD)
+    # the payload the joints carry: identified on the first part of the payload run (fricli payload),
+    # declared at import, scored on the rest
+    load_bare = import_run(data, work, LOAD_RUN, cal, "cal")
+    seen = fricli("payload", load_bare, "--frame", PAYLOAD["frame"], "--until", f"{SEEN_SPLIT:.0%}", "--json", "-q",
+                  json_out=True)
+    load_seen = import_run(data, work, LOAD_RUN, cal, "cal", payload=seen, suffix="seen")
 
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {},
               "calibration": {k: report[k] for k in ("fit", "friction", "armature", "links", "suspicious",
@@ -218,9 +227,18 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
             row["payload"][key + "_gain"] = _gain(err, reference)
             row["payload"][key + "_above_floor"] = _above_floor(err, sig["t"])
         row["payload"]["fixed_unloaded"] = rms(twin)
+        bare, seen_sig = signals(load_bare, j), signals(load_seen, j)
+        ref_seen = (bare["tau_g"] + bare["tau_dyn"]) - (seen_sig["tau_g"] + seen_sig["tau_dyn"])
+        t = sig["t"]
+        held = t >= t[0] + SEEN_SPLIT * (t[-1] - t[0])      # the rows --until left out
+        estimates = {"fixed": estimated_external(os.path.join(fixed, f"joint_{j}.npz"), load_seen, j, work) + ref_seen,
+                     "idim": logs.external_torque(bare, linear_columns(bare) @ idim), "linear": ext_linear}
+        row["payload_seen"] = {"reference_rms": rms(ref_seen[held]),
+                               **{k: rms(e[held] - ref_seen[held]) for k, e in estimates.items()}}
         row["payload_series"] = {"t": sig["t"] - sig["t"][0], "reference": reference, "fixed": ext_fixed,
                                  "idim": ext_idim, "linear": ext_linear}
         result["joints"][j] = row
+    result["payload_seen"] = {k: seen[k] for k in ("mass", "com", "stderr", "frame", "rows")}
     pairs = [p for p in PAIRS if set(p) <= set(val_names)]
     imported = dict(zip(val_names, val_cal))
     result["adapt"] = adapt_pairs(work, fixed, imported, joints, pairs) if adapt and pairs else None

@@ -29,6 +29,7 @@ COMMANDS = {
     "identify": "fricli.cli.lugre:identify_cmd",
     "import": "fricli.cli.robot:import_cmd",
     "inspect": "fricli.cli.inspect_cmd:inspect_model",
+    "payload": "fricli.cli.payload:payload_cmd",
     "predict": "fricli.cli.predict:predict_cmd",
     "report": "fricli.cli.evaluate:report_cmd",
     "simulate": "fricli.cli.simulate:simulate_cmd",

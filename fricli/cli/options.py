@@ -47,16 +47,21 @@ def declared_zero() -> tuple[str, ...]:
     return tuple(ctx.meta.get("fricli.zero", ())) if ctx else ()
 
 
-def log_reading(f):
-    """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
-    docs/log-format.md); --from, --until: the rows read (``time_window``, ``read_log``;
-    fricli.core.timewindow)."""
+def window_options(f):
+    """--from, --until: the rows read (``time_window``, ``read_log``; fricli.core.timewindow)."""
     for name in ("until", "from"):
         f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
                          callback=_window_bound,
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
+    return f
+
+
+def log_reading(f):
+    """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
+    docs/log-format.md); --from, --until (``window_options``)."""
+    f = window_options(f)
     from fricli.fitting.optionspec import READING, ZERO_FLAGS
 
     for opt in reversed(READING):

@@ -1,0 +1,98 @@
+"""fricli payload: a point payload identified from a whole-arm log simulated through Pinocchio
+(the four-joint arm of test_calibrate.py, linear friction, the payload added as import adds it)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fricli.core import errors, logs
+
+pin = pytest.importorskip("pinocchio")
+
+from fricli.robot import calibration as cb  # noqa: E402
+from fricli.robot import payload  # noqa: E402
+from fricli.robot.dynamics import RobotModel  # noqa: E402
+from fricli.robot.mapping import Payload  # noqa: E402
+from test_calibrate import FRICTION, URDF, fricli, harmonics  # noqa: E402
+
+TRUE = Payload(mass=1.7, com=(0.05, -0.03, 0.12), frame="flange")
+
+
+def simulate(rng, carried: Payload | None, n=1500):
+    """q, qd, qdd, tau_m of the arm (URDF's own inertias) carrying ``carried``, plus linear friction."""
+    t, q, qd, qdd = harmonics(rng, n, (0.2, 0.45, 0.7, 1.1), 0.25)
+    robot = RobotModel(URDF, "true", payload=carried)
+    tau_g, tau_dyn = robot.terms(q, qd, qdd)
+    tau = tau_g + tau_dyn + FRICTION[:, 0] * qd + FRICTION[:, 1] * np.sign(qd) + FRICTION[:, 2]
+    return t, q, qd, qdd, tau
+
+
+def motion(t, q, qd, qdd, tau):
+    return cb.Motion(t=t, q=q, qd=qd, qdd=qdd, tau=tau, names=[1, 2, 3, 4], rotor_inertia=np.full(4, np.nan))
+
+
+def test_recovers_the_payload_mass_and_centre_of_mass():
+    found = payload.identify(RobotModel(URDF, "cad"), motion(*simulate(np.random.default_rng(3), TRUE)), "flange")
+    assert found.detected
+    assert found.mass == pytest.approx(TRUE.mass, rel=1e-6)
+    np.testing.assert_allclose(found.com, TRUE.com, atol=1e-6)
+    np.testing.assert_allclose(found.friction, FRICTION, rtol=1e-6, atol=1e-6)
+    assert np.all(found.rms_with < 1e-6 * found.rms_without)
+
+
+def test_no_payload_is_reported_as_none():
+    rng = np.random.default_rng(4)
+    t, q, qd, qdd, tau = simulate(rng, None)
+    tau = tau + rng.normal(0.0, 0.05, tau.shape)
+    found = payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau), "flange")
+    assert not found.detected
+    assert abs(found.mass) < 0.05
+
+
+def test_the_printed_declaration_reproduces_the_torques(tmp_path):
+    """fricli dynamics -> fricli payload (the URDF recorded in the log) -> the printed import options:
+    the log's robot model with that payload gives the true torques."""
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(5), TRUE, n=800)
+    (tmp_path / "arm.urdf").write_text(URDF)
+    n = len(t)
+    columns = {"t": np.tile(t, 4), "joint": np.repeat(np.arange(1, 5), n),
+               **{c: v.T.reshape(-1) for c, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau_m", tau))}}
+    logs.write_table(logs.table_from_arrays(columns, {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2",
+                                                      "tau_m": "Nm"}), str(tmp_path / "rec.parquet"))
+    done = fricli("dynamics", "rec.parquet", "--urdf", "arm.urdf", "--match", "order", "-o", "dyn.parquet", "-q",
+                  cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    done = fricli("payload", "dyn.parquet", "--frame", "flange", "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    report = json.loads(done.stdout)
+    assert report["detected"] and report["mass"] == pytest.approx(TRUE.mass, rel=1e-6)
+    declare = next(line for line in done.stderr.splitlines() if line.startswith("declare it: "))
+    words = declare.split()
+    mass = float(words[words.index("--payload-mass") + 1])
+    com = [float(w) for w in words[words.index("--payload-com") + 1:][:3]]
+    assert words[words.index("--payload-frame") + 1] == "flange"
+    robot = RobotModel(URDF, "declared", payload=Payload(mass, tuple(com), "flange"))
+    truth = RobotModel(URDF, "true", payload=TRUE)
+    rb = lambda r: np.add(*r.terms(q, qd, qdd))  # noqa: E731
+    # printed with 4 significant digits: the torques agree to that
+    assert np.max(np.abs(rb(robot) - rb(truth))) < 1e-3 * np.max(np.abs(rb(truth)))
+    window = fricli("payload", "dyn.parquet", "--frame", "flange", "--until", "50%", "--json", "-q", cwd=tmp_path)
+    assert window.returncode == 0 and json.loads(window.stdout)["rows"] < report["rows"]
+
+
+def test_bad_input_is_one_line(tmp_path):
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(6), TRUE, n=300)
+    (tmp_path / "arm.urdf").write_text(URDF)
+    n = len(t)
+    columns = {"t": np.tile(t, 4), "joint": np.repeat(np.arange(1, 5), n),
+               **{c: v.T.reshape(-1) for c, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau_m", tau))}}
+    logs.write_table(logs.table_from_arrays(columns, {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2",
+                                                      "tau_m": "Nm"}), str(tmp_path / "rec.parquet"))
+    bare = fricli("payload", "rec.parquet", "--frame", "flange", cwd=tmp_path)
+    assert bare.returncode == errors.INPUT and "import it with --urdf" in bare.stderr
+    assert len(bare.stderr.strip().splitlines()) == 1
+    fricli("dynamics", "rec.parquet", "--urdf", "arm.urdf", "--match", "order", "-o", "dyn.parquet", "-q", cwd=tmp_path)
+    frame = fricli("payload", "dyn.parquet", "--frame", "tool9", cwd=tmp_path)
+    assert frame.returncode == errors.MODEL and "the frames are: " in frame.stderr
+    assert len(frame.stderr.strip().splitlines()) == 1
