@@ -370,3 +370,22 @@ def test_fleet_job_and_command_write_the_same_bytes(tmp_path, pipeline):
     again = invoke(pipeline, *args, log, "-o", tmp_path / "fleet" / "joint4.npz", "--joint", "4", *flags,
                    "--if-changed", cwd=tmp_path)
     assert again.returncode == errors.UNCHANGED, again.stderr
+
+
+def test_the_fleet_prints_the_warnings_identify_prints(tmp_path):
+    """A log on which identify warns (the Stribeck velocity of joint4_extended_asym spans its
+    speeds): the fleet prints the same warning, named by robot, joint and date, and keeps it in --json."""
+    from conftest import SAMPLE
+
+    (tmp_path / "logs").mkdir()
+    shutil.copy(SAMPLE / "joint4_extended_asym.parquet", tmp_path / "logs" / "2026-05-04.parquet")
+    (tmp_path / "m.toml").write_text('[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [4]\n')
+    command = invoke("identify", tmp_path / "logs" / "2026-05-04.parquet", "-o", tmp_path / "one.npz", "-q",
+                     cwd=tmp_path)
+    said = [line.removeprefix("warning: ") for line in command.stderr.splitlines() if line.startswith("warning: ")]
+    assert said
+    res = invoke("fleet", "m.toml", "--json", "-q", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert [line for line in res.stderr.splitlines() if line.startswith("warning: ")] == \
+        [f"warning: r1 joint 4 2026-05-04: {line}" for line in said]
+    assert json.loads(res.stdout)["jobs"][0]["warnings"] == said

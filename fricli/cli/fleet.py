@@ -7,7 +7,7 @@ import click
 
 from fricli.core import errors
 from fricli.cli import cli
-from fricli.cli.options import common, emit_json, json_flag, progress_enabled, say
+from fricli.cli.options import common, emit_json, json_flag, progress_enabled, say, warn
 
 
 @cli.command("fleet")
@@ -64,10 +64,14 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
     if as_json:
         emit_json({"run": outcome.run, "history": outcome.written, "exit_code": outcome.exit_code,
                    "jobs": [{"robot": j.robot, "joint": j.joint, "date": j.date, "log": j.log, "model": j.model,
-                             "status": r["status"], "reason": r.get("reason", ""), "seconds": r.get("seconds")}
+                             "status": r["status"], "reason": r.get("reason", ""), "seconds": r.get("seconds"),
+                             "warnings": r.get("warnings", [])}
                             for j, r in zip(outcome.jobs, outcome.results)]})
     else:
         click.echo(run.table(outcome))
+    for job, res in zip(outcome.jobs, outcome.results):
+        for line in res.get("warnings", []):
+            warn(f"warning: {job.robot} joint {job.joint or '-'} {job.date}: {line}")
     if outcome.written:
         say(f"appended to {m.history} ({len(outcome.written)} files)", quiet)
     click.get_current_context().exit(outcome.exit_code)

@@ -30,13 +30,14 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
     """Run one job; never raises for a job's own failure.
 
     Returns {"status": ok | unchanged | failed, "reason": one line or "", "seconds",
-    "kind", "parameters", "errors", "sha256", "effects"}: "errors" are the MAE, RMSE and max
-    over the log's rows in motion (``runs.moving_errors``). With ``job.diagnose`` the effects the
+    "kind", "parameters", "errors", "sha256", "effects", "warnings"}: "errors" are the MAE, RMSE
+    and max over the log's rows in motion (``runs.moving_errors``); "warnings" the fit's
+    plausibility warnings (those ``fricli identify`` prints). With ``job.diagnose`` the effects the
     new model misses are looked for (``fricli.fitting.diagnosis``); when that fails the job stays ok and
     the reason says why."""
     start = time.perf_counter()
     out = {"status": "failed", "reason": "", "kind": None, "parameters": {}, "errors": {}, "sha256": "",
-           "effects": []}
+           "effects": [], "warnings": []}
     try:
         opts = options_of(job)
         os.makedirs(os.path.dirname(job.model), exist_ok=True)
@@ -48,7 +49,8 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
             out["status"] = "unchanged"
             return out
         params = made.model.parameters() if made.pipeline == "identify" else {}
-        out.update(status="ok", kind=made.model.kind, parameters=params, errors=runs.moving_errors(made))
+        out.update(status="ok", kind=made.model.kind, parameters=params, errors=runs.moving_errors(made),
+                   warnings=list(made.summary.get("warnings", [])))
         if job.diagnose:
             out["effects"], out["reason"] = _diagnose(made.model, made.data)
     except errors.FricliError as exc:
