@@ -120,11 +120,13 @@ def _log_transmission(table, name: str, names: list, urdf_joints: list[str]):
     return transmission.Transmission([by_name[str(j)] for j in tr.joints], tr.ratio, tr.offset, tr.rotor_inertia)
 
 
-def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, list[int] | None]:
-    """The ratio matrix R (joints, joints) in URDF order (row m: the motor of URDF joint m), each
-    motor's prior rotor inertia J0 (joints,) [kg m^2], and the URDF indices of the joints whose
-    motors a transmission gives (None: none; every other joint has its own rotor, R = 1, J0 its
-    armature prior: the URDF's ``rotor_params``, else the rotor inertia the log records, else 0).
+def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int] | None]:
+    """(R, g, a0, motors): the ratio matrix R (joints, joints) in URDF order (row m: the motor of URDF
+    joint m); each motor's ratio to its own joint g (joints,) (R_mm, else the row's largest); each
+    motor's prior rotor inertia seen at its own joint a0 = g^2 J0 (joints,) [kg m^2]; the URDF
+    indices of the joints whose motors a transmission gives (None: none; every other joint has its
+    own rotor, R = g = 1, a0 its armature prior: the URDF's ``rotor_params``, else the rotor inertia
+    the log records, else 0).
 
     The transmission is the log's, else the URDF's (``fricli_transmission``). A motor's J0 is the
     URDF's per-motor value (same row of R), else for a motor alone on its joint that joint's
@@ -132,12 +134,13 @@ def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, list[in
     inertia), else the transmission's rotor inertia."""
     nj = len(robot.joints)
     armature0 = np.where(np.isnan(robot.armature), np.nan_to_num(motion.rotor_inertia), robot.armature)
-    ratio, rotor0 = np.eye(nj), armature0.copy()
+    ratio, gain, rotor0 = np.eye(nj), np.ones(nj), armature0.copy()
     tr = motion.transmission if motion.transmission is not None else robot.transmission
     if tr is None:
-        return ratio, rotor0, None
+        return ratio, gain, rotor0, None
     listed = [robot.joints.index(j) for j in tr.joints]
     ratio[np.ix_(listed, listed)] = tr.ratio
+    gain = np.array([row[m] if row[m] else row[np.argmax(np.abs(row))] for m, row in enumerate(ratio)])
     own = {}
     if robot.transmission is not None:
         urdf = np.eye(nj)
@@ -147,12 +150,18 @@ def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, list[in
     for m, i in enumerate(listed):
         alone = ratio[i, i] != 0 and np.count_nonzero(ratio[i]) == 1 and np.count_nonzero(ratio[:, i]) == 1
         if i in own:
-            rotor0[i] = own[i]
-        elif alone and (not np.isnan(robot.armature[i]) or tr.rotor_inertia[m] == 0):
-            rotor0[i] = armature0[i] / ratio[i, i] ** 2
-        else:
-            rotor0[i] = tr.rotor_inertia[m]
-    return ratio, rotor0, sorted(listed)
+            rotor0[i] = gain[i] ** 2 * own[i]
+        elif not (alone and (not np.isnan(robot.armature[i]) or tr.rotor_inertia[m] == 0)):
+            rotor0[i] = gain[i] ** 2 * tr.rotor_inertia[m]
+    return ratio, gain, rotor0, sorted(listed)
+
+
+def motor_units(gain: np.ndarray, stribeck: bool = False) -> np.ndarray:
+    """Per parameter (14 or 15 * joints,), what a motor's parameter is multiplied by to be seen at its own
+    joint (``motor_layout``'s g): 1 for inertial parameters, g^2 for J_m and Fv, |g| for Fc (and
+    Fs - Fc), g for the offset."""
+    fric = np.column_stack([gain ** 2, np.abs(gain), gain]).reshape(-1)
+    return np.concatenate([np.ones(10 * len(gain)), gain ** 2, fric] + ([np.abs(gain)] if stribeck else []))
 
 
 def reflected(ratio: np.ndarray, rotor: np.ndarray) -> np.ndarray:
@@ -325,20 +334,22 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         raise DataError(f"joint {still[0]} does not move in the log: its friction cannot be identified")
     q, qd, qdd, tau = motion.q[keep], motion.qd[keep], motion.qdd[keep], motion.tau[keep]
     n = len(q)
-    ratio, rotor0, motors = motor_layout(robot, motion)
-    Phi = regressor(robot, q, qd, qdd, ratio=ratio)
+    # fitted in each motor's units seen at its own joint (ratio / g; with one rotor per joint: the identity)
+    ratio, gain, rotor0, motors = motor_layout(robot, motion)
+    norm = np.where(ratio != 0, ratio / gain[:, None], 0.0)
+    Phi = regressor(robot, q, qd, qdd, ratio=norm)
     y = tau.reshape(-1)
     stribeck = friction == "stribeck"
     names = parameter_names(robot, stribeck, motors)
     pi_cad = cad_parameters(robot)
     x0 = np.concatenate([pi_cad, rotor0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
-    w = qd @ ratio.T                                         # motor velocities (n, motors)
+    w = qd @ norm.T                                          # motor velocities / g (n, motors)
     def to_motors(joint_side):   # torques (n, joints) -> (n, motors), rows contiguous as the joints' were
-        return np.ascontiguousarray(np.linalg.solve(ratio.T, joint_side.T).T)
+        return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
 
     motor_rms = np.sqrt(np.mean(to_motors(tau) ** 2, axis=0))
-    s = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, prior, ratio)
+    s = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, prior, norm)
 
     # before: the CAD model (with the prior armature) and each motor's friction fitted alone to its torque
     r0 = to_motors((y - Phi @ x0).reshape(n, nj))
@@ -349,7 +360,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         coef = np.linalg.lstsq(cols, r0[:, m], rcond=None)[0]
         before[:, m] = r0[:, m] - cols @ coef
         fric_before[m] = coef
-    before = before @ ratio                                  # joint side: R^T (motor torques)
+    before = before @ norm                                  # joint side: R^T (motor torques)
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
@@ -360,20 +371,21 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         x0 = np.concatenate([x0, np.zeros(nj)])
         s = np.concatenate([s, 10.0 * np.maximum(motor_rms, 1e-6)])
         for _ in range(STRIBECK_ALTERNATIONS):
-            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs, ratio)])
+            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
             x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms)
             own = (Phi_s[:, 11 * nj:] * x[11 * nj:]).reshape(n, nj, -1).sum(axis=2)  # friction part, (n, nj)
             target = to_motors(resid + own)
             for m in range(nj):
                 vs[m] = min(top[m] * STRIBECK_GRID, key=lambda v: _stribeck_rss(w[:, m], target[:, m], v))
-        Phi = np.hstack([Phi, stribeck_columns(qd, vs, ratio)])
+        Phi = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
     x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms)
 
     A = (Phi / sigma[rows_of, None]) * s
-    excitation = _excitation(robot, A, Phi, s, names, seed, vs, ratio)
-    layout = {"ratio": None if motors is None else ratio, "motors": motors}
-    linear = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report={},
-                         **layout)
+    excitation = _excitation(robot, A, Phi, s, names, seed, vs, norm)
+    unit = motor_units(gain, stribeck)      # x / unit: in motor units
+    layout = {"x0": x0 / unit, "names": names, "bodies": bodies(robot), "joints": list(robot.joints),
+              "ratio": None if motors is None else ratio, "motors": motors}
+    linear = Calibration(x=x / unit, report={}, **layout)
     broken = consistency(linear)["problems"]
     enforced = None
     if broken and enforce:
@@ -389,15 +401,14 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
                                        "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
                                        "rms_after": float(np.sqrt(np.mean(resid[:, j] ** 2))),
                                        "noise_std": float(sigma[j])} for j in range(nj)},
-        "friction": _friction_report(robot, motion, x, vs, motors),
-        "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k]) for k, f in enumerate(FRICTION)}
-                              for j in range(nj)},
+        "friction": _friction_report(robot, motion, x / unit, None if vs is None else vs * np.abs(gain), motors),
+        "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k] / unit[11 * nj + 3 * j + k])
+                                                     for k, f in enumerate(FRICTION)} for j in range(nj)},
         "consistency_enforced": enforced,
     }
-    cal = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report=report,
-                      **layout)
+    cal = Calibration(x=x / unit, report=report, **layout)
     report["armature"] = {robot.joints[j]: {"prior": float(a0), "identified": float(a)}
-                          for j, (a0, a) in enumerate(zip(cal.armature(x0), cal.armature()))}
+                          for j, (a0, a) in enumerate(zip(cal.armature(cal.x0), cal.armature()))}
     if motors is not None:
         report.update(_motor_report(cal, motion))
     report["links"] = link_table(cal)
