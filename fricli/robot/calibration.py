@@ -345,6 +345,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     x0 = np.concatenate([pi_cad, rotor0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
     w = qd @ norm.T                                          # motor velocities / g (n, motors)
+
     def to_motors(joint_side):   # torques (n, joints) -> (n, motors), rows contiguous as the joints' were
         return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
 
