@@ -1,5 +1,6 @@
-"""fricli calibrate: a whole-arm log + URDF -> a calibrated URDF (inertial parameters, armature)
-and each joint's linear friction, identified together."""
+"""fricli calibrate: a whole-arm log + URDF -> a calibrated URDF (inertial parameters, armature, or
+each motor's rotor inertia through the log's transmission) and each joint's (motor's) linear
+friction, identified together."""
 
 from __future__ import annotations
 
@@ -49,8 +50,9 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     q, qd, qdd (or derivable) and tau_m. The URDF's masses, centres of mass and inertias, a reflected
     rotor inertia per joint and Fv, Fc, offset per joint are fitted together by weighted least
     squares with a prior at the CAD values: what the run does not excite stays at CAD and is
-    reported. Writes the calibrated URDF and a JSON report (friction, fit, excitation, checks).
-    See docs/calibration.md.
+    reported. When the log records a transmission (a motor-side import), the rotor inertia and the
+    friction are each motor's, through the transmission. Writes the calibrated URDF and a JSON
+    report (friction, fit, excitation, checks). See docs/calibration.md.
 
     \b
     Example:
@@ -117,5 +119,10 @@ def _summary(report: dict) -> list[str]:
         fr = report["friction"]["joints"][joint]
         extra = f", Fs {fr['Fs']:.4g}, vs {fr['vs']:.3g}" if "Fs" in fr else ""
         lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} "
-                     f"(Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, offset {fr['offset']:.4g})")
+                     f"({'motor: ' if fr.get('motor') else ''}Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, "
+                     f"offset {fr['offset']:.4g})")
+    if report.get("motors"):
+        lines.append("motors (through the log's transmission): rotor inertia [kg m^2], prior -> identified:")
+        lines += [f"  motor of joint {joint}: {m['prior']:.4g} -> {m['identified']:.4g}"
+                  for joint, m in report["motors"].items()]
     return lines

@@ -10,11 +10,19 @@ m, m c, inertia at the joint origin), ``a``: the reflected rotor inertia (armatu
 ``f_j = (Fv, Fc, offset)``: joint j's linear friction (optionally with the LuGre static curve's
 Stribeck bump, linear for a given Stribeck velocity, which alternates with the fit).
 
+With a transmission (``fricli.core.transmission``: motor velocities w = R qd, joint torques R^T
+tau_motor) the rotors and the friction belong to the motors: row m of R is the motor of joint m,
+``a`` becomes the motors' rotor inertias J_m (the torque R^T diag(J_m) R qdd, column of J_m:
+R[m, :]^T (R[m, :] qdd), which holds the cross-term of coupled joints) and ``f_m`` motor m's
+friction in w_m (columns R[m, :]^T [w_m, sign(w_m), 1]). One rotor per joint is R = identity:
+the same columns, the armature.
+
 The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
 CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
 standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
 inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: the larger of
-``prior`` x its prior value and the joint's CAD mass-matrix diagonal at q = 0; friction: loose).
+``prior`` x its prior value and the joint's CAD mass-matrix diagonal at q = 0, over R_mj^2 for a
+motor; friction: loose).
 Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
 (iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
 little: directions the run does not excite stay at CAD, and the report names them.
@@ -29,7 +37,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from fricli.core import logs
+from fricli.core import logs, transmission
 from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
@@ -59,6 +67,7 @@ class Motion:
     tau: np.ndarray
     names: list            # the log's joint names, in URDF order
     rotor_inertia: np.ndarray  # (joints,) recorded by import/dynamics, NaN where unknown
+    transmission: object = None  # the log's Transmission over URDF joint names, or None
 
 
 def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[str, str] | None = None,
@@ -91,7 +100,73 @@ def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[
     recorded = record.get("rotor_inertia") or {}
     rotor = np.array([recorded.get(str(names[i]), np.nan) for i in by_urdf], dtype=float)
     return Motion(t=t, q=stack("q"), qd=stack("qd"), qdd=stack("qdd"), tau=stack("tau_m"),
-                  names=[names[i] for i in by_urdf], rotor_inertia=rotor)
+                  names=[names[i] for i in by_urdf], rotor_inertia=rotor,
+                  transmission=_log_transmission(table, name, names, [robot.joints[k] for k in order]))
+
+
+def _log_transmission(table, name: str, names: list, urdf_joints: list[str]):
+    """The transmission the log records (``fricli.transmission``), its joints renamed to the URDF's
+    (``urdf_joints[i]`` is log joint ``names[i]``'s); None when it records none."""
+    try:
+        tr = transmission.of_schema(table.schema.metadata)
+    except ValueError as exc:
+        raise LogError(f"{name}: {exc}") from None
+    if tr is None:
+        return None
+    by_name = {str(j): u for j, u in zip(names, urdf_joints)}
+    missing = [j for j in tr.joints if str(j) not in by_name]
+    if missing:
+        raise LogError(f"{name}: the log's transmission drives joint {missing[0]}, which the log does not hold")
+    return transmission.Transmission([by_name[str(j)] for j in tr.joints], tr.ratio, tr.offset, tr.rotor_inertia)
+
+
+def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int] | None]:
+    """(R, g, a0, motors): the ratio matrix R (joints, joints) in URDF order (row m: the motor of URDF
+    joint m); each motor's ratio to its own joint g (joints,) (R_mm, else the row's largest); each
+    motor's prior rotor inertia seen at its own joint a0 = g^2 J0 (joints,) [kg m^2]; the URDF
+    indices of the joints whose motors a transmission gives (None: none; every other joint has its
+    own rotor, R = g = 1, a0 its armature prior: the URDF's ``rotor_params``, else the rotor inertia
+    the log records, else 0).
+
+    The transmission is the log's, else the URDF's (``fricli_transmission``). A motor's J0 is the
+    URDF's per-motor value (same row of R), else for a motor alone on its joint that joint's
+    armature prior / R_mm^2 (where the URDF gives the armature, or the transmission no rotor
+    inertia), else the transmission's rotor inertia."""
+    nj = len(robot.joints)
+    armature0 = np.where(np.isnan(robot.armature), np.nan_to_num(motion.rotor_inertia), robot.armature)
+    ratio, gain, rotor0 = np.eye(nj), np.ones(nj), armature0.copy()
+    tr = motion.transmission if motion.transmission is not None else robot.transmission
+    if tr is None:
+        return ratio, gain, rotor0, None
+    listed = [robot.joints.index(j) for j in tr.joints]
+    ratio[np.ix_(listed, listed)] = tr.ratio
+    gain = np.array([row[m] if row[m] else row[np.argmax(np.abs(row))] for m, row in enumerate(ratio)])
+    own = {}
+    if robot.transmission is not None:
+        urdf = np.eye(nj)
+        idx = [robot.joints.index(j) for j in robot.transmission.joints]
+        urdf[np.ix_(idx, idx)] = robot.transmission.ratio
+        own = {i: v for i, v in zip(idx, robot.transmission.rotor_inertia) if np.array_equal(urdf[i], ratio[i])}
+    for m, i in enumerate(listed):
+        alone = ratio[i, i] != 0 and np.count_nonzero(ratio[i]) == 1 and np.count_nonzero(ratio[:, i]) == 1
+        if i in own:
+            rotor0[i] = gain[i] ** 2 * own[i]
+        elif not (alone and (not np.isnan(robot.armature[i]) or tr.rotor_inertia[m] == 0)):
+            rotor0[i] = gain[i] ** 2 * tr.rotor_inertia[m]
+    return ratio, gain, rotor0, sorted(listed)
+
+
+def motor_units(gain: np.ndarray, stribeck: bool = False) -> np.ndarray:
+    """Per parameter (14 or 15 * joints,), what a motor's parameter is multiplied by to be seen at its own
+    joint (``motor_layout``'s g): 1 for inertial parameters, g^2 for J_m and Fv, |g| for Fc (and
+    Fs - Fc), g for the offset."""
+    fric = np.column_stack([gain ** 2, np.abs(gain), gain]).reshape(-1)
+    return np.concatenate([np.ones(10 * len(gain)), gain ** 2, fric] + ([np.abs(gain)] if stribeck else []))
+
+
+def reflected(ratio: np.ndarray, rotor: np.ndarray) -> np.ndarray:
+    """R^T diag(J_m) R (joints, joints) [kg m^2]: rotor inertias ``rotor`` (joints,) seen at the joints."""
+    return ratio.T @ (rotor[:, None] * ratio)
 
 
 def _robot_record(table) -> dict:
@@ -129,41 +204,46 @@ def bodies(robot) -> list[str]:
     return out
 
 
-def parameter_names(robot, stribeck: bool = False) -> list[str]:
-    """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset (and JOINT.Fs-Fc)."""
-    return ([f"{b}.{p}" for b in bodies(robot) for p in PARAMS] + [f"{j}.armature" for j in robot.joints]
-            + [f"{j}.{f}" for j in robot.joints for f in FRICTION] + ([f"{j}.Fs-Fc" for j in robot.joints]
-                                                                       if stribeck else []))
+def parameter_names(robot, stribeck: bool = False, motors: list[int] | None = None) -> list[str]:
+    """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset (and JOINT.Fs-Fc); for
+    the joints ``motors`` (URDF indices) whose motors a transmission gives, motor@JOINT.rotor_inertia,
+    motor@JOINT.Fv ... instead."""
+    own = [f"motor@{j}" if k in (motors or ()) else j for k, j in enumerate(robot.joints)]
+    return ([f"{b}.{p}" for b in bodies(robot) for p in PARAMS]
+            + [f"{j}.rotor_inertia" if j.startswith("motor@") else f"{j}.armature" for j in own]
+            + [f"{j}.{f}" for j in own for f in FRICTION] + ([f"{j}.Fs-Fc" for j in own] if stribeck else []))
 
 
-def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vs: np.ndarray | None = None) -> np.ndarray:
+def regressor(robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, vs: np.ndarray | None = None,
+              ratio: np.ndarray | None = None) -> np.ndarray:
     """The full observation matrix, shape (n * joints, 14 * joints): the rows of sample k are
     k * joints ... (k + 1) * joints - 1 (joint order of the URDF); columns as ``parameter_names``.
-    With Stribeck velocities ``vs`` (joints,) one more column per joint, ``stribeck_columns``."""
+    With Stribeck velocities ``vs`` (joints,) one more column per joint, ``stribeck_columns``.
+    ``ratio``: R (joints, joints) of ``motor_layout`` (default the identity: one rotor per joint)."""
     pin = _pin()
     model = robot.pin_model
     data = model.createData()
     config = robot.configuration(q)
     n, nj = q.shape
+    ratio = np.eye(nj) if ratio is None else ratio
     out = np.zeros((n, nj, 14 * nj))
     for k in range(n):
         out[k, :, :10 * nj] = pin.computeJointTorqueRegressor(model, data, config[k], qd[k], qdd[k])
-    idx = np.arange(nj)
-    out[:, idx, 10 * nj + idx] = qdd
-    out[:, idx, 11 * nj + 3 * idx] = qd
-    out[:, idx, 11 * nj + 3 * idx + 1] = np.sign(qd)
-    out[:, idx, 11 * nj + 3 * idx + 2] = 1.0
+    w = qd @ ratio.T                                                  # motor velocities, (n, motors)
+    out[:, :, 10 * nj:11 * nj] = ratio.T * (qdd @ ratio.T)[:, None, :]   # [k, j, m] = R[m, j] (R qdd_k)_m
+    basis = np.stack([w, np.sign(w), np.ones_like(w)], axis=2)       # (n, motors, 3)
+    out[:, :, 11 * nj:] = (ratio.T[None, :, :, None] * basis[:, None]).reshape(n, nj, 3 * nj)
     out = out.reshape(n * nj, 14 * nj)
-    return out if vs is None else np.hstack([out, stribeck_columns(qd, vs)])
+    return out if vs is None else np.hstack([out, stribeck_columns(qd, vs, ratio)])
 
 
-def stribeck_columns(qd: np.ndarray, vs: np.ndarray) -> np.ndarray:
-    """The Stribeck bump sign(qd_j) exp(-(qd_j / vs_j)^2) of each joint in its own rows, (n * joints, joints)."""
+def stribeck_columns(qd: np.ndarray, vs: np.ndarray, ratio: np.ndarray | None = None) -> np.ndarray:
+    """The Stribeck bump sign(w_m) exp(-(w_m / vs_m)^2) of each motor m (w = R qd; without ``ratio``
+    each joint's own) in the rows of the joints it drives, times R[m, j]: (n * joints, motors)."""
     n, nj = qd.shape
-    out = np.zeros((n, nj, nj))
-    idx = np.arange(nj)
-    out[:, idx, idx] = np.sign(qd) * np.exp(-np.square(qd / vs))
-    return out.reshape(n * nj, nj)
+    ratio = np.eye(nj) if ratio is None else ratio
+    w = qd @ ratio.T
+    return (ratio.T * (np.sign(w) * np.exp(-np.square(w / vs)))[:, None, :]).reshape(n * nj, nj)
 
 
 def _pin():
@@ -179,9 +259,10 @@ def cad_parameters(robot) -> np.ndarray:
 
 
 def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.ndarray,
-                 tau_rms: np.ndarray, prior: float) -> np.ndarray:
+                 tau_rms: np.ndarray, prior: float, ratio: np.ndarray | None = None) -> np.ndarray:
     """Prior standard deviation of every parameter, (14 * joints,) (see the module docstring);
-    ``qd_rms`` and ``tau_rms``: each joint's RMS velocity and torque, (joints,)."""
+    ``armature0``: each motor's prior rotor inertia, ``qd_rms`` and ``tau_rms``: each motor's RMS
+    velocity and torque, (joints,), for motors of ``ratio`` (default: one per joint)."""
     pin = _pin()
     nj = len(robot.joints)
     masses = pi_cad[0::10]
@@ -195,7 +276,9 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
     model = robot.pin_model
     diag = np.diag(pin.crba(model, model.createData(), pin.neutral(model)))
     diag = diag - np.asarray(model.armature)
-    arm = np.maximum(armature0, diag)
+    ratio = np.eye(nj) if ratio is None else ratio
+    with np.errstate(divide="ignore"):        # each motor: the loosest of its joints' diagonals / R_mj^2
+        arm = np.maximum(armature0, np.where(ratio != 0, diag / np.square(ratio), -np.inf).max(axis=1))
     fric = []
     for j in range(nj):
         loose = 10.0 * max(tau_rms[j], 1e-6)
@@ -216,11 +299,24 @@ class Calibration:
     bodies: list[str]
     joints: list[str]          # URDF joints
     report: dict
+    ratio: np.ndarray | None = None   # R (joints, joints) of ``motor_layout``; None: one rotor per joint
+    motors: list[int] | None = None   # URDF indices of the joints whose motors a transmission gives
+
+    def armature(self, x: np.ndarray | None = None) -> np.ndarray:
+        """Each joint's reflected rotor inertia (joints,) [kg m^2]: the diagonal of R^T diag(J_m) R."""
+        nj = len(self.joints)
+        rotor = (self.x if x is None else x)[10 * nj:11 * nj]
+        return rotor.copy() if self.ratio is None else np.diag(reflected(self.ratio, rotor)).copy()
+
+    def motor_of(self, j: int) -> str:
+        """How the report names the rotor of URDF joint index ``j``."""
+        return f"motor of joint {self.joints[j]}" if j in (self.motors or ()) else f"joint {self.joints[j]}"
 
 
 def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
               enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
-    """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion``.
+    """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion`` (per
+    motor with a transmission, ``motor_layout``).
     ``enforce``: when the linear estimate is physically inconsistent, fit again over consistent
     parameters only (``consistent_fit``). ``seed`` fixes the random configurations of the
     structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
@@ -238,48 +334,59 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         raise DataError(f"joint {still[0]} does not move in the log: its friction cannot be identified")
     q, qd, qdd, tau = motion.q[keep], motion.qd[keep], motion.qdd[keep], motion.tau[keep]
     n = len(q)
-    Phi = regressor(robot, q, qd, qdd)
+    # fitted in each motor's units seen at its own joint (ratio / g; with one rotor per joint: the identity)
+    ratio, gain, rotor0, motors = motor_layout(robot, motion)
+    norm = np.where(ratio != 0, ratio / gain[:, None], 0.0)
+    Phi = regressor(robot, q, qd, qdd, ratio=norm)
     y = tau.reshape(-1)
     stribeck = friction == "stribeck"
-    names = parameter_names(robot, stribeck)
+    names = parameter_names(robot, stribeck, motors)
     pi_cad = cad_parameters(robot)
-    urdf_armature = robot.armature
-    armature0 = np.where(np.isnan(urdf_armature), np.nan_to_num(motion.rotor_inertia), urdf_armature)
-    x0 = np.concatenate([pi_cad, armature0, np.zeros(3 * nj)])
+    x0 = np.concatenate([pi_cad, rotor0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
-    s = prior_scales(robot, pi_cad, armature0, np.sqrt(np.mean(qd ** 2, axis=0)), tau_rms, prior)
+    w = qd @ norm.T                                          # motor velocities / g (n, motors)
 
-    # before: the CAD model (with the prior armature) and each joint's friction fitted alone
-    r0 = (y - Phi @ x0).reshape(n, nj)
+    def to_motors(joint_side):   # torques (n, joints) -> (n, motors), rows contiguous as the joints' were
+        return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
+
+    motor_rms = np.sqrt(np.mean(to_motors(tau) ** 2, axis=0))
+    s = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, prior, norm)
+
+    # before: the CAD model (with the prior armature) and each motor's friction fitted alone to its torque
+    r0 = to_motors((y - Phi @ x0).reshape(n, nj))
     before = np.empty((n, nj))
     fric_before = {}
-    for j in range(nj):
-        cols = np.column_stack([qd[:, j], np.sign(qd[:, j]), np.ones(n)])
-        coef = np.linalg.lstsq(cols, r0[:, j], rcond=None)[0]
-        before[:, j] = r0[:, j] - cols @ coef
-        fric_before[j] = coef
+    for m in range(nj):
+        cols = np.column_stack([w[:, m], np.sign(w[:, m]), np.ones(n)])
+        coef = np.linalg.lstsq(cols, r0[:, m], rcond=None)[0]
+        before[:, m] = r0[:, m] - cols @ coef
+        fric_before[m] = coef
+    before = before @ norm                                  # joint side: R^T (motor torques)
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
     vs = None
     if stribeck:
-        top = np.abs(qd).max(axis=0)
+        top = np.abs(w).max(axis=0)
         vs = 0.1 * top
         x0 = np.concatenate([x0, np.zeros(nj)])
-        s = np.concatenate([s, 10.0 * np.maximum(tau_rms, 1e-6)])
+        s = np.concatenate([s, 10.0 * np.maximum(motor_rms, 1e-6)])
         for _ in range(STRIBECK_ALTERNATIONS):
-            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs)])
+            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
             x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms)
             own = (Phi_s[:, 11 * nj:] * x[11 * nj:]).reshape(n, nj, -1).sum(axis=2)  # friction part, (n, nj)
-            for j in range(nj):
-                target = resid[:, j] + own[:, j]
-                vs[j] = min(top[j] * STRIBECK_GRID, key=lambda v: _stribeck_rss(qd[:, j], target, v))
-        Phi = np.hstack([Phi, stribeck_columns(qd, vs)])
+            target = to_motors(resid + own)
+            for m in range(nj):
+                vs[m] = min(top[m] * STRIBECK_GRID, key=lambda v: _stribeck_rss(w[:, m], target[:, m], v))
+        Phi = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
     x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms)
 
     A = (Phi / sigma[rows_of, None]) * s
-    excitation = _excitation(robot, A, Phi, s, names, seed, vs)
-    linear = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report={})
+    excitation = _excitation(robot, A, Phi, s, names, seed, vs, norm)
+    unit = motor_units(gain, stribeck)      # x / unit: in motor units
+    layout = {"x0": x0 / unit, "names": names, "bodies": bodies(robot), "joints": list(robot.joints),
+              "ratio": None if motors is None else ratio, "motors": motors}
+    linear = Calibration(x=x / unit, report={}, **layout)
     broken = consistency(linear)["problems"]
     enforced = None
     if broken and enforce:
@@ -295,14 +402,16 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
                                        "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
                                        "rms_after": float(np.sqrt(np.mean(resid[:, j] ** 2))),
                                        "noise_std": float(sigma[j])} for j in range(nj)},
-        "friction": _friction_report(robot, motion, x, vs),
-        "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k]) for k, f in enumerate(FRICTION)}
-                              for j in range(nj)},
+        "friction": _friction_report(robot, motion, x / unit, None if vs is None else vs * np.abs(gain), motors),
+        "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k] / unit[11 * nj + 3 * j + k])
+                                                     for k, f in enumerate(FRICTION)} for j in range(nj)},
         "consistency_enforced": enforced,
-        "armature": {robot.joints[j]: {"prior": float(armature0[j]), "identified": float(x[10 * nj + j])}
-                     for j in range(nj)},
     }
-    cal = Calibration(x=x, x0=x0, names=names, bodies=bodies(robot), joints=list(robot.joints), report=report)
+    cal = Calibration(x=x / unit, report=report, **layout)
+    report["armature"] = {robot.joints[j]: {"prior": float(a0), "identified": float(a)}
+                          for j, (a0, a) in enumerate(zip(cal.armature(cal.x0), cal.armature()))}
+    if motors is not None:
+        report.update(_motor_report(cal, motion))
     report["links"] = link_table(cal)
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal)
@@ -333,21 +442,41 @@ def _stribeck_rss(qd: np.ndarray, target: np.ndarray, vs: float) -> float:
     return float(np.sum(np.square(target - cols @ coef)))
 
 
-def _friction_report(robot, motion: Motion, x: np.ndarray, vs: np.ndarray | None) -> dict:
+def _motor_report(cal: Calibration, motion: Motion) -> dict:
+    """Per motor of the transmission: its joint, row of R, prior and identified rotor inertia; and the
+    reflected inertia R^T diag(J_m) R of those joints (its off-diagonal: the rotors' cross-term)."""
+    nj, listed = len(cal.joints), cal.motors
+    joints = [cal.joints[i] for i in listed]
+    sub = lambda x: reflected(cal.ratio, x[10 * nj:11 * nj])[np.ix_(listed, listed)].tolist()  # noqa: E731
+    return {
+        "motors": {cal.joints[m]: {"log_joint": str(motion.names[m]),
+                                   "ratio": {cal.joints[j]: float(cal.ratio[m, j]) for j in listed if cal.ratio[m, j]},
+                                   "prior": float(cal.x0[10 * nj + m]), "identified": float(cal.x[10 * nj + m])}
+                   for m in listed},
+        "reflected_inertia": {"joints": joints, "prior": sub(cal.x0), "identified": sub(cal.x)},
+    }
+
+
+def _friction_report(robot, motion: Motion, x: np.ndarray, vs: np.ndarray | None, motors: list[int] | None) -> dict:
+    """Friction per log joint, or per motor (named by its joint, ``"motor": true``, in its velocity w)."""
     nj = len(robot.joints)
     rotary = robot.kinds[0] == "rotary"
     units = {"Fv": "Nm s/rad", "Fc": "Nm", "offset": "Nm"} if rotary else {"Fv": "N s/m", "Fc": "N", "offset": "N"}
     joints = {}
     for j in range(nj):
         row = {"urdf_joint": robot.joints[j], **{f: float(x[11 * nj + 3 * j + k]) for k, f in enumerate(FRICTION)}}
+        if j in (motors or ()):
+            row["motor"] = True
         if vs is not None:
             row.update(Fs=row["Fc"] + float(x[14 * nj + j]), vs=float(vs[j]), delta=2.0)
         joints[str(motion.names[j])] = row
+    side = {} if motors is None else {"motors": "a motor's friction f is in its velocity w = (R qd)_m, its "
+                                                 "torque in motor units; the joints feel R^T f"}
     if vs is None:
-        return {"kind": "linear", "model": "Fv*qd + Fc*sign(qd) + offset", "units": units, "joints": joints}
+        return {"kind": "linear", "model": "Fv*qd + Fc*sign(qd) + offset", "units": units, "joints": joints, **side}
     units.update(Fs=units["Fc"], vs="rad/s" if rotary else "m/s", delta="-")
     return {"kind": "stribeck", "model": "Fv*qd + (Fc + (Fs - Fc) exp(-|qd/vs|^delta)) sign(qd) + offset",
-            "units": units, "joints": joints}
+            "units": units, "joints": joints, **side}
 
 
 def pseudo_inertia(pi: np.ndarray) -> np.ndarray:
@@ -423,7 +552,7 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
 
 
 def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int,
-                vs: np.ndarray | None = None) -> dict:
+                vs: np.ndarray | None = None, ratio: np.ndarray | None = None) -> dict:
     """How well the run determines the parameters.
 
     Structural: the base parameters (QR with column pivoting of the regressor at random states,
@@ -432,7 +561,7 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
     prior-whitened information matrix, 1 = as much as the prior's) is below ``UNDETERMINED``."""
     from scipy import linalg
 
-    R_ = _random_regressor(robot, seed, vs) * s
+    R_ = _random_regressor(robot, seed, vs, ratio) * s
     _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     rank = int(np.sum(d > 1e-9 * d[0]))
@@ -460,27 +589,31 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
     }
 
 
-def _random_regressor(robot, seed: int, vs: np.ndarray | None = None) -> np.ndarray:
+def _random_regressor(robot, seed: int, vs: np.ndarray | None = None, ratio: np.ndarray | None = None) -> np.ndarray:
     """The regressor at random states (positions uniform in [-pi, pi], standard normal velocities
     and accelerations): enough rows to show every structural dependency."""
     nj = len(robot.joints)
     rng = np.random.default_rng(seed)
     k = max(60, 30 * nj)
-    qd = rng.normal(size=(k, nj)) * (1.0 if vs is None else 2 * vs)
-    return regressor(robot, rng.uniform(-np.pi, np.pi, (k, nj)), qd, rng.normal(size=(k, nj)), vs)
+    qd = rng.normal(size=(k, nj))
+    if vs is not None:     # motor velocities around each motor's Stribeck velocity
+        qd = qd * 2 * vs if ratio is None else np.linalg.solve(ratio, (qd * 2 * vs).T).T
+    return regressor(robot, rng.uniform(-np.pi, np.pi, (k, nj)), qd, rng.normal(size=(k, nj)), vs, ratio)
 
 
-def base_parameters(robot, x: np.ndarray, seed: int = 0) -> tuple[np.ndarray, list[str]]:
+def base_parameters(robot, x: np.ndarray, seed: int = 0, ratio: np.ndarray | None = None,
+                    motors: list[int] | None = None) -> tuple[np.ndarray, list[str]]:
     """The identifiable combinations of ``x`` (14 * joints,): base parameters ``x_B + beta x_D`` from
-    QR with column pivoting of the unscaled regressor at random states; and their leading names."""
+    QR with column pivoting of the unscaled regressor at random states; and their leading names.
+    ``ratio`` and ``motors``: a calibration's (``Calibration.ratio``, ``Calibration.motors``)."""
     from scipy import linalg
 
-    R_ = _random_regressor(robot, seed)
+    R_ = _random_regressor(robot, seed, ratio=ratio)
     _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     rank = int(np.sum(d > 1e-9 * d[0]))
     beta = linalg.solve_triangular(r[:rank, :rank], r[:rank, rank:])
-    names = parameter_names(robot)
+    names = parameter_names(robot, motors=motors)
     return x[piv[:rank]] + beta @ x[piv[rank:]], [names[c] for c in piv[:rank]]
 
 
@@ -508,7 +641,7 @@ def link_table(cal: Calibration) -> dict:
 def consistency(cal: Calibration) -> dict:
     """Physical consistency: ``problems`` (each body's mass positive, its inertia at the centre of mass
     positive definite with principal moments satisfying the triangle inequality; each armature not
-    negative) and ``warnings`` (negative friction coefficients)."""
+    (a motor's rotor inertia) not negative) and ``warnings`` (negative friction coefficients)."""
     problems, warnings = [], []
     nj = len(cal.joints)
     for body, inertia in zip(cal.bodies, body_inertias(cal)):
@@ -525,22 +658,23 @@ def consistency(cal: Calibration) -> dict:
         elif pseudo[0] < -TOLERANCE * pseudo[-1]:   # with the above: the triangle inequality
             problems.append(f"link {body}: principal moments {text} kg m^2 break the triangle inequality "
                             "(no real body has them)")
-    for j, joint in enumerate(cal.joints):
-        a = float(cal.x[10 * nj + j])
+    for j in range(nj):
+        who, a = cal.motor_of(j), float(cal.x[10 * nj + j])
         if a < 0:
-            problems.append(f"joint {joint}: armature {a:.4g} kg m^2 is negative")
+            problems.append(f"{who}: {'rotor inertia' if j in (cal.motors or ()) else 'armature'} {a:.4g} kg m^2 "
+                            "is negative")
         fv, fc = cal.x[11 * nj + 3 * j], cal.x[11 * nj + 3 * j + 1]
         if fv < 0 or fc < 0:
-            warnings.append(f"joint {joint}: friction Fv {fv:.4g}, Fc {fc:.4g}: a negative coefficient "
-                            "makes the joint gain energy")
+            warnings.append(f"{who}: friction Fv {fv:.4g}, Fc {fc:.4g}: a negative coefficient "
+                            f"makes the {'motor' if j in (cal.motors or ()) else 'joint'} gain energy")
         if len(cal.x) == 15 * nj and fc + cal.x[14 * nj + j] < 0:
-            warnings.append(f"joint {joint}: friction Fs {fc + cal.x[14 * nj + j]:.4g} at zero speed is negative")
+            warnings.append(f"{who}: friction Fs {fc + cal.x[14 * nj + j]:.4g} at zero speed is negative")
     return {"ok": not problems, "problems": problems, "warnings": warnings}
 
 
 def suspicious(cal: Calibration) -> list[str]:
-    """Parameters far (> SUSPICIOUS) from CAD or from the prior armature, with the other causes
-    that give the same torque shape."""
+    """Parameters far (> SUSPICIOUS) from CAD or from the prior armature (a motor's rotor inertia), with
+    the other causes that give the same torque shape."""
     out = []
     causes = "; ".join(OTHER_CAUSES)
     for body, cad, new in zip(cal.bodies, body_inertias(cal, cal.x0), body_inertias(cal)):
@@ -548,10 +682,14 @@ def suspicious(cal: Calibration) -> list[str]:
             out.append(f"link {body}: mass {cad.mass:.4g} -> {new.mass:.4g} kg ({100 * (new.mass / cad.mass - 1):+.0f} %); "
                        f"also consistent with: {causes}")
     nj = len(cal.joints)
-    for j, joint in enumerate(cal.joints):
+    for j in range(nj):
         a0, a = cal.x0[10 * nj + j], cal.x[10 * nj + j]
-        if a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS:
-            out.append(f"joint {joint}: armature {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
+        if a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS and j in (cal.motors or ()):
+            out.append(f"{cal.motor_of(j)}: rotor inertia {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
+                       "also consistent with: a drive gain off on the joints it drives; a gear ratio off; inertia "
+                       "of those links' own axes that the data cannot tell from the rotor's")
+        elif a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS:
+            out.append(f"joint {cal.joints[j]}: armature {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
                        "also consistent with: a drive gain off on that joint; inertia of the link's own axis "
                        "that the data cannot tell from the armature")
     return out
@@ -563,7 +701,10 @@ def suspicious(cal: Calibration) -> list[str]:
 def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
     """``urdf_text`` with the identified inertial parameters of every moving link (its own inertia
     plus the identified change of its body: fixed children keep theirs) and the armature as
-    Pinocchio's ``<rotor_params>`` (gear_ratio 1, mass = armature)."""
+    Pinocchio's ``<rotor_params>`` (gear_ratio 1, mass = armature); with a transmission also each
+    motor's rotor inertia and row of R as ``<fricli_transmission>`` (``fricli.robot.dynamics``)."""
+    from fricli.robot.dynamics import TRANSMISSION
+
     pin = _pin()
     root = ET.fromstring(urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     links = {link.get("name"): link for link in root.findall("link")}
@@ -576,16 +717,25 @@ def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
         delta = cal.x[10 * b:10 * b + 10] - cal.x0[10 * b:10 * b + 10]
         inertia = pin.Inertia.FromDynamicParameters(own + delta)
         _set_inertial(link, inertia)
-    for old in root.findall("rotor_params"):
+    for old in root.findall("rotor_params") + root.findall(TRANSMISSION):
         root.remove(old)
     if len(root):
         root[-1].tail = "\n  "
     rotor = ET.SubElement(root, "rotor_params")
     rotor.text, rotor.tail = "\n    ", "\n"
-    for j, joint in enumerate(cal.joints):
-        element = ET.SubElement(rotor, "joint", {"name": joint, "mass": repr(float(cal.x[10 * nj + j])),
-                                                 "gear_ratio": "1"})
+    for j, (joint, a) in enumerate(zip(cal.joints, cal.armature())):
+        element = ET.SubElement(rotor, "joint", {"name": joint, "mass": repr(float(a)), "gear_ratio": "1"})
         element.tail = "\n    " if j < nj - 1 else "\n  "
+    if cal.motors is not None:
+        rotor.tail = "\n  "
+        listed = ET.SubElement(root, TRANSMISSION)
+        listed.text, listed.tail = "\n    ", "\n"
+        for k, m in enumerate(cal.motors):
+            motor = ET.SubElement(listed, "motor", {"joint": cal.joints[m], "rotor_inertia": repr(float(cal.x[10 * nj + m]))})
+            for j in cal.motors:
+                if cal.ratio[m, j]:
+                    ET.SubElement(motor, "ratio", {"joint": cal.joints[j], "value": repr(float(cal.ratio[m, j]))})
+            motor.tail = "\n    " if k < len(cal.motors) - 1 else "\n  "
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 

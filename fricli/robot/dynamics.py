@@ -10,6 +10,20 @@ A URDF may carry the reflected rotor inertias itself, in Pinocchio's SRDF form (
 ``fricli calibrate`` writes; ``pin.loadRotorParameters`` reads the same element):
 ``<rotor_params><joint name="J" mass="I_rotor" gear_ratio="N"/></rotor_params>`` under
 ``<robot>``, armature = I_rotor * N^2. For those joints it replaces a rotor inertia given otherwise.
+
+Rotors coupled through a transmission (``fricli.core.transmission``) also need the per-motor rotor
+inertias J_m and the ratio matrix R, for the cross-term of R^T diag(J_m) R that a diagonal armature
+cannot hold. ``fricli calibrate`` writes them under ``<robot>`` in an element of fricli's own, which
+URDF parsers ignore (``TRANSMISSION``)::
+
+    <fricli_transmission>
+      <motor joint="J5" rotor_inertia="J_m"><ratio joint="J5" value="R55"/></motor>
+      <motor joint="J6" rotor_inertia="J_m"><ratio joint="J5" value="R65"/><ratio joint="J6" value="R66"/></motor>
+    </fricli_transmission>
+
+(one motor per joint listed, named by that joint; each ``ratio`` an entry of its row of R). The
+diagonal of R^T diag(J_m) R is those joints' armature (``rotor_params`` may repeat it and must then
+agree); its off-diagonal part, ``RobotModel.cross_inertia``, is added to tau_dyn as well.
 """
 
 from __future__ import annotations
@@ -22,6 +36,7 @@ from fricli.core.errors import MissingDependencyError, ModelFileError
 from fricli.robot.mapping import Payload
 
 INSTALL = "pip install 'fricli[robot]'"
+TRANSMISSION = "fricli_transmission"   # the URDF element of per-motor rotor inertias (module docstring)
 
 
 def pinocchio():
@@ -64,6 +79,17 @@ class RobotModel:
             point = pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3)))
             model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(point)
         self.armature = rotor_params(urdf_text, name, model)  # (joints,), NaN where the URDF gives none
+        # per-motor rotor inertias (URDF joint names), or None; their cross-term (joints, joints) [kg m^2]
+        self.transmission = urdf_transmission(urdf_text, name, model)
+        self.cross_inertia = np.zeros((model.nv, model.nv))
+        if self.transmission is not None:
+            idx = [self.joints.index(j) for j in self.transmission.joints]
+            self.cross_inertia[np.ix_(idx, idx)] = self.transmission.cross_inertia()
+            for j, a in zip(idx, self.transmission.armature()):
+                if not np.isnan(self.armature[j]) and not np.isclose(self.armature[j], a, rtol=1e-9, atol=0.0):
+                    raise ModelFileError(f"{name}: rotor_params of joint {self.joints[j]!r} ({self.armature[j]:.6g} "
+                                         f"kg m^2) differs from the diagonal of its {TRANSMISSION} ({a:.6g} kg m^2)")
+                self.armature[j] = a
         model.armature = np.nan_to_num(self.armature)
         model.gravity = pin.Motion(np.asarray(gravity, dtype=float), np.zeros(3))
         self._with_g = model
@@ -100,6 +126,8 @@ class RobotModel:
         tau_dyn = _rnea(self._no_g, config, qd, qdd)
         if rotor_inertia is not None:  # not where the URDF's own armature (in tau_dyn already) applies
             tau_dyn += qdd * np.where(np.isnan(self.armature), np.asarray(rotor_inertia, dtype=float), 0.0)
+        if self.cross_inertia.any():
+            tau_dyn += qdd @ self.cross_inertia.T
         return tau_g, tau_dyn
 
 
@@ -140,6 +168,46 @@ def rotor_params(urdf_text: str, name: str, model) -> np.ndarray:
                                  "finite numbers, the mass not negative")
         out[joints.index(joint)] = value
     return out
+
+
+def urdf_transmission(urdf_text: str, name: str, model):
+    """The ``<robot><fricli_transmission>`` of a URDF as a ``Transmission`` over URDF joint names
+    (rotor inertias J_m per motor, ratio matrix R), or None. ModelFileError when it is malformed."""
+    import xml.etree.ElementTree as ET
+
+    from fricli.core.transmission import Transmission
+
+    element = ET.fromstring(urdf_text).find(TRANSMISSION) if TRANSMISSION in urdf_text else None
+    if element is None:
+        return None
+    where = f"{name}: {TRANSMISSION}"
+    joints = list(model.names)[1:]
+    motors = [m.get("joint") for m in element.findall("motor")]
+    if not motors:
+        raise ModelFileError(f"{where}: no <motor joint=\"J\" rotor_inertia=\"J_m\"> in it")
+    for joint in motors:
+        if joint not in joints or motors.count(joint) > 1:
+            raise ModelFileError(f"{where}: the motor of joint {joint!r} is listed twice or names no moving joint")
+    ratio, inertia = np.zeros((len(motors), len(motors))), np.zeros(len(motors))
+
+    def number(value, what):
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            raise ModelFileError(f"{where}: {what} is {value!r}, not a number") from None
+
+    for i, motor in enumerate(element.findall("motor")):
+        inertia[i] = number(motor.get("rotor_inertia"), f"rotor_inertia of the motor of joint {motors[i]!r}")
+        for entry in motor.findall("ratio"):
+            if entry.get("joint") not in motors:
+                raise ModelFileError(f"{where}: the motor of joint {motors[i]!r} has a ratio to joint "
+                                     f"{entry.get('joint')!r}, whose motor is not listed")
+            ratio[i, motors.index(entry.get("joint"))] = number(entry.get("value"), f"a ratio of the motor of joint "
+                                                                                      f"{motors[i]!r}")
+    try:
+        return Transmission(motors, ratio, rotor_inertia=inertia)
+    except ValueError as exc:
+        raise ModelFileError(f"{where}: {exc}") from None
 
 
 def _rnea(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:

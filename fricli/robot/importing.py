@@ -139,12 +139,16 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         for jm, armature in zip(mapping.joints, tr.armature()):
             jm.rotor_inertia = float(armature)
     robot = robot_terms(model, mapping, t, per_joint, axis, cutoff_hz) if model is not None else None
-    if robot is not None and tr is not None and tr.cross_inertia().any():
+    cross = tr.cross_inertia() if robot is not None and tr is not None else None
+    if cross is not None and model.transmission is not None:   # the URDF's own rotor inertias (in tau_dyn) win
+        own = [robot["joints"][str(jm.name)] in model.transmission.joints for jm in mapping.joints]
+        cross[own, :] = cross[:, own] = 0.0
+    if cross is not None and cross.any():
         # the rotors' cross-inertia R^T J_m R off its diagonal: a diagonal armature leaves it out of tau_dyn
-        cross = tr.cross_torque(np.column_stack([sig["qdd"] for sig in per_joint]))
+        torque = np.column_stack([sig["qdd"] for sig in per_joint]) @ cross.T
         for k, sig in enumerate(per_joint):
-            sig["tau_dyn"] = sig["tau_dyn"] + cross[:, k]
-        robot["cross_inertia"] = tr.cross_inertia().tolist()
+            sig["tau_dyn"] = sig["tau_dyn"] + torque[:, k]
+        robot["cross_inertia"] = cross.tolist()
     units = dict(logs.CANONICAL[axis])
     units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
              **{c: units["tau"] for c in logs.TORQUES}}
