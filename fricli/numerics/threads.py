@@ -52,3 +52,18 @@ def blas_threads() -> dict[str, int]:
     """Thread count of each loaded BLAS library, by file path."""
     return {lib["filepath"]: int(lib["num_threads"]) for lib in threadpoolctl.threadpool_info()
             if lib["user_api"] == "blas"}
+
+
+def pinned(func):
+    """``func`` run inside ``single_threaded()``, with scipy's linear algebra and optimisers
+    loaded first (a library loaded inside the block would not be pinned)."""
+    import functools
+
+    @functools.wraps(func)
+    def run(*args, **kwargs):
+        import scipy.linalg  # noqa: F401
+        import scipy.optimize  # noqa: F401
+
+        with single_threaded():
+            return func(*args, **kwargs)
+    return run

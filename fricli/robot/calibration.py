@@ -39,6 +39,7 @@ import numpy as np
 
 from fricli.core import logs, transmission
 from fricli.core.errors import DataError, FitError, LogError, ModelFileError
+from fricli.numerics.threads import pinned
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
 FRICTION = ("Fv", "Fc", "offset")
@@ -313,6 +314,7 @@ class Calibration:
         return f"motor of joint {self.joints[j]}" if j in (self.motors or ()) else f"joint {self.joints[j]}"
 
 
+@pinned
 def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
               enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
     """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion`` (per

@@ -22,6 +22,7 @@ import numpy as np
 from fricli.core import metrics
 from fricli.core.errors import FitError, LogError, ModelFileError
 from fricli.robot import calibration
+from fricli.numerics.threads import pinned
 from fricli.robot.dynamics import pinocchio
 
 SIGNIFICANCE = 3.0   # a payload is reported as detected when its mass exceeds this many standard errors
@@ -78,6 +79,7 @@ def point_parameters(mass: float, com: np.ndarray, placement) -> np.ndarray:
     return placement.act(pin.Inertia(float(mass), np.asarray(com, dtype=float), np.zeros((3, 3)))).toDynamicParameters()
 
 
+@pinned
 def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_EDGE_S) -> IdentifiedPayload:
     """The point payload at ``frame`` of ``robot`` (a ``RobotModel`` without payload) that the
     torques of ``motion`` (``calibration.Motion``) carry."""
