@@ -54,7 +54,7 @@ def group_code(model, meta: dict, prefix: str, sgn: str) -> str:
         "    (void)s;", *body, "}", ""])
 
 
-MOTOR_SIGNALS = {"qd": "w", "tau_g": None}   # what a motor model reads: its velocity, no load
+MOTOR_SIGNALS = {"qd": "w", "tau_g": None}   # coupled.motor_signals: its velocity, no load (0)
 
 
 def _motor_code(model, prefix: str, sgn: str, body: list[str]) -> list[str]:

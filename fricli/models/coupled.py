@@ -42,6 +42,7 @@ from fricli.core.transmission import Transmission
 FEATURES = ("fv", "fc", "offset")
 STRIBECK = ("fs", "vs")
 VS_GRID = 24            # Stribeck velocities tried per motor, between the 2nd and 60th percentile of |theta_d|
+MOTOR_INPUTS = ("qd", "tau_g")   # what a motor model may read (``motor_signals``)
 PARAM_INFO = {"fv": ("Nm s/rad", "viscous friction (motor side)"), "fc": ("Nm", "Coulomb friction (motor side)"),
               "offset": ("Nm", "constant torque (motor side)"), "fs": ("Nm", "static friction (motor side)"),
               "vs": ("rad/s", "Stribeck velocity (motor side)")}
@@ -68,6 +69,8 @@ class CoupledModel(FrictionModel):
         if self.motors is not None:
             if len(self.motors) != k or any(v is not None for v in (fv, fc, offset, fs, vs)):
                 raise ValueError(f"a coupled model has {k} motor models or the linear law's parameters, not both")
+            if any(not m.required_inputs() <= set(MOTOR_INPUTS) for m in self.motors):
+                raise ValueError("a motor model reads its velocity alone (qd, and tau_g as 0)")
             self.fv = self.fc = self.offset = self.fs = self.vs = None
             return
         if fv is None or fc is None or offset is None:
@@ -213,7 +216,8 @@ class CoupledModel(FrictionModel):
         lines.append("  R (motor rows, joint columns):")
         lines += ["    " + "  ".join(f"{x:>10.6g}" for x in row) for row in self.ratio]
         for i, motor in enumerate(self.motors):
-            lines.append(f"  motor {i + 1}:")
+            lines.append(f"  motor {i + 1} (its qd is the motor velocity theta_d_{i + 1}; tau_g is 0: "
+                         "a load term does not act):")
             lines += ["    " + line for line in motor.describe().splitlines()]
         return "\n".join(lines)
 
