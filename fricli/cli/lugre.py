@@ -60,8 +60,24 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
 
     if motor_stribeck and not coupling:
         raise click.UsageError("--motor-stribeck applies to --coupling")
+
+    def report_group(made, label):
+        model, fit = made.model, made.summary
+        if not quiet:
+            unit = made.data.units["tau"]
+            say(f"identified the coupled friction of joints {label} on {made.data.name} ({len(made.data):,} rows "
+                "per joint), per motor:")
+            say("\n".join(model.describe().splitlines()[1:]))
+            for x, errs in fit["joints"].items():
+                say(f"fit error, joint {x}: {_figures(errs, unit)}")
+            say(wrote(made.output))
+        return {"model": made.output, "log": made.data.name, "joints": list(model.joints), "kind": "coupled",
+                "parameters": {k: getattr(model, k).tolist() for k in model.names()},
+                "ratio": model.ratio.tolist(), "fit": fit}
+
     if coupling:
-        results, folder_run = _fit_coupled(log, output, report, if_changed=if_changed, quiet=quiet)
+        results, folder_run = fit_coupled("identify", log, output, report, report_group, if_changed=if_changed,
+                                          quiet=quiet)
     else:
         results, folder_run = fit_joints("identify", log, output, report, if_changed=if_changed, quiet=quiet)
     if as_json:
@@ -96,16 +112,20 @@ def _report(data, model, fit, output, quiet) -> None:
     say(wrote(output), quiet)
 
 
-def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool) -> tuple[dict, bool]:
-    """``fit_joints`` for identify --coupling: a joint of a coupled group of the log's transmission
-    brings its whole group into one model (DIR/joints_<a>_<b>.npz); the other joints get theirs."""
+def fit_coupled(pipeline: str, log: str, output: str, report, report_group, *, if_changed: bool, quiet: bool,
+                progress=None) -> tuple[dict, bool]:
+    """``fit_joints`` for ``pipeline`` (identify, train-base) with --coupling: a joint of a coupled
+    group of the log's transmission brings its whole group into one model (DIR/joints_<a>_<b>.npz,
+    ``fricli.fitting.runs.run_group``; ``report_group(made, label)`` prints it and returns its JSON
+    result); the other joints get theirs (``report(made)``). ``progress(data)``: a trainer
+    progress callback with ``close()``, for a joint's log; ``progress(data, motor)`` for a group's motor."""
     from fricli.core import joints, logs, modelset
     from fricli.fitting import runs
     from fricli.core.errors import LogError
     from fricli.models import coupled
     from fricli.core import transmission
 
-    opts = command_options("identify")
+    opts = command_options(pipeline)
     window = time_window()
     window = window.to_json() if window else None
     table, digest = read_log(log)
@@ -139,7 +159,12 @@ def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool
         if group is None:
             data = runs.read(table, digest, name, opts, joint=j, warn=warn)
             out = modelset.path_for(folder, j) if folder else output
-            made = runs.run("identify", data, out, opts, if_changed=if_changed, window=window)
+            on_eval = progress(data) if progress else None
+            try:
+                made = runs.run(pipeline, data, out, opts, if_changed=if_changed, window=window, on_eval=on_eval)
+            finally:
+                if on_eval is not None:
+                    on_eval.close()
         else:
             missing = [x for x in group.joints if not any(joints.same(x, y) for y in log_joints)]
             if missing:
@@ -147,7 +172,8 @@ def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool
                                "does not hold: the coupled group needs every joint's rows")
             _, datas = coupled.group_rows(table, list(group.joints), name, sha256=digest, **reading)
             out = os.path.join(folder, modelset.group_file_name(group.joints)) if folder else output
-            made = runs.run_group(datas, group, out, opts, if_changed=if_changed, window=window)
+            made = runs.run_group(datas, group, out, opts, if_changed=if_changed, window=window, pipeline=pipeline,
+                                  progress=(lambda i: progress(datas[0], i)) if progress else None)
         if made is None:
             say(up_to_date_line(out, digest, False), quiet)
             if folder is None:
@@ -156,18 +182,7 @@ def _fit_coupled(log: str, output: str, report, *, if_changed: bool, quiet: bool
         if group is None:
             results[j] = report(made)
             return
-        model, fit = made.model, made.summary
-        if not quiet:
-            unit = made.data.units["tau"]
-            say(f"identified the coupled friction of joints {labels[j]} on {name} ({len(made.data):,} rows "
-                "per joint), per motor:")
-            say("\n".join(model.describe().splitlines()[1:]))
-            for x, errs in fit["joints"].items():
-                say(f"fit error, joint {x}: {_figures(errs, unit)}")
-            say(wrote(out))
-        results[labels[j]] = {"model": out, "log": name, "joints": list(group.joints), "kind": "coupled",
-                              "parameters": {k: getattr(model, k).tolist() for k in model.names()},
-                              "ratio": model.ratio.tolist(), "fit": fit}
+        results[labels[j]] = report_group(made, labels[j])
 
     modelset.each_joint([labels[j] for j, _ in units], work)
     if folder and not results:

@@ -77,7 +77,7 @@ def _decision(summary: dict, tau: str) -> str:
 @if_changed_option
 @json_flag
 @common
-def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
+def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_options):
     """Train a neural friction model on LOG and write it to MODEL.npz.
 
     The default network (--arch dissipative) predicts tau_f = tanh(qd / v_ps) * m with a
@@ -96,7 +96,9 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
     paper's constant rate for 50,000 steps). Training and validation MAE are printed at the end.
     The same seed gives the same file. A log of several joints without --joint gives one model
-    per joint in the folder -o DIR.
+    per joint in the folder -o DIR. With --coupling, each group of joints that share motors (the
+    log's transmission) gets one model, DIR/joints_<a>_<b>.npz: a dissipative network per motor,
+    of the motor's velocity, its friction mapped to the joints by R^T (docs/drives.md).
 
     \b
     Example:
@@ -104,6 +106,7 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
       fricli train-base sample_data/joint2_base.parquet --arch mlp -o paper_nn_base.npz
       fricli train-base sample_data/joint2_base.parquet --schedule paper -o nn_paper.npz
       fricli train-base base.parquet --steps 5000 --batch-size 256 --seed 3 -o quick.npz --json
+      fricli train-base arm.parquet --coupling -o nn-arm/          # a network per motor of the wrist
     """
     check_outputs(output, as_json)
 
@@ -120,11 +123,34 @@ def train_base(log, output, arch, if_changed, as_json, quiet, **_options):
         say(wrote(out), quiet)
         return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}
 
-    def progress(data):
-        return _Progress(quiet, f"train-base {arch}" + (f" joint {data.joint}" if data.joint is not None else ""))
+    def progress(data, motor=None):
+        where = f" motor {motor + 1}" if motor is not None else (
+            f" joint {data.joint}" if data.joint is not None else "")
+        return _Progress(quiet, f"train-base {arch}{where}")
 
-    results, folder_run = fit_joints("train-base", log, output, report, if_changed=if_changed, quiet=quiet,
-                                     progress=progress)
+    def report_group(made, label):
+        summary, model, tau = made.summary, made.model, made.data.units["tau"]
+        say(f"trained a dissipative network per motor of joints {label} on {made.data.name} "
+            f"({len(made.data):,} rows per joint) in {made.seconds:.1f} s", quiet)
+        for i, motor in enumerate(summary["motors"]):
+            say(f"  motor {i + 1}: {motor['train_rows']} {_rows_used(motor, tau)}; weights from step "
+                f"{motor['best_step']} of {motor['steps']}; friction MAE [{tau}] training {_mae(motor, 'train')}, "
+                f"validation {_mae(motor, 'val')}", quiet)
+        for joint, errs in summary["moving"].items():
+            say(f"friction MAE [{tau}], joint {joint}: moving rows {errs['mae']:.3f}, "
+                f"all rows {summary['joints'][joint]['mae']:.3f}", quiet)
+        say(wrote(made.output), quiet)
+        return {"model": made.output, "log": made.data.name, "joints": list(model.joints), "kind": "coupled",
+                "ratio": model.ratio.tolist(), "seconds": round(made.seconds, 3), **summary}
+
+    if coupling:
+        from fricli.cli.lugre import fit_coupled
+
+        results, folder_run = fit_coupled("train-base", log, output, report, report_group, if_changed=if_changed,
+                                          quiet=quiet, progress=progress)
+    else:
+        results, folder_run = fit_joints("train-base", log, output, report, if_changed=if_changed, quiet=quiet,
+                                         progress=progress)
     if as_json:
         emit_results(results, folder_run)
 

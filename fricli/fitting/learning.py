@@ -73,7 +73,24 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                velocity_input: str = "asinh", velocity_scale: float | None = None,
                folds: bool = True,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
-    """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
+    """Train a network (``arch``) on the friction target of ``log``: ``train`` on the log's
+    signals with the generator of ``seed``."""
+    return train(log.signals, logs.friction_target(log.signals), name=log.name, units=log.units, arch=arch,
+                 hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr, batch_size=batch_size,
+                 rng=np.random.default_rng(seed), val_fraction=val_fraction, balance=balance,
+                 max_samples=max_samples, velocity_input=velocity_input, velocity_scale=velocity_scale,
+                 folds=folds, on_eval=on_eval)
+
+
+def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: dict, rng: np.random.Generator,
+          arch: str = DEFAULT_ARCH, hidden: tuple[int, ...] | None = None, steps: int | None = None,
+          schedule: str = "cosine", patience: int | None = None, lr: float = 0.01, batch_size: int = 0,
+          val_fraction: float = 0.2, balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
+          velocity_input: str = "asinh", velocity_scale: float | None = None, folds: bool = True,
+          on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
+    """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on signals ``sig`` (n,) each
+    against the friction target ``target`` (n,) [Nm] (``name``: the log's name for messages;
+    ``units``: the log's units; ``rng``: the generator of the row selection, weights and batches).
 
     A log of constant-velocity sweeps trains on its velocity levels (``training_data``), rows
     slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
@@ -102,24 +119,21 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     if arch == "dissipative" and velocity_input != "asinh":
         raise ValueError("the dissipative network always sees asinh(|qd| / v0): --velocity-input linear "
                          "applies to the paper's networks (mlp, selmic, nnacm)")
-    sig = log.signals
-    target = logs.friction_target(sig)
-    rng = np.random.default_rng(seed)
     # velocity levels are looked for down to LOW of the top speed (a sweep's slowest levels lie
     # below the in-motion share); without levels the rows in motion are the training rows
     sweeping = metrics.in_motion(sig["qd"], training_data.LOW)
     moving = metrics.in_motion(sig["qd"])
     if not sweeping.any():
-        raise DataError(f"{log.name}: the log holds no motion (qd is zero everywhere)")
-    check_motion(log.name, sig["qd"], sweeping, "train-base")
+        raise DataError(f"{name}: the log holds no motion (qd is zero everywhere)")
+    check_motion(name, sig["qd"], sweeping, "train-base")
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
                                rng=rng, keep=sweeping, moving=moving)
     if sel.mode == "moving":
-        check_motion(log.name, sig["qd"], moving, "train-base")
+        check_motion(name, sig["qd"], moving, "train-base")
 
     def new_model(n_steps: int) -> FrictionModel:
         return ARCHS[arch](hidden_sizes=tuple(hidden or DEFAULT_HIDDEN[arch]), steps=n_steps, lr=lr,
-                           batch_size=batch_size, units=log.units, schedule=trainer_schedule, patience=patience,
+                           batch_size=batch_size, units=units, schedule=trainer_schedule, patience=patience,
                            velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
 
     cv = None
@@ -160,6 +174,46 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     if getattr(model, "v_ps_", None) is not None:
         summary["presliding_speed"] = model.v_ps_
     return model, summary
+
+
+def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable | None = None,
+                **options) -> tuple[FrictionModel, dict]:
+    """One network per motor of a coupled group (``fricli.models.coupled``): ``datas`` the logs of
+    the group's joints (rows at the same times, in the order of ``transmission``'s joints).
+
+    Motor i trains with ``train`` (``options``: its keyword arguments) on its velocity
+    w_i = (R qd)_i [rad/s] (no load input: ``coupled.motor_signals``) against its share of the
+    friction, y = R^-T tau_f (n, k) [Nm]; one generator from ``seed`` runs through the motors in
+    order. ``progress(i)``: the trainer's progress callback for motor i (0-based), with ``close()``,
+    or None. Returns the coupled model and a summary: each motor's train summary ("motors") and
+    the figures per joint (MAE, RMSE, max [Nm]) over the log's rows ("joints") and over the rows
+    where the joint is in motion ("moving")."""
+    from fricli.models import coupled
+
+    data = datas[0]
+    qd = coupled.stack(datas, "qd")
+    tau_f = np.column_stack([logs.friction_target(d.signals) for d in datas])
+    w = transmission.motor_velocities(qd)
+    y = transmission.motor_torques(tau_f)
+    rng = np.random.default_rng(seed)
+    group = ", ".join(map(str, transmission.joints))
+    motors, summaries = [], []
+    for i in range(len(transmission.joints)):
+        sig = {"t": data.signals["t"], **coupled.motor_signals(w[:, i])}
+        on_eval = progress(i) if progress else None
+        try:
+            model, summary = train(sig, y[:, i], name=f"{data.name}, motor {i + 1} of joints {group}",
+                                   units=data.units, rng=rng, on_eval=on_eval, **options)
+        finally:
+            if on_eval is not None:
+                on_eval.close()
+        motors.append(model)
+        summaries.append(summary)
+    model = coupled.CoupledModel(transmission.joints, transmission.ratio, motors=motors)
+    err = model.predict_group(qd) - tau_f
+    moving = {str(j): coupled.figures(err[metrics.in_motion(qd[:, c]), c]) for c, j in enumerate(transmission.joints)}
+    return model, {"motors": summaries, "rows": int(len(qd)), "moving": moving,
+                   "joints": {str(j): coupled.figures(err[:, c]) for c, j in enumerate(transmission.joints)}}
 
 
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],

@@ -147,7 +147,8 @@ IDENTIFY = (
     Option("motor_stribeck", "flag", False, "With --coupling: each motor's friction with the Stribeck curve (fs, vs) "
                                             "as well."),
 )
-# options a fleet job (one joint per job) cannot take: a coupled group's model needs every joint of the group
+# options a fleet job (one joint per job) cannot take, in any pipeline: a coupled group's model needs
+# every joint of the group
 WHOLE_LOG = {"coupling", "motor_stribeck"}
 
 TRAIN_BASE = (
@@ -186,6 +187,10 @@ TRAIN_BASE = (
     Option("velocity_scale", "float", None,
            "v0 of --velocity-input asinh [rad/s or m/s]; default the 5 % quantile of the training rows' speeds.",
            unit="rad/s or m/s", low=0, low_open=True, metavar="V0"),
+    Option("coupling", "flag", False,
+           "Train each group of joints that share motors (the log's transmission, docs/drives.md) as one model "
+           "with a dissipative network per motor of the motor's velocity (kind coupled); the other joints as "
+           "before."),
 )
 
 ADAPT = (

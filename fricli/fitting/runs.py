@@ -64,6 +64,9 @@ def check_train_base(opts: dict) -> None:
     if opts["arch"] == "dissipative" and opts["velocity_input"] != "asinh":
         raise optionspec.OptionError("train-base option velocity_input: the dissipative network always sees "
                                      "asinh(|qd| / v0); use --arch mlp", "velocity_input")
+    if opts["coupling"] and opts["arch"] != "dissipative":
+        raise optionspec.OptionError("train-base option coupling: the motors' friction is learned by dissipative "
+                                     "networks (--arch dissipative)", "coupling")
 
 
 def zero(opts: dict) -> tuple[str, ...]:
@@ -116,25 +119,44 @@ def run(pipeline: str, data: logs.Log, output: str, opts: dict, *, base: str | N
 
 
 def run_group(datas: list, transmission, output: str, opts: dict, *, if_changed: bool = False,
-              window: dict | None = None) -> Made | None:
-    """identify --coupling for one coupled group: the joints of ``datas`` (their logs, rows at the
-    same times, in the order of ``transmission``'s joints) into one model of kind coupled
-    (``fricli.models.coupled``) at ``output``; None when up to date. ``Made.data`` is the first
-    joint's log, ``Made.summary`` the fit figures per joint."""
+              window: dict | None = None, pipeline: str = "identify", progress: Callable | None = None) -> Made | None:
+    """identify or train-base (``pipeline``) with --coupling for one coupled group: the joints of
+    ``datas`` (their logs, rows at the same times, in the order of ``transmission``'s joints) into
+    one model of kind coupled (``fricli.models.coupled``) at ``output``; None when up to date.
+    identify fits the linear law per motor, train-base a network per motor
+    (``fricli.fitting.learning.train_group``; ``progress(i)``: motor i's trainer progress callback).
+    ``Made.data`` is the first joint's log, ``Made.summary`` the fit figures per joint."""
     from fricli.models import coupled
 
-    opts = options("identify", opts)
+    if pipeline not in GROUP_FIT:
+        raise ValueError(f"pipeline {pipeline!r} does not fit coupled groups")
+    opts = options(pipeline, opts)
     recorded = dict(opts, joint=[str(j) for j in transmission.joints])
     if window:
         recorded["window"] = window
-    job = jobs.job_record("identify", recorded)
+    job = jobs.job_record(pipeline, recorded)
     with jobs.output_lock(output):
         if if_changed and jobs.up_to_date(output, datas[0].sha256, job):
             return None
         start = time.perf_counter()
-        model, fit = coupled.fit_group(datas, transmission, stribeck=opts["motor_stribeck"])
+        model, fit = GROUP_FIT[pipeline](datas, transmission, opts, progress)
         coupled.save_group(output, model, datas[0], fit=fit, job=job)
-    return Made("identify", output, datas[0], model, fit, seconds=time.perf_counter() - start)
+    return Made(pipeline, output, datas[0], model, fit, seconds=time.perf_counter() - start)
+
+
+def _identify_group(datas, transmission, opts, _progress):
+    from fricli.models import coupled
+
+    return coupled.fit_group(datas, transmission, stribeck=opts["motor_stribeck"])
+
+
+def _train_base_group(datas, transmission, opts, progress):
+    from fricli.fitting import learning
+
+    return learning.train_group(datas, transmission, progress=progress, **_train_options(opts))
+
+
+GROUP_FIT = {"identify": _identify_group, "train-base": _train_base_group}
 
 
 def moving_errors(made: Made) -> dict:
@@ -164,15 +186,19 @@ def _identify(data, output, opts, job, _base, _on_eval) -> Made:
 def _train_base(data, output, opts, job, _base, on_eval) -> Made:
     from fricli.fitting import learning
 
-    model, summary = learning.train_base(
-        data, arch=opts["arch"], hidden=opts["hidden"], steps=opts["steps"], schedule=opts["schedule"],
-        patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
-        val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
-        max_samples=opts["max_samples"], velocity_input=opts["velocity_input"], velocity_scale=opts["velocity_scale"],
-        on_eval=on_eval)
+    model, summary = learning.train_base(data, on_eval=on_eval, **_train_options(opts))
     models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
                         seed=opts["seed"], fit=summary, job=job)
     return Made("train-base", output, data, model, summary)
+
+
+def _train_options(opts: dict) -> dict:
+    """train-base's options as the keyword arguments of ``learning.train_base`` and ``train_group``."""
+    return dict(arch=opts["arch"], hidden=opts["hidden"], steps=opts["steps"], schedule=opts["schedule"],
+                patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
+                val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
+                max_samples=opts["max_samples"], velocity_input=opts["velocity_input"],
+                velocity_scale=opts["velocity_scale"])
 
 
 def _load_base(base: str, data) -> tuple:

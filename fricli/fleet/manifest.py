@@ -150,10 +150,10 @@ def load(path: str) -> Manifest:
         options.update(_check_options(where, robot.get("options", {})))
         if "joint" in options:
             raise ManifestError(f"{where}: option 'joint' is set by joints = [...], not by the options")
-        whole = sorted(set(options) & optionspec.WHOLE_LOG)
+        whole = sorted(set(options) & optionspec.WHOLE_LOG & set(optionspec.options_of(pipeline)))
         if whole:
             raise ManifestError(f"{where}: option {whole[0]!r} fits several joints into one model; a fleet job "
-                                "fits one joint (use fricli identify --coupling)")
+                                f"fits one joint (use fricli {pipeline} --coupling)")
         try:
             checked = optionspec.check(pipeline, options)
         except optionspec.OptionError as exc:

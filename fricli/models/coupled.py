@@ -15,6 +15,13 @@ the motors, R^-T tau_f (n, k), regressed on every motor's features [theta_d, sig
 With the Stribeck curve (the static curve of the LuGre model with delta = 2), each motor's vs is
 chosen on a grid and the rest is linear for a given vs.
 
+Instead of the linear law, each motor's friction can be a model of its own (``motors``: one
+``FrictionModel`` per motor, trained by ``fricli train-base --coupling``, ``fricli.fitting.learning.train_group``),
+which reads the motor's signals: ``qd`` its velocity theta_d_i [rad/s] and ``tau_g`` zero (the
+motor's law depends on its velocity alone). A dissipative network per motor has f_i theta_d_i >= 0,
+so tau_f . q_d = f . theta_d >= 0: the group is dissipative too. Its file holds the networks as
+children ``motor_1`` ... ``motor_k`` (and the ratio); a file of the linear law is unchanged.
+
 The model predicts the friction of every joint of the group from the group's rows at the same
 times (``predict_group``). A command applying it to one joint's rows uses ``member(joint)``, a
 view whose inputs are the joint's own ``qd`` and its partners' velocities as ``qd@<joint>``.
@@ -35,6 +42,7 @@ from fricli.core.transmission import Transmission
 FEATURES = ("fv", "fc", "offset")
 STRIBECK = ("fs", "vs")
 VS_GRID = 24            # Stribeck velocities tried per motor, between the 2nd and 60th percentile of |theta_d|
+MOTOR_INPUTS = ("qd", "tau_g")   # what a motor model may read (``motor_signals``)
 PARAM_INFO = {"fv": ("Nm s/rad", "viscous friction (motor side)"), "fc": ("Nm", "Coulomb friction (motor side)"),
               "offset": ("Nm", "constant torque (motor side)"), "fs": ("Nm", "static friction (motor side)"),
               "vs": ("rad/s", "Stribeck velocity (motor side)")}
@@ -47,15 +55,26 @@ def partner_key(joint) -> str:
 
 @register
 class CoupledModel(FrictionModel):
-    """Motor-side Coulomb + viscous friction of a coupled group; ``joints`` (k,), ``ratio`` R (k, k),
-    per-motor ``fv`` [Nm s/rad], ``fc`` [Nm], ``offset`` [Nm], each (k,); optionally the Stribeck
-    curve's ``fs`` [Nm] and ``vs`` [rad/s], each (k,)."""
+    """Motor-side friction of a coupled group; ``joints`` (k,), ``ratio`` R (k, k), and either
+    per-motor ``fv`` [Nm s/rad], ``fc`` [Nm], ``offset`` [Nm], each (k,), optionally with the
+    Stribeck curve's ``fs`` [Nm] and ``vs`` [rad/s], each (k,); or ``motors``, one stateless
+    model per motor of its velocity ``qd`` [rad/s] (e.g. a dissipative network)."""
 
     kind = "coupled"
 
-    def __init__(self, joints, ratio, fv, fc, offset, fs=None, vs=None):
+    def __init__(self, joints, ratio, fv=None, fc=None, offset=None, fs=None, vs=None, *, motors=None):
         self.transmission = Transmission(joints, ratio)
         k = len(self.joints)
+        self.motors = None if motors is None else list(motors)
+        if self.motors is not None:
+            if len(self.motors) != k or any(v is not None for v in (fv, fc, offset, fs, vs)):
+                raise ValueError(f"a coupled model has {k} motor models or the linear law's parameters, not both")
+            if any(not m.required_inputs() <= set(MOTOR_INPUTS) for m in self.motors):
+                raise ValueError("a motor model reads its velocity alone (qd, and tau_g as 0)")
+            self.fv = self.fc = self.offset = self.fs = self.vs = None
+            return
+        if fv is None or fc is None or offset is None:
+            raise ValueError("the linear law needs fv, fc and offset")
         self.fv, self.fc, self.offset = (np.array(v, dtype=np.float64).reshape(-1) for v in (fv, fc, offset))
         if (fs is None) != (vs is None):
             raise ValueError("the Stribeck curve needs both fs and vs")
@@ -72,7 +91,9 @@ class CoupledModel(FrictionModel):
         return self.fs is not None
 
     def names(self) -> tuple[str, ...]:
-        """The per-motor parameters the model has."""
+        """The per-motor parameters of the linear law (none with motor models)."""
+        if self.motors is not None:
+            return ()
         return FEATURES + (STRIBECK if self.stribeck else ())
 
     @property
@@ -90,6 +111,9 @@ class CoupledModel(FrictionModel):
 
     def motor_friction(self, theta_d: np.ndarray) -> np.ndarray:
         """f (n, k) [Nm] per motor at motor velocities theta_d (n, k) [rad/s]."""
+        if self.motors is not None:
+            return np.column_stack([motor.predict(motor_signals(theta_d[:, i]))[0]
+                                    for i, motor in enumerate(self.motors)])
         f = self.fv * theta_d + self.fc * np.sign(theta_d) + self.offset
         if self.stribeck:
             f += (self.fs - self.fc) * np.sign(theta_d) * np.exp(-np.square(theta_d / self.vs))
@@ -158,14 +182,24 @@ class CoupledModel(FrictionModel):
     def get_arrays(self) -> dict[str, np.ndarray]:
         return {"ratio": self.ratio, **{name: getattr(self, name) for name in self.names()}}
 
+    def children(self) -> dict[str, FrictionModel]:
+        return {} if self.motors is None else {motor_name(i): m for i, m in enumerate(self.motors)}
+
     @classmethod
     def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "CoupledModel":
         if set(params) != {"joints"} or not isinstance(params["joints"], list):
             raise ValueError("a coupled model records its joints, and nothing else")
+        if children:
+            names = [motor_name(i) for i in range(len(params["joints"]))]
+            if set(children) != set(names) or set(arrays) != {"ratio"}:
+                raise ValueError(f"a coupled model of motor models holds {', '.join(names)} and the ratio")
+            return cls(params["joints"], arrays["ratio"], motors=[children[n] for n in names])
         return cls(params["joints"], arrays["ratio"], arrays["fv"], arrays["fc"], arrays["offset"],
                    arrays.get("fs"), arrays.get("vs"))
 
     def describe(self) -> str:
+        if self.motors is not None:
+            return self._describe_motors()
         lines = [f"coupled group of joints {', '.join(map(str, self.joints))}: friction per motor, "
                  "f = fv*theta_d + fc*sign(theta_d) + offset"
                  + (" + (fs - fc)*sign(theta_d)*exp(-(theta_d/vs)^2)" if self.stribeck else "") + ", tau_f = R^T f"]
@@ -175,6 +209,27 @@ class CoupledModel(FrictionModel):
             lines.append(f"  motor {i + 1}: " + "  ".join(f"{n} {getattr(self, n)[i]:.6g} {PARAM_INFO[n][0]}"
                                                         for n in self.names()))
         return "\n".join(lines)
+
+    def _describe_motors(self) -> str:
+        lines = [f"coupled group of joints {', '.join(map(str, self.joints))}: friction per motor, "
+                 "f_i = a model of motor i's velocity theta_d_i (no load input), tau_f = R^T f"]
+        lines.append("  R (motor rows, joint columns):")
+        lines += ["    " + "  ".join(f"{x:>10.6g}" for x in row) for row in self.ratio]
+        for i, motor in enumerate(self.motors):
+            lines.append(f"  motor {i + 1} (its qd is the motor velocity theta_d_{i + 1}; tau_g is 0: "
+                         "a load term does not act):")
+            lines += ["    " + line for line in motor.describe().splitlines()]
+        return "\n".join(lines)
+
+
+def motor_name(i: int) -> str:
+    """The child name of motor model i (0-based) in a model file."""
+    return f"motor_{i + 1}"
+
+
+def motor_signals(w: np.ndarray) -> dict[str, np.ndarray]:
+    """What a motor model reads: its velocity ``qd`` = w (n,) [rad/s] and no load (``tau_g`` 0)."""
+    return {"qd": w, "tau_g": np.zeros_like(w)}
 
 
 class GroupMember(FrictionModel):
