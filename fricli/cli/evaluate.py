@@ -88,16 +88,21 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
+    from fricli import models
     from fricli.applying import report
     from fricli.core import modelset  # matplotlib loads only for this command
+    from fricli.models import coupled
 
     source = modelset.source(model)
     table, digest = read_log(log)
     name = "stdin" if log == "-" else log
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
-    runs = [(path, logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs))
-            for j, path in modelset.paired(source, table, name, joint).items()]
+    runs = []
+    for j, path in modelset.paired(source, table, name, joint).items():
+        data = logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs)
+        coupled.add_partners(coupled.view(models.load(path)[0], j), data, table, **kwargs)
+        runs.append((path, data))
     summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from fricli.core import logs, metrics
-from fricli.core.errors import DataError, FitError, ModelFileError
+from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.core.transmission import Transmission
@@ -177,9 +177,11 @@ class CoupledModel(FrictionModel):
         return "\n".join(lines)
 
 
+@register
 class GroupMember(FrictionModel):
     """Joint ``index`` of a coupled model: ``predict`` reads the joint's ``qd`` and its partners'
-    velocities ``qd@<joint>`` (n,) at the same times. Not saved on its own (the file holds the group)."""
+    velocities ``qd@<joint>`` (n,) at the same times. Saved as a model of that joint (kind
+    ``coupled-member``): the group is its child ``group``, the joint its one parameter."""
 
     kind = "coupled-member"
 
@@ -198,6 +200,56 @@ class GroupMember(FrictionModel):
 
     def required_inputs(self) -> set[str]:
         return {"t", "qd"} | {partner_key(j) for j in self.partners}
+
+    def children(self) -> dict[str, FrictionModel]:
+        return {"group": self.group}
+
+    def get_params(self) -> dict:
+        return {"joint": self.joint}
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "GroupMember":
+        group = children.get("group")
+        if not hasattr(group, "member") or set(params) != {"joint"}:
+            raise ValueError("a member of a coupled group records its group and its joint, and nothing else")
+        return group.member(params["joint"])
+
+    def describe(self) -> str:
+        return "\n".join([f"joint {self.joint} of the coupled group of joints {', '.join(map(str, self.group.joints))} "
+                          f"(reads the velocities of joints {', '.join(map(str, self.partners))} too):"]
+                         + ["  " + line for line in self.group.describe().splitlines()])
+
+
+def view(model: FrictionModel, joint) -> FrictionModel:
+    """The model that predicts ``joint``'s rows: a coupled group's member (``CoupledModel.member``),
+    any other model itself."""
+    return model.member(joint) if hasattr(model, "member") else model
+
+
+def partners_read(model: FrictionModel) -> list[str]:
+    """The joints (as text, in name order) whose velocities ``qd@<joint>`` ``model`` reads: those
+    of a member's group, also under a model built on a member (adapted, fixed)."""
+    return sorted(name[len(partner_key("")):] for name in model.required_inputs() if name.startswith(partner_key("")))
+
+
+def add_partners(model: FrictionModel, log, table, **reading) -> None:
+    """Add to ``log.signals`` (one joint's ``fricli.core.logs.Log``) the velocities ``qd@<p>``
+    [rad/s] that ``model`` reads (``partners_read``), from joint p's rows of ``table`` (the long-format
+    log ``log`` was read from, read the same way: ``reading`` as ``logs.from_table``) at ``log``'s
+    times. LogError (INPUT) when the log has no usable rows of p or none at some of those times."""
+    reading = {k: v for k, v in reading.items() if k in ("kt", "cutoff_hz", "drop_invalid", "zero")}
+    t = log.signals["t"]
+    for p in partners_read(model):
+        try:
+            sig = logs.from_table(table, name=log.name, joint=p, **reading).signals
+        except LogError:
+            raise LogError(f"{log.name}: the friction of joint {log.joint} depends on joint {p} (they share motors), "
+                           f"and the log has no usable rows of joint {p}") from None
+        at = np.minimum(np.searchsorted(sig["t"], t), len(sig["t"]) - 1)
+        if not np.array_equal(sig["t"][at], t):
+            raise LogError(f"{log.name}: joint {log.joint} and joint {p} share motors, but their rows are not at "
+                           "the same times")
+        log.signals[partner_key(p)] = sig["qd"][at]
 
 
 def figures(err: np.ndarray) -> dict:
