@@ -189,10 +189,10 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
         def work(j):
             data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
-            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
             base, meta = models.load(pairs[j])
             base = coupled.view(base, j)
             coupled.add_partners(base, data, table, **reading)   # what the model reads (a group's member)
+            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
             models.check_log(meta, data, pairs[j])
             result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
                                      max_effects=max_effects, accept_implausible=accept_implausible)

@@ -304,7 +304,7 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     reads: the velocities ``qd@<p>`` [rad/s] of the joints p that share motors with it, and the
     direction ``sign_motor@<m>`` of each motor m that turns with ``joint`` and another joint (a
     motor is named by the joint of its row of R); {} when the log records no transmission or the
-    joint shares no motor."""
+    joint shares no motor with another, or the log lacks the other joints' rows."""
     from fricli.core import transmission
 
     try:
@@ -320,7 +320,10 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     c = next(i for i, j in enumerate(sub.joints) if str(j) == str(joint))
     order = [c] + [i for i in range(len(group)) if i != c]
     reading = {k: v for k, v in reading.items() if k != "warn"}     # noted when the joint's own rows were read
-    _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
+    try:
+        _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
+    except LogError:
+        return {}
     qd = np.empty((len(datas[0]), len(group)))
     for i, d in zip(order, datas):
         qd[:, i] = d.signals["qd"]
