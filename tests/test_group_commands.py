@@ -225,3 +225,11 @@ def test_a_log_without_the_partners_rows_is_refused(arm, tmp_path, command):
     assert res.output.strip() == (f"fricli: error: {log}: the friction of joint 5 depends on joint 6 (they share "
                                   "motors), and the log has no usable rows of joint 6")
     assert not (tmp_path / "a.npz").exists() and not (tmp_path / "rep").exists()
+
+
+def test_diagnose_calibrate_refuses_a_group_model_it_cannot_refit(arm, tmp_path):
+    res = run("diagnose", arm["group"], arm["test"], "--fix", "--calibrate", tmp_path / "cal.urdf", "-o",
+              tmp_path / "fixed")
+    assert res.exit_code == 4, res.output
+    assert "joints 5, 6 share the model of their coupled group, which it does not refit" in res.output
+    assert not (tmp_path / "fixed").exists() and not (tmp_path / "cal.urdf").exists()
