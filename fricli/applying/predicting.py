@@ -6,7 +6,8 @@ with the model's state carried from one batch to the next (e.g. the LuGre bristl
 streams the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All
 columns and their field and schema metadata are carried through. On a log of several joints
 each joint covered gets its own model (the joint rule, fricli/core/joints.py), state and time check;
-the rows keep their order.
+the rows keep their order. A model that reads other joints' velocities (a coupled group's member,
+or a model over one) gets them from the same rows (``fricli.models.coupled.add_partners``).
 
 The log is read whole instead, as one batch, when a batch-wise reading would change the result:
 when ``qd`` or ``qdd`` must be derived from ``q`` (the zero-phase filter needs the whole series)
