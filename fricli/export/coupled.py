@@ -18,6 +18,7 @@ step function takes the joint's ``qd`` and its partners' velocities ``qd@<joint>
 
 from __future__ import annotations
 
+from fricli.core.errors import ModelFileError
 from fricli.export.c import Context, Part, comment, emitter, num
 
 
@@ -38,6 +39,9 @@ def member(model, name: str, ctx: Context) -> Part:
     from fricli.models.coupled import partner_key
 
     group, i = model.group, model.i
+    if group.children():   # motor friction of other forms than motor_friction writes
+        raise ModelFileError(f"cannot export joint {model.joint} of a coupled group whose motors have models of "
+                             "their own to C")
     r, k = group.ratio, len(group.joints)
     qd = [ctx.signal("qd") if c == i else ctx.signal(partner_key(j)) for c, j in enumerate(group.joints)]
     motors = [m for m in range(k) if r[m, i] != 0]
