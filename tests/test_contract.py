@@ -69,7 +69,15 @@ def _coupled(path: str):
 
 BUILDERS = {"lugre": _lugre, "linear": _linear, "residual": _residual, "augmented": _augmented,
             **{arch: _network(arch) for arch in learning.ARCHS}}
-GROUP_BUILDERS = {"coupled": _coupled}   # kinds of several joints: builder(path) -> (log, view, log file)
+def _coupled_member(path: str):
+    """The member of the coupled wrist's first joint, saved as a model of that joint."""
+    log, view, log_file = _coupled(path)
+    models.save_for_log(path, view(models.load(path)[0]), log, rows_used=len(log))
+    return log, lambda m: m, log_file
+
+
+GROUP_BUILDERS = {"coupled": _coupled,   # kinds of several joints: builder(path) -> (log, view, log file)
+                  "coupled-member": _coupled_member}   # one joint of a group: reads the partners' rows of the log
 
 
 def registered_kinds() -> list[str]:

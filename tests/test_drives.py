@@ -465,7 +465,7 @@ def test_motor_rotor_inertias_reach_the_dynamics_with_their_cross_term(tmp_path,
     np.testing.assert_allclose(_per_joint(tables["motor"], "tau_m", "ab"), tau, rtol=1e-12, atol=1e-12)
 
 
-def test_estimate_ext_with_a_group_model_and_commands_of_one_joint_refuse_it(tmp_path, arm_logs):
+def test_estimate_ext_with_a_group_model(tmp_path, arm_logs):
     folder, runs = arm_logs
     test = folder / "test.parquet"
     model = tmp_path / "wrist.npz"
@@ -476,8 +476,6 @@ def test_estimate_ext_with_a_group_model_and_commands_of_one_joint_refuse_it(tmp
     # no external torque in the simulation: the estimate is the friction error, at the noise floor
     ext = _per_joint(table, "tau_ext_pred", [5, 6])
     assert np.all(np.sqrt(np.mean(ext ** 2, axis=0)) <= 1.3 * default_arm().noise_floor()[WRIST])
-    res = run("evaluate", "--model", f"g={model}", "--log", test)
-    assert res.exit_code == 4 and "this command takes models of one joint" in res.output
 
 
 def test_a_log_of_the_wrist_alone_gives_one_model_file(tmp_path, arm_logs):

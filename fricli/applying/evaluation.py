@@ -9,6 +9,7 @@ import numpy as np
 from fricli import models
 from fricli.core import logs, metrics
 from fricli.core.envelope import share_outside
+from fricli.models import coupled
 from fricli.applying.predicting import external_estimate
 
 
@@ -44,8 +45,10 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,
              read_kwargs: dict | None = None, read=logs.read_table) -> list[Result]:
-    """Every model on every log. A model is a file or a model set folder; which model applies to
-    which joint of a log follows the joint rule (fricli.core.joints): a result per model, log and joint.
+    """Every model on every log. A model is a file, a model set folder or a coupled group's file;
+    which model applies to which joint of a log follows the joint rule (fricli.core.joints): a
+    result per model, log and joint. A model that reads other joints' velocities (a coupled
+    group's) gets them from the same log (``coupled.add_partners``).
     ``read``: path -> (table, sha256) of a log (e.g. with a time window)."""
     from fricli.core import joints, modelset
 
@@ -66,8 +69,10 @@ def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_
                 if path not in cache:
                     cache[path] = models.load(path)
                 model, meta = cache[path]
-                result = evaluate_one(model, meta, cache[key], lowpass_hz=lowpass_hz, model_name=mname,
-                                      log_name=lname)
+                model = coupled.view(model, joint)
+                log = dataclasses.replace(cache[key], signals=dict(cache[key].signals))
+                coupled.add_partners(model, log, table, **read_kwargs)
+                result = evaluate_one(model, meta, log, lowpass_hz=lowpass_hz, model_name=mname, log_name=lname)
                 result.joint = joint
                 results.append(result)
     return results

@@ -6,7 +6,8 @@ with the model's state carried from one batch to the next (e.g. the LuGre bristl
 streams the log with ``tau_f_pred`` (and ``tau_ext_pred``) added to a Parquet writer. All
 columns and their field and schema metadata are carried through. On a log of several joints
 each joint covered gets its own model (the joint rule, fricli/core/joints.py), state and time check;
-the rows keep their order.
+the rows keep their order. A model that reads other joints' velocities (a coupled group's member,
+or a model over one) gets them from the same rows (``fricli.models.coupled.add_partners``).
 
 The log is read whole instead, as one batch, when a batch-wise reading would change the result:
 when ``qd`` or ``qdd`` must be derived from ``q`` (the zero-phase filter needs the whole series)
@@ -29,6 +30,7 @@ from fricli import models
 from fricli.core import joints, lazy, logs, timewindow
 from fricli.core.atomic import atomic_open
 from fricli.core.errors import LogError, ModelFileError
+from fricli.models import coupled
 from fricli.models.base import FrictionModel
 from fricli.numerics.nn.network import prediction_threads
 
@@ -275,13 +277,11 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
     streams = {}
     for j, path in joints.pair(source, found, joint, name):
         model, meta = load(path)
-        if hasattr(model, "member"):   # a model of a coupled group: this joint's view of it
-            model = model.member(j)
-        streams[j] = _Stream(j, model, meta, path, env=models.envelope(meta, path))
+        streams[j] = _Stream(j, coupled.view(model, j), meta, path, env=models.envelope(meta, path))
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
     reason = whole_reason(pf.schema_arrow, outputs.lowpass_hz if outputs.external else None)
-    if reason is None and any(getattr(st.model, "partners", None) for st in streams.values()):
+    if reason is None and any(coupled.partners_read(st.model) for st in streams.values()):
         reason = "the joints of a coupled group are predicted together"
     warnings: list[str] = []
     fric, ext_err = ErrorSums(), ErrorSums()
@@ -315,9 +315,8 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                         part = table.filter(pc.equal(jcol, pa.scalar(j, jcol.type)))
                     if part.num_rows == 0:
                         continue
-                    partners = _partner_signals(st, table, name, reading)
                     out, n_in = _predict_part(st, part, offset, name, total, reason, reading, outputs, warn,
-                                              warnings, partners)
+                                              warnings, table)
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -365,25 +364,11 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                                                           "share": n_outside / rows if rows else 0.0})
 
 
-def _partner_signals(st: _Stream, table: pa.Table, name: str, reading: Reading) -> dict:
-    """{signal name: (t, qd)} of the other joints of a coupled group's member model (none for others)."""
-    from fricli.models.coupled import partner_key
-
-    out = {}
-    for p in getattr(st.model, "partners", None) or []:
-        try:
-            sig = logs.from_table(table, name=name, joint=p, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
-                                  drop_invalid=reading.drop_invalid, zero=reading.zero).signals
-        except LogError:
-            raise LogError(f"{name}: the friction of joint {st.joint} depends on joint {p} (they share motors), "
-                           f"and the log has no usable rows of joint {p}") from None
-        out[partner_key(p)] = (sig["t"], sig["qd"])
-    return out
-
-
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, reading: Reading,
-                  outputs: Outputs, warn, warnings: list, partners: dict | None = None) -> tuple[pa.Table, int]:
-    """One joint's rows of one batch with tau_f_pred (and ``outputs``) added; the rows it had."""
+                  outputs: Outputs, warn, warnings: list, whole: pa.Table) -> tuple[pa.Table, int]:
+    """One joint's rows of one batch with tau_f_pred (and ``outputs``) added; the rows it had.
+    ``whole``: the batch's rows of every joint (where the velocities of a coupled group's other
+    joints come from)."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
     jpos = table.schema.get_field_index("joint")
     jfield = table.schema.field(jpos) if jpos >= 0 else None
@@ -398,6 +383,8 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
         raise
     log.joint = st.joint
+    coupled.add_partners(st.model, log, whole, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
+                         drop_invalid=reading.drop_invalid, zero=reading.zero)
     if st.t_last is None:
         models.check_log(st.meta, log, st.model_name)
     sig = log.signals
@@ -407,11 +394,6 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         where = f" of joint {st.joint}" if st.joint is not None else ""
         raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
     st.t_last = float(t[-1])
-    for key, (tp, qdp) in (partners or {}).items():
-        if len(tp) != len(t) or not np.array_equal(tp, t):
-            raise LogError(f"{name}: joint {st.joint} and joint {key[3:]} share motors, but their rows are not at "
-                           "the same times")
-        sig = {**sig, key: qdp}
     with prediction_threads(1):   # the reader and writer threads keep the other core busy
         tau_f, st.state = st.model.predict(sig, st.state)
     unit = log.units["tau"]

@@ -17,6 +17,7 @@ from fricli.core import logs, metrics
 from fricli.core.atomic import atomic_write_bytes
 from fricli.core.errors import OutputError
 from fricli.core.envelope import share_outside
+from fricli.models import coupled
 from fricli.applying.evaluation import static_friction
 from fricli.applying.predicting import external_estimate
 
@@ -250,8 +251,10 @@ class Section:
 def write_report(model_path: str, log: logs.Log, folder: str, *, lowpass_hz: float | None = 5.0,
                  seed: int = 0, sections: list[Section] = ()) -> dict:
     """Write the figures and index.html into ``folder`` (``sections`` first); returns the figure
-    files and the error figures [Nm]."""
+    files and the error figures [Nm]. A coupled group's model is applied as its member of
+    ``log``'s joint (the partners' velocities in ``log.signals``: ``coupled.add_partners``)."""
     model, meta = models.load(model_path)
+    model = coupled.view(model, log.joint)
     models.check_log(meta, log, model_path)
     make_folder(folder)
     sig, u = log.signals, log.units

@@ -13,7 +13,7 @@ from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_
                                 log_reading, read_log, reading_kwargs, say, warn)
 from fricli.fitting.diagnosis import driver
 from fricli.fitting.diagnosis import effects as E
-from fricli.core.errors import FricliError, OutputError
+from fricli.core.errors import FricliError, ModelFileError, OutputError
 
 
 def _effect_names(ctx, param, value):
@@ -137,7 +137,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     --json). With --fix -o OUT.npz the model plus the added effects is written as one
     self-contained model file. Exit 0 (OK) whether or not something was found. MODEL may be a
     model folder: every joint of the log is diagnosed with its own model (a result per joint)
-    and --fix -o DIR writes one fixed model per joint (docs/joints.md).
+    and --fix -o DIR writes one fixed model per joint (docs/joints.md); a coupled group's model
+    is diagnosed on each joint of its group, and --fix writes a fixed model per joint on top of
+    the group's friction (docs/drives.md).
 
     \b
     Example:
@@ -169,6 +171,11 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
     if calibrated and not several:
         raise click.UsageError("--calibrate needs a whole-arm log and a model folder (one model per joint)")
+    shared = [j for j, path in pairs.items() if list(pairs.values()).count(path) > 1]
+    if calibrated and shared:
+        raise ModelFileError(f"{model}: --calibrate refits each joint's model on the recomputed log, but joints "
+                             f"{', '.join(map(str, shared))} share the model of their coupled group, which it does not "
+                             "refit: leave --calibrate out, or give models of one joint each")
 
     def show(result, data, model_path) -> None:
         if not as_json:
@@ -189,8 +196,10 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
         def work(j):
             data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
-            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
             base, meta = models.load(pairs[j])
+            base = coupled.view(base, j)
+            coupled.add_partners(base, data, table, **reading)   # what the model reads (a group's member)
+            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
             models.check_log(meta, data, pairs[j])
             result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
                                      max_effects=max_effects, accept_implausible=accept_implausible)
@@ -237,7 +246,7 @@ def _fix_refitted(table, digest: str, name: str, output: str, source, report) ->
     results = {}
 
     def work(j):
-        data = runs.read(table, digest, name, opts, joint=j, warn=warn)
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j])
         out = modelset.path_for(folder, data.joint)
         base, meta = models.load(pairs[j])
         base = refit(base, data)

@@ -43,7 +43,9 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
     external-torque error is against the log's sensor column tau_ext, when it has one.
     A model folder (one model per joint) is evaluated on every joint of a log, one row per
-    joint; a model fitted on another joint than the log's is refused (docs/joints.md).
+    joint, and so is a coupled group's model on each joint of its group, with the other joints'
+    velocities from the same log (docs/drives.md); a model fitted on another joint than the
+    log's is refused (docs/joints.md).
     The share of each log's rows outside each model's training envelope goes to stderr (and the JSON).
     The JSON gives each error's mae, rmse (the RMS) and max, in the log's torque unit ("unit").
 
@@ -82,22 +84,28 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     Figures: training/validation loss, friction against velocity, a heat map over velocity and
     gravity torque, friction over time, the four quadrants, and the external torque against the
     sensor when the log has one. MODEL may be a model folder (one model per joint): every joint
-    of the log gets its report in DIR/joint_<name>/, and DIR/index.html links them (docs/joints.md).
+    of the log gets its report in DIR/joint_<name>/, and DIR/index.html links them (docs/joints.md);
+    a coupled group's model the same for each joint of its group (docs/drives.md).
 
     \b
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
+    from fricli import models
     from fricli.applying import report
     from fricli.core import modelset  # matplotlib loads only for this command
+    from fricli.models import coupled
 
     source = modelset.source(model)
     table, digest = read_log(log)
     name = "stdin" if log == "-" else log
     kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
     del kwargs["joint"]
-    runs = [(path, logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs))
-            for j, path in modelset.paired(source, table, name, joint).items()]
+    runs = []
+    for j, path in modelset.paired(source, table, name, joint).items():
+        data = logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs)
+        coupled.add_partners(coupled.view(models.load(path)[0], j), data, table, **kwargs)
+        runs.append((path, data))
     summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))

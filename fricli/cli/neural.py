@@ -174,7 +174,9 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     pieces of every stretch of motion; for a log without velocity levels, whole blocks of
     time): when NN_add does not lower the RMS error there consistently, the output is BASE
     unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
-    on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md).
+    on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md). BASE
+    may be a coupled group's model: each joint of its group (or --joint) gets NN_add on top of the
+    group's friction, added to it (docs/drives.md).
 
     \b
     Example:

@@ -249,7 +249,7 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
     results: dict = {}
 
     def work(j):
-        data = runs.read(table, digest, name, opts, joint=j, warn=warn)
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j])
         out = modelset.path_for(folder, data.joint) if folder else output
         on_eval = progress(data) if progress else None
         try:

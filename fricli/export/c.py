@@ -171,7 +171,7 @@ def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     return fn(model, name, ctx)
 
 
-EMITTER_MODULES = ("lugre", "linear", "neural", "composite")   # modules under fricli.export that register emitters
+EMITTER_MODULES = ("lugre", "linear", "neural", "composite", "coupled")   # modules under fricli.export that register emitters
 
 
 def _load_emitters() -> None:
@@ -189,6 +189,8 @@ def signals_of(model: FrictionModel) -> list[str]:
 
 
 def _signal_doc(name: str, units: dict) -> str:
+    if name.startswith("qd@"):   # a coupled group's member reads its partners' velocities
+        return f"{name} [{units.get('qd', 'qd')}] velocity of joint {name[3:]} (shares motors with this joint)"
     unit_key, meaning = SIGNAL_INFO.get(name, ("", "log column"))
     unit = units.get(unit_key, unit_key) if unit_key in ("q", "qd", "qdd", "tau") else unit_key
     return f"{name} [{unit or '-'}] {meaning}"

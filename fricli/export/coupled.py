@@ -10,12 +10,51 @@ f = fv w + fc sign(w) + offset (+ (fs - fc) sign(w) exp(-(w/vs)^2) with the Stri
 each motor's model (a network per motor: its step function, as ``fricli.export.c.emit`` writes
 it, reading the motor's velocity as ``qd`` and a zero ``tau_g``), joint friction tau_f = R^T f.
 The model has no state; the state argument keeps the calls of every other exported model.
+
+A member of the group (``GroupMember``, the model of one of its joints, alone or as the base of
+an adapted or fixed model) is a part like any model of one joint (emitter ``coupled-member``): its
+step function takes the joint's ``qd`` and its partners' velocities ``qd@<joint>`` (C names
+``qd_<joint>``) and returns that joint's friction.
 """
 
 from __future__ import annotations
 
 from fricli.core.errors import ModelFileError
-from fricli.export.c import Context, emit, num
+from fricli.export.c import Context, Part, comment, emit, emitter, num
+
+
+def motor_friction(model, i: int, w: str, sgn: str) -> str:
+    """The C expression of motor ``i``'s friction [Nm] at the motor velocity ``w`` (a C expression)."""
+    f = f"{num(model.fv[i])} * {w} + {num(model.fc[i])} * {sgn}({w}) + {num(model.offset[i])}"
+    if model.stribeck:
+        f += (f" + {num(model.fs[i] - model.fc[i])} * {sgn}({w}) * exp(-(({w} / {num(model.vs[i])}) * "
+              f"({w} / {num(model.vs[i])})))")
+    return f
+
+
+@emitter("coupled-member")
+def member(model, name: str, ctx: Context) -> Part:
+    """One joint of a coupled group (``GroupMember``), a part like any model of one joint: the
+    velocities of the motors that drive the joint, w_m = R[m] qd, from the joint's qd and its
+    partners' ``qd@<joint>``; their friction f_m; the joint's friction sum_m R[m, i] f_m."""
+    from fricli.models.coupled import partner_key
+
+    group, i = model.group, model.i
+    if group.children():   # motor friction of other forms than motor_friction writes
+        raise ModelFileError(f"cannot export joint {model.joint} of a coupled group whose motors have models of "
+                             "their own to C")
+    r, k = group.ratio, len(group.joints)
+    qd = [ctx.signal("qd") if c == i else ctx.signal(partner_key(j)) for c, j in enumerate(group.joints)]
+    motors = [m for m in range(k) if r[m, i] != 0]
+    body = []
+    for m in motors:
+        w = " + ".join(f"{num(r[m, c])} * {qd[c]}" for c in range(k) if r[m, c] != 0)
+        body += [f"    const double w{m} = {w};", f"    const double f{m} = {motor_friction(group, m, f'w{m}', ctx.sgn)};"]
+    body.append(f"    return {' + '.join(f'{num(r[m, i])} * f{m}' for m in motors)};")
+    names = ", ".join(map(str, group.joints))
+    return Part(name, "\n".join([f"/* joint {comment(str(model.joint))} of the coupled group of joints {comment(names)} */",
+                                 f"static inline double {name}_step(const {ctx.in_type} *in) {{", *body, "}", ""]),
+                stateful=False)
 
 
 def group_code(model, meta: dict, prefix: str, sgn: str) -> str:
@@ -30,11 +69,7 @@ def group_code(model, meta: dict, prefix: str, sgn: str) -> str:
         body.append(f"    const double w{i} = {w};")
     motors = _motor_code(model, prefix, sgn, body) if model.motors is not None else []
     for i in range(k if model.motors is None else 0):
-        f = f"{num(model.fv[i])} * w{i} + {num(model.fc[i])} * {sgn}(w{i}) + {num(model.offset[i])}"
-        if model.stribeck:
-            f += (f" + {num(model.fs[i] - model.fc[i])} * {sgn}(w{i}) * exp(-((w{i} / {num(model.vs[i])}) * "
-                  f"(w{i} / {num(model.vs[i])})))")
-        body.append(f"    const double f{i} = {f};")
+        body.append(f"    const double f{i} = {motor_friction(model, i, f'w{i}', sgn)};")
     for j in range(k):
         terms = " + ".join(f"{num(r[i, j])} * f{i}" for i in range(k) if r[i, j] != 0) or "0.0"
         body.append(f"    tau_f[{j}] = {terms};")

@@ -80,11 +80,18 @@ def check_table(table, name: str, opts: dict) -> None:
     logs.require_robot_model(table.schema, name, zero(opts))
 
 
-def read(table, digest: str, name: str, opts: dict, joint=None, warn=None) -> logs.Log:
-    """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options."""
-    return logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
-                           kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], warn=warn,
-                           zero=zero(opts))
+def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base: str | None = None) -> logs.Log:
+    """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options; with
+    ``base`` (the input model file of adapt and diagnose) also the other joints' velocities it
+    reads (a coupled group's, ``coupled.add_partners``)."""
+    from fricli.models import coupled
+
+    reading = dict(kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], zero=zero(opts))
+    data = logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
+                           warn=warn, **reading)
+    if base is not None:
+        coupled.add_partners(coupled.view(models.load(base)[0], data.joint), data, table, **reading)
+    return data
 
 
 def record(pipeline: str, opts: dict, data: logs.Log, base: str | None = None, window: dict | None = None) -> dict:
@@ -202,9 +209,12 @@ def _train_options(opts: dict) -> dict:
 
 
 def _load_base(base: str, data) -> tuple:
+    """The input model as it applies to ``data``'s joint (a coupled group's member) and its meta."""
+    from fricli.models import coupled
+
     model, meta = models.load(base)
     models.check_log(meta, data, base)
-    return model, meta
+    return coupled.view(model, data.joint), meta
 
 
 def _adapt(data, output, opts, job, base, on_eval) -> Made:

@@ -43,7 +43,7 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
         os.makedirs(os.path.dirname(job.model), exist_ok=True)
         table, out["sha256"] = logs.read_table(job.log)
         runs.check_table(table, job.log, opts)
-        made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts), job.model, opts, base=job.base,
+        made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts, base=job.base), job.model, opts, base=job.base,
                         if_changed=if_changed)
         if made is None:
             out["status"] = "unchanged"

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from fricli.core import logs, metrics
-from fricli.core.errors import DataError, FitError, ModelFileError
+from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.core.transmission import Transmission
@@ -232,9 +232,11 @@ def motor_signals(w: np.ndarray) -> dict[str, np.ndarray]:
     return {"qd": w, "tau_g": np.zeros_like(w)}
 
 
+@register
 class GroupMember(FrictionModel):
     """Joint ``index`` of a coupled model: ``predict`` reads the joint's ``qd`` and its partners'
-    velocities ``qd@<joint>`` (n,) at the same times. Not saved on its own (the file holds the group)."""
+    velocities ``qd@<joint>`` (n,) at the same times. Saved as a model of that joint (kind
+    ``coupled-member``): the group is its child ``group``, the joint its one parameter."""
 
     kind = "coupled-member"
 
@@ -253,6 +255,56 @@ class GroupMember(FrictionModel):
 
     def required_inputs(self) -> set[str]:
         return {"t", "qd"} | {partner_key(j) for j in self.partners}
+
+    def children(self) -> dict[str, FrictionModel]:
+        return {"group": self.group}
+
+    def get_params(self) -> dict:
+        return {"joint": self.joint}
+
+    @classmethod
+    def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "GroupMember":
+        group = children.get("group")
+        if not hasattr(group, "member") or set(params) != {"joint"}:
+            raise ValueError("a member of a coupled group records its group and its joint, and nothing else")
+        return group.member(params["joint"])
+
+    def describe(self) -> str:
+        return "\n".join([f"joint {self.joint} of the coupled group of joints {', '.join(map(str, self.group.joints))} "
+                          f"(reads the velocities of joints {', '.join(map(str, self.partners))} too):"]
+                         + ["  " + line for line in self.group.describe().splitlines()])
+
+
+def view(model: FrictionModel, joint) -> FrictionModel:
+    """The model that predicts ``joint``'s rows: a coupled group's member (``CoupledModel.member``),
+    any other model itself."""
+    return model.member(joint) if hasattr(model, "member") else model
+
+
+def partners_read(model: FrictionModel) -> list[str]:
+    """The joints (as text, in name order) whose velocities ``qd@<joint>`` ``model`` reads: those
+    of a member's group, also under a model built on a member (adapted, fixed)."""
+    return sorted(name[len(partner_key("")):] for name in model.required_inputs() if name.startswith(partner_key("")))
+
+
+def add_partners(model: FrictionModel, log, table, **reading) -> None:
+    """Add to ``log.signals`` (one joint's ``fricli.core.logs.Log``) the velocities ``qd@<p>``
+    [rad/s] that ``model`` reads (``partners_read``), from joint p's rows of ``table`` (the long-format
+    log ``log`` was read from, read the same way: ``reading`` as ``logs.from_table``) at ``log``'s
+    times. LogError (INPUT) when the log has no usable rows of p or none at some of those times."""
+    reading = {k: v for k, v in reading.items() if k in ("kt", "cutoff_hz", "drop_invalid", "zero")}
+    t = log.signals["t"]
+    for p in partners_read(model):
+        try:
+            sig = logs.from_table(table, name=log.name, joint=p, **reading).signals
+        except LogError:
+            raise LogError(f"{log.name}: the friction of joint {log.joint} depends on joint {p} (they share motors), "
+                           f"and the log has no usable rows of joint {p}") from None
+        at = np.minimum(np.searchsorted(sig["t"], t), len(sig["t"]) - 1)
+        if not np.array_equal(sig["t"][at], t):
+            raise LogError(f"{log.name}: joint {log.joint} and joint {p} share motors, but their rows are not at "
+                           "the same times")
+        log.signals[partner_key(p)] = sig["qd"][at]
 
 
 def figures(err: np.ndarray) -> dict:
@@ -307,7 +359,7 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     reads: the velocities ``qd@<p>`` [rad/s] of the joints p that share motors with it, and the
     direction ``sign_motor@<m>`` of each motor m that turns with ``joint`` and another joint (a
     motor is named by the joint of its row of R); {} when the log records no transmission or the
-    joint shares no motor."""
+    joint shares no motor with another, or the log lacks the other joints' rows."""
     from fricli.core import transmission
 
     try:
@@ -323,7 +375,10 @@ def partner_signals(table, joint, name: str, **reading) -> dict[str, np.ndarray]
     c = next(i for i, j in enumerate(sub.joints) if str(j) == str(joint))
     order = [c] + [i for i in range(len(group)) if i != c]
     reading = {k: v for k, v in reading.items() if k != "warn"}     # noted when the joint's own rows were read
-    _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
+    try:
+        _, datas = group_rows(table, [sub.joints[i] for i in order], name, **reading)
+    except LogError:
+        return {}
     qd = np.empty((len(datas[0]), len(group)))
     for i, d in zip(order, datas):
         qd[:, i] = d.signals["qd"]

@@ -18,7 +18,10 @@ velocity covers. Two ways to combine them (``combine``):
                  |target| of the training rows; v_ps is the base's pre-sliding speed if it has
                  one, else PRESLIDING_SHARE of the slowest training speed.
     additive     the paper's form, tau_f = base(log) + NN_add (model files written before the
-                 dissipative form load as this).
+                 dissipative form load as this). The default over a base that reads other
+                 joints' velocities (a coupled group's member, ``fricli.models.coupled``): a
+                 joint whose motor turns with another joint has friction along its own motion
+                 whenever that motor turns against it.
 
 Both parts are children in the model file ("base/...", "add/..."); the base may be of any kind,
 with its own state (e.g. the LuGre bristles), which ``predict`` carries across batches.
@@ -58,12 +61,16 @@ class ResidualFriction(FrictionModel):
 
     def __init__(self, base: FrictionModel, *, hidden_sizes=(30,), epochs: int = 200, batch_size: int = 64,
                  lr: float = 0.01, min_speed: float | None = None, units: dict | None = None,
-                 add: FrictionModel | None = None, combine: str = "dissipative"):
+                 add: FrictionModel | None = None, combine: str | None = None):
+        """``combine``: "dissipative" or "additive"; by default dissipative, unless ``base`` reads other
+        joints' velocities (a coupled group's member): that joint's friction may act along its own
+        motion (its motor turns with another joint), which the dissipative form would forbid."""
         self.base = base
         self.hidden_sizes, self.epochs, self.batch_size, self.lr = tuple(hidden_sizes), epochs, batch_size, lr
         self.min_speed, self.units = min_speed, dict(units or {})
         self.add = add
-        self.combine = combine
+        self.combine = combine or ("additive" if any(name.startswith("qd@") for name in base.required_inputs())
+                                   else "dissipative")
 
     def fit(self, sig: dict[str, np.ndarray], target: np.ndarray, train_rows: np.ndarray, val_rows: np.ndarray,
             *, rng: np.random.Generator, on_eval: Callable | None = None,
