@@ -169,9 +169,9 @@ class CoupledModel(FrictionModel):
 
     def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:
         """Refused: the group's joints are predicted together (``predict_group``) or one of them
-        through ``member``; a command that takes models of one joint cannot use it."""
+        through ``member`` (``view``), as every command applies a group's model."""
         raise ModelFileError(f"a model of the coupled group of joints {', '.join(map(str, self.joints))}: "
-                             "fricli predict, estimate-ext and export apply it (this command takes models of one joint)")
+                             "apply it to one joint through its member (CoupledModel.member)")
 
     def required_inputs(self) -> set[str]:
         return {"t", "qd"} | {partner_key(j) for j in self.joints}
