@@ -71,7 +71,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               folds: bool = True,
+               folds: bool = True, bristles: str = "off",
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on the friction target of ``log``.
 
@@ -90,7 +90,12 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
     the validation rows, the moving rows and the whole log. ``schedule`` is a key of SCHEDULES;
     ``steps`` None takes its number of steps; ``patience`` stops training after that many
     steps without improvement of the validation loss (see ``fricli.numerics.nn.Trainer``).
+    ``bristles`` (dissipative only, a key of BRISTLES): "on" gives the model its pre-sliding state
+    (``DissipativeFriction.fit_bristles``), "auto" only when it lowers the held-out error
+    (``bristle_check``; summary "bristles"), "off" never.
     """
+    if bristles not in BRISTLES:
+        raise ValueError(f"unknown bristles choice {bristles!r}")
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown schedule {schedule!r}")
     trainer_schedule = SCHEDULES[schedule][0]
@@ -132,7 +137,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
         cv = cross_validated_steps(new_model, steps, sig, target, rows, sel.blocks,
                                    training_data.time_folds(val_fraction, rng), rng, on_eval,
                                    scales_from=model, snapshots=True)
-        members = cv.pop("models")
+        members, held = cv.pop("models"), cv.pop("held")
         for fold in members:
             fold.net_.theta[...] = fold.snapshots_[cv["record"]]
             fold.snapshots_ = None
@@ -143,10 +148,21 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
         model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
         model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+        if bristles != "off":
+            block = training_data.time_block(moving.size)
+            splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h)))
+                      for h in held]
+            check = bristle_check(members, splits, sig, target)
+            if bristles == "on" or check["helps"]:
+                model.fit_bristles(sig, target, np.flatnonzero(moving))
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
                   on_eval=on_eval)
+        if bristles != "off" and arch == "dissipative":
+            check = bristle_check([model], [(sel.train, sel.val)], sig, target)
+            if bristles == "on" or check["helps"]:
+                model.fit_bristles(sig, target, sel.train)
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
                "schedule": schedule, "max_steps": int(steps),
@@ -159,7 +175,36 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
         summary["val"] = _errors(target, pred, sel.val)
     if getattr(model, "v_ps_", None) is not None:
         summary["presliding_speed"] = model.v_ps_
+    if bristles != "off" and arch == "dissipative":
+        summary["bristles"] = {**check, "kept": model.sigma0_ is not None, "sigma0": model.sigma0_}
     return model, summary
+
+
+def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarray, np.ndarray]],
+                  sig: dict[str, np.ndarray], target: np.ndarray) -> dict:
+    """Whether the pre-sliding state lowers the error on rows the networks did not train on.
+
+    ``splits`` gives, for each of the ``fitted`` models, its training rows and its held-out rows
+    (indices into ``sig`` and ``target`` (n,) [Nm]). Each model gets the state with sigma0 fitted
+    on its training rows (left on it); both predictions run over the whole log. Returns the RMS
+    [Nm] over all held-out rows without and with the state, and "helps": the state lowers it by
+    MIN_GAIN at least (False when no rows are held out).
+    """
+    e_static, e_state = [], []
+    for model, (train, held) in zip(fitted, splits):
+        if not train.size or not held.size:
+            continue
+        model.sigma0_ = None
+        e_static.append(target[held] - model.predict(sig)[0][held])
+        model.fit_bristles(sig, target, train)
+        e_state.append(target[held] - model.predict(sig)[0][held])
+    if not e_static:
+        return {"helps": False}
+    static, state = (float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for e in (e_static, e_state))
+    return {"static_rmse": static, "bristles_rmse": state, "helps": bool(state <= (1.0 - MIN_GAIN) * static)}
+
+
+BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state
 
 
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
@@ -178,7 +223,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     "curve" (the pooled curve [Nm^2]) and "models" (the K fitted models).
     """
     done = 0
-    curves, weights, fitted = [], [], []
+    curves, weights, fitted, held_out = [], [], [], []
     for held in folds:
         is_val = np.isin(blocks[rows], held)
         train, val = rows[~is_val], rows[is_val]
@@ -195,6 +240,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
         curves.append(np.asarray(model.history_val_) * model.y_scale_ ** 2)
         weights.append(val.size)
         fitted.append(model)
+        held_out.append(held)
     if not curves:
         raise DataError("no fold of time blocks holds both training and validation rows")
     length = min(c.size for c in curves)
@@ -202,7 +248,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     best = int(np.argmin(pooled))
     step = min((best + 1) * fitted[0].eval_every_, steps)
     return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
-            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted}
+            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted, "held": held_out}
 
 
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:

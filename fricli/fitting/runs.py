@@ -169,7 +169,7 @@ def _train_base(data, output, opts, job, _base, on_eval) -> Made:
         patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
         val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
         max_samples=opts["max_samples"], velocity_input=opts["velocity_input"], velocity_scale=opts["velocity_scale"],
-        on_eval=on_eval)
+        bristles=opts["bristles"], on_eval=on_eval)
     models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
                         seed=opts["seed"], fit=summary, job=job)
     return Made("train-base", output, data, model, summary)
