@@ -5,11 +5,14 @@ days, and adapt on one run of a day scored on another run of the same day.
     python benchmarks/ur10e_neural.py --part base     # the train-base table only
     python benchmarks/ur10e_neural.py --part adapt --json out.json
     python benchmarks/ur10e_neural.py --part base --train-base-option=--no-folds   # one network, one fold
+    python benchmarks/ur10e_neural.py --part base --train-base-option=--bristles=off  # no pre-sliding state
 
 Every model comes from the fricli command line (the commands are printed on stderr and listed
 at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
 the friction target tau_m - tau_g - tau_dyn minus the model's prediction, pooled over the runs
-scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10).
+scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10). The base table adds, when
+train-base reports it, the held-out RMS on the training log without and with the pre-sliding
+state and the bristle stiffness sigma0 of the model written.
 
 - base: ``identify`` and ``train-base`` on ur-20_02_12-50sec_12harm, scored on every run of
   19_10_01, 20_02_05, 20_02_06 and 20_02_10.
@@ -98,7 +101,8 @@ def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) ->
         a, b = moving_error(lugre, runs, j), moving_error(nn, runs, j)
         fit_j = trained["joints"][str(j)]
         rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a, "step": fit_j["best_step"],
-                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation")})
+                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation"),
+                     "bristles": fit_j.get("bristles")})
     return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "train_base_options": list(options),
             "joints": rows}
 
@@ -125,9 +129,19 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
 
 
 def base_table(result: dict) -> str:
-    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |", "|---|---:|---:|---:|---:|"]
+    """The train-base table; with the pre-sliding state checked (train-base --json "bristles"), the
+    held-out RMS on the training log without and with it, and sigma0 where the model has it."""
+    state = any(r.get("bristles") and "static_rmse" in r["bristles"] for r in result["joints"])
+    head = "| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |"
+    lines = [head + (" held out: static → state [Nm] | sigma0 [Nm/rad] |" if state else ""),
+             "|---|---:|---:|---:|---:|" + ("---:|---:|" if state else "")]
     for r in result["joints"]:
-        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |")
+        line = f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |"
+        if state:
+            b = r.get("bristles") or {}
+            held = f" {b['static_rmse']:.3f} → {b['bristles_rmse']:.3f} |" if "static_rmse" in b else " - |"
+            line += held + (f" {b['sigma0']:.3g} |" if b.get("sigma0") else " - |")
+        lines.append(line)
     return "\n".join(lines)
 
 
