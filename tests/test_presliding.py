@@ -113,6 +113,7 @@ def test_save_and_load_give_the_same_numbers(fitted, tmp_path):
         assert loaded.sigma0_ == model.sigma0_
         assert np.array_equal(loaded.predict(other)[0], model.predict(other)[0])
         assert ("t" in meta["inputs"]) == (model.sigma0_ is not None)
+        assert ("sigma0" in loaded.describe()) == (model.sigma0_ is not None)
     assert "bristles" not in models.to_parts(static)[0]["params"]   # files without the state stay as they were
     tanh = np.tanh(other["qd"] / static.v_ps_)
     np.testing.assert_allclose(static.predict(other)[0], tanh * static.magnitude(other), rtol=1e-6, atol=1e-9)
@@ -166,9 +167,14 @@ def test_train_base_bristles_option(tmp_path):
 def test_export_with_the_state_matches_predict(fitted, tmp_path):
     """The exported C code carries the bristle state as predict --precision double does (1e-9)."""
     from fricli.core import logs
+    from fricli.models.residual import ResidualFriction
 
-    _, state, _, _ = fitted
+    _, state, train, _ = fitted
     log = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet"), cutoff_hz=50.0)
-    path = str(tmp_path / "state.npz")
-    models.save_for_log(path, state, log, rows_used=len(log))
-    assert _compare(path, str(SAMPLE / "joint2_extended_asym.parquet"), tmp_path) <= 1.0
+    rows = np.arange(0, train["t"].size, 7)
+    adapted = ResidualFriction(state, epochs=2).fit(train, train["tau_f_true"], rows[::2], rows[1::2],
+                                                    rng=np.random.default_rng(1))
+    for name, model in (("state", state), ("adapted", adapted)):      # alone and as the base of adapt's model
+        path = str(tmp_path / f"{name}.npz")
+        models.save_for_log(path, model, log, rows_used=len(log))
+        assert _compare(path, str(SAMPLE / "joint2_extended_asym.parquet"), tmp_path) <= 1.0

@@ -409,7 +409,10 @@ class DissipativeFriction(FrictionModel):
         tau, v = self.units.get("tau", "Nm"), self.units.get("qd", "rad/s")
         act = _describe_activation(self.activation)
         lines = [f"{self.kind}: {self.label}",
-                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)",
+                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)"
+                 if self.sigma0_ is None else
+                 "  tau_f = sigma0 z, dz/dt = qd - sigma0 |qd| z / g, g = y_scale (softplus(r0) + softplus(b1) "
+                 "|tau_g| / g_scale)",
                  f"  r0 = NN(asinh(|qd| / v0), sign(qd)); hidden layers: "
                  f"{' | '.join(f'{n} {act}' for n in self.hidden_sizes)}; linear output"]
         if self.net_ is None:
@@ -427,9 +430,8 @@ class DissipativeFriction(FrictionModel):
                          f"{self.y_scale_ * self.slope_[1]:.4g} {tau} per {v}")
         if self.sigma0_ is not None:
             q = self.units.get("q", "rad")
-            lines.append(f"  pre-sliding state: dz/dt = qd - sigma0 |qd| z / g, tau_f = sigma0 z, g = the magnitude; "
-                         f"sigma0 {self.sigma0_:.4g} {tau}/{q} (deflection y_scale / sigma0 "
-                         f"{self.y_scale_ / self.sigma0_:.3g} {q})")
+            lines.append(f"  pre-sliding (bristle) state z: sigma0 {self.sigma0_:.4g} {tau}/{q} (deflection y_scale / "
+                         f"sigma0 {self.y_scale_ / self.sigma0_:.3g} {q}); in steady sliding tau_f = sign(qd) g")
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
         held = (f"{self.n_val_} for validation" if len(self.nets_) == 1 else
