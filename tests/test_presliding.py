@@ -3,6 +3,7 @@ learned magnitude as the steady state (``DissipativeFriction.fit_bristles``)."""
 
 import copy
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -154,13 +155,18 @@ def test_train_base_bristles_option(tmp_path):
                                "tau_m": sig["tau_g"] + sig["tau_f_true"], "tau_g": sig["tau_g"], "tau_dyn": zeros},
                               {k: units[k] for k in ("t", "q", "qd", "qdd", "tau_m", "tau_g", "tau_dyn")})
     log = write(table, tmp_path / "log.parquet")
-    for choice in ("on", "off"):
+    for choice in ("on", "off", "auto"):
         out = tmp_path / f"{choice}.npz"
         res = CliRunner().invoke(cli, ["train-base", str(log), "--steps", "300", "--bristles", choice,
-                                       "-o", str(out), "-q"])
+                                       "-o", str(out), "--json", "-q"])
         assert res.exit_code == 0, res.output
         model = models.load(str(out))[0]
-        assert (model.sigma0_ is not None) == (choice == "on")
+        check = json.loads(res.stdout).get("bristles")
+        if choice == "off":
+            assert model.sigma0_ is None and check is None
+            continue
+        assert check["bristles_rmse"] < check["static_rmse"]     # held out: the joint's bristles show
+        assert check["kept"] == (model.sigma0_ is not None) == (choice == "on" or check["helps"])
 
 
 @needs_cc

@@ -37,6 +37,7 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
         return COSINE_STEPS[arch]
     return SCHEDULES[schedule][1]
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
+BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state (bristle_check)
 # adapt keeps NN_add only when, cross-validated over FOLDS folds of whole pieces of the log, it
 # lowers the RMS error by MIN_GAIN at least and the gain per piece is positive by SIGNIFICANCE
 # standard errors (about 95 % one-sided over the ten pieces): a network fitted to pure noise
@@ -204,9 +205,6 @@ def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarr
     return {"static_rmse": static, "bristles_rmse": state, "helps": bool(state <= (1.0 - MIN_GAIN) * static)}
 
 
-BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state
-
-
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
                           target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
                           rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
@@ -220,7 +218,8 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     every held-out row, and the step of its least value is chosen. Returns "folds" (K), "step"
     (the step chosen), "record" (its index in the loss records), "held_out_rmse" [Nm] (the
     pooled curve's least value, rooted), "fold_best_steps" (each fold's own best step),
-    "curve" (the pooled curve [Nm^2]) and "models" (the K fitted models).
+    "curve" (the pooled curve [Nm^2]), "models" (the K fitted models) and "held" (the blocks each
+    of them held out).
     """
     done = 0
     curves, weights, fitted, held_out = [], [], [], []
