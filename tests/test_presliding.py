@@ -60,7 +60,7 @@ def test_the_state_follows_the_reversals_of_a_lugre_joint(fitted):
     assert near.sum() > 50
     y = other["tau_f_true"]
     e_static, e_state = rms((y - static.predict(other)[0])[near]), rms((y - state.predict(other)[0])[near])
-    assert e_state < 0.5 * e_static                      # measured about 0.15 of it
+    assert e_state < 0.5 * e_static                      # measured: 0.61 against 3.33 Nm
     assert rms(y - state.predict(other)[0]) < rms(y - static.predict(other)[0])
     assert SIGMA0 / 2 < state.sigma0_ < 2 * SIGMA0         # the stiffness found is the joint's
 
