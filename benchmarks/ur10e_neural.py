@@ -5,11 +5,16 @@ days, and adapt on one run of a day scored on another run of the same day.
     python benchmarks/ur10e_neural.py --part base     # the train-base table only
     python benchmarks/ur10e_neural.py --part adapt --json out.json
     python benchmarks/ur10e_neural.py --part base --train-base-option=--no-folds   # one network, one fold
+    python benchmarks/ur10e_neural.py --part base --train-base-option=--bristles=off  # no pre-sliding state
 
 Every model comes from the fricli command line (the commands are printed on stderr and listed
 at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
 the friction target tau_m - tau_g - tau_dyn minus the model's prediction, pooled over the runs
-scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10).
+scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10). The base table adds, when
+train-base reports it, the held-out RMS on the training log without and with the pre-sliding
+state and the bristle stiffness sigma0 of the model written; a second table splits the errors
+into the rows within 0.1 s after a velocity reversal and the rest, with the LuGre model also
+run with sigma0 x 1e6 (no pre-sliding).
 
 - base: ``identify`` and ``train-base`` on ur-20_02_12-50sec_12harm, scored on every run of
   19_10_01, 20_02_05, 20_02_06 and 20_02_10.
@@ -87,6 +92,38 @@ def moving_error(model_dir: str, runs: list[str], joint: int) -> float:
     return float(np.sqrt(np.mean(e * e)))
 
 
+REVERSAL_WINDOW = 0.1   # [s] after a reversal of the velocity: the rows of the "reversals" figures
+
+
+def since_reversal(t: np.ndarray, qd: np.ndarray) -> np.ndarray:
+    """Time [s] since the last change of sign of qd (n,); from the start before the first one."""
+    s = np.sign(qd)
+    start = np.zeros(qd.size, dtype=int)
+    turns = np.flatnonzero(s[1:] * s[:-1] < 0) + 1
+    start[turns] = turns
+    return t - t[np.maximum.accumulate(start)]
+
+
+def reversal_errors(model_dirs: dict[str, str], runs: list[str], joint: int) -> dict:
+    """In-motion RMS [Nm] pooled over ``runs`` within REVERSAL_WINDOW after a reversal ("near") and
+    after it ("far"), for each model folder, and for the first one (LuGre) with sigma0 x 1e6 and
+    no micro-damping ("lugre_rigid": no pre-sliding)."""
+    loaded = {name: models.load(os.path.join(d, f"joint_{joint}.npz"))[0] for name, d in model_dirs.items()}
+    first = next(iter(loaded.values()))
+    loaded["lugre_rigid"] = first.replace(sigma0=first.sigma0 * 1e6, sigma1=0.0)
+    errs = {name: ([], []) for name in loaded}
+    for path in runs:
+        sig = logs.load_log(path, joint=str(joint)).signals
+        y, moving = logs.friction_target(sig), metrics.in_motion(sig["qd"])
+        near = since_reversal(sig["t"], sig["qd"]) < REVERSAL_WINDOW
+        for name, model in loaded.items():
+            e = y - model.predict(sig)[0]
+            errs[name][0].append(e[moving & near])
+            errs[name][1].append(e[moving & ~near])
+    return {name: {part: float(np.sqrt(np.mean(np.concatenate(pair[k]) ** 2))) for k, part in enumerate(("near", "far"))}
+            for name, pair in errs.items()}
+
+
 def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) -> dict:
     fit = import_run(data, work, BASE_FIT)
     runs = [import_run(data, work, name) for name in BASE_VALIDATION]
@@ -98,7 +135,9 @@ def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) ->
         a, b = moving_error(lugre, runs, j), moving_error(nn, runs, j)
         fit_j = trained["joints"][str(j)]
         rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a, "step": fit_j["best_step"],
-                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation")})
+                     "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation"),
+                     "bristles": fit_j.get("bristles"),
+                     "reversals": reversal_errors({"lugre": lugre, "nn": nn}, runs, j)})
     return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "train_base_options": list(options),
             "joints": rows}
 
@@ -125,9 +164,30 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
 
 
 def base_table(result: dict) -> str:
-    lines = ["| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |", "|---|---:|---:|---:|---:|"]
+    """The train-base table; with the pre-sliding state checked (train-base --json "bristles"), the
+    held-out RMS on the training log without and with it, and sigma0 where the model has it."""
+    state = any(r.get("bristles") and "static_rmse" in r["bristles"] for r in result["joints"])
+    head = "| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |"
+    lines = [head + (" held out: static → state [Nm] | sigma0 [Nm/rad] |" if state else ""),
+             "|---|---:|---:|---:|---:|" + ("---:|---:|" if state else "")]
     for r in result["joints"]:
-        lines.append(f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |")
+        line = f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |"
+        if state:
+            b = r.get("bristles") or {}
+            held = f" {b['static_rmse']:.3f} → {b['bristles_rmse']:.3f} |" if "static_rmse" in b else " - |"
+            line += held + (f" {b['sigma0']:.3g} |" if b.get("sigma0") else " - |")
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def reversal_table(result: dict) -> str:
+    """Where the errors of the base table sit: near the reversals or not."""
+    lines = [f"| joint | LuGre ≤ {REVERSAL_WINDOW:g} s after a reversal | LuGre, sigma0 × 1e6 | NN_base | "
+             "LuGre later | LuGre, sigma0 × 1e6 | NN_base |", "|---|---:|---:|---:|---:|---:|---:|"]
+    for r in result["joints"]:
+        e = r["reversals"]
+        cells = [f"{e[m][part]:.3f}" for part in ("near", "far") for m in ("lugre", "lugre_rigid", "nn")]
+        lines.append(f"| {r['joint']} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 
@@ -170,6 +230,8 @@ def main() -> None:
             out["base"] = base_part(args.data, work, args.seed, tuple(args.train_base_option))
             print(f"## train-base on {BASE_FIT}, in-motion RMS on the runs of other days\n")
             print(base_table(out["base"]) + "\n")
+            print(f"In-motion RMS [Nm] up to {REVERSAL_WINDOW:g} s after a reversal of the velocity and after that:\n")
+            print(reversal_table(out["base"]) + "\n")
         if args.part in ("adapt", "both"):
             out["adapt"] = adapt_part(args.data, work, args.seed)
             for kind, label in (("lugre", "LuGre"), ("nn", "NN_base")):

@@ -67,7 +67,7 @@ def base_log():
 
 @pytest.fixture(scope="module")
 def trained(base_log):
-    model, summary = learning.train_base(base_log, steps=800, seed=0)
+    model, summary = learning.train_base(base_log, steps=800, seed=0, bristles="off")   # the static network
     return model, summary
 
 
@@ -216,7 +216,7 @@ def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
     log = logs.from_table(motion_log((0.05, 0.1, 0.2), seed=1), name="slow")
     qd = log.signals["qd"]
     qd[qd < -0.15] = -0.4
-    model, _ = learning.train_base(log, steps=300, seed=0)
+    model, _ = learning.train_base(log, steps=300, seed=0, bristles="off")   # the static network
     assert model.v_max_ == (pytest.approx(0.2), pytest.approx(0.4)) and min(model.slope_) >= 0
     for direction, top in ((1.0, 0.2), (-1.0, 0.4)):
         speeds = direction * np.array([top, 1.5 * top, 3 * top])

@@ -82,7 +82,10 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
 
     The default network (--arch dissipative) predicts tau_f = tanh(qd / v_ps) * m with a
     magnitude m >= 0 from the speed, the direction and |tau_g|, so it never predicts friction
-    along the motion; --arch mlp is the paper's NN_base, tau_f = NN(tau_g, qd).
+    along the motion; --arch mlp is the paper's NN_base, tau_f = NN(tau_g, qd). By default
+    (--bristles on) the dissipative network carries the LuGre model's bristle state with m as
+    its steady state, so friction passes through zero over a small displacement at a reversal
+    and holds at rest; --bristles off gives the static network.
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every

@@ -5,7 +5,9 @@ the dense network, and the output scaling
 
 with the velocity input asinh(qd / v0) when the model has a velocity scale; and of the
 dissipative network (``fricli.models.dissipative``), its first output through the head of
-``fricli.numerics.nn.heads``. Stateless.
+``fricli.numerics.nn.heads``; stateless, except a dissipative network with the pre-sliding
+state (``sigma0_``): its magnitude g drives the bristle update of the LuGre export
+(``fricli.export.lugre``), z = z_ss + (z_prev - z_ss) exp(-sigma0 |qd| / g dt), tau_f = sigma0 z.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 from fricli.core.errors import ModelFileError
 from fricli.export import network
 from fricli.export.c import Context, Part, emitter, num
+from fricli.models.dissipative import G_MIN
 from fricli.numerics.nn import activations as acts
 
 
@@ -72,5 +75,30 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              *([] if model.v_max_ is None else [   # linear beyond the top training speeds
                  f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
                  f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),
-             f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
-    return Part(name, "\n".join(lines), stateful=False)
+             *([f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
+               if model.sigma0_ is None else _bristles(model, ctx))]
+    if model.sigma0_ is None:
+        return Part(name, "\n".join(lines), stateful=False)
+    lines[len(nets):len(nets)] = [
+        "typedef struct {", "    double z;       /* bristle deflection [rad] */",
+        "    double t_prev;  /* time of the previous sample [s] */",
+        "    int started;    /* 0 until the first sample */", f"}} {name}_state;", "",
+        f"static inline void {name}_init({name}_state *s) {{ s->z = 0.0; s->t_prev = 0.0; s->started = 0; }}", ""]
+    lines[lines.index(f"static inline double {name}_step(const {ctx.in_type} *in) {{")] = (
+        f"static inline double {name}_step({name}_state *s, const {ctx.in_type} *in) {{")
+    return Part(name, "\n".join(lines), stateful=True)
+
+
+def _bristles(model, ctx: Context) -> list[str]:
+    """The end of a dissipative step function with the pre-sliding state: g = y_scale r0, the
+    bristle update, tau_f = sigma0 z (as ``DissipativeFriction.predict``)."""
+    t = ctx.signal("t")
+    return [f"    {{ double g = r0 * {num(model.y_scale_)}, rate, a, zss, z;",
+            f"      g = g > {num(G_MIN)} ? g : {num(G_MIN)};",
+            f"      rate = fabs(qd) * {num(model.sigma0_)} / g;",
+            f"      a = rate * (s->started ? {t} - s->t_prev : 0.0);",
+            "      a = exp(-(a < 700.0 ? a : 700.0));",
+            f"      zss = {ctx.sgn}(qd) * g / {num(model.sigma0_)};",
+            "      z = (1.0 - a) * zss + a * (s->started ? s->z : zss);",
+            f"      s->z = z; s->t_prev = {t}; s->started = 1;",
+            f"      return z * {num(model.sigma0_)}; }}", "}", ""]

@@ -37,6 +37,7 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
         return COSINE_STEPS[arch]
     return SCHEDULES[schedule][1]
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
+BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state (bristle_check)
 # adapt keeps NN_add only when, cross-validated over FOLDS folds of whole pieces of the log, it
 # lowers the RMS error by MIN_GAIN at least and the gain per piece is positive by SIGNIFICANCE
 # standard errors (about 95 % one-sided over the ten pieces): a network fitted to pure noise
@@ -71,7 +72,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               folds: bool = True,
+               folds: bool = True, bristles: str = "on",
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch``) on the friction target of ``log``: ``train`` on the log's
     signals with the generator of ``seed``."""
@@ -79,7 +80,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                  hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr, batch_size=batch_size,
                  rng=np.random.default_rng(seed), val_fraction=val_fraction, balance=balance,
                  max_samples=max_samples, velocity_input=velocity_input, velocity_scale=velocity_scale,
-                 folds=folds, on_eval=on_eval)
+                 folds=folds, bristles=bristles, on_eval=on_eval)
 
 
 def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: dict, rng: np.random.Generator,
@@ -87,7 +88,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
           schedule: str = "cosine", patience: int | None = None, lr: float = 0.01, batch_size: int = 0,
           val_fraction: float = 0.2, balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
           velocity_input: str = "asinh", velocity_scale: float | None = None, folds: bool = True,
-          on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
+          bristles: str = "on", on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on signals ``sig`` (n,) each
     against the friction target ``target`` (n,) [Nm] (``name``: the log's name for messages;
     ``units``: the log's units; ``rng``: the generator of the row selection, weights and batches).
@@ -107,7 +108,12 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     the validation rows, the moving rows and the whole log. ``schedule`` is a key of SCHEDULES;
     ``steps`` None takes its number of steps; ``patience`` stops training after that many
     steps without improvement of the validation loss (see ``fricli.numerics.nn.Trainer``).
+    ``bristles`` (dissipative only, a key of BRISTLES): "on" gives the model its pre-sliding state
+    (``DissipativeFriction.fit_bristles``), "auto" only when it lowers the held-out error
+    (``bristle_check``; summary "bristles"), "off" never.
     """
+    if bristles not in BRISTLES:
+        raise ValueError(f"unknown bristles choice {bristles!r}")
     if schedule not in SCHEDULES:
         raise ValueError(f"unknown schedule {schedule!r}")
     trainer_schedule = SCHEDULES[schedule][0]
@@ -146,7 +152,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         cv = cross_validated_steps(new_model, steps, sig, target, rows, sel.blocks,
                                    training_data.time_folds(val_fraction, rng), rng, on_eval,
                                    scales_from=model, snapshots=True)
-        members = cv.pop("models")
+        members, held = cv.pop("models"), cv.pop("held")
         for fold in members:
             fold.net_.theta[...] = fold.snapshots_[cv["record"]]
             fold.snapshots_ = None
@@ -157,10 +163,21 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
         model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+        if bristles != "off":
+            block = training_data.time_block(moving.size)
+            splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h)))
+                      for h in held]
+            check = bristle_check(members, splits, sig, target)
+            if bristles == "on" or check["helps"]:
+                model.fit_bristles(sig, target, np.flatnonzero(moving))
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
                   on_eval=on_eval)
+        if bristles != "off" and arch == "dissipative":
+            check = bristle_check([model], [(sel.train, sel.val)], sig, target)
+            if bristles == "on" or check["helps"]:
+                model.fit_bristles(sig, target, sel.train)
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
                "schedule": schedule, "max_steps": int(steps),
@@ -173,6 +190,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         summary["val"] = _errors(target, pred, sel.val)
     if getattr(model, "v_ps_", None) is not None:
         summary["presliding_speed"] = model.v_ps_
+    if bristles != "off" and arch == "dissipative":
+        summary["bristles"] = {**check, "kept": model.sigma0_ is not None, "sigma0": model.sigma0_}
     return model, summary
 
 
@@ -181,7 +200,8 @@ def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable 
     """One network per motor of a coupled group (``fricli.models.coupled``): ``datas`` the logs of
     the group's joints (rows at the same times, in the order of ``transmission``'s joints).
 
-    Motor i trains with ``train`` (``options``: its keyword arguments) on its velocity
+    Motor i trains with ``train`` (``options``: its keyword arguments; the networks stay static
+    maps, without the pre-sliding state: ``predict_group`` holds no state) on its velocity
     w_i = (R qd)_i [rad/s] (no load input: ``coupled.motor_signals``) against its share of the
     friction, y = R^-T tau_f (n, k) [Nm]; one generator from ``seed`` runs through the motors in
     order. ``progress(i)``: the trainer's progress callback for motor i (0-based), with ``close()``,
@@ -196,6 +216,7 @@ def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable 
     w = transmission.motor_velocities(qd)
     y = transmission.motor_torques(tau_f)
     rng = np.random.default_rng(seed)
+    options = {**options, "bristles": "off"}
     group = ", ".join(map(str, transmission.joints))
     motors, summaries = [], []
     for i in range(len(transmission.joints)):
@@ -216,6 +237,30 @@ def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable 
                    "joints": {str(j): coupled.figures(err[:, c]) for c, j in enumerate(transmission.joints)}}
 
 
+def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarray, np.ndarray]],
+                  sig: dict[str, np.ndarray], target: np.ndarray) -> dict:
+    """Whether the pre-sliding state lowers the error on rows the networks did not train on.
+
+    ``splits`` gives, for each of the ``fitted`` models, its training rows and its held-out rows
+    (indices into ``sig`` and ``target`` (n,) [Nm]). Each model gets the state with sigma0 fitted
+    on its training rows (left on it); both predictions run over the whole log. Returns the RMS
+    [Nm] over all held-out rows without and with the state, and "helps": the state lowers it by
+    MIN_GAIN at least (False when no rows are held out).
+    """
+    e_static, e_state = [], []
+    for model, (train, held) in zip(fitted, splits):
+        if not train.size or not held.size:
+            continue
+        model.sigma0_ = None
+        e_static.append(target[held] - model.predict(sig)[0][held])
+        model.fit_bristles(sig, target, train)
+        e_state.append(target[held] - model.predict(sig)[0][held])
+    if not e_static:
+        return {"helps": False}
+    static, state = (float(np.sqrt(np.mean(np.concatenate(e) ** 2))) for e in (e_static, e_state))
+    return {"static_rmse": static, "bristles_rmse": state, "helps": bool(state <= (1.0 - MIN_GAIN) * static)}
+
+
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
                           target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
                           rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
@@ -229,10 +274,11 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     every held-out row, and the step of its least value is chosen. Returns "folds" (K), "step"
     (the step chosen), "record" (its index in the loss records), "held_out_rmse" [Nm] (the
     pooled curve's least value, rooted), "fold_best_steps" (each fold's own best step),
-    "curve" (the pooled curve [Nm^2]) and "models" (the K fitted models).
+    "curve" (the pooled curve [Nm^2]), "models" (the K fitted models) and "held" (the blocks each
+    of them held out).
     """
     done = 0
-    curves, weights, fitted = [], [], []
+    curves, weights, fitted, held_out = [], [], [], []
     for held in folds:
         is_val = np.isin(blocks[rows], held)
         train, val = rows[~is_val], rows[is_val]
@@ -249,6 +295,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
         curves.append(np.asarray(model.history_val_) * model.y_scale_ ** 2)
         weights.append(val.size)
         fitted.append(model)
+        held_out.append(held)
     if not curves:
         raise DataError("no fold of time blocks holds both training and validation rows")
     length = min(c.size for c in curves)
@@ -256,7 +303,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     best = int(np.argmin(pooled))
     step = min((best + 1) * fitted[0].eval_every_, steps)
     return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
-            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted}
+            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted, "held": held_out}
 
 
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:

@@ -187,10 +187,15 @@ TRAIN_BASE = (
     Option("velocity_scale", "float", None,
            "v0 of --velocity-input asinh [rad/s or m/s]; default the 5 % quantile of the training rows' speeds.",
            unit="rad/s or m/s", low=0, low_open=True, metavar="V0"),
+    Option("bristles", "choice", "on",
+           "The dissipative network's pre-sliding (bristle) state, LuGre's with the learned curve as its steady "
+           "state (docs/neural-models.md): on; auto: only where it lowers the held-out error by 1 %; off: the "
+           "static network.",
+           choices=learning.BRISTLES),
     Option("coupling", "flag", False,
            "Train each group of joints that share motors (the log's transmission, docs/drives.md) as one model "
            "with a dissipative network per motor of the motor's velocity (kind coupled); the other joints as "
-           "before."),
+           "before. The motors' networks have no pre-sliding state (--bristles does not apply)."),
 )
 
 ADAPT = (

@@ -32,6 +32,20 @@ magnitude grows linearly with the speed instead, by the mean slope of the learne
 
 Models written without these records extrapolate as the network does.
 
+Pre-sliding (bristle) state, optional (``fit_bristles``; train-base --bristles). Friction then
+follows the LuGre bristle equations with the learned magnitude as the steady state:
+
+    g     = y_scale * m(qd, tau_g)  (the magnitude above, c = 1)                  [Nm], > 0
+    dz/dt = qd - sigma0 |qd| z / g                                                [rad]
+    tau_f = sigma0 z                                                              [Nm]
+
+In steady sliding tau_f = sign(qd) g, the learned curve; at a reversal the friction passes
+through zero over a bristle deflection of about g / sigma0 instead of at qd = 0 (the tanh
+factor is not used). The state z runs over the rows in time order with the exact update of
+``fricli.numerics.physics.lugre_friction`` and is carried from one ``predict`` batch to the next
+(state (z [rad], t_last [s]), as for LuGre). With g > 0 the map qd -> tau_f is passive: its
+work is at least -sigma0 z0^2 / 2. sigma0 is fitted on the training log (``fit_bristles``).
+
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
 PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
 training target. Training minimises the mean squared error of tau_f / y_scale with the
@@ -49,12 +63,16 @@ from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
                                   training_arrays, training_params)
+from fricli.numerics import physics
 from fricli.numerics.nn import activations as acts
 from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
 from fricli.numerics.nn.network import predict_in_chunks
 from fricli.numerics.nn.training import Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
+G_MIN = 1e-12            # floor on the bristle curve g [Nm], so the bristle rate stays finite
+# fit_bristles: the bristle deflection g_typ / sigma0 [rad] searched (as identify's bounds)
+DEFLECTION_RANGE = (1e-8, 1.0)
 
 
 @register
@@ -81,6 +99,7 @@ class DissipativeFriction(FrictionModel):
         self.nets_: list[HeadedNetwork] | None = None   # one network, or the members of an ensemble
         self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
         self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
+        self.sigma0_: float | None = None                 # bristle stiffness [Nm/rad]; None: no pre-sliding state
 
     @property
     def net_(self) -> HeadedNetwork | None:
@@ -142,6 +161,7 @@ class DissipativeFriction(FrictionModel):
             for key in self._SCALARS:
                 setattr(self, f"{key}_", getattr(scales_from, f"{key}_"))
         net = self.new_network().init(rng)
+        self.sigma0_ = None
         x = self._rows(sig)
         y = (target / self.y_scale_)[None, :]
         xv = tv = None
@@ -203,7 +223,7 @@ class DissipativeFriction(FrictionModel):
     # ------------------------------------------------------------------ predicting
 
     def required_inputs(self) -> set[str]:
-        return {"qd", "tau_g"}
+        return {"qd", "tau_g"} if self.sigma0_ is None else {"t", "qd", "tau_g"}
 
     def load_slope(self) -> float:
         """k [Nm/Nm]: the growth of the friction magnitude per |tau_g|."""
@@ -214,11 +234,63 @@ class DissipativeFriction(FrictionModel):
         """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
         return self._run(signals, sliding=True)
 
-    def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, None]:
-        """tau_f (n,) [Nm]; stateless."""
+    def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, object]:
+        """tau_f (n,) [Nm]. Without the bristle state: stateless (state None). With it (``sigma0_``):
+        ``state`` (z [rad], t_last [s]) from the previous batch, or None to start in the steady
+        state of the first row; returns (tau_f, state after the last row)."""
         if self.net_ is None:
             raise ValueError("the model is not fitted")
-        return self._run(signals, sliding=False), None
+        if self.sigma0_ is None:
+            return self._run(signals, sliding=False), None
+        if "t" not in signals:
+            raise DataError("the log has no column 't' (the pre-sliding state runs in time)")
+        t = np.asarray(signals["t"], dtype=np.float64)
+        if not t.size:
+            return np.empty(0), state
+        z, t_last = (None, None) if state is None else state
+        g = self._bristle_curve(signals)
+        tau, z = self._bristles(np.asarray(signals["qd"], dtype=np.float64), g, physics.intervals(t, t_last),
+                                self.sigma0_, z)
+        return tau, (z, float(t[-1]))
+
+    def _bristle_curve(self, signals: dict[str, np.ndarray]) -> np.ndarray:
+        """g = the magnitude, floored at G_MIN (n,) [Nm]."""
+        return np.maximum(self.magnitude(signals), G_MIN)
+
+    @staticmethod
+    def _bristles(qd: np.ndarray, g: np.ndarray, dt: np.ndarray, sigma0: float,
+                  z0: float | None) -> tuple[np.ndarray, float]:
+        """tau_f = sigma0 z (n,) [Nm] and the last z [rad] for speeds qd (n,), curve g (n,) and
+        intervals dt (n,) [s] (``physics.lugre_friction`` without damping and viscous term)."""
+        return physics.lugre_friction(qd, g, 0.0, sigma0, 0.0, dt, z0)
+
+    def fit_bristles(self, sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray) -> float:
+        """Set ``sigma0_`` [Nm/rad] to the least mean squared error of tau_f against ``target`` (n,)
+        [Nm] over ``rows`` (indices), the state run over every row of ``sig`` in order: a grid of
+        bristle deflections g_typ / sigma0 over DEFLECTION_RANGE (g_typ the median magnitude over
+        ``rows``), refined by a bounded scalar search. Returns that error, rooted [Nm]."""
+        from scipy.optimize import minimize_scalar
+
+        self.sigma0_ = None
+        qd = np.asarray(sig["qd"], dtype=np.float64)
+        g = self._bristle_curve(sig)
+        dt = physics.intervals(np.asarray(sig["t"], dtype=np.float64))
+        y = np.asarray(target, dtype=np.float64)[rows]
+        g_typ = float(np.median(g[rows]))
+
+        def cost(log_deflection: float) -> float:
+            tau = self._bristles(qd, g, dt, g_typ / 10.0 ** log_deflection, None)[0]
+            return float(np.mean((tau[rows] - y) ** 2))
+
+        lo, hi = (float(np.log10(b)) for b in DEFLECTION_RANGE)
+        grid = np.linspace(lo, hi, 17)
+        costs = [cost(x) for x in grid]
+        k = int(np.argmin(costs))
+        res = minimize_scalar(cost, bounds=(grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]),
+                              method="bounded", options={"xatol": 1e-3})
+        best = float(res.x) if res.fun < costs[k] else float(grid[k])
+        self.sigma0_ = g_typ / 10.0 ** best
+        return float(np.sqrt(min(res.fun, costs[k])))
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
         """y_scale * head output (n,), in chunks (``predict_in_chunks``); ``sliding``: c = 1. The network
@@ -273,6 +345,8 @@ class DissipativeFriction(FrictionModel):
             params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
             if self.v_max_ is not None:
                 params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
+            if self.sigma0_ is not None:
+                params["bristles"] = {"sigma0": self.sigma0_}
             params["fitted"] = training_params(self)
         return params
 
@@ -319,6 +393,13 @@ class DissipativeFriction(FrictionModel):
             if not (_pair(v_max) and _pair(slope) and min(v_max) > 0 and min(slope) >= 0):
                 raise ValueError(f"damaged extrapolation {extra!r}")
             model.v_max_, model.slope_ = (float(v_max[0]), float(v_max[1])), (float(slope[0]), float(slope[1]))
+        bristles = params.get("bristles")
+        if bristles is not None:
+            sigma0 = bristles.get("sigma0") if isinstance(bristles, dict) else None
+            if not (isinstance(sigma0, (int, float)) and not isinstance(sigma0, bool) and np.isfinite(sigma0)
+                    and sigma0 > 0):
+                raise ValueError(f"damaged bristle parameters {bristles!r}")
+            model.sigma0_ = float(sigma0)
         load_training(model, params, arrays)
         return model
 
@@ -328,7 +409,10 @@ class DissipativeFriction(FrictionModel):
         tau, v = self.units.get("tau", "Nm"), self.units.get("qd", "rad/s")
         act = _describe_activation(self.activation)
         lines = [f"{self.kind}: {self.label}",
-                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)",
+                 "  tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale)"
+                 if self.sigma0_ is None else
+                 "  tau_f = sigma0 z, dz/dt = qd - sigma0 |qd| z / g, g = y_scale (softplus(r0) + softplus(b1) "
+                 "|tau_g| / g_scale)",
                  f"  r0 = NN(asinh(|qd| / v0), sign(qd)); hidden layers: "
                  f"{' | '.join(f'{n} {act}' for n in self.hidden_sizes)}; linear output"]
         if self.net_ is None:
@@ -344,6 +428,10 @@ class DissipativeFriction(FrictionModel):
             lines.append(f"  beyond the top training speeds (+{self.v_max_[0]:.4g} / -{self.v_max_[1]:.4g} {v}) the "
                          f"magnitude grows by {self.y_scale_ * self.slope_[0]:.4g} / "
                          f"{self.y_scale_ * self.slope_[1]:.4g} {tau} per {v}")
+        if self.sigma0_ is not None:
+            q = self.units.get("q", "rad")
+            lines.append(f"  pre-sliding (bristle) state z: sigma0 {self.sigma0_:.4g} {tau}/{q} (deflection y_scale / "
+                         f"sigma0 {self.y_scale_ / self.sigma0_:.3g} {q}); in steady sliding tau_f = sign(qd) g")
         how = (f"{self.epochs} epochs of mini-batches of {self.batch_size}" if self.epochs is not None
                else f"{self.steps_} {'full-batch' if not self.batch_size else f'mini-batch ({self.batch_size})'} steps")
         held = (f"{self.n_val_} for validation" if len(self.nets_) == 1 else
