@@ -34,7 +34,10 @@ from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
 FRICTION = ("Fv", "Fc", "offset")
-DEFAULT_PRIOR = 0.5        # prior std of an inertial parameter, relative to its scale
+DEFAULT_PRIOR = "auto"     # prior std of an inertial parameter relative to its scale, or chosen by held-out fit
+PRIOR_GRID = (0.01, 0.03, 0.1, 0.2, 0.5, 1.0, 3.0, 10.0)   # the prior strengths "auto" chooses from
+PRIOR_FOLDS = 10           # contiguous blocks of time of the cross-validation that chooses the prior (as diagnose)
+PRIOR_START = 0.5          # the fixed strength whose fit gives the cross-validation's row weights
 DEFAULT_EDGE_S = 0.5       # rows dropped at each end [s]: the zero-phase filter's and differences' transients
 MIN_LENGTH = 0.1           # m: the length scale of a body whose CAD centre of mass is closer to its joint
 SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is flagged
@@ -218,14 +221,16 @@ class Calibration:
     report: dict
 
 
-def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
+def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
               enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
     """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion``.
     ``enforce``: when the linear estimate is physically inconsistent, fit again over consistent
     parameters only (``consistent_fit``). ``seed`` fixes the random configurations of the
     structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
     or "stribeck" (and the bump (Fs - Fc) sign(qd) exp(-(qd / vs)^2) of the LuGre static curve, vs
-    per joint alternated with the linear fit by a search on a grid)."""
+    per joint alternated with the linear fit by a search on a grid). ``prior``: the prior strength
+    (a float) or "auto" (``choose_prior``: the strength on ``PRIOR_GRID`` whose fits predict held-out
+    blocks of time of the log best)."""
     if friction not in ("linear", "stribeck"):
         raise ValueError(f"unknown friction kind {friction!r}")
     nj = len(robot.joints)
@@ -247,7 +252,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     armature0 = np.where(np.isnan(urdf_armature), np.nan_to_num(motion.rotor_inertia), urdf_armature)
     x0 = np.concatenate([pi_cad, armature0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
-    s = prior_scales(robot, pi_cad, armature0, np.sqrt(np.mean(qd ** 2, axis=0)), tau_rms, prior)
+    s1 = prior_scales(robot, pi_cad, armature0, np.sqrt(np.mean(qd ** 2, axis=0)), tau_rms, 1.0)
 
     # before: the CAD model (with the prior armature) and each joint's friction fitted alone
     r0 = (y - Phi @ x0).reshape(n, nj)
@@ -261,6 +266,10 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
+    prior_choice = None
+    if prior == "auto":
+        prior, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
+    s = _with_prior(s1, nj, float(prior))
     vs = None
     if stribeck:
         top = np.abs(qd).max(axis=0)
@@ -289,7 +298,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
                                                                   for j in range(nj)}}
     report = {
         "rows": int(n), "rows_dropped_at_ends": int((~keep).sum()), "edge_s": edge_s,
-        "prior": prior, "iterations": iteration,
+        "prior": float(prior), "prior_choice": prior_choice, "iterations": iteration,
         "excitation": excitation,
         "fit": {str(motion.names[j]): {"urdf_joint": robot.joints[j],
                                        "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
@@ -307,6 +316,44 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal)
     return cal
+
+
+def _with_prior(s1: np.ndarray, nj: int, prior: float) -> np.ndarray:
+    """Prior std (as ``prior_scales``) for strength ``prior`` from those for strength 1: the inertial
+    parameters and armatures scale with it, friction's loose prior does not."""
+    return np.concatenate([prior * s1[:11 * nj], s1[11 * nj:]])
+
+
+def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, grid=PRIOR_GRID, folds=PRIOR_FOLDS) -> tuple[float, dict]:
+    """The prior strength on ``grid`` whose fits predict held-out data best (ridge selection by
+    blocked cross-validation): the log cut into ``folds`` contiguous blocks of time, each predicted
+    by the fit on the others; score: the held-out sum of squared residuals, each joint's rows weighted
+    by 1 / its residual std in the fit at ``PRIOR_START``. The weakest prior wins ties (noise-free
+    data need none). ``Phi`` (n * joints, p), ``y`` (n * joints,), ``s1``: prior std at strength 1.
+    Returns (strength, report: the grid and each strength's held-out RMS of the weighted residual,
+    1 = the rows' noise level)."""
+    from fricli.fitting.diagnosis.selection import fold_bounds
+
+    nj = len(sigma)
+    n = len(y) // nj
+    _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms)
+    W = Phi / w[rows_of, None]
+    r = (y - Phi @ x0) / w[rows_of]
+    edges = fold_bounds(n, folds) * nj
+    parts = [(W[a:b].T @ W[a:b], W[a:b].T @ r[a:b], float(r[a:b] @ r[a:b])) for a, b in zip(edges[:-1], edges[1:])]
+    G, B = sum(p[0] for p in parts), sum(p[1] for p in parts)
+    scores = {}
+    for strength in sorted(grid, reverse=True):
+        s = _with_prior(s1, nj, strength)
+        total = 0.0
+        for Gk, Bk, Ck in parts:    # the fit without block k, scored on block k
+            d = s * np.linalg.solve((G - Gk) * np.outer(s, s) + np.eye(len(s)), (B - Bk) * s)
+            total += Ck - 2 * d @ Bk + d @ Gk @ d
+        scores[strength] = total
+    floor = min(scores.values()) + 1e-9 * sum(p[2] for p in parts)   # round-off of the quadratic forms
+    best = max(k for k, v in scores.items() if v <= floor)
+    return best, {"grid": sorted(grid), "folds": folds, "chosen": best,
+                  "held_out_rms": {f"{k:g}": float(np.sqrt(max(v, 0.0) / len(y))) for k, v in sorted(scores.items())}}
 
 
 def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
@@ -637,7 +684,7 @@ def recorded_urdf(table) -> str | None:
     return _robot_record(table).get("urdf") or None
 
 
-def recalibrate(table, name: str, urdf: str, *, prior: float = DEFAULT_PRIOR, friction: str = "linear",
+def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRIOR, friction: str = "linear",
                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """Calibrate the robot model of a whole-arm log imported with a URDF (the matching and gravity it
     recorded) and recompute its tau_g and tau_dyn from the calibrated model.
