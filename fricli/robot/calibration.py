@@ -13,8 +13,10 @@ Stribeck bump, linear for a given Stribeck velocity, which alternates with the f
 The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
 CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
 standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
-inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: the larger of
-``prior`` x its prior value and the joint's CAD mass-matrix diagonal at q = 0; friction: loose).
+inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: ``prior`` x the larger of
+its prior value and the joint's CAD mass-matrix diagonal at q = 0; friction: loose).
+``prior`` "auto" chooses the strength, for all parameters and then per body, by cross-validation
+over blocks of time of the log (``choose_prior``).
 Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
 (iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
 little: directions the run does not excite stay at CAD, and the report names them.
@@ -266,10 +268,13 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
-    prior_choice = None
+    prior_choice, strengths = None, float(prior) if prior != "auto" else None
     if prior == "auto":
-        prior, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
-    s = _with_prior(s1, nj, float(prior))
+        strengths, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
+        prior = prior_choice["chosen"]
+        if "per_body" in prior_choice:
+            prior_choice["per_body"] = dict(zip(bodies(robot), prior_choice["per_body"]))
+    s = _with_prior(s1, nj, strengths)
     vs = None
     if stribeck:
         top = np.abs(qd).max(axis=0)
@@ -318,42 +323,64 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     return cal
 
 
-def _with_prior(s1: np.ndarray, nj: int, prior: float) -> np.ndarray:
-    """Prior std (as ``prior_scales``) for strength ``prior`` from those for strength 1: the inertial
-    parameters and armatures scale with it, friction's loose prior does not."""
-    return np.concatenate([prior * s1[:11 * nj], s1[11 * nj:]])
+def _with_prior(s1: np.ndarray, nj: int, prior) -> np.ndarray:
+    """Prior std (as ``prior_scales``) for strength ``prior`` (a float, or one per inertial parameter
+    and armature, (11 * joints,)) from those for strength 1: friction's loose prior does not scale."""
+    return np.concatenate([np.asarray(prior, dtype=float) * s1[:11 * nj], s1[11 * nj:]])
 
 
-def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, grid=PRIOR_GRID, folds=PRIOR_FOLDS) -> tuple[float, dict]:
-    """The prior strength on ``grid`` whose fits predict held-out data best (ridge selection by
+def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_body: bool = True, grid=PRIOR_GRID,
+                 folds=PRIOR_FOLDS) -> tuple[np.ndarray, dict]:
+    """The prior strengths on ``grid`` whose fits predict held-out data best (ridge selection by
     blocked cross-validation): the log cut into ``folds`` contiguous blocks of time, each predicted
     by the fit on the others; score: the held-out sum of squared residuals, each joint's rows weighted
-    by 1 / its residual std in the fit at ``PRIOR_START``. The weakest prior wins ties (noise-free
-    data need none). ``Phi`` (n * joints, p), ``y`` (n * joints,), ``s1``: prior std at strength 1.
-    Returns (strength, report: the grid and each strength's held-out RMS of the weighted residual,
-    1 = the rows' noise level)."""
+    by 1 / its residual std in the fit at ``PRIOR_START``. First one strength for every parameter;
+    then, with ``per_body``, each body's (its 10 inertial parameters and its joint's armature) in
+    turn, until no body's change lowers the score. The weakest prior wins ties (noise-free data need
+    none). ``Phi`` (n * joints, p), ``y`` (n * joints,), ``s1``: prior std at strength 1.
+    Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
     from fricli.fitting.diagnosis.selection import fold_bounds
 
     nj = len(sigma)
-    n = len(y) // nj
     _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms)
     W = Phi / w[rows_of, None]
     r = (y - Phi @ x0) / w[rows_of]
-    edges = fold_bounds(n, folds) * nj
+    edges = fold_bounds(len(y) // nj, folds) * nj
     parts = [(W[a:b].T @ W[a:b], W[a:b].T @ r[a:b], float(r[a:b] @ r[a:b])) for a, b in zip(edges[:-1], edges[1:])]
     G, B = sum(p[0] for p in parts), sum(p[1] for p in parts)
-    scores = {}
-    for strength in sorted(grid, reverse=True):
-        s = _with_prior(s1, nj, strength)
+    tie = 1e-9 * sum(p[2] for p in parts)     # round-off of the quadratic forms below
+
+    def score(strengths):
+        s = _with_prior(s1, nj, strengths)
         total = 0.0
         for Gk, Bk, Ck in parts:    # the fit without block k, scored on block k
             d = s * np.linalg.solve((G - Gk) * np.outer(s, s) + np.eye(len(s)), (B - Bk) * s)
             total += Ck - 2 * d @ Bk + d @ Gk @ d
-        scores[strength] = total
-    floor = min(scores.values()) + 1e-9 * sum(p[2] for p in parts)   # round-off of the quadratic forms
-    best = max(k for k, v in scores.items() if v <= floor)
-    return best, {"grid": sorted(grid), "folds": folds, "chosen": best,
-                  "held_out_rms": {f"{k:g}": float(np.sqrt(max(v, 0.0) / len(y))) for k, v in sorted(scores.items())}}
+        return total
+
+    held = lambda v: float(np.sqrt(max(v, 0.0) / len(y)))  # noqa: E731
+    weak_first = sorted(grid, reverse=True)
+    scores = {g: score(np.full(11 * nj, g)) for g in weak_first}
+    chosen = max(g for g, v in scores.items() if v <= min(scores.values()) + tie)
+    strengths, best = np.full(11 * nj, chosen), scores[chosen]
+    per = np.full(nj, chosen)
+    for _ in range(3 * per_body):
+        changed = False
+        for b in range(nj):
+            for g in weak_first:
+                trial = per.copy()
+                trial[b] = g
+                cols = np.concatenate([np.repeat(trial, 10), trial])
+                v = score(cols)
+                if v < best - tie:
+                    per, strengths, best, changed = trial, cols, v, True
+        if not changed:
+            break
+    report = {"grid": sorted(grid), "folds": folds, "chosen": chosen,
+              "held_out_rms": {f"{g:g}": held(v) for g, v in sorted(scores.items())}}
+    if per_body:
+        report.update(per_body=[float(v) for v in per], held_out_rms_per_body=held(best))
+    return strengths, report
 
 
 def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
