@@ -26,6 +26,8 @@ def test_noise_free_data_choose_the_weakest_prior(run):
     assert cal.report["prior"] == choice["chosen"] == max(cb.PRIOR_GRID)
     assert choice["folds"] == cb.PRIOR_FOLDS and choice["grid"] == sorted(cb.PRIOR_GRID)
     assert cb.PRIOR_START in cb.PRIOR_GRID
+    groups = cal.bodies + [f"{j}.armature" for j in cal.joints]
+    assert choice["per_group"] == {g: max(cb.PRIOR_GRID) for g in groups}
 
 
 def test_noise_around_the_cad_model_chooses_a_strong_prior(run):
@@ -41,6 +43,9 @@ def test_noise_around_the_cad_model_chooses_a_strong_prior(run):
     held = cal.report["prior_choice"]["held_out_rms"]
     assert cal.report["prior"] < cb.PRIOR_START
     assert held[f"{cal.report['prior']:g}"] == min(held.values()) < held[f"{max(cb.PRIOR_GRID):g}"]
+    choice = cal.report["prior_choice"]
+    assert len(choice["per_group"]) == 2 * len(cal.joints) and set(choice["per_group"].values()) <= set(cb.PRIOR_GRID)
+    assert choice["held_out_rms_per_group"] <= min(held.values())
 
 
 def test_fixed_prior_and_refusal_on_the_command_line(run, tmp_path):

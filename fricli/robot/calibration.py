@@ -15,7 +15,7 @@ CAD values (maximum a posteriori, a ridge on the deviation from CAD): each param
 standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
 inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: ``prior`` x the larger of
 its prior value and the joint's CAD mass-matrix diagonal at q = 0; friction: loose).
-``prior`` "auto" chooses the strength, for all parameters and then per body, by cross-validation
+``prior`` "auto" chooses the strength, for all parameters and then per body and armature, by cross-validation
 over blocks of time of the log (``choose_prior``).
 Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
 (iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
@@ -272,8 +272,9 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     if prior == "auto":
         strengths, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
         prior = prior_choice["chosen"]
-        if "per_body" in prior_choice:
-            prior_choice["per_body"] = dict(zip(bodies(robot), prior_choice["per_body"]))
+        if "per_group" in prior_choice:
+            groups = bodies(robot) + [f"{j}.armature" for j in robot.joints]
+            prior_choice["per_group"] = dict(zip(groups, prior_choice["per_group"]))
     s = _with_prior(s1, nj, strengths)
     vs = None
     if stribeck:
@@ -329,15 +330,16 @@ def _with_prior(s1: np.ndarray, nj: int, prior) -> np.ndarray:
     return np.concatenate([np.asarray(prior, dtype=float) * s1[:11 * nj], s1[11 * nj:]])
 
 
-def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_body: bool = True, grid=PRIOR_GRID,
+def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = True, grid=PRIOR_GRID,
                  folds=PRIOR_FOLDS) -> tuple[np.ndarray, dict]:
     """The prior strengths on ``grid`` whose fits predict held-out data best (ridge selection by
     blocked cross-validation): the log cut into ``folds`` contiguous blocks of time, each predicted
     by the fit on the others; score: the held-out sum of squared residuals, each joint's rows weighted
     by 1 / its residual std in the fit at ``PRIOR_START``. First one strength for every parameter;
-    then, with ``per_body``, each body's (its 10 inertial parameters and its joint's armature) in
-    turn, until no body's change lowers the score. The weakest prior wins ties (noise-free data need
-    none). ``Phi`` (n * joints, p), ``y`` (n * joints,), ``s1``: prior std at strength 1.
+    then, with ``per_group``, each group's own in turn (each body's 10 inertial parameters, centred
+    on CAD; each joint's armature, centred on the rotor inertia), until no group's change lowers the
+    score. The weakest prior wins ties (noise-free data need none). ``Phi`` (n * joints, p),
+    ``y`` (n * joints,), ``s1``: prior std at strength 1.
     Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
     from fricli.fitting.diagnosis.selection import fold_bounds
 
@@ -363,14 +365,14 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_body: bool = Tr
     scores = {g: score(np.full(11 * nj, g)) for g in weak_first}
     chosen = max(g for g, v in scores.items() if v <= min(scores.values()) + tie)
     strengths, best = np.full(11 * nj, chosen), scores[chosen]
-    per = np.full(nj, chosen)
-    for _ in range(3 * per_body):
+    per = np.full(2 * nj, chosen)      # each body's inertial parameters, then each joint's armature
+    for _ in range(3 * per_group):
         changed = False
-        for b in range(nj):
+        for b in range(2 * nj):
             for g in weak_first:
                 trial = per.copy()
                 trial[b] = g
-                cols = np.concatenate([np.repeat(trial, 10), trial])
+                cols = np.concatenate([np.repeat(trial[:nj], 10), trial[nj:]])
                 v = score(cols)
                 if v < best - tie:
                     per, strengths, best, changed = trial, cols, v, True
@@ -378,8 +380,8 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_body: bool = Tr
             break
     report = {"grid": sorted(grid), "folds": folds, "chosen": chosen,
               "held_out_rms": {f"{g:g}": held(v) for g, v in sorted(scores.items())}}
-    if per_body:
-        report.update(per_body=[float(v) for v in per], held_out_rms_per_body=held(best))
+    if per_group:
+        report.update(per_group=[float(v) for v in per], held_out_rms_per_group=held(best))
     return strengths, report
 
 
