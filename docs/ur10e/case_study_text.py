@@ -198,7 +198,8 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "",
         "## The calibrated robot model next to the CAD one",
         "",
-        f"Prior: {cal['prior']} times each parameter's scale ([calibration.md](calibration.md)); the fitting run",
+        *_prior_lines(cal),
+        "The fitting run",
         f"determines {cal['excitation']['base_parameters']} base parameters of {cal['excitation']['parameters']},"
         f" {len(cal['excitation']['undetermined'])} directions stay near CAD.",
         "",
@@ -256,3 +257,20 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "```",
         "",
     ])
+
+
+def _prior_lines(cal: dict) -> list[str]:
+    """How strong the calibration's prior at CAD was and how it was chosen ([calibration.md])."""
+    choice = cal.get("prior_choice")
+    if not choice:
+        return [f"Prior: {cal['prior']:g} times each parameter's scale ([calibration.md](calibration.md)).", ""]
+    held = ", ".join(f"{k}: {v:.4f}" for k, v in sorted(choice["held_out_rms"].items(), key=lambda kv: float(kv[0])))
+    lines = [f"Prior: chosen by {choice['folds']}-fold cross-validation over blocks of time of the fitting run",
+             "(`--prior auto`, [calibration.md](calibration.md)); nothing of the validation runs enters it. One",
+             f"strength for all parameters: **{choice['chosen']:g}** times each parameter's scale (held-out",
+             f"weighted RMS per strength, 1 = the noise level: {held})."]
+    if choice.get("per_group"):
+        per = ", ".join(f"{b} {v:g}" for b, v in choice["per_group"].items())
+        lines += [f"Then each body's inertial parameters and each joint's armature on their own: {per}",
+                  f"(held-out weighted RMS {choice['held_out_rms_per_group']:.4f})."]
+    return lines + [""]

@@ -180,7 +180,7 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
 
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {},
               "calibration": {k: report[k] for k in ("fit", "friction", "armature", "links", "suspicious",
-                                                     "excitation", "prior")},
+                                                     "excitation", "prior", "prior_choice")},
               "robot_model": calibrated.get("robot_model")}
     for j in joints:
         fr = report["friction"]["joints"][str(j)]

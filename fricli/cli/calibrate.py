@@ -135,9 +135,14 @@ def _summary(report: dict) -> list[str]:
             lines.append(f"  ... and {len(ex['undetermined']) - 8} more (see the report)")
     choice = report.get("prior_choice")
     if choice:
-        held = ", ".join(f"{k} {v:.4g}" for k, v in choice["held_out_rms"].items())
-        lines.append(f"prior: {report['prior']:g} x each parameter's scale, chosen by {choice['folds']}-fold "
-                     f"cross-validation over time (held-out weighted RMS per strength: {held})")
+        held, weakest = choice["held_out_rms"], max(choice["grid"])
+        line = (f"prior: {report['prior']:g} x each parameter's scale (held-out weighted RMS "
+                f"{held[format(report['prior'], 'g')]:.4g}; {held[format(weakest, 'g')]:.4g} at the weakest, {weakest:g})")
+        if choice.get("per_group"):
+            per = choice["per_group"].values()
+            line += (f", then per body and armature {min(per):g} to {max(per):g} "
+                     f"(held-out {choice['held_out_rms_per_group']:.4g})")
+        lines.append(line + f"; chosen by {choice['folds']}-fold cross-validation over time (see the report)")
     else:
         lines.append(f"prior: {report['prior']:g} x each parameter's scale (--prior)")
     lines.append("fit: RMS of tau_m minus the model [Nm], CAD + friction -> calibrated:")
