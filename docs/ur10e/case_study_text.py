@@ -54,6 +54,15 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     if 3 in joints:
         p3 = joints[3]["payload"]
         extra = max(p3["fixed"] ** 2 - p3["fixed_unloaded"] ** 2, 0.0) ** 0.5
+        links = res["calibration"]["links"].get("forearm_link")
+        flagged = any(s.startswith("link forearm_link") for s in res["calibration"]["suspicious"])
+        forearm = ""
+        if links and flagged:
+            forearm = (": the calibration's forearm mass change is flagged for the same reason (\"also consistent "
+                       "with a drive gain off\")")
+        elif links:
+            forearm = (f", nor to the calibration, which keeps the forearm's mass near CAD "
+                       f"({_pct(links['mass'] / links['mass_cad'] - 1)})")
         limit = [
             f"What limits joint 3, measured: fricli's error on the payload run is {p3['fixed']:.3f} Nm; on the unloaded",
             f"twin (the same trajectory without the payload) the same models leave {p3['fixed_unloaded']:.3f} Nm, so the",
@@ -62,8 +71,7 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
             f"{_pct(1 + p3['fixed_gain'])} of it (least-squares slope), i.e. the measured torque on joint 3 rises by about that",
             "share of what the declared 2.805 kg exert through the URDF. A drive gain (torque per ampere) off on",
             "joint 3, or a payload centre of mass other than the assumed flange point, gives exactly this, and",
-            "neither is visible on the unloaded twin the models were fitted on: the calibration's forearm mass",
-            "change is flagged for the same reason (\"also consistent with a drive gain off\"). The linear",
+            "neither is visible on the unloaded twin the models were fitted on" + forearm + ". The linear",
             f"model's error on joint 3 ({p3['linear']:.3f} Nm, the CAD model's errors partly cancelling the payload's)",
             f"is small against the payload torque ({p3['reference_rms']:.2f} Nm RMS).",
         ]
