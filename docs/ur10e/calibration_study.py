@@ -112,7 +112,7 @@ def residuals(paths, joint, predict) -> dict:
     return {k: rms(np.concatenate(v)) for k, v in out.items()}
 
 
-def unconstrained(fit_log, cad):
+def unconstrained(fit_log, cad, prior="auto"):
     """The calibration's linear (maximum a posteriori) estimate without the consistency step, and the
     robot model to predict with it."""
     from fricli.core.logs import read_table
@@ -122,20 +122,21 @@ def unconstrained(fit_log, cad):
 
     robot = load_model(cad, Mapping(time=None, joints=[]))
     motion = cb.read_motion(read_table(fit_log)[0], fit_log, robot, match=None)
-    return robot, cb.calibrate(robot, motion, enforce=False)
+    return robot, cb.calibrate(robot, motion, enforce=False, prior=prior if prior == "auto" else float(prior))
 
 
-def study(data, work, keep, fit_run=FIT_RUN) -> dict:
+def study(data, work, keep, fit_run=FIT_RUN, prior="auto") -> dict:
     cad = os.path.join(data, "ur10e.urdf")
     names = sorted(f[:-4] for f in os.listdir(os.path.join(data, "identification")) if f.endswith(".csv"))
     val_names = [n for n in names if not n.startswith(fit_run[:11]) and n != LOAD_RUN]
     fit_cad = import_run(data, work, fit_run, cad, "cad", keep)
-    cal_urdf, report = calibrate(fit_cad, cad, work, "cal", keep)
+    cal_urdf, report = calibrate(fit_cad, cad, work, "cal", keep, "--prior", prior)
     val_cad = [import_run(data, work, n, cad, "cad", keep) for n in val_names]
     val_cal = [import_run(data, work, n, cal_urdf, "cal", keep) for n in val_names]
-    str_urdf, str_report = calibrate(fit_cad, cad, work, "cal-stribeck", keep, "--friction", "stribeck")
+    str_urdf, str_report = calibrate(fit_cad, cad, work, "cal-stribeck", keep, "--friction", "stribeck",
+                                     "--prior", prior)
     val_str = [import_run(data, work, n, str_urdf, "cal-stribeck", keep) for n in val_names]
-    robot, free = unconstrained(fit_cad, cad)
+    robot, free = unconstrained(fit_cad, cad, prior)
     nj = len(JOINTS)
 
     def free_pred(path, s, j, _cache={}):
@@ -233,11 +234,12 @@ def main() -> None:
     ap.add_argument("--keep", action="store_true", help="reuse outputs already in --work")
     ap.add_argument("--fit-run", default=FIT_RUN, help=f"the calibration run (default {FIT_RUN}); validation: "
                     "the identification runs of other days")
+    ap.add_argument("--prior", default="auto", help="fricli calibrate's --prior (default auto)")
     args = ap.parse_args()
     if not os.path.isdir(os.path.join(args.data, "identification")):
         raise SystemExit(f"{args.data}: no UR10e recordings (see ../shared/data/README.md)")
     os.makedirs(args.work, exist_ok=True)
-    res = study(args.data, args.work, args.keep, args.fit_run)
+    res = study(args.data, args.work, args.keep, args.fit_run, args.prior)
     with open(os.path.join(args.work, "calibration-study.json"), "w", encoding="utf-8") as fh:
         json.dump(res, fh, indent=2, default=float)
     print(tables(res))

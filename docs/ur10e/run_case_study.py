@@ -189,7 +189,7 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
 
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {},
               "calibration": {k: report[k] for k in ("fit", "friction", "armature", "links", "suspicious",
-                                                     "excitation", "prior")},
+                                                     "excitation", "prior", "prior_choice")},
               "robot_model": calibrated.get("robot_model")}
     for j in joints:
         fr = report["friction"]["joints"][str(j)]
@@ -313,14 +313,14 @@ def tables(res: dict) -> dict[str, str]:
             ratios[key].append(ratio)
             cells.append(f"**{ratio:.2f}**" if key == "fixed" else f"{ratio:.2f}")
         t = targets(r)
-        ok = ratios["fixed"][-1] <= t["target"] + 5e-3 and (j != 2 or ratios["fixed"][-1] <= ratios["idim"][-1])
+        ok = ratios["fixed"][-1] <= t["target"] and (j != 2 or ratios["fixed"][-1] <= ratios["idim"][-1])
         met.append(ok)
         rows.append(f"| {j} | {base:.3f} | " + " | ".join(cells) + f" | {t['floor']:.2f} | {t['target']:.2f} | "
                     f"{'yes' if ok else 'no'} | {r['fixed']['all'] / r['linear']['all']:.2f} |")
     means = {k: float(np.mean(v)) for k, v in ratios.items()}
     rows.append("| mean | | " + " | ".join(f"**{means[k]:.2f}**" if k == "fixed" else f"{means[k]:.2f}"
                                           for k, _, _ in MODEL_COLUMNS) + f" | | {TARGET_MEAN:.2f} | "
-                f"{'yes' if means['fixed'] <= TARGET_MEAN + 5e-3 else 'no'} | |")
+                f"{'yes' if means['fixed'] <= TARGET_MEAN else 'no'} | |")
     friction = "\n".join([
         f"| joint | linear model, in motion [Nm] | {head} | floor (above {FLOOR_HZ:g} Hz) | target | met | "
         "fricli, all rows |", "|---|---|" + "---|" * (len(MODEL_COLUMNS) + 4), *rows])

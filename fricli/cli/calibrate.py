@@ -4,6 +4,8 @@ friction, identified together."""
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from fricli.cli.options import common, emit_json, output_option, say, warn
@@ -13,6 +15,23 @@ def report_path(output: str) -> str:
     """The report written beside OUT.urdf: OUT.calibration.json."""
     stem = output[:-5] if output.lower().endswith(".urdf") else output
     return stem + ".calibration.json"
+
+
+class PriorStrength(click.ParamType):
+    """--prior: "auto" or a positive number."""
+
+    name = "auto|P"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, float) or str(value).strip().lower() == "auto":
+            return value if isinstance(value, float) else "auto"
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not number > 0 or not math.isfinite(number):
+            self.fail(f"{value!r} is neither auto nor a positive number", param, ctx)
+        return number
 
 
 @click.command("calibrate")
@@ -28,8 +47,10 @@ def report_path(output: str) -> str:
 @click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
               help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint "
                    "(IDIM-LS); stribeck adds the LuGre static curve's bump (Fs - Fc) exp(-(qd/vs)^2).")
-@click.option("--prior", type=click.FloatRange(min=0, min_open=True), default=0.5, show_default=True,
-              help="Prior standard deviation of each inertial parameter around its CAD value, relative to its scale.")
+@click.option("--prior", type=PriorStrength(), default="auto", show_default=True, metavar="auto|P",
+              help="Prior standard deviation of each inertial parameter and armature around its CAD/prior value, "
+                   "relative to its scale; auto: the strength whose fits best predict held-out blocks of time "
+                   "of the log (cross-validation).")
 @click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
               help="enforce: fit again over physically consistent parameters when the linear estimate is not; "
                    "check: refuse (FIT, exit 5) an inconsistent estimate.")
@@ -114,6 +135,18 @@ def _summary(report: dict) -> list[str]:
             lines.append(f"  {combo} (information {d['information']:.2g} x the prior's)")
         if len(ex["undetermined"]) > 8:
             lines.append(f"  ... and {len(ex['undetermined']) - 8} more (see the report)")
+    choice = report.get("prior_choice")
+    if choice:
+        held, weakest = choice["held_out_rms"], max(choice["grid"])
+        line = (f"prior: {report['prior']:g} x each parameter's scale (held-out weighted RMS "
+                f"{held[format(report['prior'], 'g')]:.4g}; {held[format(weakest, 'g')]:.4g} at the weakest, {weakest:g})")
+        if choice.get("per_group"):
+            per = choice["per_group"].values()
+            line += (f", then per body and armature {min(per):g} to {max(per):g} "
+                     f"(held-out {choice['held_out_rms_per_group']:.4g})")
+        lines.append(line + f"; chosen by {choice['folds']}-fold cross-validation over time (see the report)")
+    else:
+        lines.append(f"prior: {report['prior']:g} x each parameter's scale (--prior)")
     lines.append("fit: RMS of tau_m minus the model [Nm], CAD + friction -> calibrated:")
     for joint, f in report["fit"].items():
         fr = report["friction"]["joints"][joint]

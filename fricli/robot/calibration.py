@@ -20,9 +20,11 @@ the same columns, the armature.
 The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
 CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
 standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
-inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: the larger of
-``prior`` x its prior value and the joint's CAD mass-matrix diagonal at q = 0, over R_mj^2 for a
-motor; friction: loose).
+inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: ``prior`` x the larger
+of its prior value and the joint's CAD mass-matrix diagonal at q = 0 (over R_mj^2 for a motor);
+friction: loose).
+``prior`` "auto" chooses the strength, for all parameters and then per body and armature, by cross-validation
+over blocks of time of the log (``choose_prior``).
 Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
 (iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
 little: directions the run does not excite stay at CAD, and the report names them.
@@ -43,7 +45,10 @@ from fricli.numerics.threads import pinned
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
 FRICTION = ("Fv", "Fc", "offset")
-DEFAULT_PRIOR = 0.5        # prior std of an inertial parameter, relative to its scale
+DEFAULT_PRIOR = "auto"     # prior std of an inertial parameter relative to its scale, or chosen by held-out fit
+PRIOR_GRID = (0.01, 0.03, 0.1, 0.2, 0.5, 1.0, 3.0, 10.0)   # the prior strengths "auto" chooses from
+PRIOR_FOLDS = 10           # contiguous blocks of time of the cross-validation that chooses the prior (as diagnose)
+PRIOR_START = 0.5          # the fixed strength whose fit gives the cross-validation's row weights
 DEFAULT_EDGE_S = 0.5       # rows dropped at each end [s]: the zero-phase filter's and differences' transients
 MIN_LENGTH = 0.1           # m: the length scale of a body whose CAD centre of mass is closer to its joint
 SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is flagged
@@ -315,7 +320,7 @@ class Calibration:
 
 
 @pinned
-def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
+def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge_s: float = DEFAULT_EDGE_S,
               enforce: bool = True, friction: str = "linear", seed: int = 0) -> Calibration:
     """Identify inertial parameters, armature and linear friction of ``robot`` from ``motion`` (per
     motor with a transmission, ``motor_layout``).
@@ -323,7 +328,9 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     parameters only (``consistent_fit``). ``seed`` fixes the random configurations of the
     structural (trajectory-independent) analysis. ``friction``: "linear" (Fv, Fc, offset per joint)
     or "stribeck" (and the bump (Fs - Fc) sign(qd) exp(-(qd / vs)^2) of the LuGre static curve, vs
-    per joint alternated with the linear fit by a search on a grid)."""
+    per joint alternated with the linear fit by a search on a grid). ``prior``: the prior strength
+    (a float) or "auto" (``choose_prior``: the strength on ``PRIOR_GRID`` whose fits predict held-out
+    blocks of time of the log best)."""
     if friction not in ("linear", "stribeck"):
         raise ValueError(f"unknown friction kind {friction!r}")
     nj = len(robot.joints)
@@ -352,7 +359,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
         return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
 
     motor_rms = np.sqrt(np.mean(to_motors(tau) ** 2, axis=0))
-    s = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, prior, norm)
+    s1 = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, 1.0, norm)
 
     # before: the CAD model (with the prior armature) and each motor's friction fitted alone to its torque
     r0 = to_motors((y - Phi @ x0).reshape(n, nj))
@@ -367,6 +374,14 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
+    prior_choice, strengths = None, float(prior) if prior != "auto" else None
+    if prior == "auto":
+        strengths, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
+        prior = prior_choice["chosen"]
+        if "per_group" in prior_choice:
+            groups = bodies(robot) + names[10 * nj:11 * nj]
+            prior_choice["per_group"] = dict(zip(groups, prior_choice["per_group"]))
+    s = _with_prior(s1, nj, strengths)
     vs = None
     if stribeck:
         top = np.abs(w).max(axis=0)
@@ -398,7 +413,7 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
                                                                   for j in range(nj)}}
     report = {
         "rows": int(n), "rows_dropped_at_ends": int((~keep).sum()), "edge_s": edge_s,
-        "prior": prior, "iterations": iteration,
+        "prior": float(prior), "prior_choice": prior_choice, "iterations": iteration,
         "excitation": excitation,
         "fit": {str(motion.names[j]): {"urdf_joint": robot.joints[j],
                                        "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
@@ -418,6 +433,67 @@ def calibrate(robot, motion: Motion, *, prior: float = DEFAULT_PRIOR, edge_s: fl
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal)
     return cal
+
+
+def _with_prior(s1: np.ndarray, nj: int, prior) -> np.ndarray:
+    """Prior std (as ``prior_scales``) for strength ``prior`` (a float, or one per inertial parameter
+    and armature, (11 * joints,)) from those for strength 1: friction's loose prior does not scale."""
+    return np.concatenate([np.asarray(prior, dtype=float) * s1[:11 * nj], s1[11 * nj:]])
+
+
+def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = True, grid=PRIOR_GRID,
+                 folds=PRIOR_FOLDS) -> tuple[np.ndarray, dict]:
+    """The prior strengths on ``grid`` whose fits predict held-out data best (ridge selection by
+    blocked cross-validation): the log cut into ``folds`` contiguous blocks of time, each predicted
+    by the fit on the others; score: the held-out sum of squared residuals, each joint's rows weighted
+    by 1 / its residual std in the fit at ``PRIOR_START``. First one strength for every parameter;
+    then, with ``per_group``, each group's own in turn (each body's 10 inertial parameters, centred
+    on CAD; each joint's armature, centred on the rotor inertia), until no group's change lowers the
+    score. The weakest prior wins ties (noise-free data need none). ``Phi`` (n * joints, p),
+    ``y`` (n * joints,), ``s1``: prior std at strength 1.
+    Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
+    from fricli.fitting.diagnosis.selection import fold_bounds
+
+    nj = len(sigma)
+    _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms)
+    W = Phi / w[rows_of, None]
+    r = (y - Phi @ x0) / w[rows_of]
+    edges = fold_bounds(len(y) // nj, folds) * nj
+    parts = [(W[a:b].T @ W[a:b], W[a:b].T @ r[a:b], float(r[a:b] @ r[a:b])) for a, b in zip(edges[:-1], edges[1:])]
+    G, B = sum(p[0] for p in parts), sum(p[1] for p in parts)
+    tie = 1e-9 * sum(p[2] for p in parts)     # round-off of the quadratic forms below
+
+    def score(strengths):
+        s = _with_prior(s1, nj, strengths)
+        total = 0.0
+        for Gk, Bk, Ck in parts:    # the fit without block k, scored on block k
+            d = s * np.linalg.solve((G - Gk) * np.outer(s, s) + np.eye(len(s)), (B - Bk) * s)
+            total += Ck - 2 * d @ Bk + d @ Gk @ d
+        return total
+
+    held = lambda v: float(np.sqrt(max(v, 0.0) / len(y)))  # noqa: E731
+    weak_first = sorted(grid, reverse=True)
+    scores = {g: score(np.full(11 * nj, g)) for g in weak_first}
+    chosen = max(g for g, v in scores.items() if v <= min(scores.values()) + tie)
+    strengths, best = np.full(11 * nj, chosen), scores[chosen]
+    per = np.full(2 * nj, chosen)      # each body's inertial parameters, then each joint's armature
+    for _ in range(3 * per_group):
+        changed = False
+        for b in range(2 * nj):
+            for g in weak_first:
+                trial = per.copy()
+                trial[b] = g
+                cols = np.concatenate([np.repeat(trial[:nj], 10), trial[nj:]])
+                v = score(cols)
+                if v < best - tie:
+                    per, strengths, best, changed = trial, cols, v, True
+        if not changed:
+            break
+    report = {"grid": sorted(grid), "folds": folds, "chosen": chosen,
+              "held_out_rms": {f"{g:g}": held(v) for g, v in sorted(scores.items())}}
+    if per_group:
+        report.update(per_group=[float(v) for v in per], held_out_rms_per_group=held(best))
+    return strengths, report
 
 
 def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
@@ -789,7 +865,7 @@ def recorded_urdf(table) -> str | None:
     return _robot_record(table).get("urdf") or None
 
 
-def recalibrate(table, name: str, urdf: str, *, prior: float = DEFAULT_PRIOR, friction: str = "linear",
+def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRIOR, friction: str = "linear",
                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """Calibrate the robot model of a whole-arm log imported with a URDF (the matching and gravity it
     recorded) and recompute its tau_g and tau_dyn from the calibrated model.
