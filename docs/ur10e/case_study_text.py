@@ -102,8 +102,10 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
             "here is itself identified from the same recording's other half with the calibrated robot model, so",
             "it favours the calibrated models; with the point-mass assumption above the figure is the one of the",
             "target line. What limits joint 3 is the payload's unknown centre of mass, measured, not the friction",
-            "model: once the payload is known, fricli's error on the payload run is close to what the same models",
-            "leave on the unloaded twin (last column).",
+            "model: once the payload is known, fricli's error on joint 3"
+            + (f" ({joints[3]['payload_seen']['fixed']:.3f} Nm) is close to what the same models leave on the unloaded"
+               f" twin ({joints[3]['payload']['fixed_unloaded']:.3f} Nm)" if 3 in joints else "")
+            + "; on the other joints part of the payload's effect remains (last column).",
         ]
 
     cal = res["calibration"]
