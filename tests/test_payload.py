@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from fricli.core import errors, logs
+from fricli.core import errors
 
 pin = pytest.importorskip("pinocchio")
 
@@ -14,7 +14,7 @@ from fricli.robot import calibration as cb  # noqa: E402
 from fricli.robot import payload  # noqa: E402
 from fricli.robot.dynamics import RobotModel  # noqa: E402
 from fricli.robot.mapping import Payload  # noqa: E402
-from test_calibrate import FRICTION, URDF, fricli, harmonics  # noqa: E402
+from test_calibrate import FRICTION, URDF, fricli, harmonics, write_log  # noqa: E402
 
 TRUE = Payload(mass=1.7, com=(0.05, -0.03, 0.12), frame="flange")
 
@@ -55,11 +55,7 @@ def test_the_printed_declaration_reproduces_the_torques(tmp_path):
     the log's robot model with that payload gives the true torques."""
     t, q, qd, qdd, tau = simulate(np.random.default_rng(5), TRUE, n=800)
     (tmp_path / "arm.urdf").write_text(URDF)
-    n = len(t)
-    columns = {"t": np.tile(t, 4), "joint": np.repeat(np.arange(1, 5), n),
-               **{c: v.T.reshape(-1) for c, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau_m", tau))}}
-    logs.write_table(logs.table_from_arrays(columns, {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2",
-                                                      "tau_m": "Nm"}), str(tmp_path / "rec.parquet"))
+    write_log(tmp_path / "rec.parquet", t, q, qd, qdd, tau)
     done = fricli("dynamics", "rec.parquet", "--urdf", "arm.urdf", "--match", "order", "-o", "dyn.parquet", "-q",
                   cwd=tmp_path)
     assert done.returncode == 0, done.stderr
@@ -84,11 +80,7 @@ def test_the_printed_declaration_reproduces_the_torques(tmp_path):
 def test_bad_input_is_one_line(tmp_path):
     t, q, qd, qdd, tau = simulate(np.random.default_rng(6), TRUE, n=300)
     (tmp_path / "arm.urdf").write_text(URDF)
-    n = len(t)
-    columns = {"t": np.tile(t, 4), "joint": np.repeat(np.arange(1, 5), n),
-               **{c: v.T.reshape(-1) for c, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau_m", tau))}}
-    logs.write_table(logs.table_from_arrays(columns, {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2",
-                                                      "tau_m": "Nm"}), str(tmp_path / "rec.parquet"))
+    write_log(tmp_path / "rec.parquet", t, q, qd, qdd, tau)
     bare = fricli("payload", "rec.parquet", "--frame", "flange", cwd=tmp_path)
     assert bare.returncode == errors.INPUT and "import it with --urdf" in bare.stderr
     assert len(bare.stderr.strip().splitlines()) == 1
