@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import subprocess
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -132,7 +131,7 @@ def test_a_fleet_job_refuses_a_coupled_train_base(tmp_path):
 @pytest.mark.parametrize("cxx", [False, True], ids=["c99", "c++"])
 def test_exported_network_group_matches_predict_double(cxx, tmp_path, arm):
     import export_check as check
-    from test_drives import _build_group
+    from test_drives import check_group_export
 
     if check.compiler(cxx) is None:
         pytest.skip("no compiler")
@@ -141,14 +140,4 @@ def test_exported_network_group_matches_predict_double(cxx, tmp_path, arm):
     res = run("export", path, "--prefix", "wr", "-o", header, "-q")
     assert res.exit_code == 0, res.output
     assert "wr_step(wr_state *s, const double *qd, double *tau_f)" in header.read_text()
-    _build_group(header, "wr", tmp_path / "drv", cxx)
-    res = run("predict", path, folder / "test.parquet", "--precision", "double", "-o", tmp_path / "p.parquet", "-q")
-    assert res.exit_code == 0, res.output
-    pred = pq.read_table(tmp_path / "p.parquet")
-    joint = pred.column("joint").to_numpy()
-    qd = np.column_stack([pred.column("qd").to_numpy()[joint == j] for j in (5, 6)])
-    ref = np.column_stack([pred.column("tau_f_pred").to_numpy()[joint == j] for j in (5, 6)])
-    qd.tofile(tmp_path / "in.bin")
-    subprocess.run([str(tmp_path / "drv"), str(tmp_path / "in.bin"), str(tmp_path / "out.bin")], check=True)
-    got = np.fromfile(tmp_path / "out.bin").reshape(ref.shape)
-    assert np.max(np.abs(got - ref) / (1e-12 + np.abs(ref))) <= 1e-9
+    check_group_export(header, "wr", path, folder / "test.parquet", tmp_path, cxx)

@@ -228,8 +228,6 @@ def _build_group(header, prefix, exe, cxx):
 
 @pytest.mark.parametrize("cxx", [False, True], ids=["c99", "c++"])
 def test_exported_group_matches_predict_double(cxx, tmp_path, arm_logs):
-    import subprocess
-
     import export_check as check
     if check.compiler(cxx) is None:
         pytest.skip("no compiler")
@@ -242,8 +240,16 @@ def test_exported_group_matches_predict_double(cxx, tmp_path, arm_logs):
     text = header.read_text()
     assert "arm_joints_5_6_step(arm_joints_5_6_state *s, const double *qd, double *tau_f)" in text
     assert "arm_joint_4_step(" in text
-    _build_group(header, "arm_joints_5_6", tmp_path / "drv", cxx)
-    res = run("predict", tmp_path / "arm", test, "--precision", "double", "-o", tmp_path / "p.parquet", "-q")
+    check_group_export(header, "arm_joints_5_6", tmp_path / "arm", test, tmp_path, cxx)
+
+
+def check_group_export(header, prefix, model, log, tmp_path, cxx):
+    """The group step function ``prefix`` of ``header``, compiled and run on the joint velocities of
+    joints 5 and 6 of ``log``, against ``fricli predict MODEL LOG --precision double`` to 1e-9."""
+    import subprocess
+
+    _build_group(header, prefix, tmp_path / "drv", cxx)
+    res = run("predict", model, log, "--precision", "double", "-o", tmp_path / "p.parquet", "-q")
     assert res.exit_code == 0, res.output
     pred = pq.read_table(tmp_path / "p.parquet")
     joint = pred.column("joint").to_numpy()

@@ -25,9 +25,11 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 
 from fricli.core import logs, metrics  # noqa: E402
 from fricli.core.atomic import atomic_write_bytes  # noqa: E402
+from ur10e_neural import PAIRS  # noqa: E402  days with two runs: adapt on one, score on the other
 
 DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "ur10e")
 MAPPING = os.path.join(ROOT, "docs", "ur10e-mapping.toml")
@@ -41,12 +43,6 @@ PUBLISHED = {1: (21.26, 12.55, 0.196), 2: (20.22, 13.27, -0.754), 3: (10.38, 4.9
              4: (3.58, 2.00, 0.055), 5: (2.49, 2.69, -0.010), 6: (3.03, 2.30, 0.043)}  # Fv, Fc, offset
 FLOOR_HZ = 2.0  # the error above this frequency is not friction a model of the state can follow
 TARGET_MEAN, TARGET_EXT = 0.66, 0.65   # mean ratio in motion; payload error ratio, joints 2 and 3
-# days with two runs: adapt on one, score on the other (as benchmarks/ur10e_neural.py)
-PAIRS = (("ur-19_10_01-14_04_13", "ur-19_10_01-14_04_41"),
-         ("ur-20_02_05-20sec_12harm", "ur-20_02_05-20sec_8harm"),
-         ("ur-20_02_06-20sec_10harm", "ur-20_02_06-20sec_5harm"),
-         ("ur-20_02_10-20sec_7harm", "ur-20_02_10-30sec_12harm"),
-         ("ur-20_02_12-40sec_12harm", "ur-20_02_12-50sec_12harm"))
 
 COMMANDS: list[str] = []
 

@@ -865,6 +865,21 @@ def recorded_urdf(table) -> str | None:
     return _robot_record(table).get("urdf") or None
 
 
+def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
+    """(record, robot, motion) of a whole-arm log imported with a URDF: what ``import``/``dynamics``
+    recorded, the robot model of ``urdf`` (default: the recorded URDF) with the recorded gravity and
+    no payload, and the log's motion matched to it as recorded."""
+    from fricli.robot.dynamics import load_model
+    from fricli.robot.mapping import Mapping
+
+    record = _robot_record(table)
+    if not record.get("joints"):
+        raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
+    gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
+    robot = load_model(urdf or record.get("urdf"), Mapping(time=None, joints=[], gravity=gravity))
+    return record, robot, read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
+
+
 def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRIOR, friction: str = "linear",
                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """Calibrate the robot model of a whole-arm log imported with a URDF (the matching and gravity it
@@ -872,16 +887,11 @@ def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRI
 
     Returns (Calibration, the calibrated URDF's text, the table with the new tau_g and tau_dyn).
     A payload the import declared is fitted into the last body (and not added again)."""
-    from fricli.robot.dynamics import RobotModel, load_model
+    from fricli.robot.dynamics import RobotModel
     from fricli.robot.logterms import add_terms
-    from fricli.robot.mapping import Mapping
 
-    record = _robot_record(table)
-    if not record.get("joints"):
-        raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
+    record, robot, motion = recorded_motion(table, name, urdf, cutoff_hz=cutoff_hz)
     gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
-    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity))
-    motion = read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
     cal = calibrate(robot, motion, prior=prior, friction=friction)
     refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:

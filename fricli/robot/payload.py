@@ -137,15 +137,7 @@ def identify_log(table, name: str, frame: str, *, urdf: str | None = None, cutof
     """``identify`` on a whole-arm log imported with a URDF: its robot model as recorded (or the
     URDF at ``urdf``), without the payload the import may have declared."""
     from fricli.core import logs
-    from fricli.robot.dynamics import load_model
-    from fricli.robot.mapping import Mapping
 
-    record = calibration._robot_record(table)
-    if not record.get("joints"):
-        raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
-    path = urdf or record.get("urdf")
-    gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
-    robot = load_model(path, Mapping(time=None, joints=[], gravity=gravity))
-    motion = calibration.read_motion(table, name, robot, match=None,
-                                     cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff_hz is None else cutoff_hz)
+    _, robot, motion = calibration.recorded_motion(
+        table, name, urdf, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff_hz is None else cutoff_hz)
     return identify(robot, motion, frame, edge_s=edge_s)
