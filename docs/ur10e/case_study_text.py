@@ -41,6 +41,19 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
             f"({lin['above_floor_moving'] / lin['moving']:.2f}×) | {_pct(lin['rest_share'])} | "
             f"{r['fixed']['moving']:.3f} | {r['fixed']['above_floor_moving']:.3f} |")
 
+    own_rows, beyond = [], []
+    for (j, r), target in zip(joints.items(), tab["targets"]):
+        own = r["fixed"]["own_friction_moving"] / r["linear"]["moving"]
+        own_rows.append(f"| {j} | {r['fixed']['moving'] / r['linear']['moving']:.2f} | {own:.3f} | {target:.2f} |")
+        if own > target:
+            beyond.append(str(j))
+    own_text = ("Even with each day's friction level known, joint" + ("s " if len(beyond) > 1 else " ")
+                + ", ".join(beyond) + (" stay" if len(beyond) > 1 else " stays") + " above the target: what is left"
+                " there is neither the robot model nor the friction level of the day."
+                if beyond else "With each day's friction level known, every joint would meet its target: what the"
+                " targets miss is the change of friction between days, which `fricli adapt` follows from a"
+                " minute of the day's data (below).")
+
     meaning_rows = []
     for j, r in joints.items():
         for name in r["diagnose"]["added"]:
@@ -223,6 +236,19 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "",
         "Whatever the error holds above 2 Hz is no friction a model of the state can follow: current noise,",
         "the velocity controller's own corrections, gear ripple. On the wrists it is most of the error.",
+        "",
+        "### What limits the figure: each day's friction, measured",
+        "",
+        "The friction of a joint changes from day to day (temperature, lubricant), and a model fitted on one",
+        "day cannot know another's. How much of the error that is: each validation run's residual with its",
+        "own `Fv·qd + Fc·sign(qd) + offset` added, fitted by least squares on that run's rows in motion",
+        "(knowledge of the run being scored, which no model fitted on another day has), pooled as above.",
+        "",
+        "| joint | fricli | with each run's own friction level | target |",
+        "|---|---|---|---|",
+        *own_rows,
+        "",
+        own_text,
         "",
         "## What diagnose finds, per joint",
         "",

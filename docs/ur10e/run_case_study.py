@@ -102,14 +102,18 @@ def torque_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
     prediction) over all validation rows, over the rows in motion and over those at rest; and the RMS
     of the error's part above FLOOR_HZ (zero-phase high-pass), which no model of q, qd, qdd and tau_g
     follows: the excitation lies below 1 Hz. With the same robot model for two friction models this
-    is the RMS of their friction errors; it also compares logs of different robot models."""
+    is the RMS of their friction errors; it also compares logs of different robot models. And the
+    RMS in motion once each run's own Fv, Fc, offset are added, fitted on that run: what the error
+    would be if the model knew each day's friction level, which no model fitted on another day does."""
     from scipy import signal
 
-    every, moving, fast, fast_moving = [], [], [], []
+    every, moving, fast, fast_moving, own = [], [], [], [], []
     for path in val_logs:
         sig = signals(path, joint)
         e = logs.friction_target(sig) - pred_of(path, sig)
         mv = metrics.in_motion(sig["qd"])
+        cols = linear_columns(sig)[mv]          # the run's own friction level, fitted on itself
+        own.append(e[mv] - cols @ np.linalg.lstsq(cols, e[mv], rcond=None)[0])
         sos = signal.butter(4, FLOOR_HZ, btype="high", fs=1.0 / np.median(np.diff(sig["t"])), output="sos")
         hf = signal.sosfiltfilt(sos, e)
         every.append(e)
@@ -118,7 +122,8 @@ def torque_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
         fast_moving.append(hf[mv])
     every, moving = np.concatenate(every), np.concatenate(moving)
     return {"all": rms(every), "moving": rms(moving), "rest_share": 1.0 - moving.size / every.size,
-            "above_floor": rms(np.concatenate(fast)), "above_floor_moving": rms(np.concatenate(fast_moving))}
+            "above_floor": rms(np.concatenate(fast)), "above_floor_moving": rms(np.concatenate(fast_moving)),
+            "own_friction_moving": rms(np.concatenate(own))}
 
 
 def predicted(model: str, path: str, joint: int) -> np.ndarray:
@@ -300,7 +305,7 @@ def targets(r: dict) -> dict:
 
 def tables(res: dict) -> dict[str, str]:
     head = " | ".join(f"{label} ({urdf} URDF)" for _, label, urdf in MODEL_COLUMNS)
-    rows, ratios, met = [], {k: [] for k, _, _ in MODEL_COLUMNS}, []
+    rows, ratios, met, goals = [], {k: [] for k, _, _ in MODEL_COLUMNS}, [], []
     for j, r in res["joints"].items():
         base = r["linear"]["moving"]
         cells = []
@@ -309,6 +314,7 @@ def tables(res: dict) -> dict[str, str]:
             ratios[key].append(ratio)
             cells.append(f"**{ratio:.2f}**" if key == "fixed" else f"{ratio:.2f}")
         t = targets(r)
+        goals.append(t["target"])
         ok = ratios["fixed"][-1] <= t["target"] and (j != 2 or ratios["fixed"][-1] <= ratios["idim"][-1])
         met.append(ok)
         rows.append(f"| {j} | {base:.3f} | " + " | ".join(cells) + f" | {t['floor']:.2f} | {t['target']:.2f} | "
@@ -362,7 +368,7 @@ def tables(res: dict) -> dict[str, str]:
         "fricli on the unloaded twin |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|", *ext_rows])
     out = {"friction": friction, "diagnose": diagnose, "parameters": parameters, "external": external,
-           "means": means, "met": met}
+           "means": means, "met": met, "targets": goals}
     if res.get("adapt"):
         out["adapt"] = adapt_table(res["adapt"], list(res["joints"]))
     return out
