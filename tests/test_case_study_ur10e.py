@@ -30,6 +30,8 @@ def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):
     row = results["joints"]["3"]
     for key in ("linear", "published", "lugre", "fixed_cad", "idim", "lugre_cal", "fixed"):
         assert math.isfinite(row[key]["moving"]) and row[key]["moving"] > 0
+    # each run's own friction level, fitted on that run, can only lower the error it is added to
+    assert 0 < row["fixed"]["own_friction_moving"] <= row["fixed"]["moving"]
     fv, fc, _offset = row["linear_coef"]
     assert fv > 0 and fc > 0, "friction must oppose the motion: a sign or gain error in the import"
     # the payload's torque on the elbow is tens of Nm; the linear model's estimate must see most of it

@@ -25,6 +25,14 @@ def _pct(x: float) -> str:
     return f"{100 * x:.0f} %"
 
 
+def _joints(js: list[str]) -> str:
+    return ("Joint " if len(js) == 1 else "Joints ") + ", ".join(js)
+
+
+def _verb(js: list[str], one: str, many: str) -> str:
+    return one if len(js) == 1 else many
+
+
 def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     joints = res["joints"]
     means = tab["means"]
@@ -41,18 +49,19 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
             f"({lin['above_floor_moving'] / lin['moving']:.2f}×) | {_pct(lin['rest_share'])} | "
             f"{r['fixed']['moving']:.3f} | {r['fixed']['above_floor_moving']:.3f} |")
 
-    own_rows, beyond = [], []
+    own_rows, day, beyond = [], [], []
     for (j, r), target in zip(joints.items(), tab["targets"]):
-        own = r["fixed"]["own_friction_moving"] / r["linear"]["moving"]
-        own_rows.append(f"| {j} | {r['fixed']['moving'] / r['linear']['moving']:.2f} | {own:.3f} | {target:.2f} |")
-        if own > target:
-            beyond.append(str(j))
-    own_text = ("Even with each day's friction level known, joint" + ("s " if len(beyond) > 1 else " ")
-                + ", ".join(beyond) + (" stay" if len(beyond) > 1 else " stays") + " above the target: what is left"
-                " there is neither the robot model nor the friction level of the day."
-                if beyond else "With each day's friction level known, every joint would meet its target: what the"
-                " targets miss is the change of friction between days, which `fricli adapt` follows from a"
-                " minute of the day's data (below).")
+        ratio, own = r["fixed"]["moving"] / r["linear"]["moving"], r["fixed"]["own_friction_moving"] / r["linear"]["moving"]
+        own_rows.append(f"| {j} | {ratio:.3f} | {own:.3f} | {target:.3f} |")
+        if ratio > target:
+            (day if own <= target else beyond).append(str(j))
+    own_text = " ".join(filter(None, [
+        f"{_joints(day)} {_verb(day, 'misses', 'miss')} {_verb(day, 'its', 'their')} target and would meet it with "
+        "each day's friction level known: what the error misses there is the change of friction between days, "
+        "which only data of that day can tell (`fricli adapt`, below)." if day else "",
+        f"{_joints(beyond)} {_verb(beyond, 'stays', 'stay')} above {_verb(beyond, 'its', 'their')} target even with "
+        "each day's friction level known." if beyond else "",
+        "Every joint meets its target." if not day and not beyond else ""]))
 
     meaning_rows = []
     for j, r in joints.items():
