@@ -149,8 +149,27 @@ def test_position_frequency_is_found_over_unevenly_spaced_q(rng):
     sig = log.signals
     period = 0.0731
     r = 0.8 * np.sin(2 * np.pi * sig["q"] / period + 1.0) + 0.2 * rng.standard_normal(len(log))
-    w = E.Position().frequency(E.Context(sig, np.zeros(len(log))), r)
+    w = E.Position().frequencies(E.Context(sig, np.zeros(len(log))), r)[0]
     assert 2 * np.pi / w == pytest.approx(period, rel=0.01)
+
+
+def test_a_ripple_whose_phase_turns_with_the_direction_is_added_as_position(rng):
+    """Harmonic-drive friction ripple: a torque periodic in q whose friction part changes sign with
+    the motion. Its two directions' phases differ by 90 degrees: the mean over both directions of a
+    fit without the direction terms leaves most of it."""
+    period = 0.0517
+
+    def friction(s):
+        wq = 2 * np.pi * s["q"] / period
+        return CoulombViscous().predict(s)[0] + 0.4 * np.sin(wq + 0.3) + 0.4 * T.held_sign(s["qd"]) * np.cos(wq + 0.3)
+
+    d = diagnose(CoulombViscous(), synthetic(rng, friction=friction, noise=0.1))
+    assert d.added == ["position"]
+    params = {k: v["value"] for k, v in d.effects[0].params.items()}
+    assert params["period1"] == pytest.approx(period, rel=1e-3)
+    assert params["amplitude1"] == pytest.approx(0.4, rel=0.05)
+    assert params["friction1"] == pytest.approx(0.4, rel=0.05)
+    assert d.mae_after < 0.5 * d.mae_before
 
 
 SYNTHETIC_EFFECTS = {

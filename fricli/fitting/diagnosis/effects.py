@@ -502,12 +502,17 @@ class Velocity(Effect):
 
 
 class Position(Effect):
-    """Periodic in q: sine and cosine terms with harmonics of a spatial frequency found in
-    the residual by a Lomb-Scargle periodogram over q (q is unevenly spaced)."""
+    """Periodic in q (gear ripple): at each of the strongest spatial frequencies w of the residual,
+    sin(w q) and cos(w q) and the same times the direction of motion. A harmonic drive's torque
+    ripple is fixed to the position of its wave generator and motor; the part of it that is
+    friction changes sign with the motion, so each direction of motion has its own phase. The
+    frequencies are found one after the other by a periodogram over q (q is unevenly spaced) of
+    each direction's rows, each removed before the next is sought: not always harmonics of the
+    strongest one (twice the wave generator's turn and its multiples, the motor's cogging)."""
 
     name = "position"
     description = "periodic in q (gear ripple)"
-    harmonics = 3
+    peaks = 3
     max_bins = 1 << 20
     oversample = 4
 
@@ -516,7 +521,7 @@ class Position(Effect):
         if q is None or _constant(q):
             return "the log has no position range"
         step = self.step(ctx)
-        need = 2 * 2 * self.harmonics * step      # two periods of the shortest ripple the sampling resolves
+        need = 2 * 2 * 3 * step      # two periods of a ripple six samples long
         if np.ptp(q) < need:
             return (f"the position range {np.ptp(q):.2g} {ctx.q_unit} is under two periods of the shortest ripple "
                     f"its sampling resolves ({need:.2g} {ctx.q_unit})")
@@ -529,56 +534,69 @@ class Position(Effect):
         dq = dq[dq > 0]
         return float(np.median(dq)) if len(dq) else 0.0
 
-    def frequency(self, ctx, residual) -> float:
-        """Spatial angular frequency w [rad per q unit] with the largest periodogram power.
+    def frequencies(self, ctx, residual) -> list[float]:
+        """The ``peaks`` strongest spatial angular frequencies w [rad per q unit], strongest first:
+        the largest peaks of the periodogram power summed over the two directions of motion, each
+        with two periods or more in the range of q and two resolution widths (2 pi / range) or more
+        from a stronger one.
 
-        The residual is averaged in bins of q about half a typical sample step wide; an FFT of
-        the binned series (empty bins zero) locates the peak, and a Lomb-Scargle periodogram of
-        the non-empty bins (unevenly spaced) refines it around that peak.
+        Each direction's residual is averaged in bins of q about half a typical sample step wide;
+        an FFT of the binned series (empty bins zero) locates the peaks, and a Lomb-Scargle
+        periodogram of the non-empty bins (unevenly spaced) refines each around its FFT bin.
         """
         q = ctx.signals["q"]
         step = self.step(ctx)
         span = float(np.ptp(q))
         h = max(step / 2 if step > 0 else span / 1000, span / self.max_bins)
         nb = int(span / h) + 1
-        idx = np.minimum(((q - q.min()) / h).astype(np.int64), nb - 1)
-        count = np.bincount(idx, minlength=nb)
-        total = np.bincount(idx, weights=residual - residual.mean(), minlength=nb)
-        full = count > 0
-        mean = np.zeros(nb)
-        mean[full] = total[full] / count[full]
-        mean[full] -= mean[full].mean()
         nfft = 1 << int(np.ceil(np.log2(nb * self.oversample)))
-        power = np.abs(np.fft.rfft(mean, nfft)) ** 2
+        direction = T.held_sign(ctx.signals["qd"])
+        series = []
+        for rows in (direction > 0, direction < 0):
+            if rows.sum() < 2:
+                continue
+            idx = np.minimum(((q[rows] - q.min()) / h).astype(np.int64), nb - 1)
+            count = np.bincount(idx, minlength=nb)
+            total = np.bincount(idx, weights=residual[rows] - residual[rows].mean(), minlength=nb)
+            full = count > 0
+            mean = np.zeros(nb)
+            mean[full] = total[full] / count[full]
+            mean[full] -= mean[full].mean()
+            series.append((q.min() + (np.flatnonzero(full) + 0.5) * h, mean[full], mean))
         w = 2 * np.pi * np.fft.rfftfreq(nfft, h)
+        power = sum((np.abs(np.fft.rfft(mean, nfft)) ** 2 for *_, mean in series), np.zeros(len(w)))
         keep = w >= 2 * 2 * np.pi / span            # at least two periods in the range
-        if not keep.any():
-            return float(2 * 2 * np.pi / span)
-        k = int(np.flatnonzero(keep)[np.argmax(power[keep])])
         dw = w[1] - w[0]
-        grid = np.linspace(max(w[k] - dw, w[keep][0]), w[k] + dw, 41)
-        centers = q.min() + (np.flatnonzero(full) + 0.5) * h
         from scipy import signal  # imported here: it costs a noticeable part of start-up
 
-        fine = signal.lombscargle(centers, mean[full], grid)
-        return float(grid[int(np.argmax(fine))])
+        found: list[float] = []
+        while len(found) < self.peaks and keep.any():
+            k = int(np.flatnonzero(keep)[np.argmax(power[keep])])
+            grid = np.linspace(max(w[k] - dw, w[keep][0]), w[k] + dw, 41)
+            fine = sum(signal.lombscargle(centers, values, grid) for centers, values, _ in series)
+            found.append(float(grid[int(np.argmax(fine))]))
+            keep &= np.abs(w - found[-1]) >= 2 * 2 * np.pi / span
+        return found or [float(2 * 2 * np.pi / span)]
 
     def terms(self, ctx, residual):
-        w = self.frequency(ctx, residual)
         out = []
-        for h in range(1, self.harmonics + 1):
-            out.append(T.term(f"sin{h}@{w:.6g}", {"f": "sin", "name": "q", "w": h * w}))
-            out.append(T.term(f"cos{h}@{w:.6g}", {"f": "cos", "name": "q", "w": h * w}))
+        for w in self.frequencies(ctx, residual):
+            for f in ("sin", "cos"):
+                wave = {"f": f, "name": "q", "w": w}
+                out.append(T.term(f"{f}@{w:.6g}", wave))
+                out.append(T.term(f"sign*{f}@{w:.6g}", T.SIGN, wave))
         return out
 
     def params(self, coef, ctx):
-        names = sorted(coef)
-        w = float(names[0].split("@")[1])
-        out = {"period": _par(2 * np.pi / w, ctx.q_unit)}
-        for h in range(1, self.harmonics + 1):
-            a = coef.get(f"sin{h}@{w:.6g}", 0.0)
-            b = coef.get(f"cos{h}@{w:.6g}", 0.0)
-            out[f"amplitude{h}"] = _par(np.hypot(a, b), ctx.tau_unit)
+        def amplitude(w, prefix=""):
+            return float(np.hypot(coef.get(f"{prefix}sin@{w:.6g}", 0.0), coef.get(f"{prefix}cos@{w:.6g}", 0.0)))
+
+        ws = {float(name.rsplit("@", 1)[1]) for name in coef}
+        out = {}
+        for i, w in enumerate(sorted(ws, key=lambda w: -np.hypot(amplitude(w), amplitude(w, "sign*"))), 1):
+            out[f"period{i}"] = _par(2 * np.pi / w, ctx.q_unit)
+            out[f"amplitude{i}"] = _par(amplitude(w), ctx.tau_unit)
+            out[f"friction{i}"] = _par(amplitude(w, "sign*"), ctx.tau_unit)
         return out
 
 
