@@ -75,7 +75,8 @@ SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T
              T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
              T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
              T.term("qdd", T.sig_("qdd")), T.term("|qd|", T.abs_("qd")),
-             T.term("tau_g held", T.HELDGRAVITY), T.term("payload*sign", T.OVERLOAD, T.SIGN)]
+             T.term("tau_g held", T.HELDGRAVITY), T.term("payload*sign", T.OVERLOAD, T.SIGN),
+             T.term("sign*sin@3", T.SIGN, {"f": "sin", "name": "q", "w": 3.0})]
 EMPS_TERMS = [T.term("1", T.ONE), T.term("qdd", T.sig_("qdd")), T.term("p*pos", T.P, T.POS),
               T.term("sign", T.SIGN), T.term("sat1", {"f": "sat", "scale": 0.01}),
               T.term("sin1@40", {"f": "sin", "name": "q", "w": 40.0}), T.term("tau_g held", T.HELDGRAVITY)]
