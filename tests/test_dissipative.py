@@ -293,3 +293,20 @@ def test_an_ensemble_exports_to_c_as_predict_computes(ensemble, tmp_path):
     if check.compiler() is None:
         pytest.skip("no C compiler")
     assert _compare(ensemble["path"], ensemble["log"], tmp_path) <= 1.0
+
+
+def test_a_load_that_does_not_vary_stays_out_of_the_magnitude(base_log):
+    """|tau_g| of rounding noise (a vertical axis) is no load: scaled by 1 Nm, not by its own mean
+    (which made the noise an input of order 1)."""
+    sig = {k: v.copy() for k, v in base_log.signals.items()}
+    rng = np.random.default_rng(3)
+    moving = sig["qd"] != 0
+    sig["tau_g"] = rng.uniform(-1e-14, 1e-14, sig["qd"].size)
+    model = DissipativeFriction(steps=50).fit({k: v[moving] for k, v in sig.items()},
+                                              logs.friction_target(base_log.signals)[moving], rng=rng)
+    assert model.g_scale_ == 1.0
+    zero = dict(sig, tau_g=np.zeros_like(sig["qd"]))
+    np.testing.assert_allclose(model.predict(sig)[0], model.predict(zero)[0], rtol=1e-9, atol=1e-9)
+    varying = DissipativeFriction()
+    varying.set_scales(base_log.signals, logs.friction_target(base_log.signals))
+    assert varying.g_scale_ == pytest.approx(np.abs(base_log.signals["tau_g"]).mean())

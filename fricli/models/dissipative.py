@@ -58,9 +58,10 @@ factor is not used). The state z runs over the rows in time order with the exact
 work is at least -sigma0 z0^2 / 2. sigma0 is fitted on the training log (``fit_bristles``).
 
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
-PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
-training target. Training minimises the mean squared error of tau_f / y_scale with the
-trainer of ``fricli.numerics.nn.training`` (the head is part of the network, ``fricli.numerics.nn.heads``).
+PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows (1 when |tau_g| does not
+vary), y_scale the RMS of the training target. Training minimises the mean squared error of
+tau_f / y_scale with the trainer of ``fricli.numerics.nn.training`` (the head is part of the
+network, ``fricli.numerics.nn.heads``).
 """
 
 from __future__ import annotations
@@ -211,7 +212,10 @@ class DissipativeFriction(FrictionModel):
         if not (self.v0_ > 0 and self.v_ps_ > 0):
             raise DataError("no moving training samples to scale the velocity with")
         g = np.abs(np.asarray(sig.get("tau_g", np.zeros_like(speed)), dtype=np.float64))
-        self.g_scale_ = float(g.mean()) if g.mean() > 0 else 1.0
+        lo, hi = np.percentile(g, [5, 95])
+        # |tau_g| that does not vary (identify's rule: rounding noise on a vertical axis) is no
+        # load: scaled by 1 Nm, not by its own mean, it stays out of the magnitude
+        self.g_scale_ = float(g.mean()) if hi - lo > 1e-6 * (1.0 + hi) else 1.0
         u = np.arcsinh(speed / self.v0_)
         self.u_mean_, self.u_scale_ = float(u.mean()), float(u.std()) if u.std() > 1e-12 else 1.0
         rms = float(np.sqrt(np.mean(np.asarray(target, dtype=np.float64) ** 2)))
