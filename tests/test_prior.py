@@ -154,3 +154,19 @@ def test_export_with_the_prior_matches_predict(lugre_form, tmp_path):
     path = str(tmp_path / "blend.npz")
     models.save_for_log(path, model, lugre_form["train"], rows_used=1)
     assert _compare(path, str(lugre_form["dir"] / "other.parquet"), tmp_path) <= 1.0
+
+
+def test_a_prior_that_cannot_be_fitted_leaves_the_network_alone(lugre_form, monkeypatch):
+    calls = []
+
+    def failing(*args):
+        calls.append(1)
+        return None if len(calls) == 2 else real(*args)       # the second fold's prior fails
+
+    real = learning.fit_prior
+    monkeypatch.setattr(learning, "fit_prior", failing)
+    model, summary = learning.train_base(lugre_form["train"], steps=20, seed=1, bristles="off")
+    assert summary["prior"] == {"blend": 1.0} and model.prior_ is None and len(calls) == 2
+    alone, _ = learning.train_base(lugre_form["train"], steps=20, seed=1, bristles="off", prior=False)
+    sig = lugre_form["other"].signals
+    np.testing.assert_array_equal(model.predict(sig)[0], alone.predict(sig)[0])

@@ -111,7 +111,9 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     steps without improvement of the validation loss (see ``fricli.numerics.nn.Trainer``).
     ``bristles`` (dissipative only, a key of BRISTLES): "on" gives the model its pre-sliding state
     (``DissipativeFriction.fit_bristles``), "auto" only when it lowers the held-out error
-    (``bristle_check``; summary "bristles"), "off" never.
+    (``bristle_check``; summary "bristles"), "off" never. ``prior`` (dissipative, with held-out
+    rows): blend the network with the LuGre model's static curve by the share that the held-out
+    rows give it (``blend_prior``; summary "prior"), before the pre-sliding state is fitted.
     """
     if bristles not in BRISTLES:
         raise ValueError(f"unknown bristles choice {bristles!r}")
@@ -244,20 +246,24 @@ def blend_prior(model: DissipativeFriction, fitted: list[DissipativeFriction], t
     network, the prior and the blend; {"blend": 1.0} (the network alone) when a prior cannot be fitted.
     """
     ys, nets, priors, kept = [], [], [], []
+    failed = False
     for net, train, held in zip(fitted, train_rows, held_rows):
         if not train.size or not held.size:
             continue
         p = fit_prior(sig, target, train, units)
         if p is None:
-            return {"blend": 1.0}
+            failed = True
+            break
         net.set_prior(None)
         nets.append(net.predict(sig)[0][held])
         net.set_prior(p, 0.0)
         priors.append(net.predict(sig)[0][held])
         ys.append(target[held])
         kept.append((net, p))
-    final = fit_prior(sig, target, rows, units)
-    if not ys or final is None:
+    final = None if failed or not kept else fit_prior(sig, target, rows, units)
+    if final is None:
+        for net in fitted:
+            net.set_prior(None)
         return {"blend": 1.0}
     y, a, b = (np.concatenate(x) for x in (ys, nets, priors))
     blend = blend_weight(y, a, b)
