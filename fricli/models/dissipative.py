@@ -113,7 +113,7 @@ class DissipativeFriction(FrictionModel):
         self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
         self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
         self.sigma0_: float | None = None                 # bristle stiffness [Nm/rad]; None: no pre-sliding state
-        self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS) [Nm]; None: no prior
+        self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS, LuGreModel's units)
         self.blend_: float | None = None                  # lambda in [0, 1]: the network's share over the prior
 
     @property
@@ -346,7 +346,8 @@ class DissipativeFriction(FrictionModel):
         def run(part: list[tuple[int, int]]) -> None:
             ws = [None] * len(nets)
             for start, stop in part:
-                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, nets[0].dtype)
+                rows = {k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}
+                x = self._rows(rows, nets[0].dtype)
                 if sliding:
                     x[2] = 1.0
                 for k, net in enumerate(nets):
@@ -366,9 +367,8 @@ class DissipativeFriction(FrictionModel):
                         grow = self._by_direction(qd, self.slope_) * np.maximum(beyond, 0.0) * self.y_scale_
                         out[start:stop] += grow * x[2]
                 if self.prior_ is not None:
-                    p = self.prior_magnitude({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")})
                     out[start:stop] *= self.blend_
-                    out[start:stop] += (1.0 - self.blend_) * x[2] * p
+                    out[start:stop] += (1.0 - self.blend_) * x[2] * self.prior_magnitude(rows)
 
         predict_in_chunks(n, run)
         return out
@@ -487,7 +487,8 @@ class DissipativeFriction(FrictionModel):
             p = self.prior_
             lines.append(f"  blended with the LuGre static curve p by lambda = {self.blend_:.3g}: magnitude lambda "
                          f"y_scale m + (1 - lambda) p; p: fc {p['fc']:.4g}, fs {p['fs']:.4g} {tau}, vs {p['vs']:.4g} "
-                         f"{v}, delta {p['delta']:.3g}, fv {p['fv']:.4g} {tau} s/{self.units.get('q', 'rad')}, kc {p['kc']:.3g}, ks {p['ks']:.3g}")
+                         f"{v}, delta {p['delta']:.3g}, fv {p['fv']:.4g} {tau} s/{self.units.get('q', 'rad')}, "
+                         f"kc {p['kc']:.3g}, ks {p['ks']:.3g}")
         if self.sigma0_ is not None:
             q = self.units.get("q", "rad")
             lines.append(f"  pre-sliding (bristle) state z: sigma0 {self.sigma0_:.4g} {tau}/{q} (deflection y_scale / "
