@@ -6,13 +6,15 @@ days, and adapt on one run of a day scored on another run of the same day.
     python benchmarks/ur10e_neural.py --part adapt --json out.json
     python benchmarks/ur10e_neural.py --part base --train-base-option=--no-folds   # one network, one fold
     python benchmarks/ur10e_neural.py --part base --train-base-option=--bristles=off  # no pre-sliding state
+    python benchmarks/ur10e_neural.py --part base --train-base-option=--no-prior      # the network alone
 
 Every model comes from the fricli command line (the commands are printed on stderr and listed
 at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
 the friction target tau_m - tau_g - tau_dyn minus the model's prediction, pooled over the runs
 scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10). The base table adds, when
 train-base reports it, the held-out RMS on the training log without and with the pre-sliding
-state and the bristle stiffness sigma0 of the model written; a second table splits the errors
+state and the bristle stiffness sigma0 of the model written, and the network's share lambda of
+the blend with the LuGre static curve with the held-out RMS of network, prior and blend; a second table splits the errors
 into the rows within 0.1 s after a velocity reversal and the rest, with the LuGre model also
 run with sigma0 x 1e6 (no pre-sliding).
 
@@ -136,7 +138,7 @@ def base_part(data: str, work: str, seed: int, options: tuple[str, ...] = ()) ->
         fit_j = trained["joints"][str(j)]
         rows.append({"joint": j, "lugre": a, "nn": b, "ratio": b / a, "step": fit_j["best_step"],
                      "seconds": fit_j["seconds"], "cross_validation": fit_j.get("cross_validation"),
-                     "bristles": fit_j.get("bristles"),
+                     "bristles": fit_j.get("bristles"), "prior": fit_j.get("prior"),
                      "reversals": reversal_errors({"lugre": lugre, "nn": nn}, runs, j)})
     return {"fit": BASE_FIT, "validation": list(BASE_VALIDATION), "seed": seed, "train_base_options": list(options),
             "joints": rows}
@@ -165,17 +167,24 @@ def adapt_part(data: str, work: str, seed: int) -> dict:
 
 def base_table(result: dict) -> str:
     """The train-base table; with the pre-sliding state checked (train-base --json "bristles"), the
-    held-out RMS on the training log without and with it, and sigma0 where the model has it."""
+    held-out RMS on the training log without and with it, and sigma0 where the model has it; with
+    the prior ("prior"), the network's share lambda and the held-out RMS of network, prior and blend."""
     state = any(r.get("bristles") and "static_rmse" in r["bristles"] for r in result["joints"])
+    prior = any(r.get("prior") and "prior_rmse" in r["prior"] for r in result["joints"])
     head = "| joint | LuGre [Nm] | NN_base [Nm] | NN / LuGre | step kept |"
-    lines = [head + (" held out: static → state [Nm] | sigma0 [Nm/rad] |" if state else ""),
-             "|---|---:|---:|---:|---:|" + ("---:|---:|" if state else "")]
+    lines = [head + (" held out: static → state [Nm] | sigma0 [Nm/rad] |" if state else "")
+             + (" lambda | held out: network, prior → blend [Nm] |" if prior else ""),
+             "|---|---:|---:|---:|---:|" + ("---:|---:|" if state else "") + ("---:|---:|" if prior else "")]
     for r in result["joints"]:
         line = f"| {r['joint']} | {r['lugre']:.3f} | {r['nn']:.3f} | {r['ratio']:.2f} | {r['step']:,} |"
         if state:
             b = r.get("bristles") or {}
             held = f" {b['static_rmse']:.3f} → {b['bristles_rmse']:.3f} |" if "static_rmse" in b else " - |"
             line += held + (f" {b['sigma0']:.3g} |" if b.get("sigma0") else " - |")
+        if prior:
+            p = r.get("prior") or {}
+            line += (f" {p['blend']:.2f} | {p['network_rmse']:.3f}, {p['prior_rmse']:.3f} → {p['blend_rmse']:.3f} |"
+                     if "prior_rmse" in p else " - | - |")
         lines.append(line)
     return "\n".join(lines)
 

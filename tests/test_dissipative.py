@@ -216,7 +216,7 @@ def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
     log = logs.from_table(motion_log((0.05, 0.1, 0.2), seed=1), name="slow")
     qd = log.signals["qd"]
     qd[qd < -0.15] = -0.4
-    model, _ = learning.train_base(log, steps=300, seed=0, bristles="off")   # the static network
+    model, _ = learning.train_base(log, steps=300, seed=0, bristles="off", prior=False)   # the static network alone
     assert model.v_max_ == (pytest.approx(0.2), pytest.approx(0.4)) and min(model.slope_) >= 0
     for direction, top in ((1.0, 0.2), (-1.0, 0.4)):
         speeds = direction * np.array([top, 1.5 * top, 3 * top])
@@ -271,7 +271,9 @@ def test_train_base_on_continuous_excitation_averages_one_network_per_fold(ensem
         members.append(one.predict(sig)[0])
     pred = model.predict(sig)[0]
     np.testing.assert_allclose(pred, np.mean(members, axis=0), rtol=1e-5, atol=1e-5)
-    assert np.all(pred * sig["qd"] >= 0)     # still never along the motion
+    static = copy.copy(model)
+    static.sigma0_ = None                    # the static map: still never along the motion
+    assert np.all(static.predict(sig)[0] * sig["qd"] >= 0)
     b1 = np.array([net.weights[-1][1, -1] for net in model.nets_], dtype=np.float64)
     assert model.load_slope() == pytest.approx(model.y_scale_ * np.mean(acts.softplus(b1)) / model.g_scale_)
 
@@ -291,3 +293,20 @@ def test_an_ensemble_exports_to_c_as_predict_computes(ensemble, tmp_path):
     if check.compiler() is None:
         pytest.skip("no C compiler")
     assert _compare(ensemble["path"], ensemble["log"], tmp_path) <= 1.0
+
+
+def test_a_load_that_does_not_vary_stays_out_of_the_magnitude(base_log):
+    """|tau_g| of rounding noise (a vertical axis) is no load: scaled by 1 Nm, not by its own mean
+    (which made the noise an input of order 1)."""
+    sig = {k: v.copy() for k, v in base_log.signals.items()}
+    rng = np.random.default_rng(3)
+    moving = sig["qd"] != 0
+    sig["tau_g"] = rng.uniform(-1e-14, 1e-14, sig["qd"].size)
+    model = DissipativeFriction(steps=50).fit({k: v[moving] for k, v in sig.items()},
+                                              logs.friction_target(base_log.signals)[moving], rng=rng)
+    assert model.g_scale_ == 1.0
+    zero = dict(sig, tau_g=np.zeros_like(sig["qd"]))
+    np.testing.assert_allclose(model.predict(sig)[0], model.predict(zero)[0], rtol=1e-9, atol=1e-9)
+    varying = DissipativeFriction()
+    varying.set_scales(base_log.signals, logs.friction_target(base_log.signals))
+    assert varying.g_scale_ == pytest.approx(np.abs(base_log.signals["tau_g"]).mean())

@@ -306,7 +306,8 @@ def test_bad_hidden_is_a_usage_error(files, tmp_path):
 @pytest.fixture(scope="module")
 def base_model(files):
     path = files["dir"] / "nn_base.npz"
-    assert run("train-base", files["base"], "-o", path, "--steps", 1500, "-q").exit_code == 0
+    # the network alone: on these logs the LuGre static curve (the default's prior) is the friction itself
+    assert run("train-base", files["base"], "-o", path, "--steps", 1500, "--no-prior", "-q").exit_code == 0
     return path
 
 

@@ -85,7 +85,10 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
     along the motion; --arch mlp is the paper's NN_base, tau_f = NN(tau_g, qd). By default
     (--bristles on) the dissipative network carries the LuGre model's bristle state with m as
     its steady state, so friction passes through zero over a small displacement at a reversal
-    and holds at rest; --bristles off gives the static network.
+    and holds at rest; --bristles off gives the static network. The magnitude is blended with the
+    LuGre model's static curve (Stribeck, viscous and load terms) fitted on the same rows, the
+    network's share chosen on the held-out rows, so the network corrects that curve only as far
+    as rows it did not train on show it helps; --no-prior gives the network alone.
 
     The target is the friction torque tau_m + tau_ext - tau_g - tau_dyn. By default the rows are
     balanced over the velocity levels of the log (a few thousand rows), whole stretches of every

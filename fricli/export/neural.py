@@ -12,6 +12,8 @@ state (``sigma0_``): its magnitude g drives the bristle update of the LuGre expo
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fricli.core.errors import ModelFileError
@@ -75,6 +77,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              *([] if model.v_max_ is None else [   # linear beyond the top training speeds
                  f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
                  f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),
+             *([] if model.prior_ is None else _prior(model, ctx)),
              *([f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
                if model.sigma0_ is None else _bristles(model, ctx))]
     if model.sigma0_ is None:
@@ -87,6 +90,19 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     lines[lines.index(f"static inline double {name}_step(const {ctx.in_type} *in) {{")] = (
         f"static inline double {name}_step({name}_state *s, const {ctx.in_type} *in) {{")
     return Part(name, "\n".join(lines), stateful=True)
+
+
+def _prior(model, ctx: Context) -> list[str]:
+    """r0 = blend r0 + (1 - blend) p / y_scale, p the prior's steady magnitude (as
+    ``DissipativeFriction.prior_magnitude``)."""
+    p, blend = model.prior_, model.blend_
+    tau_g = ctx.signal("tau_g")
+    return [f"    {{ const double load = fabs({tau_g}), absv = fabs(qd);",
+            f"      const double shape = absv > 0.0 ? exp(-exp((log(absv) - {num(math.log(p['vs']))}) * "
+            f"{num(p['delta'])})) : 1.0;",
+            f"      const double p = shape * (load * {num(p['ks'] - p['kc'])} + {num(p['fs'] - p['fc'])})"
+            f" + (load * {num(p['kc'])} + {num(p['fc'])}) + absv * {num(p['fv'])};",
+            f"      r0 = r0 * {num(blend)} + p * {num((1.0 - blend) / model.y_scale_)}; }}"]
 
 
 def _bristles(model, ctx: Context) -> list[str]:

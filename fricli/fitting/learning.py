@@ -11,11 +11,12 @@ import numpy as np
 from fricli.core import logs, metrics
 from fricli.fitting import training_data
 from fricli.core.envelope import share_outside
-from fricli.core.errors import DataError
+from fricli.core.errors import DataError, FitError
 from fricli.models.base import FrictionModel
-from fricli.models.dissipative import DissipativeFriction
+from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
+from fricli.numerics.threads import pinned
 
 ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
 DEFAULT_ARCH = "dissipative"
@@ -72,7 +73,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               folds: bool = True, bristles: str = "on",
+               folds: bool = True, bristles: str = "on", prior: bool = True,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch``) on the friction target of ``log``: ``train`` on the log's
     signals with the generator of ``seed``."""
@@ -80,7 +81,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                  hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr, batch_size=batch_size,
                  rng=np.random.default_rng(seed), val_fraction=val_fraction, balance=balance,
                  max_samples=max_samples, velocity_input=velocity_input, velocity_scale=velocity_scale,
-                 folds=folds, bristles=bristles, on_eval=on_eval)
+                 folds=folds, bristles=bristles, prior=prior, on_eval=on_eval)
 
 
 def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: dict, rng: np.random.Generator,
@@ -88,7 +89,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
           schedule: str = "cosine", patience: int | None = None, lr: float = 0.01, batch_size: int = 0,
           val_fraction: float = 0.2, balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
           velocity_input: str = "asinh", velocity_scale: float | None = None, folds: bool = True,
-          bristles: str = "on", on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
+          bristles: str = "on", prior: bool = True, on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on signals ``sig`` (n,) each
     against the friction target ``target`` (n,) [Nm] (``name``: the log's name for messages;
     ``units``: the log's units; ``rng``: the generator of the row selection, weights and batches).
@@ -110,7 +111,9 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     steps without improvement of the validation loss (see ``fricli.numerics.nn.Trainer``).
     ``bristles`` (dissipative only, a key of BRISTLES): "on" gives the model its pre-sliding state
     (``DissipativeFriction.fit_bristles``), "auto" only when it lowers the held-out error
-    (``bristle_check``; summary "bristles"), "off" never.
+    (``bristle_check``; summary "bristles"), "off" never. ``prior`` (dissipative, with held-out
+    rows): blend the network with the LuGre model's static curve by the share that the held-out
+    rows give it (``blend_prior``; summary "prior"), before the pre-sliding state is fitted.
     """
     if bristles not in BRISTLES:
         raise ValueError(f"unknown bristles choice {bristles!r}")
@@ -142,7 +145,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
                            batch_size=batch_size, units=units, schedule=trainer_schedule, patience=patience,
                            velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
 
-    cv = None
+    cv = prior_summary = None
     if sel.mode == "moving" and sel.val.size and folds and arch == "dissipative":
         # continuous excitation: one network per fold of time blocks, all stopped at the step
         # of the least mean validation loss, and the model their mean
@@ -163,10 +166,14 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
         model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+        block = training_data.time_block(moving.size)
+        splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h)))
+                  for h in held]
+        if prior:
+            # each network's prior from the rows it trained on; the blend from the rows it did not
+            fold_rows = [np.setdiff1d(rows, np.flatnonzero(np.isin(block, h))) for h in held]
+            prior_summary = blend_prior(model, members, fold_rows, [h for _, h in splits], sig, target, rows, units)
         if bristles != "off":
-            block = training_data.time_block(moving.size)
-            splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h)))
-                      for h in held]
             check = bristle_check(members, splits, sig, target)
             if bristles == "on" or check["helps"]:
                 model.fit_bristles(sig, target, np.flatnonzero(moving))
@@ -174,6 +181,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
                   on_eval=on_eval)
+        if prior and arch == "dissipative" and sel.val.size:
+            prior_summary = blend_prior(model, [model], [sel.train], [sel.val], sig, target, sel.train, units)
         if bristles != "off" and arch == "dissipative":
             check = bristle_check([model], [(sel.train, sel.val)], sig, target)
             if bristles == "on" or check["helps"]:
@@ -192,7 +201,78 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         summary["presliding_speed"] = model.v_ps_
     if bristles != "off" and arch == "dissipative":
         summary["bristles"] = {**check, "kept": model.sigma0_ is not None, "sigma0": model.sigma0_}
+    if prior_summary is not None:
+        summary["prior"] = prior_summary
     return model, summary
+
+
+@pinned
+def fit_prior(sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray, units: dict) -> dict | None:
+    """The static curve of the LuGre model (``identify``'s static stage: Stribeck, viscous and load
+    terms, symmetric) fitted by least squares to ``target`` (n,) [Nm] over ``rows`` (indices);
+    its parameters (``dissipative.PRIOR_KEYS``), or None when the fit fails."""
+    from fricli.fitting.identify import LuGreIdentifier
+
+    ident = LuGreIdentifier()
+    ident.notes_ = []
+    tau_g = sig.get("tau_g")
+    try:
+        params, _ = ident._fit_static(sig["qd"][rows], target[rows], None if tau_g is None else tau_g[rows],
+                                      {"qd": units.get("qd", "rad/s")})
+    except FitError:
+        return None
+    return {k: float(params[k]) for k in PRIOR_KEYS}
+
+
+def blend_weight(y: np.ndarray, network: np.ndarray, prior: np.ndarray) -> float:
+    """lambda in [0, 1] of least squares of y - (prior + lambda (network - prior)) (each (n,) [Nm]);
+    1 when the two predictions do not differ."""
+    d = network - prior
+    den = float(d @ d)
+    return 1.0 if not den > 0 else float(np.clip(float((y - prior) @ d) / den, 0.0, 1.0))
+
+
+def blend_prior(model: DissipativeFriction, fitted: list[DissipativeFriction], train_rows: list[np.ndarray],
+                held_rows: list[np.ndarray], sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray,
+                units: dict) -> dict:
+    """Make ``model`` the blend of its network and the LuGre static curve (``fit_prior`` on ``rows``),
+    the network's share chosen on held-out rows.
+
+    Each of the ``fitted`` networks (static, as trained) gets the prior fitted on its training
+    rows ``train_rows[k]``; over their held-out rows ``held_rows[k]`` (indices into ``sig`` and
+    ``target`` (n,) [Nm]) the prediction prior + lambda (network - prior) is least squares for
+    ``blend_weight``'s lambda, pooled over the networks, which then keep their prior and that
+    lambda (for ``bristle_check``). Returns lambda ("blend") and the held-out RMS [Nm] of the
+    network, the prior and the blend; {"blend": 1.0} (the network alone) when a prior cannot be fitted.
+    """
+    ys, nets, priors, kept = [], [], [], []
+    failed = False
+    for net, train, held in zip(fitted, train_rows, held_rows):
+        if not train.size or not held.size:
+            continue
+        p = fit_prior(sig, target, train, units)
+        if p is None:
+            failed = True
+            break
+        net.set_prior(None)
+        nets.append(net.predict(sig)[0][held])
+        net.set_prior(p, 0.0)
+        priors.append(net.predict(sig)[0][held])
+        ys.append(target[held])
+        kept.append((net, p))
+    final = None if failed or not kept else fit_prior(sig, target, rows, units)
+    if final is None:
+        for net in fitted:
+            net.set_prior(None)
+        return {"blend": 1.0}
+    y, a, b = (np.concatenate(x) for x in (ys, nets, priors))
+    blend = blend_weight(y, a, b)
+    for net, p in kept:
+        net.set_prior(p, blend)
+    model.set_prior(final, blend)
+    rms = {name: float(np.sqrt(np.mean((y - pred) ** 2)))
+           for name, pred in (("network_rmse", a), ("prior_rmse", b), ("blend_rmse", b + blend * (a - b)))}
+    return {"blend": blend, **rms, "prior": dict(final)}
 
 
 def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable | None = None,
@@ -216,7 +296,7 @@ def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable 
     w = transmission.motor_velocities(qd)
     y = transmission.motor_torques(tau_f)
     rng = np.random.default_rng(seed)
-    options = {**options, "bristles": "off"}
+    options = {**options, "bristles": "off", "prior": False}
     group = ", ".join(map(str, transmission.joints))
     motors, summaries = [], []
     for i in range(len(transmission.joints)):

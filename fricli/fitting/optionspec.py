@@ -192,6 +192,9 @@ TRAIN_BASE = (
            "state (docs/neural-models.md): on; auto: only where it lowers the held-out error by 1 %; off: the "
            "static network.",
            choices=learning.BRISTLES),
+    Option("no_prior", "flag", False,
+           "The dissipative network alone, not blended with the LuGre model's static curve fitted on the same rows "
+           "(by default the network's share of the blend is chosen on the held-out rows; docs/neural-models.md)."),
     Option("coupling", "flag", False,
            "Train each group of joints that share motors (the log's transmission, docs/drives.md) as one model "
            "with a dissipative network per motor of the motor's velocity (kind coupled); the other joints as "

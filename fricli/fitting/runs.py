@@ -205,7 +205,8 @@ def _train_options(opts: dict) -> dict:
                 patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
                 val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
                 max_samples=opts["max_samples"], velocity_input=opts["velocity_input"],
-                velocity_scale=opts["velocity_scale"], bristles=opts["bristles"])
+                velocity_scale=opts["velocity_scale"], bristles=opts["bristles"],
+                prior=not opts["no_prior"])
 
 
 def _load_base(base: str, data) -> tuple:

@@ -32,6 +32,17 @@ magnitude grows linearly with the speed instead, by the mean slope of the learne
 
 Models written without these records extrapolate as the network does.
 
+Over a physical prior, optional (``set_prior``; train-base by default). The magnitude is then
+the blend of the network's and the static curve p of the LuGre model (Stribeck, viscous and
+load terms, fitted on the same rows; ``PRIOR_KEYS``):
+
+    y_scale * m  ->  lambda * y_scale * m + (1 - lambda) * p,   0 <= lambda <= 1
+    p = fc + kc |tau_g| + (fs - fc + (ks - kc) |tau_g|) exp(-|qd / vs|^delta) + fv |qd|   >= 0
+
+so the network is a correction of the prior, p + lambda (y_scale m - p), scaled by the share
+lambda that held-out rows of the training log give it (``fricli.fitting.learning.blend_prior``).
+Both terms are non-negative, and so is the blend: the model stays dissipative.
+
 Pre-sliding (bristle) state, optional (``fit_bristles``; train-base --bristles). Friction then
 follows the LuGre bristle equations with the learned magnitude as the steady state:
 
@@ -47,9 +58,10 @@ factor is not used). The state z runs over the rows in time order with the exact
 work is at least -sigma0 z0^2 / 2. sigma0 is fitted on the training log (``fit_bristles``).
 
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
-PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows, y_scale the RMS of the
-training target. Training minimises the mean squared error of tau_f / y_scale with the
-trainer of ``fricli.numerics.nn.training`` (the head is part of the network, ``fricli.numerics.nn.heads``).
+PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows (1 when |tau_g| does not
+vary), y_scale the RMS of the training target. Training minimises the mean squared error of
+tau_f / y_scale with the trainer of ``fricli.numerics.nn.training`` (the head is part of the
+network, ``fricli.numerics.nn.heads``).
 """
 
 from __future__ import annotations
@@ -70,6 +82,7 @@ from fricli.numerics.nn.network import predict_in_chunks
 from fricli.numerics.nn.training import Trainer
 
 PRESLIDING_SHARE = 0.1   # v_ps = this share of v0
+PRIOR_KEYS = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")   # the prior's parameters, as LuGreModel's
 G_MIN = 1e-12            # floor on the bristle curve g [Nm], so the bristle rate stays finite
 # fit_bristles: the bristle deflection g_typ / sigma0 [rad] searched (as identify's bounds)
 DEFLECTION_RANGE = (1e-8, 1.0)
@@ -100,6 +113,8 @@ class DissipativeFriction(FrictionModel):
         self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
         self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
         self.sigma0_: float | None = None                 # bristle stiffness [Nm/rad]; None: no pre-sliding state
+        self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS, LuGreModel's units)
+        self.blend_: float | None = None                  # lambda in [0, 1]: the network's share over the prior
 
     @property
     def net_(self) -> HeadedNetwork | None:
@@ -161,7 +176,7 @@ class DissipativeFriction(FrictionModel):
             for key in self._SCALARS:
                 setattr(self, f"{key}_", getattr(scales_from, f"{key}_"))
         net = self.new_network().init(rng)
-        self.sigma0_ = None
+        self.sigma0_ = self.prior_ = self.blend_ = None
         x = self._rows(sig)
         y = (target / self.y_scale_)[None, :]
         xv = tv = None
@@ -197,7 +212,10 @@ class DissipativeFriction(FrictionModel):
         if not (self.v0_ > 0 and self.v_ps_ > 0):
             raise DataError("no moving training samples to scale the velocity with")
         g = np.abs(np.asarray(sig.get("tau_g", np.zeros_like(speed)), dtype=np.float64))
-        self.g_scale_ = float(g.mean()) if g.mean() > 0 else 1.0
+        lo, hi = np.percentile(g, [5, 95])
+        # |tau_g| that does not vary (identify's rule: rounding noise on a vertical axis) is no
+        # load: scaled by 1 Nm, not by its own mean, it stays out of the magnitude
+        self.g_scale_ = float(g.mean()) if hi - lo > 1e-6 * (1.0 + hi) else 1.0
         u = np.arcsinh(speed / self.v0_)
         self.u_mean_, self.u_scale_ = float(u.mean()), float(u.std()) if u.std() > 1e-12 else 1.0
         rms = float(np.sqrt(np.mean(np.asarray(target, dtype=np.float64) ** 2)))
@@ -207,6 +225,7 @@ class DissipativeFriction(FrictionModel):
         """Make the model the mean of ``nets`` (networks of ``new_network`` trained on this model's
         scales); the extrapolation from the training velocities qd (n,)."""
         self.nets_, self.v_max_, self.slope_ = list(nets), None, None
+        self.prior_ = self.blend_ = None
         self._fit_extrapolation(np.asarray(qd, dtype=np.float64))
 
     def _fit_extrapolation(self, qd: np.ndarray) -> None:
@@ -231,8 +250,31 @@ class DissipativeFriction(FrictionModel):
         return self.y_scale_ * float(np.mean(acts.softplus(b1))) / self.g_scale_
 
     def magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
-        """|tau_f| above the pre-sliding speed, y_scale * m (n,) [Nm], >= 0."""
+        """|tau_f| above the pre-sliding speed (n,) [Nm], >= 0: y_scale * m, or with the prior
+        blend * y_scale * m + (1 - blend) * p."""
         return self._run(signals, sliding=True)
+
+    def set_prior(self, prior: dict | None, blend: float | None = None) -> None:
+        """Blend the network with the static curve ``prior`` (PRIOR_KEYS [Nm, rad/s, Nm s/rad,
+        Nm/Nm], as ``LuGreModel``'s) by ``blend`` in [0, 1]; None: the network alone."""
+        if prior is None:
+            self.prior_ = self.blend_ = None
+            return
+        self.prior_ = {k: float(prior[k]) for k in PRIOR_KEYS}
+        self.blend_ = float(blend)
+
+    def prior_magnitude(self, signals: dict[str, np.ndarray]) -> np.ndarray:
+        """p = fc + kc |tau_g| + (fs - fc + (ks - kc) |tau_g|) exp(-|qd / vs|^delta) + fv |qd| (n,) [Nm],
+        >= 0: the prior's steady friction magnitude (tau_g absent: 0)."""
+        p = self.prior_
+        qd = np.asarray(signals["qd"], dtype=np.float64)
+        g = signals.get("tau_g")
+        load = np.zeros_like(qd) if g is None else np.abs(np.asarray(g, dtype=np.float64))
+        out = physics.stribeck_shape(qd, p["vs"], p["delta"])
+        out *= load * (p["ks"] - p["kc"]) + (p["fs"] - p["fc"])
+        out += load * p["kc"] + p["fc"]
+        out += np.abs(qd) * p["fv"]
+        return out
 
     def predict(self, signals: dict[str, np.ndarray], state=None) -> tuple[np.ndarray, object]:
         """tau_f (n,) [Nm]. Without the bristle state: stateless (state None). With it (``sigma0_``):
@@ -304,7 +346,8 @@ class DissipativeFriction(FrictionModel):
         def run(part: list[tuple[int, int]]) -> None:
             ws = [None] * len(nets)
             for start, stop in part:
-                x = self._rows({k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}, nets[0].dtype)
+                rows = {k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}
+                x = self._rows(rows, nets[0].dtype)
                 if sliding:
                     x[2] = 1.0
                 for k, net in enumerate(nets):
@@ -323,6 +366,9 @@ class DissipativeFriction(FrictionModel):
                     if (beyond > 0).any():
                         grow = self._by_direction(qd, self.slope_) * np.maximum(beyond, 0.0) * self.y_scale_
                         out[start:stop] += grow * x[2]
+                if self.prior_ is not None:
+                    out[start:stop] *= self.blend_
+                    out[start:stop] += (1.0 - self.blend_) * x[2] * self.prior_magnitude(rows)
 
         predict_in_chunks(n, run)
         return out
@@ -347,6 +393,8 @@ class DissipativeFriction(FrictionModel):
                 params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
             if self.sigma0_ is not None:
                 params["bristles"] = {"sigma0": self.sigma0_}
+            if self.prior_ is not None:
+                params["prior"] = {**self.prior_, "blend": self.blend_}
             params["fitted"] = training_params(self)
         return params
 
@@ -400,6 +448,13 @@ class DissipativeFriction(FrictionModel):
                     and sigma0 > 0):
                 raise ValueError(f"damaged bristle parameters {bristles!r}")
             model.sigma0_ = float(sigma0)
+        prior = params.get("prior")
+        if prior is not None:
+            if not (isinstance(prior, dict) and all(_number(prior.get(k)) for k in PRIOR_KEYS + ("blend",))
+                    and min(prior[k] for k in PRIOR_KEYS) >= 0 and prior["vs"] > 0 and prior["delta"] > 0
+                    and 0 <= prior["blend"] <= 1):
+                raise ValueError(f"damaged prior {prior!r}")
+            model.set_prior(prior, prior["blend"])
         load_training(model, params, arrays)
         return model
 
@@ -428,6 +483,12 @@ class DissipativeFriction(FrictionModel):
             lines.append(f"  beyond the top training speeds (+{self.v_max_[0]:.4g} / -{self.v_max_[1]:.4g} {v}) the "
                          f"magnitude grows by {self.y_scale_ * self.slope_[0]:.4g} / "
                          f"{self.y_scale_ * self.slope_[1]:.4g} {tau} per {v}")
+        if self.prior_ is not None:
+            p = self.prior_
+            lines.append(f"  blended with the LuGre static curve p by lambda = {self.blend_:.3g}: magnitude lambda "
+                         f"y_scale m + (1 - lambda) p; p: fc {p['fc']:.4g}, fs {p['fs']:.4g} {tau}, vs {p['vs']:.4g} "
+                         f"{v}, delta {p['delta']:.3g}, fv {p['fv']:.4g} {tau} s/{self.units.get('q', 'rad')}, "
+                         f"kc {p['kc']:.3g}, ks {p['ks']:.3g}")
         if self.sigma0_ is not None:
             q = self.units.get("q", "rad")
             lines.append(f"  pre-sliding (bristle) state z: sigma0 {self.sigma0_:.4g} {tau}/{q} (deflection y_scale / "
@@ -444,6 +505,11 @@ class DissipativeFriction(FrictionModel):
 def _member(k: int) -> str:
     """Prefix of member k's arrays: none for the first (a single network's file), "M{k}_" after."""
     return f"M{k}_" if k else ""
+
+
+def _number(value) -> bool:
+    """A finite number (not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 def _pair(value) -> bool:
