@@ -415,8 +415,9 @@ def bench_train_base(add, tmp: str, size: dict, reps: int, torch, threads: int) 
     time of the whole command), against the same training in PyTorch: the same training and
     validation rows, network, head, steps actually run, full batch, learning-rate schedule,
     validation checks; PyTorch on 1 and on ``threads`` threads (fricli runs one thread at this size).
-    The dissipative network's pre-sliding state is fitted after its training: the ratio compares
-    the training alone (``--bristles off``), and the default command's time is reported beside it.
+    The dissipative network's pre-sliding state and its blend with the LuGre static curve are
+    fitted around its training: the ratio compares the training alone (``--bristles off
+    --no-prior``), and the default command's time is reported beside it.
     Also on the base log with distinct velocities (``distinct_velocities_log``) and with --arch mlp."""
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
 
@@ -447,8 +448,9 @@ def bench_train_base(add, tmp: str, size: dict, reps: int, torch, threads: int) 
             add("train", f"{label}, whole command (wall)", wall, "s")
             add("train", f"{label}, validation MAE", summary["val"]["mae"], log.units["tau"])
         if arch == "dissipative":   # the state's sigma0 is fitted after the training PyTorch repeats
-            _, plain = train(path, *extra, "--bristles", "off")
-            add("train", f"{label}, training time with --bristles off (the network alone)", plain["seconds"], "s")
+            _, plain = train(path, *extra, "--bristles", "off", "--no-prior")
+            add("train", f"{label}, training time with --bristles off --no-prior (the network alone)",
+                plain["seconds"], "s")
             train_s = plain["seconds"]
         if torch is None:
             continue
