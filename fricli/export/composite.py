@@ -6,8 +6,6 @@ friction apart from robot-model errors). Children are emitted with their own emi
 
 from __future__ import annotations
 
-import numpy as np
-
 from fricli.export import terms as T
 from fricli.export.c import Context, Part, comment, emit, emitter, num
 
@@ -25,31 +23,20 @@ def _signature(name: str, fn: str, ctx: Context, stateful: bool, extra: str = ""
 
 @emitter("residual")
 def residual(model, name: str, ctx: Context) -> Part:
-    """p = base + g NN_add (g: NN_add's weight within its training envelope, 1 for a model without
-    one); ``dissipative``: tau_f = w p + (1 - w) s T softplus(s p / T), s = sign(qd),
-    w = (1 - min(|qd| / v_ps, 1)^2)^2, as ``ResidualFriction.on_base``."""
+    """p = base + NN_add; ``dissipative``: tau_f = w p + (1 - w) s T softplus(s p / T),
+    s = sign(qd), w = (1 - min(|qd| / v_ps, 1)^2)^2, as ``ResidualFriction.on_base``."""
     base = emit(model.base, f"{name}_base", ctx)
     add = emit(model.add, f"{name}_add", ctx)
     code = [base.code, add.code]
     if base.stateful:
         code += _state(name, [f"{base.name}_state base"])
         code += [f"static inline void {name}_init({name}_state *s) {{ {base.init('&s->base')} }}", ""]
-    added = add.step()
-    if model.envelope_ is not None:
-        code += _gate(name)
     code.append(_signature(name, "step", ctx, base.stateful))
-    if model.envelope_ is not None:
-        qd, tau_g = ctx.signal("qd"), ctx.signal("tau_g")
-        pos, neg = ("0.0" if np.isnan(row[0]) else f"{name}_gate({', '.join(num(v) for v in row)}, {tau_g})"
-                    for row in model.envelope_)
-        code += [f"    const double gp = {pos};", f"    const double gn = {neg};",
-                 f"    const double g = {qd} > 0.0 ? gp : ({qd} < 0.0 ? gn : (gp < gn ? gp : gn));"]
-        added = f"{add.step()} * g"
     if model.combine == "additive":
-        code += [f"    return {base.step('&s->base')} + {added};", "}", ""]
+        code += [f"    return {base.step('&s->base')} + {add.step()};", "}", ""]
     else:
         qd, width = ctx.signal("qd"), num(model.width_)
-        code += [f"    const double p = {base.step('&s->base')} + {added};",
+        code += [f"    const double p = {base.step('&s->base')} + {add.step()};",
                  f"    const double sg = {ctx.sgn}({qd});",
                  f"    double w = fabs({qd}) / {num(model.v_ps_)}, x, m;",
                  "    w = w < 1.0 ? w : 1.0;",
@@ -59,17 +46,6 @@ def residual(model, name: str, ctx: Context) -> Part:
                  f"    m = {width} * ((x > 0.0 ? x : 0.0) + log1p(exp(-fabs(x))));   /* T softplus(s p / T) */",
                  "    return w * p + (1.0 - w) * sg * m;", "}", ""]
     return Part(name, "\n".join(code), stateful=base.stateful)
-
-
-def _gate(name: str) -> list[str]:
-    """NN_add's weight (1 - min(u, 1)^2)^2 at x within the envelope lo < a <= b < hi of one
-    direction, u the distance from [a, b] as a share of the tail (``residual.gate``)."""
-    return [f"static inline double {name}_gate(double lo, double a, double b, double hi, double x) {{",
-            "    double u = (a - x) / (a - lo), v = (x - b) / (hi - b);",
-            "    u = u > v ? u : v;",
-            "    u = u < 0.0 ? 0.0 : (u > 1.0 ? 1.0 : u);",
-            "    u = 1.0 - u * u;",
-            "    return u * u;", "}", ""]
 
 
 @emitter("augmented")

@@ -23,19 +23,6 @@ velocity covers. Two ways to combine them (``combine``):
                  joint whose motor turns with another joint has friction along its own motion
                  whenever that motor turns against it.
 
-NN_add never extrapolates: it is weighted by g(tau_g, s) in [0, 1], which is 1 where the bulk of
-its training rows lie and 0 outside all of them. For each direction s the training rows of that
-direction give the tau_g interval [lo, hi] (min and max) and its central part [a, b] (the
-ENVELOPE_TAIL and 1 - ENVELOPE_TAIL quantiles); with u the distance from [a, b] as a share of
-the tail's width (a - lo below, hi - b above),
-
-                 g = (1 - min(u, 1)^2)^2          (1 on [a, b], 0 outside [lo, hi], C1)
-
-and g = min(g+, g-) at rest (s = 0). lo and hi are widened by 1e-12 max(1, max |tau_g|), the
-resolution below which the networks call an input constant (a joint with a vertical axis has
-tau_g = 0 up to rounding). p above is base(log) + g NN_add. Model files written without the
-envelope load with g = 1.
-
 Both parts are children in the model file ("base/...", "add/..."); the base may be of any kind,
 with its own state (e.g. the LuGre bristles), which ``predict`` carries across batches.
 """
@@ -55,12 +42,6 @@ ADD_INPUTS = ("tau_g", "sign(qd)")
 COMBINE = ("dissipative", "additive")
 SOFTNESS = 0.01          # T of the dissipative form, as a share of the mean |friction target|
 PRESLIDING_SHARE = 0.1   # v_ps for a base without its own: this share of the slowest training speed
-# NN_add fades out over the outer ENVELOPE_TAIL of its training rows' tau_g on each side (per
-# direction): the central 95 % of a sample, the usual statistical range of the data, is where
-# the network is held by many rows; it is zero beyond the outermost row
-ENVELOPE_TAIL = 0.025
-SIDES = ("positive", "negative")   # the envelope's rows: qd > 0, qd < 0
-CONSTANT = 1e-12         # relative resolution of tau_g (numerics.nn.training.Standardizer's "constant")
 
 
 def soft_magnitude(x: np.ndarray, width: float) -> np.ndarray:
@@ -68,50 +49,8 @@ def soft_magnitude(x: np.ndarray, width: float) -> np.ndarray:
     return width * softplus(x / width)
 
 
-def envelope(tau_g: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """(2, 4) [Nm]: for s = +1 (row 0) and s = -1 (row 1), lo, a, b, hi of the tau_g (n,) of the
-    rows moving that way (min, ENVELOPE_TAIL and 1 - ENVELOPE_TAIL quantiles, max), lo and hi
-    widened by CONSTANT max(1, max |tau_g|); NaN for a direction without rows (g = 0 there)."""
-    tau_g, qd = np.asarray(tau_g, dtype=np.float64), np.asarray(qd, dtype=np.float64)
-    out = np.full((2, 4), np.nan)
-    for i, rows in enumerate((qd > 0, qd < 0)):
-        if rows.any():
-            x = tau_g[rows]
-            eps = CONSTANT * max(1.0, float(np.max(np.abs(x))))
-            lo, a, b, hi = np.quantile(x, [0.0, ENVELOPE_TAIL, 1.0 - ENVELOPE_TAIL, 1.0])
-            out[i] = lo - eps, a, b, hi + eps
-    return out
-
-
-def gate(env: np.ndarray, tau_g: np.ndarray, qd: np.ndarray) -> np.ndarray:
-    """g (n,) in [0, 1]: NN_add's weight at tau_g (n,) [Nm] and qd (n,) within the ``envelope``
-    ``env`` (2, 4) (module doc)."""
-    def one(lo, a, b, hi):
-        if np.isnan(lo):
-            return np.zeros_like(tau_g)
-        u = np.maximum((a - tau_g) / (a - lo), (tau_g - b) / (hi - b))
-        return np.square(1.0 - np.square(np.clip(u, 0.0, 1.0)))
-
-    g_pos, g_neg = one(*env[0]), one(*env[1])
-    return np.where(qd > 0, g_pos, np.where(qd < 0, g_neg, np.minimum(g_pos, g_neg)))
-
-
 def indent(text: str, prefix: str = "  ") -> str:
     return "\n".join(prefix + line for line in text.splitlines())
-
-
-def _read_envelope(saved) -> np.ndarray:
-    """The (2, 4) envelope of a model file (None for a direction: no rows); ValueError when a
-    direction's is not lo < a <= b < hi."""
-    try:
-        env = np.array([[np.nan] * 4 if saved[side] is None else saved[side] for side in SIDES], dtype=np.float64)
-    except (KeyError, TypeError, ValueError):
-        raise ValueError(f"unknown envelope {saved!r}") from None
-    given = ~np.isnan(env).all(axis=1)
-    if env.shape != (2, 4) or not np.isfinite(env[given]).all() or not (
-            (env[given, 0] < env[given, 1]) & (env[given, 1] <= env[given, 2]) & (env[given, 2] < env[given, 3])).all():
-        raise ValueError(f"unknown envelope {saved!r}")
-    return env
 
 
 @register
@@ -122,7 +61,7 @@ class ResidualFriction(FrictionModel):
 
     def __init__(self, base: FrictionModel, *, hidden_sizes=(30,), epochs: int = 200, batch_size: int = 64,
                  lr: float = 0.01, min_speed: float | None = None, units: dict | None = None,
-                 add: FrictionModel | None = None, combine: str | None = None, envelope: np.ndarray | None = None):
+                 add: FrictionModel | None = None, combine: str | None = None):
         """``combine``: "dissipative" or "additive"; by default dissipative, unless ``base`` reads other
         joints' velocities (a coupled group's member): that joint's friction may act along its own
         motion (its motor turns with another joint), which the dissipative form would forbid."""
@@ -130,7 +69,6 @@ class ResidualFriction(FrictionModel):
         self.hidden_sizes, self.epochs, self.batch_size, self.lr = tuple(hidden_sizes), epochs, batch_size, lr
         self.min_speed, self.units = min_speed, dict(units or {})
         self.add = add
-        self.envelope_ = None if envelope is None else np.asarray(envelope, dtype=np.float64)
         self.combine = combine or ("additive" if any(name.startswith("qd@") for name in base.required_inputs())
                                    else "dissipative")
 
@@ -156,7 +94,6 @@ class ResidualFriction(FrictionModel):
         pick = lambda rows: {k: v[rows] for k, v in sig.items() if k in ("t", "qd", "tau_g")}  # noqa: E731
         add.fit(pick(train_rows), residual[train_rows], pick(val_rows), residual[val_rows], rng=rng, on_eval=on_eval)
         self.add = add
-        self.envelope_ = envelope(sig["tau_g"][train_rows], sig["qd"][train_rows])
         return self
 
     def predict(self, signals: dict[str, np.ndarray], state=None):
@@ -166,10 +103,7 @@ class ResidualFriction(FrictionModel):
 
     def on_base(self, signals: dict[str, np.ndarray], tau: np.ndarray) -> np.ndarray:
         """tau_f (n,) [Nm] given the base's prediction ``tau`` (n,) over the same rows."""
-        add = self.add.predict(signals)[0]
-        if self.envelope_ is not None:
-            add = add * gate(self.envelope_, signals["tau_g"], signals["qd"])
-        p = tau + add
+        p = tau + self.add.predict(signals)[0]
         if self.combine == "additive":
             return p
         qd = signals["qd"]
@@ -188,9 +122,6 @@ class ResidualFriction(FrictionModel):
                   "batch_size": self.batch_size, "lr": self.lr, "min_speed": self.min_speed, "units": self.units}
         if self.combine != "additive":   # files without the key are the paper's additive form
             params["combine"] = {"form": self.combine, "width": self.width_, "v_ps": self.v_ps_}
-        if self.envelope_ is not None:   # files without the key: NN_add everywhere (g = 1)
-            params["envelope"] = {"tail": ENVELOPE_TAIL, **{
-                side: None if np.isnan(row[0]) else row.tolist() for side, row in zip(SIDES, self.envelope_)}}
         return params
 
     @classmethod
@@ -206,8 +137,6 @@ class ResidualFriction(FrictionModel):
                                                     and isinstance(v_ps, (int, float)) and v_ps > 0):
                 raise ValueError(f"unknown combination {combine!r}")
             model.width_, model.v_ps_ = float(width), float(v_ps)
-        if "envelope" in params:
-            model.envelope_ = _read_envelope(params["envelope"])
         return model
 
     def describe(self) -> str:
@@ -223,13 +152,5 @@ class ResidualFriction(FrictionModel):
         if self.min_speed is not None:
             unit = self.units.get("qd", "rad/s")
             lines.append(f"  NN_add trained on rows moving faster than {self.min_speed:.4g} {unit}")
-        if self.envelope_ is not None:
-            tau = self.units.get("tau", "Nm")
-            for label, (lo, a, b, hi) in zip(("qd > 0", "qd < 0"), self.envelope_):
-                if np.isnan(lo):
-                    lines.append(f"  NN_add weighted 0 ({label}: no training rows)")
-                    continue
-                lines.append(f"  NN_add weighted 1 for tau_g in [{a:.4g}, {b:.4g}] {tau}, 0 outside "
-                             f"[{lo:.4g}, {hi:.4g}] ({label})")
         lines += ["  base:", indent(self.base.describe(), "    "), "  add:", indent(self.add.describe(), "    ")]
         return "\n".join(lines)
