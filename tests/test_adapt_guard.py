@@ -32,7 +32,6 @@ def test_each_half_is_held_out_once_and_predicted_by_the_other():
     assert held["folds"] == learning.FOLDS == 2 and len(trained_on) == 2
     np.testing.assert_array_equal(np.unique(blocks[trained_on[0]]), np.arange(half))
     np.testing.assert_array_equal(np.unique(blocks[trained_on[1]]), np.arange(half, training_data.PIECES))
-    # nothing is scored by a network that saw a row of its piece, or a piece between its own
     assert held["pieces"] == training_data.PIECES and held["rows"] == N - 7
 
 
@@ -53,6 +52,7 @@ def drifting_log(seconds: float, shift: float, until: float, rng: np.random.Gene
 
 
 def as_log(cols: dict[str, np.ndarray]) -> logs.Log:
+    """A log of one rotary joint with the signals ``cols`` (canonical units)."""
     return logs.Log(table=pa.table(cols), signals=cols, axis="rotary", joint=None, sha256="0" * 64, name="drift",
                     derived={})
 
@@ -60,8 +60,8 @@ def as_log(cols: dict[str, np.ndarray]) -> logs.Log:
 @pytest.mark.parametrize("seed", [1, 2])
 def test_a_residual_gone_from_the_last_quarter_of_the_log_is_not_kept(seed):
     """Held-out pieces interleaved with training pieces show a gain in three quarters of the
-    pieces (the check before scored them so); trained on the first half, NN_add is wrong on half
-    of the second, and trained on the second it is too weak on the first."""
+    pieces (five random folds of pieces keep NN_add on these logs); trained on the first half,
+    NN_add is wrong on half of the second, and trained on the second it is too weak on the first."""
     log = drifting_log(40.0, 0.5, 0.75, np.random.default_rng(seed))
     adapted, summary = learning.adapt(LinearFriction(2.0, 1.5), log, epochs=30, seed=seed)
     assert summary["held_out"]["folds"] == 2
