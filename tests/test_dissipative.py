@@ -116,7 +116,7 @@ def test_dissipative_for_any_weights(base_log, trained, rng):
 def test_adapt_on_top_stays_dissipative(base_log, tmp_path, rng):
     model, _ = learning.train_base(base_log, steps=300, seed=1)
     adapt_log = logs.from_table(motion_log((0.1,), seed=3, seconds=20, shift=True), name="adapt")
-    adapted, _ = learning.adapt(model, adapt_log, epochs=20, seed=0)
+    adapted, _ = learning.adapt(model, adapt_log, epochs=20, seed=0, val_fraction=0)   # the residual model, unchecked
     assert adapted.combine == "dissipative" and adapted.v_ps_ == model.v_ps_
     sig = grid(base_log.signals)
     assert_dissipative(adapted, sig, adapted.v_ps_)
@@ -138,7 +138,7 @@ def test_adapt_on_top_stays_dissipative(base_log, tmp_path, rng):
 def test_residual_files_without_the_form_are_additive(base_log, tmp_path):
     model, _ = learning.train_base(base_log, arch="mlp", steps=50, seed=0)
     adapt_log = logs.from_table(motion_log((0.1,), seed=3, seconds=20, shift=True), name="adapt")
-    adapted, _ = learning.adapt(model, adapt_log, epochs=2, seed=0)
+    adapted, _ = learning.adapt(model, adapt_log, epochs=2, seed=0, val_fraction=0)   # the residual model, unchecked
     path = str(tmp_path / "a.npz")
     models.save_for_log(path, adapted, adapt_log, rows_used=1)
     from fricli.core import modelfile

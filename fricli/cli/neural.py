@@ -176,9 +176,10 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     NN_add (ELU layers, --hidden; one of 30 units by default) is trained on the friction target minus BASE's
     prediction over LOG, typically one short movement out and back at one velocity without
     external load in the new conditions. The output holds BASE and NN_add together and works
-    with every command that takes a model. Held-out rows decide (cross-validated over whole
-    pieces of every stretch of motion; for a log without velocity levels, whole blocks of
-    time): when NN_add does not lower the RMS error there consistently, the output is BASE
+    with every command that takes a model. Held-out rows decide (NN_add trained on the first half
+    of every stretch of motion, scored on the second, and the other way round; for a log without
+    velocity levels, the halves of its time): when NN_add does not lower the RMS error there
+    consistently, the output is BASE
     unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md). BASE
     may be a coupled group's model: each joint of its group (or --joint) gets NN_add on top of the
