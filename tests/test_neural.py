@@ -440,16 +440,21 @@ def test_model_to_stdout(files):
 # ---------------------------------------------------------------------------- continuous excitation
 
 
-def harmonic_log(seed=0, rate=100.0, seconds=40.0, residual=None, base=None, noise=0.2):
-    """A sum of harmonics (no steady velocity level), friction static_friction plus noise; with
-    ``base`` (a model) the friction is base's prediction plus ``residual(qd, tau_g)`` instead."""
+def harmonic_motion(seed=0, rate=100.0, seconds=40.0):
+    """(rng, signals t, q, qd, qdd, tau_g) of a sum of harmonics (no steady velocity level)."""
     rng = np.random.default_rng(seed)
     t = np.arange(int(seconds * rate)) / rate
     qd = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in
              zip((0.4, 0.25, 0.15), (0.11, 0.23, 0.41), rng.uniform(0, 2 * np.pi, 3)))
     q = np.cumsum(qd) / rate
-    g = 30 * np.sin(2 * q + 0.3)
-    sig = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": g}
+    return rng, {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": 30 * np.sin(2 * q + 0.3)}
+
+
+def harmonic_log(seed=0, rate=100.0, seconds=40.0, residual=None, base=None, noise=0.2):
+    """A sum of harmonics, friction static_friction plus noise; with ``base`` (a model) the
+    friction is base's prediction plus ``residual(qd, tau_g)`` instead."""
+    rng, sig = harmonic_motion(seed, rate, seconds)
+    t, qd, g = sig["t"], sig["qd"], sig["tau_g"]
     f = static_friction(qd, g) if base is None else base.predict(sig)[0]
     if residual is not None:
         f = f + residual(qd, g)

@@ -17,21 +17,16 @@ from fricli.fitting import learning
 from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from test_dissipative import assert_dissipative, grid
 from test_export import _compare, needs_cc
-from test_neural import UNITS, harmonic_log
+from test_neural import UNITS, harmonic_log, harmonic_motion
 
 
 def bump_log(seed: int, seconds: float = 30.0, rate: float = 100.0):
     """A sum of harmonics whose friction magnitude has a bump at 0.3 rad/s, which no Stribeck plus
     viscous curve has; noise 0.2 Nm."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(seconds * rate)) / rate
-    qd = sum(a * np.sin(2 * np.pi * f * t + p) for a, f, p in
-             zip((0.4, 0.25, 0.15), (0.11, 0.23, 0.41), rng.uniform(0, 2 * np.pi, 3)))
-    q = np.cumsum(qd) / rate
-    g = 30 * np.sin(2 * q + 0.3)
+    rng, sig = harmonic_motion(seed, rate, seconds)
+    qd, g = sig["qd"], sig["tau_g"]
     f = np.sign(qd) * (5 + 3 * np.exp(-((np.abs(qd) - 0.3) / 0.08) ** 2) + 2 * np.abs(qd))
-    cols = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": g,
-            "tau_m": g + f + rng.normal(0, 0.2, t.size), "tau_f_true": f}
+    cols = {**sig, "tau_m": g + f + rng.normal(0, 0.2, qd.size), "tau_f_true": f}
     return no_inertia(table_from_arrays(cols, UNITS))
 
 
