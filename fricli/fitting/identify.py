@@ -316,6 +316,15 @@ class LuGreIdentifier:
         gain = 1.0 - sse / sse0 if sse0 > 0 else 0.0
         return p, e_max, gain
 
+    def fit_static(self, v: np.ndarray, y: np.ndarray, tau_g: np.ndarray | None = None,
+                   qd_unit: str = "rad/s") -> dict:
+        """The static stage alone: the LuGre model's steady-state curve (Stribeck, viscous, load)
+        fitted by least squares to friction ``y`` (n,) at velocities ``v`` (n,) [qd_unit], with the
+        gravity torque ``tau_g`` (n,) or None; its parameters. Fitted attribute: ``notes_``.
+        Raises FitError when the fit fails."""
+        self.notes_ = []
+        return self._fit_static(v, y, tau_g, {"qd": qd_unit})[0]
+
     def _fit_static(self, v, y, tau_g, units) -> tuple[dict, dict]:
         load = None if tau_g is None else np.abs(tau_g)
         if load is not None:

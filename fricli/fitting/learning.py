@@ -216,12 +216,10 @@ def fit_prior(sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray, 
     its parameters (``dissipative.PRIOR_KEYS``), or None when the fit fails."""
     from fricli.fitting.identify import LuGreIdentifier
 
-    ident = LuGreIdentifier()
-    ident.notes_ = []
     tau_g = sig.get("tau_g")
     try:
-        params, _ = ident._fit_static(sig["qd"][rows], target[rows], None if tau_g is None else tau_g[rows],
-                                      {"qd": units.get("qd", "rad/s")})
+        params = LuGreIdentifier().fit_static(sig["qd"][rows], target[rows], None if tau_g is None else tau_g[rows],
+                                              units.get("qd", "rad/s"))
     except FitError:
         return None
     return {k: float(params[k]) for k in PRIOR_KEYS}
