@@ -62,11 +62,12 @@ def _decision(summary: dict, tau: str) -> str:
     if "base_rmse" not in held:
         return "too few rows to hold out (fewer than two pieces of motion): the base model is kept"
     figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
-               f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f}")
+               f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f} "
+               f"(each half x{', x'.join(f'{r:.3f}' for r in held['half_ratios'])})")
     if summary["adapted"]:
         return f"{figures}; the residual network is kept"
     return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
-            f"and in most pieces of the log): the base model is kept")
+            f"on each half and in most pieces of the log): the base model is kept")
 
 
 @cli.command("train-base")
