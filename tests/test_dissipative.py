@@ -1,7 +1,5 @@
 """The dissipative network, the dissipative residual and the thin-data case."""
 
-import json
-
 import numpy as np
 import pytest
 from click.testing import CliRunner
@@ -16,7 +14,6 @@ from fricli.models.dissipative import DissipativeFriction
 from fricli.models.residual import ResidualFriction
 from fricli.numerics.nn import activations as acts
 from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
-from fricli.numerics.nn.training import Trainer
 from test_neural import UNITS, motion_log, static_friction
 
 

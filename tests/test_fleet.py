@@ -8,10 +8,8 @@ import shutil
 import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
-import pyarrow as pa
 import pytest
 
 from fricli import models

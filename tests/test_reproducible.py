@@ -18,7 +18,6 @@ import subprocess
 import sys
 import threading
 
-import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import threadpoolctl

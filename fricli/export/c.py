@@ -240,7 +240,7 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
             f"static inline double {prefix}_step_array({prefix}_state *s, const double *x) {{",
             f"    return {prefix}_step(s, {', '.join(f'x[{i}]' for i in range(len(signals)))});", "}", "",
             f"/* {prefix}_step with its two parts apart: returns the friction torque [{tau}] alone (the part that",
-            f" * resists the motion: use it for friction compensation) and writes to *model_error the correction of the",
+             " * resists the motion: use it for friction compensation) and writes to *model_error the correction of the",
             f" * robot model's errors [{tau}] (0 when {prefix}_HAS_MODEL_ERROR is 0); their sum is {prefix}_step. */",
             f"static inline double {prefix}_step_parts({prefix}_state *s, {args}, double *model_error) {{", *parts,
             "}", "",

@@ -60,7 +60,7 @@ def lugre(m, name: str, ctx: Context) -> Part:
              "    z = (1.0 - a) * zss + a * z0;",
              f"    tau = v * {num(m.sigma1)} + ({num(m.sigma0)} + rate * {num(-m.sigma1)}) * z;",
              "    tau += fv * v;",
-             f"    s->z = z;", f"    s->t_prev = {t};", "    s->started = 1;",
+             "    s->z = z;", f"    s->t_prev = {t};", "    s->started = 1;",
              "    return tau;"]
     code = "\n".join([
         "typedef struct {", "    double z;       /* bristle deflection [rad] */",

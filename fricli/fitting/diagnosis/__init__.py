@@ -6,4 +6,6 @@
     fix.py        the result -> the augmented model (``augment``), carried by a LuGre base where natural
 """
 
-from fricli.fitting.diagnosis.driver import Diagnosis, EffectResult, diagnose  # noqa: F401
+from fricli.fitting.diagnosis.driver import Diagnosis, EffectResult, diagnose
+
+__all__ = ["Diagnosis", "EffectResult", "diagnose"]
