@@ -67,6 +67,25 @@ def test_held_sign_holds_the_last_direction_through_rest():
     assert T.held_sign(qd, -1.0)[:2].tolist() == [-1, -1]
 
 
+@pytest.mark.parametrize("rests", [0, 1, 40])
+def test_columns_hold_what_the_functions_hold_and_combine_as_the_matrix(rests):
+    rng = np.random.default_rng(rests)
+    n = 200
+    qd = rng.normal(size=n)
+    qd[rng.choice(n, rests, replace=False)] = 0.0
+    qd[:3] = 0.0 if rests else qd[:3]
+    sig = {"t": np.arange(float(n)), "qd": qd, "tau_g": rng.normal(size=n), "tau_m": rng.normal(size=n),
+           "tau_dyn": rng.normal(size=n)}
+    p = rng.normal(size=n)
+    cols = T.Columns(sig, p, (-1.0, 2.5))
+    np.testing.assert_array_equal(cols.direction, T.held_sign(qd, -1.0))
+    np.testing.assert_array_equal(cols.held_gravity, T.held(sig["tau_g"], qd, 2.5))
+    terms = [T.term("a", T.HELDGRAVITY), T.term("b", T.OVERLOAD, T.SIGN), T.term("c", T.P, T.POS)]
+    coef = np.array([0.3, -1.2, 0.7])
+    np.testing.assert_allclose(T.Columns(sig, p).combination(terms, coef), T.matrix(terms, sig, p) @ coef,
+                               rtol=1e-14, atol=1e-14)
+
+
 def test_term_values_and_inputs():
     sig = {"t": np.arange(4.0), "qd": np.array([1.0, 0.0, -2.0, 0.0]), "temp": np.array([20.0, 21, 22, 23]),
            "tau_g": np.array([3.0, -1, 2, 0]), "tau_m": np.array([7.0, 3, -4, -5]), "tau_dyn": np.array([0.0, 0, 1, 0]),

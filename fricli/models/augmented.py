@@ -56,8 +56,8 @@ class AugmentedModel(FrictionModel):
         if not self.terms and not self.error_terms:
             return p, np.zeros_like(p), (base_state, direction)
         cols = T.Columns(signals, p, direction)
-        friction = p + cols.matrix(self.terms) @ self.coef
-        error = cols.matrix(self.error_terms) @ self.error_coef
+        friction = p + cols.combination(self.terms, self.coef)
+        error = cols.combination(self.error_terms, self.error_coef)
         return friction, error, (base_state, cols.state)
 
     def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:

@@ -96,15 +96,30 @@ class Columns:
 
     def __init__(self, sig: dict, p: np.ndarray | None = None, state=None):
         self.sig, self.p = sig, p
-        self._dir = self._gear = None
+        self._dir = self._gear = self._last = None
         s0, g0 = (state, 0.0) if state is None or np.isscalar(state) else state
         self._s0 = 0.0 if s0 is None else float(s0)
         self._g0 = float(g0)
 
+    def _held(self, x: np.ndarray, x0: float) -> np.ndarray:
+        """``held(x, qd, x0)``, with the index of each row's last moving sample found once."""
+        if self._last is None:
+            qd = self.sig["qd"]
+            moving = qd != 0
+            if moving.all():
+                self._last = slice(None)
+            else:
+                idx = np.where(moving, np.arange(len(qd)), -1)
+                np.maximum.accumulate(idx, out=idx)
+                self._last = idx
+        if isinstance(self._last, slice):
+            return x
+        return np.where(self._last >= 0, x[np.maximum(self._last, 0)], x0)
+
     @property
     def direction(self) -> np.ndarray:
         if self._dir is None:
-            self._dir = held_sign(self.sig["qd"], self._s0)
+            self._dir = self._held(np.sign(self.sig["qd"]), self._s0)
         return self._dir
 
     @property
@@ -117,7 +132,7 @@ class Columns:
     @property
     def held_gravity(self) -> np.ndarray:
         if self._gear is None:
-            self._gear = held(_signal(self.sig, "tau_g"), self.sig["qd"], self._g0)
+            self._gear = self._held(_signal(self.sig, "tau_g"), self._g0)
         return self._gear
 
     @property
@@ -167,7 +182,14 @@ class Columns:
         """The term's column (n,)."""
         out = np.ones(len(self.sig["t"]))
         for factor in term["factors"]:
-            out = out * self.factor(factor)
+            out *= self.factor(factor)
+        return out
+
+    def combination(self, terms: list[dict], coef: np.ndarray) -> np.ndarray:
+        """``matrix(terms) @ coef`` (n,), one column at a time."""
+        out = np.zeros(len(self.sig["t"]))
+        for term, c in zip(terms, coef):
+            out += c * self.value(term)
         return out
 
     def matrix(self, terms: list[dict]) -> np.ndarray:
