@@ -119,6 +119,16 @@ def test_nan_refused_with_count_and_row():
     assert len(log) == 498 and len(log.table) == 498 and "dropped 2" in messages[0]
 
 
+def test_huge_finite_values_are_not_taken_for_infinite_ones():
+    tau = make_table().column("tau_m").to_numpy().copy()
+    tau[[3, 4]] = 1e308                     # their sum overflows; each value is finite
+    log = logs.from_table(make_table().set_column(3, "tau_m", pa.array(tau)), name="x")
+    assert len(log) == 500
+    tau[[5, 6]] = [np.inf, -np.inf]         # their sum is NaN
+    with pytest.raises(LogError, match=r"2 rows.*row 5"):
+        logs.from_table(make_table().set_column(3, "tau_m", pa.array(tau)), name="x")
+
+
 @pytest.mark.parametrize("kind,needle", [("dup", "duplicate"), ("back", "not increasing")])
 def test_time_order(kind, needle):
     t = make_table().column("t").to_numpy().copy()
