@@ -180,7 +180,7 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     with every command that takes a model. Held-out rows decide (NN_add trained on the first half
     of every stretch of motion, scored on the second, and the other way round; for a log without
     velocity levels, the halves of its time): when NN_add does not lower the RMS error there
-    consistently, the output is BASE
+    consistently (by 1 % on each half, and in most pieces of the log), the output is BASE
     unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md). BASE
     may be a coupled group's model: each joint of its group (or --joint) gets NN_add on top of the
