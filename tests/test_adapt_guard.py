@@ -60,6 +60,13 @@ def test_a_network_that_helps_only_one_half_is_not_kept():
     assert both["helps"]
 
 
+def test_pieces_in_one_half_only_are_not_a_held_out_check():
+    blocks = training_data.time_block(N)
+    blocks[blocks >= training_data.PIECES // 2] = -1      # the second half's rows are not used
+    held = learning.cross_validate(lambda train: np.zeros(N), blocks, np.ones(N), np.zeros(N))
+    assert held["half_ratios"] == [] and not held["helps"]
+
+
 def drifting_log(seconds: float, shift: float, until: float, rng: np.random.Generator) -> logs.Log:
     """A harmonic motion whose friction is the base's plus a Coulomb level of ``shift`` [Nm] over
     the first ``until`` share of the log and none after (a level that settles as the joint warms

@@ -82,9 +82,22 @@ def held_sign(qd: np.ndarray, s0: float = 0.0) -> np.ndarray:
 
 def held(x: np.ndarray, qd: np.ndarray, x0: float = 0.0) -> np.ndarray:
     """x (n,) where qd != 0, else its value at the last moving sample; x0 before the first."""
-    idx = np.where(qd != 0, np.arange(len(qd)), -1)
+    return hold(x, last_moving(qd), x0)
+
+
+def last_moving(qd: np.ndarray) -> np.ndarray | None:
+    """Index (n,) of each row's last sample with qd != 0 (-1 before the first); None when all move."""
+    moving = qd != 0
+    if moving.all():
+        return None
+    idx = np.where(moving, np.arange(len(qd)), -1)
     np.maximum.accumulate(idx, out=idx)
-    return np.where(idx >= 0, x[np.maximum(idx, 0)], x0)
+    return idx
+
+
+def hold(x: np.ndarray, last: np.ndarray | None, x0: float) -> np.ndarray:
+    """x (n,) taken at ``last`` (``last_moving``), x0 where it is -1; x itself when ``last`` is None."""
+    return x if last is None else np.where(last >= 0, x[np.maximum(last, 0)], x0)
 
 
 class Columns:
@@ -102,19 +115,10 @@ class Columns:
         self._g0 = float(g0)
 
     def _held(self, x: np.ndarray, x0: float) -> np.ndarray:
-        """``held(x, qd, x0)``, with the index of each row's last moving sample found once."""
+        """``held(x, qd, x0)``, with the rows' last moving samples found once."""
         if self._last is None:
-            qd = self.sig["qd"]
-            moving = qd != 0
-            if moving.all():
-                self._last = slice(None)
-            else:
-                idx = np.where(moving, np.arange(len(qd)), -1)
-                np.maximum.accumulate(idx, out=idx)
-                self._last = idx
-        if isinstance(self._last, slice):
-            return x
-        return np.where(self._last >= 0, x[np.maximum(self._last, 0)], x0)
+            self._last = (last_moving(self.sig["qd"]),)
+        return hold(x, self._last[0], x0)
 
     @property
     def direction(self) -> np.ndarray:
