@@ -73,7 +73,8 @@ def test_columns_hold_what_the_functions_hold_and_combine_as_the_matrix(rests):
     n = 200
     qd = rng.normal(size=n)
     qd[rng.choice(n, rests, replace=False)] = 0.0
-    qd[:3] = 0.0 if rests else qd[:3]
+    if rests:
+        qd[:3] = 0.0                        # and before the first motion
     sig = {"t": np.arange(float(n)), "qd": qd, "tau_g": rng.normal(size=n), "tau_m": rng.normal(size=n),
            "tau_dyn": rng.normal(size=n)}
     p = rng.normal(size=n)

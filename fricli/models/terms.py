@@ -81,7 +81,8 @@ def held_sign(qd: np.ndarray, s0: float = 0.0) -> np.ndarray:
 
 
 def held(x: np.ndarray, qd: np.ndarray, x0: float = 0.0) -> np.ndarray:
-    """x (n,) where qd != 0, else its value at the last moving sample; x0 before the first."""
+    """x (n,) where qd != 0, else its value at the last moving sample; x0 before the first
+    (x itself when every row moves)."""
     return hold(x, last_moving(qd), x0)
 
 
