@@ -159,6 +159,30 @@ def test_calibration_recovers_the_true_model(arm, tmp_path):
     np.testing.assert_allclose(loaded.armature, calibrated.armature)
 
 
+def test_rows_at_rest_do_not_bias_the_calibration(arm):
+    """A joint at rest holds whatever torque its last motion left, up to the breakaway level: no
+    Fc sign(qd) says what. Here each joint stands still for 2 s in turn, its motor holding 0.8 Fc
+    set by the direction of its last motion, while the others move; the calibration fits each
+    joint's rows in motion and recovers the model as from a log without rest."""
+    model, x_true, fit, _ = arm
+    t, q, qd, qdd = (a.copy() for a in fit)
+    rest = np.zeros(q.shape, dtype=bool)
+    for j in range(4):
+        a = 150 + 300 * j
+        rest[a:a + 200, j] = True
+        q[a:a + 200, j], qd[a:a + 200, j], qdd[a:a + 200, j] = q[a - 1, j], 0.0, 0.0
+    tau = simulate(model, t, q, qd, qdd)
+    last = np.array([np.sign(fit[2][150 + 300 * j - 1, j]) for j in range(4)])
+    tau += np.where(rest, -0.8 * FRICTION[:, 1] * last, 0.0)
+    robot = RobotModel(URDF, "cad")
+    cal = cb.calibrate(robot, motion(t, q, qd, qdd, tau))
+    base, _ = cb.base_parameters(robot, cal.x)
+    base_true, _ = cb.base_parameters(robot, x_true)
+    np.testing.assert_allclose(base, base_true, rtol=1e-6, atol=1e-6 * np.abs(base_true).max())
+    np.testing.assert_allclose(cal.x[44:], FRICTION.reshape(-1), rtol=1e-6, atol=1e-9)
+    assert cal.report["rows"] == int(cb.edge_rows(t, cb.DEFAULT_EDGE_S).sum())
+
+
 def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     model, x_true, fit, held = arm
     log = write_log(tmp_path / "fit.parquet", *fit, simulate(model, *fit))
@@ -234,6 +258,10 @@ def test_refusals(arm, tmp_path):
     assert res.returncode == errors.INPUT and "--match" in res.stderr
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.DATA and "joint 3 does not move" in res.stderr
+    qd[700:710, 2] = 0.5           # ten rows of motion: its friction has too few rows to be fitted
+    log = write_log(tmp_path / "brief.parquet", t, q, qd, qdd, simulate(model, t, q, qd, qdd))
+    res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
+    assert res.returncode == errors.DATA and "joint 3 is in motion in 10 rows" in res.stderr, res.stderr
 
 
 def test_stribeck_friction_is_found_with_the_rigid_body(arm):

@@ -2,7 +2,7 @@
 identified together on one run, validated on the runs of other days, against the URDF's CAD model
 with linear friction fitted on the same run; and the external torque of the 2.805 kg payload run.
 
-    python docs/ur10e/calibration_study.py --work /tmp/cal-study        # about 10 minutes
+    python docs/ur10e/calibration_study.py --work /tmp/cal-study        # about a minute on 2 cores
     python docs/ur10e/calibration_study.py --work /tmp/cal-study --keep # reuse imported logs
 
 Prints the tables of docs/calibration.md and writes WORK/calibration-study.json. Every log, URDF

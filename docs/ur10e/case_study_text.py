@@ -155,7 +155,7 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     return "\n".join(head + [
         "# Case study: the robot model and the friction of a UR10e arm from its own recordings",
         "",
-        "This document is written by `python docs/ur10e/run_case_study.py` (about ten minutes; data at",
+        "This document is written by `python docs/ur10e/run_case_study.py` (about 70 s on 2 cores; data at",
         "`../shared/data/ur10e`, see `../shared/data/README.md`). Every figure below comes from that run;",
         "the full list of fricli commands it ran is at the end, the numbers are also in",
         "`docs/ur10e-results.json`.",

@@ -1,7 +1,7 @@
 """Rerun the UR10e case study: CSV recordings + URDF -> fricli models for the six joints,
 validated on runs of other days; writes docs/case-study-ur10e.md and docs/img/ur10e-*.png.
 
-    python docs/ur10e/run_case_study.py                      # the whole study (a few minutes)
+    python docs/ur10e/run_case_study.py                      # the whole study (about 70 s on 2 cores)
     python docs/ur10e/run_case_study.py --joints 6 --runs 1 --out /tmp/x   # a small part
 
 Every model comes from the fricli command line, run as a user would (the commands are
@@ -264,8 +264,19 @@ def adapt_pairs(work: str, base: str, imported: dict[str, str], joints, pairs) -
                     e = logs.friction_target(sig) - predicted(os.path.join(folder, f"joint_{j}.npz"), scored_path, j)
                     errors[key] = rms(e[metrics.in_motion(sig["qd"])])
                 cases.append({"adapted_on": on, "scored_on": scored, "joint": j, "residual_kept": kept,
-                              "base_error": errors["base"], "adapted_error": errors["adapted"]})
+                              "base_error": errors["base"], "adapted_error": errors["adapted"],
+                              "base_level_on": base_level(base, on_path, j), "base_level_scored": base_level(base, scored_path, j)})
     return {"cases": cases}
+
+
+def base_level(base: str, path: str, joint: int) -> float:
+    """How far the base model's friction level is off on a run: the coefficient of sign(qd) in the least-squares
+    fit of [sign(qd), 1] to its error over the rows in motion [Nm]."""
+    sig = signals(path, joint)
+    mv = metrics.in_motion(sig["qd"])
+    e = logs.friction_target(sig) - predicted(os.path.join(base, f"joint_{joint}.npz"), path, joint)
+    cols = np.column_stack([np.sign(sig["qd"]), np.ones_like(e)])[mv]
+    return float(np.linalg.lstsq(cols, e[mv], rcond=None)[0][0])
 
 
 def _above_floor(x: np.ndarray, t: np.ndarray) -> float:
@@ -391,6 +402,13 @@ def adapt_table(result: dict, joints) -> str:
     worse = sum(c["adapted_error"] > c["base_error"] * (1 + 1e-9) for c in cases)
     lines += ["", f"adapted / base on the other run: {min(ratios):.3f} to {max(ratios):.3f} (mean {np.mean(ratios):.3f}); "
               f"residual kept in {kept} of {len(cases)} cases; worse than the base in {worse}"]
+    for c in cases:
+        if c["adapted_error"] > c["base_error"] * (1 + 1e-9) and "base_level_on" in c:
+            lines += ["", f"Worse: joint {c['joint']} adapted on {c['adapted_on'][3:]}, {c['base_error']:.3f} → "
+                      f"{c['adapted_error']:.3f} Nm on {c['scored_on'][3:]}. The base's friction level (the coefficient of "
+                      f"sign(qd) of its error in motion) is off by {c['base_level_on']:+.3f} Nm on the run adapted on and by "
+                      f"{c['base_level_scored']:+.3f} Nm on the run scored: the joint's friction changed between the two runs "
+                      "of the day, which the held-out halves of the run adapted on cannot show."]
     return "\n".join(lines)
 
 

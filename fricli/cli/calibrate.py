@@ -147,11 +147,11 @@ def _summary(report: dict) -> list[str]:
         lines.append(line + f"; chosen by {choice['folds']}-fold cross-validation over time (see the report)")
     else:
         lines.append(f"prior: {report['prior']:g} x each parameter's scale (--prior)")
-    lines.append("fit: RMS of tau_m minus the model [Nm], CAD + friction -> calibrated:")
+    lines.append("fit: RMS of tau_m minus the model over each joint's rows in motion [Nm], CAD + friction -> calibrated:")
     for joint, f in report["fit"].items():
         fr = report["friction"]["joints"][joint]
         extra = f", Fs {fr['Fs']:.4g}, vs {fr['vs']:.3g}" if "Fs" in fr else ""
-        lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} "
+        lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} on {f['rows_in_motion']:,} rows "
                      f"({'motor: ' if fr.get('motor') else ''}Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, "
                      f"offset {fr['offset']:.4g})")
     if report.get("motors"):

@@ -324,7 +324,7 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | No
         return out
     out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
     out["suspicious"] = cal.report["suspicious"]
-    out["summary"] = (f"{summary}; RMS of tau_m minus the robot model and linear friction on this log, CAD -> "
+    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and linear friction on this log, CAD -> "
                       f"calibrated: {_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction "
                       "on it")
     return out
@@ -340,7 +340,7 @@ def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
     change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
     fit = ", ".join(f"joint {j} {f['rms_before']:.3g} -> {f['rms_after']:.3g} Nm" for j, f in cal.report["fit"].items())
     summary = (f"robot-model errors on joints {', '.join(str(j) for j in flagged) or 'none'}: calibrated the robot "
-               f"model -> {output} (RMS of tau_m minus the robot model and linear friction, CAD -> calibrated: {fit})\n"
+               f"model -> {output} (RMS in motion of tau_m minus the robot model and linear friction, CAD -> calibrated: {fit})\n"
                f"held-out MAE, CAD robot model + friction model -> calibrated robot model + refitted and fixed "
                f"friction: {change}")
     return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],

@@ -25,6 +25,9 @@ of its prior value and the joint's CAD mass-matrix diagonal at q = 0 (over R_mj^
 friction: loose).
 ``prior`` "auto" chooses the strength, for all parameters and then per body and armature, by cross-validation
 over blocks of time of the log (``choose_prior``).
+Each joint's rows are those where it is in motion (``fricli.core.metrics.in_motion``; with a
+transmission, every motor that drives it): at rest a joint holds whatever torque its last motion
+left, which no friction law of the velocity gives.
 Each joint's rows are weighted by 1 / its residual standard deviation, re-estimated until it settles
 (iteratively reweighted; standard IDIM practice), so the prior matters only where the data say
 little: directions the run does not excite stay at CAD, and the report names them.
@@ -39,7 +42,7 @@ import xml.etree.ElementTree as ET
 
 import numpy as np
 
-from fricli.core import logs, transmission
+from fricli.core import logs, metrics, transmission
 from fricli.core.errors import DataError, FitError, LogError, ModelFileError
 from fricli.numerics.threads import pinned
 
@@ -55,6 +58,7 @@ SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is
 UNDETERMINED = 1.0         # a direction whose data information is below the prior's stays at CAD
 NUMERIC_ZERO = 1e-10       # ... or below this share of the best-determined direction's
 MAX_ITERATIONS = 30
+MIN_ROWS = 20              # a joint in motion in fewer rows is refused
 STRIBECK_ALTERNATIONS = 4
 STRIBECK_GRID = np.geomspace(0.005, 0.5, 25)   # Stribeck velocities searched, x the joint's top speed
 TOLERANCE = 1e-9           # relative: a body on the boundary of consistency (a thin rod, a point) passes
@@ -336,7 +340,7 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     nj = len(robot.joints)
     keep = edge_rows(motion.t, edge_s)
     moving = np.abs(motion.qd[keep]).max(axis=0) if keep.any() else np.zeros(nj)
-    if keep.sum() < 20:
+    if keep.sum() < MIN_ROWS:
         raise DataError(f"the log has {int(keep.sum())} rows more than {edge_s:g} s from its ends: too few to calibrate")
     still = [str(motion.names[j]) for j in range(nj) if moving[j] == 0]
     if still:
@@ -346,14 +350,21 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     # fitted in each motor's units seen at its own joint (ratio / g; with one rotor per joint: the identity)
     ratio, gain, rotor0, motors = motor_layout(robot, motion)
     norm = np.where(ratio != 0, ratio / gain[:, None], 0.0)
-    Phi = regressor(robot, q, qd, qdd, ratio=norm)
-    y = tau.reshape(-1)
+    w = qd @ norm.T                                          # motor velocities / g (n, motors)
+    sliding = np.column_stack([metrics.in_motion(w[:, m]) for m in range(nj)])
+    use = np.column_stack([sliding[:, norm[:, j] != 0].all(axis=1) for j in range(nj)])   # (n, joints)
+    counts = use.sum(axis=0)
+    if counts.min() < MIN_ROWS:
+        raise DataError(f"joint {motion.names[int(np.argmin(counts))]} is in motion in {int(counts.min())} rows: "
+                        "too few to calibrate")
+    mask = use.reshape(-1).astype(float)
+    Phi = regressor(robot, q, qd, qdd, ratio=norm) * mask[:, None]
+    y = tau.reshape(-1) * mask
     stribeck = friction == "stribeck"
     names = parameter_names(robot, stribeck, motors)
     pi_cad = cad_parameters(robot)
     x0 = np.concatenate([pi_cad, rotor0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
-    w = qd @ norm.T                                          # motor velocities / g (n, motors)
 
     def to_motors(joint_side):   # torques (n, joints) -> (n, motors), rows contiguous as the joints' were
         return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
@@ -366,17 +377,17 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     before = np.empty((n, nj))
     fric_before = {}
     for m in range(nj):
-        cols = np.column_stack([w[:, m], np.sign(w[:, m]), np.ones(n)])
-        coef = np.linalg.lstsq(cols, r0[:, m], rcond=None)[0]
+        cols = np.column_stack([w[:, m], np.sign(w[:, m]), np.ones(n)]) * sliding[:, m, None]
+        coef = np.linalg.lstsq(cols, r0[:, m] * sliding[:, m], rcond=None)[0]
         before[:, m] = r0[:, m] - cols @ coef
         fric_before[m] = coef
-    before = before @ norm                                  # joint side: R^T (motor torques)
-    sigma = np.maximum(np.sqrt(np.mean(before ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
+    before = (before @ norm) * use                          # joint side: R^T (motor torques)
+    sigma = np.maximum(np.sqrt(np.sum(before ** 2, axis=0) / counts), 1e-9 * tau_rms + 1e-300)
 
     rows_of = np.tile(np.arange(nj), n)
     prior_choice, strengths = None, float(prior) if prior != "auto" else None
     if prior == "auto":
-        strengths, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms)
+        strengths, prior_choice = choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts)
         prior = prior_choice["chosen"]
         if "per_group" in prior_choice:
             groups = bodies(robot) + names[10 * nj:11 * nj]
@@ -386,17 +397,23 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     if stribeck:
         top = np.abs(w).max(axis=0)
         vs = 0.1 * top
+        grids = []      # a Stribeck velocity below the slowest row in motion has no rows to be fitted on
+        for m in range(nj):
+            grid = top[m] * STRIBECK_GRID
+            slowest = np.abs(w[sliding[:, m], m]).min()
+            grids.append(grid[grid >= slowest] if grid[-1] >= slowest else grid[-1:])
         x0 = np.concatenate([x0, np.zeros(nj)])
         s = np.concatenate([s, 10.0 * np.maximum(motor_rms, 1e-6)])
         for _ in range(STRIBECK_ALTERNATIONS):
-            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
-            x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms)
+            Phi_s = np.hstack([Phi, stribeck_columns(qd, vs, norm) * mask[:, None]])
+            x, sigma, resid, iteration = _map_fit(Phi_s, y, x0, s, sigma, rows_of, tau_rms, counts)
             own = (Phi_s[:, 11 * nj:] * x[11 * nj:]).reshape(n, nj, -1).sum(axis=2)  # friction part, (n, nj)
             target = to_motors(resid + own)
             for m in range(nj):
-                vs[m] = min(top[m] * STRIBECK_GRID, key=lambda v: _stribeck_rss(w[:, m], target[:, m], v))
-        Phi = np.hstack([Phi, stribeck_columns(qd, vs, norm)])
-    x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms)
+                on = sliding[:, m]
+                vs[m] = min(grids[m], key=lambda v: _stribeck_rss(w[on, m], target[on, m], v))
+        Phi = np.hstack([Phi, stribeck_columns(qd, vs, norm) * mask[:, None]])
+    x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts)
 
     A = (Phi / sigma[rows_of, None]) * s
     excitation = _excitation(robot, A, Phi, s, names, seed, vs, norm)
@@ -416,9 +433,10 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         "prior": float(prior), "prior_choice": prior_choice, "iterations": iteration,
         "excitation": excitation,
         "fit": {str(motion.names[j]): {"urdf_joint": robot.joints[j],
-                                       "rms_before": float(np.sqrt(np.mean(before[:, j] ** 2))),
-                                       "rms_after": float(np.sqrt(np.mean(resid[:, j] ** 2))),
-                                       "noise_std": float(sigma[j])} for j in range(nj)},
+                                       "rms_before": float(np.sqrt(np.sum(before[:, j] ** 2) / counts[j])),
+                                       "rms_after": float(np.sqrt(np.sum(resid[:, j] ** 2) / counts[j])),
+                                       "noise_std": float(sigma[j]), "rows_in_motion": int(counts[j])}
+                for j in range(nj)},
         "friction": _friction_report(robot, motion, x / unit, None if vs is None else vs * np.abs(gain), motors),
         "friction_with_cad": {str(motion.names[j]): {f: float(fric_before[j][k] / unit[11 * nj + 3 * j + k])
                                                      for k, f in enumerate(FRICTION)} for j in range(nj)},
@@ -441,7 +459,7 @@ def _with_prior(s1: np.ndarray, nj: int, prior) -> np.ndarray:
     return np.concatenate([np.asarray(prior, dtype=float) * s1[:11 * nj], s1[11 * nj:]])
 
 
-def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = True, grid=PRIOR_GRID,
+def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: bool = True, grid=PRIOR_GRID,
                  folds=PRIOR_FOLDS) -> tuple[np.ndarray, dict]:
     """The prior strengths on ``grid`` whose fits predict held-out data best (ridge selection by
     blocked cross-validation): the log cut into ``folds`` contiguous blocks of time, each predicted
@@ -455,7 +473,7 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = T
     from fricli.fitting.diagnosis.selection import fold_bounds
 
     nj = len(sigma)
-    _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms)
+    _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms, counts)
     W = Phi / w[rows_of, None]
     r = (y - Phi @ x0) / w[rows_of]
     edges = fold_bounds(len(y) // nj, folds) * nj
@@ -471,7 +489,7 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = T
             total += Ck - 2 * d @ Bk + d @ Gk @ d
         return total
 
-    held = lambda v: float(np.sqrt(max(v, 0.0) / len(y)))  # noqa: E731
+    held = lambda v: float(np.sqrt(max(v, 0.0) / counts.sum()))  # noqa: E731
     weak_first = sorted(grid, reverse=True)
     scores = {g: score(np.full(11 * nj, g)) for g in weak_first}
     chosen = max(g for g, v in scores.items() if v <= min(scores.values()) + tie)
@@ -496,7 +514,7 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, *, per_group: bool = T
     return strengths, report
 
 
-def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
+def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts):
     """Maximum a posteriori estimate, rows weighted by each joint's residual std, re-estimated until
     the weights settle: (x, sigma (joints,), residuals (n, joints), iterations)."""
     nj = len(sigma)
@@ -506,7 +524,7 @@ def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms):
                             np.concatenate([(y - Phi @ x0) / sigma[rows_of], np.zeros(len(s))]), rcond=None)[0]
         x = x0 + s * z
         resid = (y - Phi @ x).reshape(-1, nj)
-        new = np.maximum(np.sqrt(np.mean(resid ** 2, axis=0)), 1e-9 * tau_rms + 1e-300)
+        new = np.maximum(np.sqrt(np.sum(resid ** 2, axis=0) / counts), 1e-9 * tau_rms + 1e-300)
         settled = np.max(np.abs(np.log(new / sigma))) < 0.01
         sigma = new
         if settled:
