@@ -468,7 +468,8 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
     then, with ``per_group``, each group's own in turn (each body's 10 inertial parameters, centred
     on CAD; each joint's armature, centred on the rotor inertia), until no group's change lowers the
     score. The weakest prior wins ties (noise-free data need none). ``Phi`` (n * joints, p),
-    ``y`` (n * joints,), ``s1``: prior std at strength 1.
+    ``y`` (n * joints,), zero in the rows not used, ``counts`` (joints,) each joint's rows used,
+    ``s1``: prior std at strength 1.
     Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
     from fricli.fitting.diagnosis.selection import fold_bounds
 
@@ -516,7 +517,8 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
 
 def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts):
     """Maximum a posteriori estimate, rows weighted by each joint's residual std, re-estimated until
-    the weights settle: (x, sigma (joints,), residuals (n, joints), iterations)."""
+    the weights settle: (x, sigma (joints,), residuals (n, joints), iterations). Rows not used are
+    zero in ``Phi`` and ``y``; ``counts`` (joints,): each joint's rows used."""
     nj = len(sigma)
     for iteration in range(1, MAX_ITERATIONS + 1):
         A = (Phi / sigma[rows_of, None]) * s
