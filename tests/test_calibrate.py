@@ -183,6 +183,29 @@ def test_rows_at_rest_do_not_bias_the_calibration(arm):
     assert cal.report["rows"] == int(cb.edge_rows(t, cb.DEFAULT_EDGE_S).sum())
 
 
+def test_a_mass_the_torques_cannot_tell_apart_is_flagged_as_the_priors(arm):
+    """A serial arm's joint torques see some masses only together with other parameters: moved with
+    them, the mass changes and no torque does. The report names such masses and a flagged change
+    says the prior chose it."""
+    model, _, fit, _ = arm
+    robot = RobotModel(URDF, "cad")
+    cal = cb.calibrate(robot, motion(*fit, simulate(model, *fit)))
+    tied = cal.report["excitation"]["masses_not_determined_alone"]
+    assert tied and set(tied) <= {f"{b}.m" for b in cal.bodies}
+    name = next(k for k, v in tied.items() if v)
+    c = cal.names.index(name)
+    Y = cb._random_regressor(robot, seed=5)          # other random states than the report's
+    _, sv, vt = np.linalg.svd(Y, full_matrices=False)
+    null = vt[int(np.sum(sv > 1e-9 * sv[0])):].T
+    v = null @ null[c]                               # the unseen direction along which the mass moves most
+    assert abs(v[c]) > 1e-6
+    x = cal.x + v * (0.5 * cal.x0[c] / v[c])        # that mass +50 % of CAD, every torque unchanged
+    assert np.abs(Y @ (x - cal.x)).max() < 1e-9 * np.abs(Y @ cal.x).max()
+    moved = cb.Calibration(x=x, x0=cal.x0, names=cal.names, bodies=cal.bodies, joints=cal.joints, report={})
+    line = next(w for w in cb.suspicious(moved, tied) if w.startswith(f"link {name[:-2]}: mass"))
+    assert "no joint torque determines this mass alone: it trades with " + tied[name][0] in line
+
+
 def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     model, x_true, fit, held = arm
     log = write_log(tmp_path / "fit.parquet", *fit, simulate(model, *fit))

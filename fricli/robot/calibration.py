@@ -449,7 +449,7 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         report.update(_motor_report(cal, motion))
     report["links"] = link_table(cal)
     report["consistency"] = consistency(cal)
-    report["suspicious"] = suspicious(cal)
+    report["suspicious"] = suspicious(cal, excitation["masses_not_determined_alone"])
     return cal
 
 
@@ -667,6 +667,12 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
     # the identifiable subspace (whitened coordinates): right singular vectors of the random regressor
     _, sv, vt = np.linalg.svd(R_, full_matrices=False)
     U = vt[:rank].T
+    null = vt[rank:].T          # what no joint torque sees: a mass with a part here is not determined alone
+    tied = {}
+    for c in range(0, 10 * len(robot.joints), 10):
+        v = null @ null[c]
+        if abs(v[c]) > 1e-6:
+            tied[names[c]] = [names[k] for k in np.argsort(-np.abs(v)) if k != c and abs(v[k]) > 1e-3 * abs(v[c])][:3]
     sv_run = np.linalg.svd(Phi[:, base], compute_uv=False)
     sv_scaled = np.linalg.svd(A[:, base] / np.linalg.norm(A[:, base], axis=0), compute_uv=False)
     g, V = np.linalg.eigh(U.T @ (A.T @ A) @ U)
@@ -684,6 +690,7 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
         "condition_number": float(sv_run[0] / sv_run[-1]) if sv_run[-1] > 0 else math.inf,
         "condition_number_scaled": float(sv_scaled[0] / sv_scaled[-1]) if sv_scaled[-1] > 0 else math.inf,
         "undetermined": undetermined,
+        "masses_not_determined_alone": tied,
     }
 
 
@@ -770,15 +777,23 @@ def consistency(cal: Calibration) -> dict:
     return {"ok": not problems, "problems": problems, "warnings": warnings}
 
 
-def suspicious(cal: Calibration) -> list[str]:
+def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
     """Parameters far (> SUSPICIOUS) from CAD or from the prior armature (a motor's rotor inertia), with
-    the other causes that give the same torque shape."""
+    the other causes that give the same torque shape. ``tied``: the masses no joint torque determines
+    alone, with the parameters they trade with (the excitation report's ``masses_not_determined_alone``)."""
     out = []
     causes = "; ".join(OTHER_CAUSES)
     for body, cad, new in zip(cal.bodies, body_inertias(cal, cal.x0), body_inertias(cal)):
         if cad.mass > 0 and abs(new.mass / cad.mass - 1) > SUSPICIOUS:
-            out.append(f"link {body}: mass {cad.mass:.4g} -> {new.mass:.4g} kg ({100 * (new.mass / cad.mass - 1):+.0f} %); "
-                       f"also consistent with: {causes}")
+            change = f"link {body}: mass {cad.mass:.4g} -> {new.mass:.4g} kg ({100 * (new.mass / cad.mass - 1):+.0f} %)"
+            partners = (tied or {}).get(f"{body}.m")
+            if partners:
+                out.append(f"{change}; no joint torque determines this mass alone: it trades with "
+                           f"{', '.join(partners)}, and the prior splits what the data determine between them")
+            elif partners is not None:
+                out.append(f"{change}; no joint torque sees this mass")
+            else:
+                out.append(f"{change}; also consistent with: {causes}")
     nj = len(cal.joints)
     for j in range(nj):
         a0, a = cal.x0[10 * nj + j], cal.x[10 * nj + j]
