@@ -206,6 +206,18 @@ def test_a_mass_the_torques_cannot_tell_apart_is_flagged_as_the_priors(arm):
     assert "no joint torque determines this mass alone: it trades with " + tied[name][0] in line
 
 
+def test_the_excitation_report_does_not_depend_on_the_prior(arm):
+    """The condition number is the run's: of its regressor over the structural base parameters
+    (those of ``base_parameters``), whatever prior the fit then uses."""
+    model, _, fit, _ = arm
+    robot = RobotModel(URDF, "cad")
+    m = motion(*fit, simulate(model, *fit))
+    reports = [cb.calibrate(robot, m, prior=p).report["excitation"] for p in (0.01, 10.0)]
+    assert set(reports[0]["base"]) == set(cb.base_parameters(robot, np.zeros(56))[1])
+    assert reports[0]["base"] == reports[1]["base"]
+    assert reports[0]["condition_number"] == pytest.approx(reports[1]["condition_number"], rel=1e-12)
+
+
 def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     model, x_true, fit, held = arm
     log = write_log(tmp_path / "fit.parquet", *fit, simulate(model, *fit))

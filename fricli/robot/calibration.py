@@ -653,14 +653,16 @@ def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: lis
                 vs: np.ndarray | None = None, ratio: np.ndarray | None = None) -> dict:
     """How well the run determines the parameters.
 
-    Structural: the base parameters (QR with column pivoting of the regressor at random states,
-    identical for every trajectory). This run: the condition number of its base regressor, and the
-    directions of the identifiable parameters whose data information (eigenvalue of the
-    prior-whitened information matrix, 1 = as much as the prior's) is below ``UNDETERMINED``."""
+    Structural: the base parameters (QR with column pivoting of the unscaled regressor at random
+    states, as ``base_parameters``: identical for every trajectory and prior). This run: the
+    condition number of its base regressor, and the directions of the identifiable parameters whose
+    data information (eigenvalue of the prior-whitened information matrix, 1 = as much as the
+    prior's) is below ``UNDETERMINED``."""
     from scipy import linalg
 
-    R_ = _random_regressor(robot, seed, vs, ratio) * s
-    _, r, piv = linalg.qr(R_, mode="economic", pivoting=True)
+    R0 = _random_regressor(robot, seed, vs, ratio)
+    R_ = R0 * s
+    _, r, piv = linalg.qr(R0, mode="economic", pivoting=True)
     d = np.abs(np.diag(r))
     rank = int(np.sum(d > 1e-9 * d[0]))
     base = np.sort(piv[:rank])
