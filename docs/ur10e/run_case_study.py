@@ -188,7 +188,8 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
                   json_out=True)
     load_seen = import_run(data, work, LOAD_RUN, cal, "cal", payload=seen, suffix="seen")
 
-    result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {},
+    aligned = twin_alignment(load_cad, fit_cad, joints)
+    result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {}, "twin_alignment": aligned,
               "calibration": {k: report[k] for k in ("fit", "friction", "armature", "links", "suspicious",
                                                      "excitation", "prior", "prior_choice")},
               "robot_model": calibrated.get("robot_model")}
@@ -228,6 +229,9 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
             row["payload"][key + "_gain"] = _gain(err, reference)
             row["payload"][key + "_above_floor"] = _above_floor(err, sig["t"])
         row["payload"]["fixed_unloaded"] = rms(twin)
+        measured, covered = measured_external(load_cad, fit_cad, j, aligned["shift"])
+        row["payload"]["measured_ratio"] = rms((measured - reference)[covered]) / rms((ext_linear - reference)[covered])
+        row["payload"]["measured_gain"] = _gain((measured - reference)[covered], reference[covered])
         bare, seen_sig = signals(load_bare, j), signals(load_seen, j)
         ref_seen = (bare["tau_g"] + bare["tau_dyn"]) - (seen_sig["tau_g"] + seen_sig["tau_dyn"])
         t = sig["t"]
@@ -236,6 +240,9 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
                      "idim": logs.external_torque(bare, linear_columns(bare) @ idim), "linear": ext_linear}
         row["payload_seen"] = {"reference_rms": rms(ref_seen[held]),
                                **{k: rms(e[held] - ref_seen[held]) for k, e in estimates.items()}}
+        both = held & covered
+        row["payload_seen"]["measured_ratio"] = (rms(measured[both] - ref_seen[both])
+                                                 / rms(estimates["linear"][both] - ref_seen[both]))
         row["payload_series"] = {"t": sig["t"] - sig["t"][0], "reference": reference, "fixed": ext_fixed,
                                  "idim": ext_idim, "linear": ext_linear}
         result["joints"][j] = row
@@ -277,6 +284,34 @@ def base_level(base: str, path: str, joint: int) -> float:
     e = logs.friction_target(sig) - predicted(os.path.join(base, f"joint_{joint}.npz"), path, joint)
     cols = np.column_stack([np.sign(sig["qd"]), np.ones_like(e)])[mv]
     return float(np.linalg.lstsq(cols, e[mv], rcond=None)[0][0])
+
+
+def twin_alignment(load: str, twin: str, joints) -> dict:
+    """The time shift [s] that lays the payload run onto its unloaded twin (the same trajectory): the
+    least RMS difference of q over ``joints``, searched over +-5 s (10 ms steps, then 0.5 ms)."""
+    a = [signals(load, j) for j in joints]
+    b = [signals(twin, j) for j in joints]
+    ta, tb = a[0]["t"] - a[0]["t"][0], b[0]["t"] - b[0]["t"][0]
+
+    def mismatch(shift: float) -> float:
+        ok = (ta + shift >= tb[0]) & (ta + shift <= tb[-1])
+        if ok.sum() < 0.8 * ta.size:
+            return np.inf
+        return rms(np.concatenate([np.interp(ta[ok] + shift, tb, y["q"]) - x["q"][ok] for x, y in zip(a, b)]))
+
+    coarse = min(np.arange(-5.0, 5.0, 0.01), key=mismatch)
+    shift = float(min(np.arange(coarse - 0.01, coarse + 0.01, 0.0005), key=mismatch))
+    return {"shift": shift, "q_rms": mismatch(shift)}
+
+
+def measured_external(load: str, twin: str, joint: int, shift: float) -> tuple[np.ndarray, np.ndarray]:
+    """The payload's torque as joint ``joint`` measured it, with no model: the unloaded twin's tau_m
+    (interpolated onto the payload run's times plus ``shift``) minus the payload run's, in the
+    external-torque sign; and the payload run's rows the twin covers."""
+    a, b = signals(load, joint), signals(twin, joint)
+    ta, tb = a["t"] - a["t"][0] + shift, b["t"] - b["t"][0]
+    ok = (ta >= tb[0]) & (ta <= tb[-1])
+    return np.interp(ta, tb, b["tau_m"]) - a["tau_m"], ok
 
 
 def _above_floor(x: np.ndarray, t: np.ndarray) -> float:
@@ -372,12 +407,12 @@ def tables(res: dict) -> dict[str, str]:
         ext_rows.append(f"| {j} | {p['reference_rms']:.2f} | {p['linear']:.3f} | {p['idim']:.3f} | {p['fixed']:.3f} | "
                         f"{p['idim'] / p['linear']:.2f} | **{p['fixed'] / p['linear']:.2f}** | "
                         f"{_share(p, 'linear_gain')} | {_share(p, 'idim_gain')} | {_share(p, 'fixed_gain')} | "
-                        f"{p['fixed_above_floor']:.3f} | {p['fixed_unloaded']:.3f} |")
+                        f"{p['fixed_above_floor']:.3f} | {p['fixed_unloaded']:.3f} | {p['measured_ratio']:.2f} |")
     external = "\n".join([
         "| joint | payload torque (RMS) [Nm] | linear error [Nm] | IDIM-LS error | fricli error | IDIM-LS / linear | "
         "fricli / linear | linear sees | IDIM-LS sees | fricli sees | fricli error above 2 Hz | "
-        "fricli on the unloaded twin |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|", *ext_rows])
+        "fricli on the unloaded twin | measured difference / linear |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *ext_rows])
     out = {"friction": friction, "diagnose": diagnose, "parameters": parameters, "external": external,
            "means": means, "met": met, "targets": goals}
     if res.get("adapt"):
