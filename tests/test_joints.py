@@ -146,7 +146,7 @@ def test_model_folder_without_the_log_joint(files, tmp_path, command):
     d.mkdir()
     save_lugre(d / "joint_2.npz", 2)
     line = one_error_line(run(*model_args(command, d, files["arm"], tmp_path)), errors.MODEL)
-    assert f"{d}: no model for joint 4 of {files['arm']} (the folder holds joints 2)" in line
+    assert f"{d}: no model for joint 4 of {files['arm']} (the folder holds joints 2; --joint 2 applies it alone)" in line
 
 
 def test_several_joints_into_one_file_is_refused(files, tmp_path):

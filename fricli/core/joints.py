@@ -142,7 +142,9 @@ def pair(source: Source, log_joints: list | None, requested, log_name: str) -> l
     for joint in covered:
         found = source.model_for(joint)
         if found is None:
+            held = listed(source.paths)
+            hint = f"--joint {held} applies it alone" if len(source.paths) == 1 else "--joint J chooses one of them"
             raise JointMismatch(f"{source.name}: no model for joint {joint} of {log_name} (the folder holds "
-                                f"joints {listed(source.paths)})")
+                                f"joints {held}; {hint})")
         out.append((joint, found[1]))
     return out
