@@ -229,7 +229,7 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
             row["payload"][key + "_gain"] = _gain(err, reference)
             row["payload"][key + "_above_floor"] = _above_floor(err, sig["t"])
         row["payload"]["fixed_unloaded"] = rms(twin)
-        measured, covered = measured_external(load_cad, fit_cad, j, aligned["shift"])
+        measured, covered = measured_external(sig, signals(fit_cad, j), aligned["shift"])
         row["payload"]["measured_ratio"] = rms((measured - reference)[covered]) / rms((ext_linear - reference)[covered])
         row["payload"]["measured_gain"] = _gain((measured - reference)[covered], reference[covered])
         bare, seen_sig = signals(load_bare, j), signals(load_seen, j)
@@ -304,11 +304,10 @@ def twin_alignment(load: str, twin: str, joints) -> dict:
     return {"shift": shift, "q_rms": mismatch(shift)}
 
 
-def measured_external(load: str, twin: str, joint: int, shift: float) -> tuple[np.ndarray, np.ndarray]:
-    """The payload's torque as joint ``joint`` measured it, with no model: the unloaded twin's tau_m
-    (interpolated onto the payload run's times plus ``shift``) minus the payload run's, in the
+def measured_external(a: dict, b: dict, shift: float) -> tuple[np.ndarray, np.ndarray]:
+    """The payload's torque as one joint measured it, with no model: the unloaded twin's tau_m (``b``'s,
+    interpolated onto the payload run ``a``'s times plus ``shift``) minus the payload run's, in the
     external-torque sign; and the payload run's rows the twin covers."""
-    a, b = signals(load, joint), signals(twin, joint)
     ta, tb = a["t"] - a["t"][0] + shift, b["t"] - b["t"][0]
     ok = (ta >= tb[0]) & (ta <= tb[-1])
     return np.interp(ta, tb, b["tau_m"]) - a["tau_m"], ok
