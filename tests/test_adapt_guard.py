@@ -109,3 +109,41 @@ def test_a_residual_that_holds_along_the_log_is_kept():
     held = summary["held_out"]
     assert summary["adapted"] is True and adapted.kind == "residual"
     assert held["adapted_rmse"] < 0.5 * held["base_rmse"]
+
+
+def speed_dependent_log(seed: int, scale: float) -> logs.Log:
+    """The harmonic motion of ``drifting_log`` with its velocity times ``scale``, whose friction is
+    the base's plus (qd - 0.3 sign(qd)) [Nm]: a base with too little viscous friction and too much
+    Coulomb friction, whose residual grows with speed through zero at 0.3 rad/s."""
+    rng = np.random.default_rng(seed)
+    sig = dict(drifting_log(40.0, 0.0, 1.0, rng).signals)
+    sig["qd"] = scale * sig["qd"]
+    residual = sig["qd"] - 0.3 * np.sign(sig["qd"])
+    sig["tau_m"] = sig["tau_g"] + LinearFriction(2.0, 1.5).predict(sig)[0] + residual + rng.normal(0.0, 0.05, sig["qd"].size)
+    return as_log(sig)
+
+
+def test_a_gain_at_high_speed_only_is_not_kept():
+    """NN_add sees no velocity: on this log it learns the residual's mean level per direction,
+    which helps the fast rows of both halves in time and harms the slow ones. On a slower run of
+    the same joint that network is worse than the base, so adapt keeps the base."""
+    log = speed_dependent_log(0, 1.0)
+    kept, summary = learning.adapt(LinearFriction(2.0, 1.5), log, epochs=30, seed=0)
+    held = summary["held_out"]
+    assert max(held["half_ratios"]) < 0.9 and held["gain_mean"] > 2 * held["gain_se"]   # the rules in time pass
+    slow, fast = held["speed_ratios"]
+    assert fast < 0.8 and slow > 1.0
+    assert summary["adapted"] is False and kept.kind == "linear"
+
+    unchecked, _ = learning.adapt(LinearFriction(2.0, 1.5), log, epochs=30, seed=0, val_fraction=0.0)
+    slower = speed_dependent_log(1, 0.5).signals
+    target, moving = logs.friction_target(slower), np.abs(slower["qd"]) > 0.05
+    rms = [float(np.sqrt(np.mean((target - m.predict(slower)[0])[moving] ** 2))) for m in (kept, unchecked)]
+    assert rms[1] > 1.3 * rms[0]
+
+
+def test_a_log_at_one_speed_has_no_speed_halves():
+    blocks = training_data.time_block(N)
+    held = learning.cross_validate(lambda train: np.full(N, 0.5), blocks, np.ones(N), np.zeros(N),
+                                   speed=np.full(N, 0.4))
+    assert held["speed_ratios"] == [] and held["helps"]

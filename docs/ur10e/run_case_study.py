@@ -28,6 +28,7 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 
 from fricli.core import logs, metrics  # noqa: E402
+from fricli.fitting import learning  # noqa: E402
 from fricli.core.atomic import atomic_write_bytes  # noqa: E402
 from ur10e_neural import PAIRS  # noqa: E402  days with two runs: adapt on one, score on the other
 
@@ -265,6 +266,7 @@ def adapt_pairs(work: str, base: str, imported: dict[str, str], joints, pairs) -
             done = fricli("adapt", base, on_path, "--seed", "0", "-o", out, "--json", "-q", json_out=True)
             for j in joints:
                 kept = done["joints"][str(j)].get("adapted", True)
+                held = done["joints"][str(j)].get("held_out", {})
                 errors = {}
                 for key, folder in (("base", base), ("adapted", out)):
                     sig = signals(scored_path, j)
@@ -272,18 +274,20 @@ def adapt_pairs(work: str, base: str, imported: dict[str, str], joints, pairs) -
                     errors[key] = rms(e[metrics.in_motion(sig["qd"])])
                 cases.append({"adapted_on": on, "scored_on": scored, "joint": j, "residual_kept": kept,
                               "base_error": errors["base"], "adapted_error": errors["adapted"],
-                              "base_level_on": base_level(base, on_path, j), "base_level_scored": base_level(base, scored_path, j)})
+                              "half_ratios": held.get("half_ratios", []), "speed_ratios": held.get("speed_ratios", []),
+                              "significant": held.get("gain_mean", 0.0) > learning.SIGNIFICANCE * held.get("gain_se", np.inf),
+                              "base_off_on": base_off(base, on_path, j), "base_off_scored": base_off(base, scored_path, j)})
     return {"cases": cases}
 
 
-def base_level(base: str, path: str, joint: int) -> float:
-    """How far the base model's friction level is off on a run: the coefficient of sign(qd) in the least-squares
-    fit of [sign(qd), 1] to its error over the rows in motion [Nm]."""
+def base_off(base: str, path: str, joint: int) -> list[float]:
+    """How far the base model's friction is off on a run: the coefficients of qd [Nm s/rad] and sign(qd) [Nm]
+    in the least-squares fit of [qd, sign(qd), 1] to its error over the rows in motion."""
     sig = signals(path, joint)
     mv = metrics.in_motion(sig["qd"])
     e = logs.friction_target(sig) - predicted(os.path.join(base, f"joint_{joint}.npz"), path, joint)
-    cols = np.column_stack([np.sign(sig["qd"]), np.ones_like(e)])[mv]
-    return float(np.linalg.lstsq(cols, e[mv], rcond=None)[0][0])
+    cols = np.column_stack([sig["qd"], np.sign(sig["qd"]), np.ones_like(e)])[mv]
+    return [float(c) for c in np.linalg.lstsq(cols, e[mv], rcond=None)[0][:2]]
 
 
 def twin_alignment(load: str, twin: str, joints) -> dict:
@@ -436,13 +440,24 @@ def adapt_table(result: dict, joints) -> str:
     worse = sum(c["adapted_error"] > c["base_error"] * (1 + 1e-9) for c in cases)
     lines += ["", f"adapted / base on the other run: {min(ratios):.3f} to {max(ratios):.3f} (mean {np.mean(ratios):.3f}); "
               f"residual kept in {kept} of {len(cases)} cases; worse than the base in {worse}"]
+    off = ("The base's error in motion, fitted by qd and sign(qd), is {0[0]:+.3f} Nm s/rad and {0[1]:+.3f} Nm on the "
+           "run adapted on, {1[0]:+.3f} Nm s/rad and {1[1]:+.3f} Nm on the run scored.")
     for c in cases:
-        if c["adapted_error"] > c["base_error"] * (1 + 1e-9) and "base_level_on" in c:
+        if c["adapted_error"] > c["base_error"] * (1 + 1e-9) and "base_off_on" in c:
             lines += ["", f"Worse: joint {c['joint']} adapted on {c['adapted_on'][3:]}, {c['base_error']:.3f} → "
-                      f"{c['adapted_error']:.3f} Nm on {c['scored_on'][3:]}. The base's friction level (the coefficient of "
-                      f"sign(qd) of its error in motion) is off by {c['base_level_on']:+.3f} Nm on the run adapted on and by "
-                      f"{c['base_level_scored']:+.3f} Nm on the run scored: the joint's friction changed between the two runs "
-                      "of the day, which the held-out halves of the run adapted on cannot show."]
+                      f"{c['adapted_error']:.3f} Nm on {c['scored_on'][3:]}. " + off.format(c["base_off_on"], c["base_off_scored"])]
+    by_speed = [c for c in cases if not c["residual_kept"] and c.get("speed_ratios") and c["significant"]
+                and max(c["half_ratios"]) <= 1 - learning.MIN_GAIN]
+    if by_speed:
+        lines += ["", "Kept as the base by the rule in speed alone (the residual lowered the held-out RMS by "
+                  f"{100 * learning.MIN_GAIN:g} % on each half in time, significantly, but not on both the slower and the faster "
+                  "half of the rows): " + "; ".join(
+                      f"joint {c['joint']} adapted on {c['adapted_on'][3:]} (held out: each half in time "
+                      f"×{c['half_ratios'][0]:.3f}, ×{c['half_ratios'][1]:.3f}; slower, faster half ×{c['speed_ratios'][0]:.3f}, "
+                      f"×{c['speed_ratios'][1]:.3f}; " + off.format(c["base_off_on"], c["base_off_scored"])[:-1].replace(
+                          "The base's error in motion", "the base's error") + ")" for c in by_speed) + ".",
+                  "NN_add sees the gravity torque and the direction of motion, not the speed: a residual that grows with speed "
+                  "becomes one level per direction, right at the log's own speeds only."]
     return "\n".join(lines)
 
 

@@ -63,11 +63,13 @@ def _decision(summary: dict, tau: str) -> str:
         return "too few rows to hold out (fewer than two pieces of motion): the base model is kept"
     figures = (f"held out in {held['folds']} folds ({held['rows']:,} rows): RMS [{tau}] base "
                f"{held['base_rmse']:.3f}, adapted {held['adapted_rmse']:.3f} "
-               f"(each half x{', x'.join(f'{r:.3f}' for r in held['half_ratios'])})")
+               f"(each half x{', x'.join(f'{r:.3f}' for r in held['half_ratios'])}"
+               + (f"; slower, faster half x{held['speed_ratios'][0]:.3f}, x{held['speed_ratios'][1]:.3f}"
+                  if held.get("speed_ratios") else "") + ")")
     if summary["adapted"]:
         return f"{figures}; the residual network is kept"
     return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
-            f"on each half and in most pieces of the log): the base model is kept")
+            f"on each half in time and in speed, and in most pieces of the log): the base model is kept")
 
 
 @cli.command("train-base")
@@ -180,7 +182,8 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     with every command that takes a model. Held-out rows decide (NN_add trained on the first half
     of every stretch of motion, scored on the second, and the other way round; for a log without
     velocity levels, the halves of its time): when NN_add does not lower the RMS error there
-    consistently (by 1 % on each half, and in most pieces of the log), the output is BASE
+    consistently (by 1 % on each half, on the slower and the faster half of those rows, and in
+    most pieces of the log), the output is BASE
     unchanged (said on stderr, recorded in the file's fit as "adapted": false). BASE may be a model folder (one model per joint):
     on a log of several joints every joint is adapted into the folder -o DIR (docs/joints.md). BASE
     may be a coupled group's model: each joint of its group (or --joint) gets NN_add on top of the

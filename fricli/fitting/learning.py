@@ -40,14 +40,17 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state (bristle_check)
 # adapt keeps NN_add only when, trained on one half of the log's pieces and scored on the other
-# half (both ways round), it lowers the RMS error by MIN_GAIN at least on each half and the gain
-# per piece is positive by SIGNIFICANCE standard errors (about 95 % one-sided over the ten
-# pieces): a network fitted to pure noise moves the RMS by a fraction of a per cent, and a gain
-# that only some pieces of the log show is not one that another run of the joint will show. The
-# halves put every held-out row on the far side in time of all the rows its network was trained
-# on, as another run is: a real joint's residual drifts over seconds (the friction level moves as
-# the joint warms), and held-out pieces between training pieces would share their error. A
-# network whose gain shows on one side in time only fails on the other half
+# half (both ways round), it lowers the RMS error by MIN_GAIN at least on each half, on the
+# held-out rows slower than their median speed and on the faster ones, and the gain per piece is
+# positive by SIGNIFICANCE standard errors (about 95 % one-sided over the ten pieces): a network
+# fitted to pure noise moves the RMS by a fraction of a per cent, and a gain that only some pieces
+# of the log show is not one that another run of the joint will show. The halves put every
+# held-out row on the far side in time of all the rows its network was trained on, as another run
+# is: a real joint's residual drifts over seconds (the friction level moves as the joint warms
+# up), and held-out pieces between training pieces would share their error. A network whose gain
+# shows on one side in time only fails on the other half. NN_add sees no velocity: a gain at some
+# speeds only is a velocity dependence it turned into a level, which another run moving at other
+# speeds does not share.
 MIN_GAIN = 0.01
 SIGNIFICANCE = 2.0
 FOLDS = 2
@@ -461,7 +464,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
             fold.fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred)
             return fold.on_base(sig, base_pred)
 
-        held = cross_validate(fit_predict, sel.blocks, target, base_pred)
+        held = cross_validate(fit_predict, sel.blocks, target, base_pred, speed=np.abs(qd))
         summary["held_out"] = held
         summary["adapted"] = held["helps"]
     else:
@@ -471,7 +474,8 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     return (model if summary["adapted"] else base), summary
 
 
-def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray, base_pred: np.ndarray) -> dict:
+def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray, base_pred: np.ndarray,
+                   speed: np.ndarray | None = None) -> dict:
     """Whether a residual model beats its base on rows it was not trained on.
 
     ``blocks`` (n,) int gives the piece 0..PIECES-1 of every usable row (-1: not used); the
@@ -479,10 +483,12 @@ def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray
     ``fit_predict(train_rows)`` trains on the rows of one fold and returns the prediction (n,)
     [Nm] for every row, kept for the other fold. Returns the RMS [Nm] of base and adapted model
     over the held-out rows and the ratio of the two on each half ("half_ratios": the second
-    half's, trained on the first, then the first half's), the mean and
+    half's, trained on the first, then the first half's); with ``speed`` (n,) [|qd|], the same
+    ratio on the held-out rows slower than their median speed and on the others
+    ("speed_ratios", slow then fast; none when all rows move at one speed); the mean and
     standard error of the per-piece gain in mean squared error [Nm^2], and "helps": the RMS
-    falls by MIN_GAIN on each half and the mean gain exceeds SIGNIFICANCE standard errors
-    (False when fewer than two pieces hold rows).
+    falls by MIN_GAIN on each half and each speed half, and the mean gain exceeds SIGNIFICANCE
+    standard errors (False when fewer than two pieces hold rows).
     """
     first = (blocks >= 0) & (blocks < training_data.PIECES // 2)
     second = blocks >= training_data.PIECES // 2
@@ -491,9 +497,13 @@ def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray
     for train, held in ((first, second), (second, first)):
         if train.any() and held.any():
             pred[held] = fit_predict(np.flatnonzero(train))[held]
-            new, old = np.mean((target - pred)[held] ** 2), np.mean((target - base_pred)[held] ** 2)
-            half_ratios.append(float(np.sqrt(new / old)) if old > 0 else (1.0 if new == 0 else np.inf))
+            half_ratios.append(rms_ratio(target, pred, base_pred, held))
     rows = blocks >= 0
+    speed_ratios = []
+    if speed is not None and len(half_ratios) == FOLDS:
+        slow = speed < np.median(speed[rows])
+        if (rows & slow).any():
+            speed_ratios = [rms_ratio(target, pred, base_pred, rows & part) for part in (slow, ~slow)]
     e_base, e_new = (target - base_pred)[rows], (target - pred)[rows]
     gains = np.array([np.mean(e_base[b] ** 2 - e_new[b] ** 2) for b in
                       (blocks[rows] == k for k in range(training_data.PIECES)) if b.any()])
@@ -503,6 +513,12 @@ def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray
     base_rms, new_rms = float(np.sqrt(np.mean(e_base ** 2))), float(np.sqrt(np.mean(e_new ** 2)))
     mean, se = float(gains.mean()), float(gains.std(ddof=1) / np.sqrt(gains.size))
     return {**out, "base_rmse": base_rms, "adapted_rmse": new_rms, "half_ratios": half_ratios,
-            "gain_mean": mean, "gain_se": se,
-            "helps": bool(len(half_ratios) == FOLDS and max(half_ratios) <= 1.0 - MIN_GAIN
+            "speed_ratios": speed_ratios, "gain_mean": mean, "gain_se": se,
+            "helps": bool(len(half_ratios) == FOLDS and max(half_ratios + speed_ratios) <= 1.0 - MIN_GAIN
                           and mean > SIGNIFICANCE * se)}
+
+
+def rms_ratio(target: np.ndarray, pred: np.ndarray, base_pred: np.ndarray, rows: np.ndarray) -> float:
+    """RMS error of ``pred`` over that of ``base_pred`` on ``rows`` (bool (n,))."""
+    new, old = np.mean((target - pred)[rows] ** 2), np.mean((target - base_pred)[rows] ** 2)
+    return float(np.sqrt(new / old)) if old > 0 else (1.0 if new == 0 else np.inf)
