@@ -17,6 +17,7 @@ from fricli.models.lugre import LuGreModel
 
 PARAMS = {2: dict(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, kc=0.03, ks=0.04, sigma0=1e4, sigma1=5.0),
           4: dict(fc=2.0, fs=2.5, vs=0.05, delta=1.0, fv=4.0, kc=0.02, ks=0.03, sigma0=1e4, sigma1=5.0)}
+ROOT = Path(__file__).resolve().parent.parent
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_ext": "Nm"}
 
 
@@ -191,6 +192,20 @@ def test_one_joint_failing_leaves_the_others(files, tmp_path):
     assert "joint 4: " in line and "(models of joints 2 written)" in line
     assert [p.name for p in out.iterdir()] == ["joint_2.npz"]
     models.load(str(out / "joint_2.npz"))
+
+
+def test_joints_failing_for_one_reason_are_named_together(tmp_path):
+    """A recording of one joint moving, the others held: one reason, said once."""
+    cols = [dict(joint_columns(2, seed=j), joint=np.full(2000, j)) for j in (1, 2, 3)]
+    for held in cols[0], cols[2]:
+        for k in ("q", "qd", "qdd"):
+            held[k] = np.zeros(2000)
+    pq.write_table(no_inertia(logs.table_from_arrays({k: np.concatenate([c[k] for c in cols]) for k in cols[0]},
+                                                    UNITS)), tmp_path / "one.parquet")
+    line = one_error_line(run("identify", tmp_path / "one.parquet", "-o", tmp_path / "arm", "-q"), errors.DATA)
+    assert line.count("joints 1, 3: ") == 1 and "joint 1:" not in line and "joint 3:" not in line
+    assert line.endswith("(models of joints 2 written)")
+    assert f"    {line}\n" in (ROOT / "docs" / "joints.md").read_text()      # the line docs/joints.md shows
 
 
 def test_train_base_adapt_and_diagnose_fix_into_folders(files, tmp_path):

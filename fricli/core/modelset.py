@@ -115,7 +115,8 @@ class PartialFailure(FricliError):
 
 def each_joint(covered: list, work: Callable[[object], None], what: str = "models") -> list:
     """Run ``work(joint)`` for every joint; a joint's FricliError does not stop the others.
-    Returns the joints done; raises ``PartialFailure`` naming the failed joints after the rest."""
+    Returns the joints done; raises ``PartialFailure`` naming the failed joints after the rest,
+    those that failed for the same reason together."""
     done, failed = [], []
     for joint in covered:
         try:
@@ -127,7 +128,11 @@ def each_joint(covered: list, work: Callable[[object], None], what: str = "model
             failed.append((joint, exc))
     if failed:
         first = failed[0][1]
-        err = PartialFailure(f"joint {failed[0][0]}: {first}" + "".join(f"; joint {j}: {e}" for j, e in failed[1:])
+        reasons: dict[str, list] = {}     # joints failing for the same reason are named together
+        for joint, exc in failed:
+            reasons.setdefault(str(exc), []).append(joint)
+        err = PartialFailure("; ".join(f"joint{'s' if len(js) > 1 else ''} {listed(js)}: {reason}"
+                                       for reason, js in reasons.items())
                              + (f" ({what} of joints {listed(done)} written)" if done else ""))
         err.exit_code = first.exit_code
         raise err
