@@ -6,7 +6,10 @@ no temporaries, where h, a, d have the shape (units, samples).
 
     ELU          f(x) = x for x > 0, e^x - 1 otherwise. Computed as max(x, E - 1) with
                  E = exp(min(x, 0)): one exp per element, never of a large positive number, and
-                 E is also the derivative (E = 1 for x >= 0).
+                 E is also the derivative (E = 1 for x >= 0). Without the derivative
+                 (``value``, prediction) in float32, as max(x, expm1(min(x, 0))): numpy's float32
+                 expm1 takes about 30 % less time than its exp and a subtraction (in float64,
+                 more), and agrees with them to 1 ulp.
     sigmoid      f(x) = 1 / (1 + e^-x), f' = f (1 - f).
     jump k       phi_k(x) = (1 - e^-x)^k for x >= 0, 0 otherwise (Selmic & Lewis 2002);
                  phi_k' = k (1 - e^-x)^(k-1) e^-x for x >= 0 (right derivative at 0), 0 otherwise.
@@ -73,6 +76,10 @@ class Activation:
         """a[:] = f(h), d[:] = f'(h); all (units, samples), three distinct buffers."""
         raise NotImplementedError
 
+    def value(self, h: np.ndarray, a: np.ndarray, scratch: np.ndarray) -> None:
+        """a[:] = f(h) alone (prediction); ``scratch``, of h's shape, may be overwritten."""
+        self.forward(h, a, scratch)
+
     def spec(self):
         return self.name
 
@@ -98,6 +105,15 @@ class ELU(Activation):
         np.exp(d, out=d)                 # E, which is also f'(h)
         np.subtract(d, 1, out=a)
         np.maximum(a, h, out=a)
+
+    def value(self, h, a, scratch):
+        np.minimum(h, _zeros_like(self._zeros, h), out=scratch)
+        if h.dtype == np.float32:
+            np.expm1(scratch, out=scratch)
+        else:
+            np.exp(scratch, out=scratch)
+            np.subtract(scratch, 1, out=scratch)
+        np.maximum(scratch, h, out=a)
 
 
 class Sigmoid(Activation):
@@ -164,6 +180,12 @@ class Mixed(Activation):
         start = 0
         for n, act in self.parts:
             act.forward(h[start:start + n], a[start:start + n], d[start:start + n])
+            start += n
+
+    def value(self, h, a, scratch):
+        start = 0
+        for n, act in self.parts:
+            act.value(h[start:start + n], a[start:start + n], scratch[start:start + n])
             start += n
 
     def spec(self):

@@ -77,7 +77,7 @@ class HeadedWorkspace(Workspace):
     without ``backward`` (prediction) no fac: the head computes values only."""
 
     def __init__(self, net: "HeadedNetwork", n: int, backward: bool = True, groups: Groups | None = None):
-        super().__init__(net, n, groups)
+        super().__init__(net, n, groups, backward)
         dt = net.dtype
         self.aux = np.empty((net.head.n_aux, n), dtype=dt)
         self.out = np.empty((1, n), dtype=dt)

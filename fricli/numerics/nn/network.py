@@ -35,7 +35,7 @@ from fricli.numerics.threads import single_threaded
 from fricli.numerics.nn import activations as acts
 from fricli.numerics.nn.activations import Activation
 
-PREDICT_CHUNK = 4096    # columns per forward pass when predicting: the layers stay in the cache
+PREDICT_CHUNK = 16384     # columns per forward pass when predicting (fastest file to file on 2 cores: docs/performance.md)
 REPEATS_WORTHWHILE = 0.5  # a fixed-input workspace groups samples when at most this share of columns is distinct
 _PREDICT_THREADS = contextvars.ContextVar("predict_threads", default=2)
 
@@ -151,7 +151,7 @@ class Network:
     def workspace(self, n: int, backward: bool = True, groups: "Groups | None" = None) -> "Workspace":
         """Buffers for ``n`` samples (``backward``: also for ``backward``; a plain network's
         forward pass needs them all the same); ``groups``: the layers run once per group."""
-        return Workspace(self, n, groups)
+        return Workspace(self, n, groups, backward)
 
     def workspace_for(self, x: np.ndarray, backward: bool = True) -> "Workspace":
         """A workspace holding the fixed inputs x (rows as ``set_inputs``, n), its layers run once
@@ -167,7 +167,10 @@ class Network:
         """Outputs (n_out, n) for the inputs already in ``ws.x`` (and ``ws.s``)."""
         for (_, act), w, a, h, d, a_next in zip(self.hidden, self.weights, ws.a, ws.h, ws.d, ws.a[1:]):
             np.matmul(w, a, out=h)
-            act.forward(h, a_next[:h.shape[0]], d)
+            if ws.backward:
+                act.forward(h, a_next[:h.shape[0]], d)
+            else:
+                act.value(h, a_next[:h.shape[0]], d)
         np.matmul(self.weights[-1], ws.a[-1], out=ws.y_cols)
         if ws.groups is not None:
             np.take(ws.y_cols, ws.groups.index, axis=1, out=ws.y)
@@ -248,14 +251,15 @@ class Workspace:
 
     a[l]  (units_l + 1 [+ n_skip], cols)  layer inputs, with the row of ones (skip rows last)
     h[l]  (units, cols)                   pre-activations of hidden layer l
-    d[l]  (units, cols)                   activation derivatives of hidden layer l
+    d[l]  (units, cols)                   activation derivatives of hidden layer l (without
+                                          ``backward``, scratch: forward computes values only)
     g[l]  (units, cols)                   back-propagated gradients of hidden layer l
     y     (n_out, n)                      outputs (``y_cols`` (n_out, cols) before the copy-out)
     x, s  views of a[0] and of the skip rows, where inputs are written
     """
 
-    def __init__(self, net: Network, n: int, groups: Groups | None = None):
-        self.n, self.groups = int(n), groups
+    def __init__(self, net: Network, n: int, groups: Groups | None = None, backward: bool = True):
+        self.n, self.groups, self.backward = int(n), groups, backward
         cols = self.n if groups is None else groups.m
         dt = net.dtype
         rows = [net.n_in] + [units for units, _ in net.hidden]

@@ -23,10 +23,11 @@ import numpy as np
 from fricli.core.errors import FitError
 from fricli.numerics.nn.adam import Adam
 from fricli.numerics.threads import single_threaded
-from fricli.numerics.nn.network import PREDICT_CHUNK, Network
+from fricli.numerics.nn.network import Network
 
 CHUNK_MIN = 8192          # full batches this large are split over two threads
 EVAL_POINTS = 2000        # default number of loss records over a run given in steps
+EVAL_CHUNK = 4096         # columns per pass of the validation loss (the order of its sum is fixed)
 SCHEDULES = ("constant", "cosine")
 
 
@@ -141,15 +142,17 @@ class Evaluator:
     Data sets larger than one chunk share one workspace, refilled chunk by chunk.
     """
 
-    def __init__(self, net: Network, x: np.ndarray, t: np.ndarray, chunk: int = PREDICT_CHUNK):
+    def __init__(self, net: Network, x: np.ndarray, t: np.ndarray, chunk: int = EVAL_CHUNK):
         self.net, self.x, self.t = net, x, t
         n = x.shape[1]
         self.cuts = list(range(0, n, chunk)) + [n]
         self.filled = len(self.cuts) == 2
+        # the training pass's arithmetic (backward workspaces), not prediction's: which step
+        # training keeps rests on these sums
         if self.filled:
-            self.ws = {n: net.workspace_for(x, backward=False)}
+            self.ws = {n: net.workspace_for(x, backward=True)}
         else:
-            self.ws = {size: net.workspace(size, backward=False)
+            self.ws = {size: net.workspace(size, backward=True)
                        for size in {b - a for a, b in zip(self.cuts[:-1], self.cuts[1:])}}
 
     def sse(self) -> float:
