@@ -370,10 +370,7 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
         if not train.size or not val.size:
             continue
         model = new_model(steps)
-        fold_eval = None
-        if on_eval is not None:
-            def fold_eval(step, total, train_loss, val_loss, offset=done):
-                on_eval(offset + step, len(folds) * steps, train_loss, val_loss)
+        fold_eval = None if on_eval is None else fold_progress(on_eval, done, len(folds) * steps)
         model.fit(subset(sig, train), target[train], subset(sig, val), target[val], rng=rng, on_eval=fold_eval,
                   **fit_kwargs)
         done += steps
@@ -389,6 +386,14 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     step = min((best + 1) * fitted[0].eval_every_, steps)
     return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
             "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted, "held": held_out}
+
+
+def fold_progress(on_eval: Callable, offset: int, total: int) -> Callable:
+    """One fold's ``on_eval``: its steps counted after the ``offset`` steps of the folds before,
+    out of ``total`` over all folds."""
+    def report(step, _fold_total, train_loss, val_loss):
+        on_eval(offset + step, total, train_loss, val_loss)
+    return report
 
 
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:
