@@ -80,6 +80,12 @@ def test_fused_forms_match_plain_pairs(spec, rng):
     np.testing.assert_allclose(a, want, rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(d, want_d, rtol=1e-5, atol=1e-6)
     assert acts.from_spec(act.spec()).spec() == act.spec()
+    for dtype in (np.float32, np.float64):        # the values alone, as prediction computes them
+        hv = h.astype(dtype)
+        with_d, alone, scratch = np.empty_like(hv), np.empty_like(hv), np.empty_like(hv)
+        act.forward(hv, with_d, np.empty_like(hv))
+        act.value(hv, alone, scratch)
+        np.testing.assert_allclose(alone, with_d, rtol=2 * np.finfo(dtype).eps, atol=2 * np.finfo(dtype).eps)
 
 
 def test_unknown_activation_refused():
