@@ -386,6 +386,7 @@ def test_refinement_that_does_not_converge_keeps_its_best_estimate():
     ("sine", "too few steady-state samples"),
     ("still", "does not move"),
     ("one-speed", "only one speed"),
+    ("held", "spans less than --settle 0.01"),
 ])
 def test_unfittable_data_refused(case, needle):
     if case == "positive-only":
@@ -395,6 +396,12 @@ def test_unfittable_data_refused(case, needle):
         sig = sweep_signals(levels=[0.05, 0.2, 0.5, -0.25 * metrics.REST_SHARE], both=False)
     elif case == "one-speed":
         sig = sweep_signals(levels=[0.2])
+    elif case == "held":   # a joint held by its controller while others move: encoder jitter only
+        t = np.arange(3000) * 0.01
+        q = 1e-4 * np.random.default_rng(0).standard_normal(t.size)
+        qd = np.gradient(q, t)
+        sig = {"t": t, "q": q, "qd": qd, "tau_m": np.sign(qd) * 7 + 12 * qd, "tau_g": 0 * t,
+               "tau_dyn": 0.3 * np.sin(t)}
     else:
         t = np.arange(3000) * 0.01
         qd = np.zeros_like(t) if case == "still" else 0.5 * np.cos(6 * t)
