@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import io
 import shutil
 import sys
 import tempfile
@@ -122,7 +121,10 @@ def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
     if not data:
         raise LogError(f"{name}: empty input, not a Parquet log")
     try:
-        return pq.ParquetFile(io.BytesIO(data), pre_buffer=False)  # pre_buffer would keep a second copy
+        # an Arrow buffer, not a Python file object: pyarrow's reader threads reading through
+        # Python now and then abort the interpreter at exit ("terminate called without an active
+        # exception"); pre_buffer would keep a second copy
+        return pq.ParquetFile(pa.BufferReader(data), pre_buffer=False)
     except Exception:  # pyarrow raises several types for corrupt input
         raise LogError(not_parquet(name, data[:4])) from None
 

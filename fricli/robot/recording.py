@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import io
 import re
 
 import numpy as np
@@ -225,7 +224,7 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
     names = [f"c{i}" for i in range(n_fields)]
     try:
         table = pcsv.read_csv(
-            io.BytesIO(body),
+            pa.BufferReader(body),
             read_options=pcsv.ReadOptions(column_names=names, use_threads=False),
             parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, invalid_row_handler=invalid),
             convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.float64() for i in wanted},
@@ -271,7 +270,7 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     body = b"\n".join([data[a:b] for a, b in zip(starts.tolist(), ends.tolist())]) + b"\n"
     names = [f"c{i}" for i in range(n_fields)]
     table = pcsv.read_csv(
-        io.BytesIO(body), read_options=pcsv.ReadOptions(column_names=names),
+        pa.BufferReader(body), read_options=pcsv.ReadOptions(column_names=names),
         parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, ignore_empty_lines=False),
         convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.string() for i in wanted},
                                             include_columns=[names[i] for i in wanted]))
