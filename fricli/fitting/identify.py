@@ -255,11 +255,11 @@ class LuGreIdentifier:
                 self.notes_.append(f"constant-velocity holds cover {100 * share:.0f} % of the moving rows: the "
                                    f"static curve is fitted on every row {self.settle:g} {units.get('q', '')} past a reversal")
         if self.samples_ == "settled":
-            steady = settled_mask(sig["t"], v, settle=self.settle)
             if "q" in sig and float(np.ptp(sig["q"])) < self.settle:
                 raise DataError(f"the joint's position spans less than --settle {self.settle:g} {units.get('q', '')} "
                                 "over the whole log: it moves too little to sample the static curve (a joint held "
                                 "still while others move?)")
+            steady = settled_mask(sig["t"], v, settle=self.settle)
         for name, side in (("positive", v > 0), ("negative", v < 0)):
             count = int((steady & side).sum())
             if count < MIN_STEADY_PER_DIRECTION:
