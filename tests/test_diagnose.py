@@ -228,7 +228,7 @@ def test_clean_log_adds_nothing_and_json_schema(rng):
     assert d.mae_after == d.mae_before
     out = d.to_json()
     assert set(out) == {"mae_before", "mae_after", "cut", "intervals", "effects", "added", "model_errors",
-                        "suspected", "skipped", "notes", "unexplained_share", "unexplained"}
+                        "suspected", "declined", "skipped", "notes", "unexplained_share", "unexplained"}
     for e in out["effects"]:
         assert set(e) == {"name", "significant", "gain", "params", "part", "implausible"}
         assert e["part"] in ("friction", "model")
@@ -365,6 +365,19 @@ def test_simulated_effect_is_ranked_first_and_fixed(lugre_base, effect):
                     "of another log (a gear's ripple is fixed to its position)")
     before, after = _mae(lugre_base, log3), _mae(fixed, log3)
     assert after <= 0.7 * before, f"MAE {before:.3f} -> {after:.3f}"
+
+
+def test_a_drift_holds_its_level_beyond_the_diagnosed_span(lugre_base):
+    """Fitted on 60 s, a straight trend run on for an hour would reverse the friction; beyond
+    the log's time span the fixed model keeps the level the log ended with."""
+    _, log = _sim(2, "drift")
+    d = diagnose(lugre_base, log)
+    fixed = augment(lugre_base, d, log)
+    assert d.added[0] == "drift"
+    t = log.signals["t"]
+    hour, two_hours = ({**log.signals, "t": t + shift} for shift in (3600.0, 7200.0))
+    np.testing.assert_allclose(fixed.predict(hour)[0], fixed.predict(two_hours)[0], rtol=1e-6, atol=1e-6)
+    assert _mae(fixed, log) < 0.7 * _mae(lugre_base, log)
 
 
 def test_simulated_clean_log_adds_nothing(lugre_base):
@@ -669,6 +682,30 @@ def test_a_ratio_beyond_one_is_not_printed_as_a_coefficient():
     assert "not physical" in E.Quadrant().implausible(params, ctx)
     assert E.Load().summary(E.Load().params({"|tau_g|*sign": 0.02}, ctx)) == "kc 0.02000 Nm/Nm"
     assert E.Load().implausible(E.Load().params({"|tau_g|*sign": 0.02}, ctx), ctx) is None
+
+
+def test_a_negative_payload_slope_is_an_echo_of_the_residual_not_a_payload():
+    ctx = E.Context({"qd": np.ones(3)}, np.zeros(3))
+    assert "not physical" in E.Payload().implausible(E.Payload().params({"(|tau_l|-|tau_g|)*sign": -0.3}, ctx), ctx)
+    assert E.Payload().implausible(E.Payload().params({"(|tau_l|-|tau_g|)*sign": 0.05}, ctx), ctx) is None
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_effects_that_would_raise_the_held_out_mae_are_not_added(seed):
+    """A third of one direction's rows, at random, 3 Nm off: an offset or a level lowers the
+    squared error but moves every other row of that direction away from its truth."""
+    rng = np.random.default_rng(seed)
+
+    def friction(s):
+        hit = (s["qd"] > 0) & (rng.random(len(s["qd"])) < 0.3)
+        return CoulombViscous().predict(s)[0] + 3.0 * hit
+
+    log = _with_tau_g(rng, lambda s: 10 * np.sin(s["q"]), friction=friction, noise=0.1)
+    d = diagnose(CoulombViscous(), log)
+    assert d.added == [] and d.terms == [] and d.mae_after == d.mae_before
+    assert d.declined["effects"] and d.declined["mae_after"] > d.mae_before
+    assert "lower the held-out squared error but not the held-out MAE" in table(d)
+    assert augment(CoulombViscous(), d, log).effects == []
 
 
 @pytest.mark.parametrize("inertia, flagged", [(0.5, False), (2.4, False), (-0.05, False), (-1.0, True), (3.0, True)])

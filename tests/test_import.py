@@ -377,3 +377,64 @@ def test_a_ur10e_recording_keeps_every_row_with_or_without_a_garbage_head():
     assert {k: d["lines"] for k, d in dirty.meta["dropped"].items()} == {
         "implausible": [[2, 2]], "zero_row": [[1, 1]], "time_outside": [[3, 3]]}
     assert dirty.table.replace_schema_metadata(None).equals(result.table.replace_schema_metadata(None))
+
+
+# --------------------------------------------------------------------------- what controllers also dump
+
+def test_a_recording_of_zero_rows_is_refused_with_what_was_dropped():
+    with pytest.raises(recording.LogError, match=r"rec.csv: no usable rows \(40 with all values zero"):
+        parse(["%.2f,0,0,0,0,0,0,ok" % (100 + k * 0.01) for k in range(40)])
+
+
+def test_too_few_usable_rows_are_refused_with_what_was_dropped():
+    with pytest.raises(recording.LogError, match=r"only 1 usable row \(39 with same time as the previous row"):
+        parse([rows(1)[0]] * 40)
+
+
+def test_a_byte_that_is_not_ascii_makes_a_field_non_numeric():
+    lines = rows(60)
+    text = "\n".join(lines).encode().split(b"\n")
+    text[19] = text[19].replace(b"0.", b"\xe9.", 1)        # line 20: a Latin-1 byte in a mapped field
+    text[29] = text[29] + b",\xff\xfe"                       # line 30: and one field too many, not UTF-8
+    result = import_recording(b"\n".join(text) + b"\n", mapping(), "rec.csv")
+    assert {k: (d["count"], d["first_line"]) for k, d in result.meta["dropped"].items()} == {
+        "field_count": (1, 30), "non_numeric": (1, 20)}
+    assert len(result.recording.lines) == 58
+
+
+def test_a_byte_order_mark_before_a_header_is_ignored():
+    header = MAPPING.replace("column = 1", 'column = "t"').replace("time = ", "header = true\ntime = ")
+    data = "\ufefft,q1,q2,qd1,qd2,i1,i2,status\n" + "\n".join(rows()) + "\n"
+    result = import_recording(data.encode("utf-8"), mapping(header), "rec.csv")
+    assert len(result.recording.lines) == 40
+
+
+def test_a_single_glitch_of_absurd_current_is_dropped():
+    lines = rows(60)
+    fields = lines[29].split(",")
+    fields[6] = "1e5"                                        # line 30: 100 kA in a current of about 1 A
+    lines[29] = ",".join(fields)
+    assert dropped(parse(lines)) == {"implausible": [[30, 30]]}
+
+
+def test_a_file_of_uninitialised_memory_is_refused():
+    with pytest.raises(recording.LogError, match="no usable rows .*implausible magnitude"):
+        parse(["%.2f,1e150,-3e150,2e150,1e150,7e149,5e150,ok" % (100 + k * 0.01) for k in range(40)])
+
+
+def test_controller_dump_defects_in_the_command(tmp_path):
+    """Not text, bad option values: one line each, with the documented code."""
+    import gzip
+
+    (tmp_path / "map.toml").write_text(MAPPING)
+    (tmp_path / "rec.csv").write_text("\n".join(rows()) + "\n")
+    (tmp_path / "rec.csv.gz").write_bytes(gzip.compress((tmp_path / "rec.csv").read_bytes()))
+    res = run("import", "rec.csv.gz", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == errors.INPUT and res.stderr == (
+        "fricli: error: rec.csv.gz: a gzip file, not a text recording: decompress it first (gunzip)\n")
+    for bad in (["--kt", "2=abc"], ["--payload-mass", "nan", "--payload-frame", "tool0"],
+                ["--gravity", "nan", "0", "0"], ["--cutoff", "inf"]):
+        res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", *bad, cwd=tmp_path)
+        assert res.returncode == errors.USAGE, (bad, res.stderr)
+        assert res.stderr.splitlines()[-1].startswith(f"Error: Invalid value for '{bad[0]}'"), res.stderr
+    assert not (tmp_path / "out.parquet").exists()

@@ -17,6 +17,7 @@ from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from conftest import ROOT  # noqa: E402
 from fricli.core import errors  # noqa: E402
+from fricli.core.errors import LogError  # noqa: E402
 from fricli.robot.importing import build_log, import_recording  # noqa: E402
 from fricli.robot.mapping import parse_bag_mapping, parse_mapping  # noqa: E402
 from fricli.robot.rosbag import read_bag  # noqa: E402
@@ -164,6 +165,14 @@ def test_garbage_messages_at_the_start_are_dropped(tmp_path):
     assert {k: d.ranges for k, d in read.recording.defects.items()} == {
         "implausible": [[2, 2]], "zero_row": [[1, 1]], "time_outside": [[3, 3]]}
     assert list(read.recording.lines) == list(range(4, 84)) and read.origin_ns == START_NS
+
+
+def test_a_bag_of_zero_messages_is_refused(tmp_path):
+    msgs = states(40)
+    for m in msgs:
+        m[2:] = [np.zeros(6), np.zeros(6), np.zeros(6)]
+    with pytest.raises(LogError, match=r"no usable messages \(40 with all values zero"):
+        bag_log(write_bag(tmp_path / "run", msgs))
 
 
 def test_empty_velocities_leave_qd_to_be_derived(tmp_path):

@@ -8,7 +8,7 @@ import math
 
 import click
 
-from fricli.cli.options import common, emit_json, output_option, say, warn
+from fricli.cli.options import Number, common, emit_json, output_option, say, warn
 
 
 def report_path(output: str) -> str:
@@ -42,7 +42,7 @@ class PriorStrength(click.ParamType):
               help="How log joints match URDF joints (default: as recorded by fricli import/dynamics).")
 @click.option("--urdf-joint", "urdf_pairs", multiple=True, metavar="JOINT=NAME",
               help="The URDF joint of a log joint, with --match name. Repeatable.")
-@click.option("--gravity", nargs=3, type=float, default=(0.0, 0.0, -9.81), show_default=True, metavar="X Y Z",
+@click.option("--gravity", nargs=3, type=Number(), default=(0.0, 0.0, -9.81), show_default=True, metavar="X Y Z",
               help="Gravity in the URDF's base frame [m/s^2].")
 @click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
               help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint "
@@ -54,10 +54,11 @@ class PriorStrength(click.ParamType):
 @click.option("--consistency", type=click.Choice(["enforce", "check"]), default="enforce", show_default=True,
               help="enforce: fit again over physically consistent parameters when the linear estimate is not; "
                    "check: refuse (FIT, exit 5) an inconsistent estimate.")
-@click.option("--edge", type=click.FloatRange(min=0), default=0.5, show_default=True,
+@click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
-@click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's).")
+@click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
+              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's); "
+                   "no effect on a log that holds both.")
 @click.option("--report", "report_file", default=None, metavar="REPORT.json",
               help="Where to write the report (default: OUT.calibration.json beside the URDF).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
@@ -96,6 +97,9 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     robot = load_model(urdf, Mapping(time=None, joints=[], gravity=tuple(gravity)))
     table, _ = read_table(log)
     name = "stdin" if log == "-" else log
+    if cutoff is not None and {"qd", "qdd"} <= set(table.column_names):
+        warn(f"note: --cutoff has no effect: {name} holds qd and qdd (derive them again with fricli import "
+             "--cutoff, or leave qdd out of the log)")
     motion = cb.read_motion(table, name, robot, match=match, urdf_names=names,
                             cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce", friction=friction)

@@ -9,7 +9,7 @@ import click
 from fricli import models
 from fricli.core import logs, modelset
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
+from fricli.cli.options import (Number, common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, read_log, reading_kwargs, say, warn)
 from fricli.fitting.diagnosis import driver
 from fricli.fitting.diagnosis import effects as E
@@ -44,6 +44,11 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
         lines.append(f"held-out MAE {d.mae_before:.4g} {u} -> {d.mae_after:.4g} {u} ({100 * d.cut:.0f} % lower; "
                      f"{level} % interval {100 * lo:.0f} to {100 * hi:.0f} % over the {d.folds} folds) "
                      f"with {', '.join(d.added)}")
+    elif d.declined:
+        names = d.declined["effects"]
+        lines.append(f"nothing added: {', '.join(names)} lower{'s' * (len(names) == 1)} the held-out squared error "
+                     f"but not the held-out MAE ({d.mae_before:.4g} {u} -> {d.declined['mae_after']:.4g} {u}): a few "
+                     f"large residuals drive {'it' if len(names) == 1 else 'them'}")
     else:
         lo, hi = d.intervals["mae_before"]
         lines.append(f"no missing effect found: nothing added (held-out MAE {d.mae_before:.4g} {u}, {level} % "
@@ -90,9 +95,9 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
               help="Augmented model file to write with --fix (.npz), or a folder for one per joint.")
 @click.option("--folds", type=click.IntRange(min=3, max=100), default=driver.DEFAULT_FOLDS, show_default=True,
               help="Contiguous folds over time for the held-out scores.")
-@click.option("--min-gain", type=click.FloatRange(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
+@click.option("--min-gain", type=Number(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
               show_default=True, help="Share of the remaining held-out squared residual an effect must remove.")
-@click.option("--alpha", type=click.FloatRange(min=0, max=0.5, min_open=True), default=driver.DEFAULT_ALPHA,
+@click.option("--alpha", type=Number(min=0, max=0.5, min_open=True), default=driver.DEFAULT_ALPHA,
               show_default=True, help="Significance level of the held-out improvement.")
 @click.option("--effects", "only", default=None, callback=_effect_names, metavar="NAMES",
               help="Comma-separated candidate effects to test (default: all).")
@@ -185,7 +190,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
                        + ("\n" if several else ""))
 
     def report(made, refitted: bool = False):
-        show(made.diagnosis, made.data, made.base)
+        show(made.diagnosis, made.data, made.base + (", refitted on the recomputed log" if refitted else ""))
         _say_fixed(made, quiet, refitted)
         return made.diagnosis.to_json()
 

@@ -9,7 +9,7 @@ import click
 from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
+from fricli.cli.options import (Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
                                 reading_kwargs, say)
 
 
@@ -32,7 +32,7 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
               help="A model file, or a model folder with one model per joint, to evaluate (repeatable).")
 @click.option("--log", "log_specs", multiple=True, required=True, metavar="[NAME=]LOG.parquet",
               help="A log to evaluate on (repeatable).")
-@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
               help="Zero-phase low-pass [Hz] on the external-torque estimate.")
 @log_reading
 @json_flag
@@ -72,7 +72,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @click.argument("model", type=click.Path())
 @click.argument("log")
 @click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Folder for the figures and index.html.")
-@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
               help="Zero-phase low-pass [Hz] on the external-torque estimate (default: none, as in evaluate and "
                    "estimate-ext; --lowpass 5 smooths it).")
 @log_reading

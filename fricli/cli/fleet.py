@@ -7,7 +7,7 @@ import click
 
 from fricli.core import errors
 from fricli.cli import cli
-from fricli.cli.options import common, emit_json, json_flag, progress_enabled, say, warn
+from fricli.cli.options import Number, common, emit_json, json_flag, progress_enabled, say, warn
 
 
 @cli.command("fleet")
@@ -85,9 +85,9 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
               help="The first days of a joint's data that set its baseline.")
 @click.option("--window-days", type=click.IntRange(min=2), default=14, show_default=True,
               help="Days over which the growth is measured (the latest ones).")
-@click.option("--max-level", type=click.FloatRange(min=0, min_open=True), default=0.15, show_default=True,
+@click.option("--max-level", type=Number(min=0, min_open=True), default=0.15, show_default=True,
               help="Flag a parameter above its baseline by more than this share.")
-@click.option("--max-growth", type=click.FloatRange(min=0, min_open=True), default=0.01, show_default=True,
+@click.option("--max-growth", type=Number(min=0, min_open=True), default=0.01, show_default=True,
               help="Flag a parameter growing faster than this share of its baseline per day.")
 @click.option("--figures", metavar="DIR", default=None,
               help="Write a PNG per flagged joint into DIR (created when missing).")

@@ -11,6 +11,22 @@ import click
 from fricli.core import errors, timewindow
 
 
+class Number(click.FloatRange):
+    """A finite float, optionally within bounds: nan and inf are refused as USAGE like any bad
+    option value (click's float and FloatRange accept them)."""
+
+    name = "float"
+
+    def __init__(self, min=None, max=None, min_open=False, max_open=False):
+        super().__init__(min=min, max=max, min_open=min_open, max_open=max_open)
+
+    def convert(self, value, param, ctx):
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value!r} is not a finite number.", param, ctx)
+        return number
+
+
 def _set_debug(ctx: click.Context, _param, value: bool) -> bool:
     if value:
         ctx.meta["fricli.debug"] = True
@@ -21,7 +37,7 @@ def common(f):
     """--quiet and --debug."""
     f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
                      help="Show the full traceback on errors.")(f)
-    f = click.option("-q", "--quiet", is_flag=True, help="No progress bars or messages on stderr.")(f)
+    f = click.option("-q", "--quiet", is_flag=True, help="No progress bars or messages on stderr (warnings and errors still go there).")(f)
     return f
 
 
@@ -177,8 +193,8 @@ def _click_option(opt):
     elif opt.type in ("float", "int"):
         bounded = opt.low is not None or opt.high is not None
         if opt.type == "float":
-            kwargs["type"] = (click.FloatRange(min=opt.low, max=opt.high, min_open=opt.low_open) if bounded
-                              else float)
+            kwargs["type"] = (Number(min=opt.low, max=opt.high, min_open=opt.low_open) if bounded
+                              else Number())
         else:
             kwargs["type"] = click.IntRange(min=opt.low, max=opt.high) if bounded else int
     return click.option(opt.flag, default=opt.default, show_default=opt.default is not None, **kwargs)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fricli.cli.options import common, emit_json, read_log, say, window_options
+from fricli.cli.options import Number, common, emit_json, read_log, say, window_options
 
 
 @click.command("payload")
@@ -12,9 +12,9 @@ from fricli.cli.options import common, emit_json, read_log, say, window_options
 @click.option("--frame", required=True, help="The URDF frame (link) that carries the payload, e.g. tool0.")
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="The robot description (default: the one the log was imported with).")
-@click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
               help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's).")
-@click.option("--edge", type=click.FloatRange(min=0), default=0.5, show_default=True,
+@click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
 @window_options

@@ -7,7 +7,7 @@ import click
 from fricli.applying import predicting
 from fricli.core import modelset
 from fricli.cli import cli
-from fricli.cli.options import (common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
+from fricli.cli.options import (Number, common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
                                 output_option, progress_enabled, say, time_window, warn)
 
 
@@ -120,7 +120,7 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
 @click.argument("model", type=click.Path())
 @click.argument("log")
 @output_option(help="Output log (Parquet; - for stdout).")
-@click.option("--lowpass", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
               help="Zero-phase Butterworth low-pass of tau_ext_pred at this cut-off [Hz] (reads the log whole).")
 @log_reading
 @batch_option

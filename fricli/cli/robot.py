@@ -8,8 +8,21 @@ from pathlib import Path
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import common, output_option, say, warn
+from fricli.cli.options import Number, common, output_option, say, warn
 from fricli.core.errors import LogError
+
+
+def _pairs(what: str, nonnegative: bool = False):
+    """A callback turning repeated JOINT=VALUE options into {joint: value}; a malformed pair is
+    a bad option (USAGE)."""
+    def parse(ctx, param, pairs):
+        from fricli.robot import mapping as mp
+
+        try:
+            return mp.parse_overrides(pairs, what, nonnegative=nonnegative)
+        except LogError as exc:
+            raise click.BadParameter(str(exc).removeprefix(f"{what}: "), ctx=ctx, param=param) from None
+    return parse
 
 
 def urdf_options(f):
@@ -18,14 +31,15 @@ def urdf_options(f):
         click.option("--match", type=click.Choice(["name", "order"]), default=None,
                      help="How log joints match URDF joints (import: overrides the mapping's robot.match)."),
         click.option("--rotor-inertia", "inertia_pairs", multiple=True, metavar="JOINT=VALUE",
+                     callback=_pairs("--rotor-inertia", nonnegative=True),
                      help="Reflected rotor inertia [kg m^2] added to the joint's mass-matrix diagonal. Repeatable."),
-        click.option("--gravity", nargs=3, type=float, default=None, metavar="X Y Z",
+        click.option("--gravity", nargs=3, type=Number(), default=None, metavar="X Y Z",
                      help="Gravity in the URDF's base frame [m/s^2] (default 0 0 -9.81; import: the mapping's if given)."),
-        click.option("--payload-mass", type=click.FloatRange(min=0), default=None, help="Known payload mass [kg]."),
-        click.option("--payload-com", nargs=3, type=float, default=None, metavar="X Y Z",
+        click.option("--payload-mass", type=Number(min=0), default=None, help="Known payload mass [kg]."),
+        click.option("--payload-com", nargs=3, type=Number(), default=None, metavar="X Y Z",
                      help="Payload centre of mass [m] in the payload frame (default 0 0 0)."),
         click.option("--payload-frame", default=None, help="URDF frame (link) that carries the payload."),
-        click.option("--cutoff", type=click.FloatRange(min=0, min_open=True), default=None,
+        click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
                      help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model (default: "
                           "the log contract's, 50 Hz)."),
     ]):
@@ -75,7 +89,7 @@ def urdf_joint_names(pairs) -> dict[str, str]:
                    "Required for a text recording; for a ROS bag it says what the effort is and which joints.")
 @click.option("--topic", default=None, metavar="TOPIC",
               help="ROS bag: the sensor_msgs/JointState topic (default: the bag's only one).")
-@click.option("--kt", "kt_pairs", multiple=True, metavar="JOINT=VALUE",
+@click.option("--kt", "kt_pairs", multiple=True, metavar="JOINT=VALUE", callback=_pairs("--kt"),
               help="Drive gain [Nm/A] of a joint (torque constant x gear ratio); overrides the mapping. Repeatable.")
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="Add tau_g and tau_dyn from this robot description (needs Pinocchio: pip install 'fricli[robot]').")
@@ -138,8 +152,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
         mapping = read.mapping
     payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
-    mp.apply_overrides(mapping, kt=mp.parse_overrides(kt_pairs, "--kt"),
-                       rotor_inertia=mp.parse_overrides(inertia_pairs, "--rotor-inertia", nonnegative=True),
+    mp.apply_overrides(mapping, kt=kt_pairs, rotor_inertia=inertia_pairs,
                        match=match, gravity=gravity or None, payload=payload)
     model = None
     if urdf is not None:
@@ -221,7 +234,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     table, _ = read_table(log)
     name = "stdin" if log == "-" else log
     table, record = add_terms(table, model, name, match=match, urdf_names=names,
-                              rotor_inertia=mp.parse_overrides(inertia_pairs, "--rotor-inertia", nonnegative=True),
+                              rotor_inertia=inertia_pairs,
                               gravity=robot.gravity, payload=payload,
                               cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     write_table(table, output)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import common, say
+from fricli.cli.options import Number, common, say
 from fricli.sim import effects as fx
 from fricli.sim import simulator
 
@@ -43,9 +43,9 @@ def _fleet_size(ctx, param, value):
                    f"finds ({', '.join(f'{a} is {n}' for a, n in fx.ALIASES.items())}, the older names, are "
                    "accepted). See docs/simulator.md.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed.")
-@click.option("--rate", type=click.FloatRange(min=1.0, max=10000.0), default=100.0, show_default=True,
+@click.option("--rate", type=Number(min=1.0, max=10000.0), default=100.0, show_default=True,
               help="Output sample rate [Hz] (friction is integrated at >= 1 kHz).")
-@click.option("--duration", type=click.FloatRange(min=10.0, max=36000.0), default=None,
+@click.option("--duration", type=Number(min=10.0, max=36000.0), default=None,
               help="Length of the extended scenario [s] (default 120).")
 @click.option("--friction-state", type=click.Choice(["base", "shifted"]), default=None,
               help="Friction state: base (warm, an exact extended LuGre model) or shifted (cold, "

@@ -18,8 +18,10 @@ the options --no-gravity/--no-dynamics, or the schema metadata key ``fricli.zero
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
+import os
 import shutil
 import sys
 import tempfile
@@ -144,25 +146,34 @@ STREAMING = {"pre_buffer": False, "buffer_size": 1 << 20}
 
 def stdin_parquet() -> pq.ParquetFile:
     """stdin as a ParquetFile for reading in batches. Parquet needs random access (its footer
-    is at the end), so stdin is spooled to an anonymous temporary file (in $TMPDIR, gone when
-    closed or the process dies) rather than held in memory."""
+    is at the end), so stdin is spooled to a temporary file in $TMPDIR rather than held in
+    memory. pyarrow reads it as its own file (not through a Python file object, as in
+    ``parquet_file``); the name is removed as soon as it is open, so nothing is left behind."""
     try:
-        spool = tempfile.TemporaryFile(prefix="fricli-stdin-")
-        shutil.copyfileobj(sys.stdin.buffer, spool, 1 << 20)
+        fd, spool = tempfile.mkstemp(prefix="fricli-stdin-")
     except OSError as exc:
         raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
-    if spool.tell() == 0:
-        spool.close()
-        raise LogError("stdin: empty input, not a Parquet log")
-    spool.seek(0)
     try:
-        pf = pq.ParquetFile(spool, **STREAMING)
+        with os.fdopen(fd, "wb") as out:
+            shutil.copyfileobj(sys.stdin.buffer, out, 1 << 20)
+            size = out.tell()
+        source = pa.OSFile(spool, "rb")
+    except OSError as exc:
+        raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(spool)
+    if size == 0:
+        source.close()
+        raise LogError("stdin: empty input, not a Parquet log")
+    try:
+        pf = pq.ParquetFile(source, **STREAMING)
     except Exception:
-        spool.seek(0)
-        message = not_parquet("stdin", spool.read(4))
-        spool.close()
+        source.seek(0)
+        message = not_parquet("stdin", source.read(4))
+        source.close()
         raise LogError(message) from None
-    weakref.finalize(pf, spool.close)   # the ParquetFile reads the spool but does not own it
+    weakref.finalize(pf, source.close)   # the ParquetFile reads the file but does not own it
     return pf
 
 
@@ -347,9 +358,10 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     if n == 0:
         raise LogError(f"{name}: the log is empty")
     bad = np.zeros(n, dtype=bool)
-    for values in sig.values():
-        if not np.isfinite(np.sum(values)):   # a finite sum holds no NaN or inf; else look row by row
-            bad |= ~np.isfinite(values)
+    with np.errstate(over="ignore", invalid="ignore"):   # huge finite values may overflow the sum
+        for values in sig.values():
+            if not np.isfinite(np.sum(values)):   # a finite sum holds no NaN or inf; else look row by row
+                bad |= ~np.isfinite(values)
     mask = None
     if bad.any():
         first = int(np.flatnonzero(bad)[0])

@@ -21,7 +21,8 @@ FACTORS = {
     "one": lambda f, ctx: "1.0",
     "p": lambda f, ctx: "p",
     "signal": lambda f, ctx: ctx.signal(f["name"]),
-    "dev": lambda f, ctx: f"({ctx.signal(f['name'])} - {num(f['center'])})",
+    "dev": lambda f, ctx: (f"(fmin(fmax({ctx.signal(f['name'])}, {num(f['low'])}), {num(f['high'])}) - "
+                           f"{num(f['center'])})" if "low" in f else f"({ctx.signal(f['name'])} - {num(f['center'])})"),
     "abs": lambda f, ctx: f"fabs({ctx.signal(f['name'])})",
     "overload": lambda f, ctx: f"(fabs({gear(ctx)}) - fabs({ctx.signal('tau_g')}))",
     "heldgravity": lambda f, ctx: "gear",

@@ -8,7 +8,9 @@ any later log from the constants it carries. Factors:
     {"f": "one"}                                   1
     {"f": "p"}                                     the base model's prediction [Nm]
     {"f": "signal", "name": S}                     signal S (e.g. qd, qdd)
-    {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column)
+    {"f": "dev", "name": S, "center": c}           S - c (temp, t, any extra column); with "low" and
+                                                   "high", S is held within them first (a trend in
+                                                   time does not run on beyond the log it was fitted on)
     {"f": "abs", "name": S}                        |S|
     {"f": "overload"}                              |tau_l| - |tau_g|, tau_l = tau_m - tau_dyn - p the load the
                                                    gear holds: what it carries beyond the robot model's gravity
@@ -161,7 +163,10 @@ class Columns:
         if f == "signal":
             return _signal(sig, factor["name"])
         if f == "dev":
-            return _signal(sig, factor["name"]) - float(factor["center"])
+            x = _signal(sig, factor["name"])
+            if "low" in factor:
+                x = np.clip(x, float(factor["low"]), float(factor["high"]))
+            return x - float(factor["center"])
         if f == "abs":
             return np.abs(_signal(sig, factor["name"]))
         if f == "overload":
@@ -261,8 +266,11 @@ def sig_(name: str) -> dict:
     return {"f": "signal", "name": name}
 
 
-def dev(name: str, center: float) -> dict:
-    return {"f": "dev", "name": name, "center": float(center)}
+def dev(name: str, center: float, low: float | None = None, high: float | None = None) -> dict:
+    out = {"f": "dev", "name": name, "center": float(center)}
+    if low is not None:
+        out.update(low=float(low), high=float(high))
+    return out
 
 
 def abs_(name: str) -> dict:

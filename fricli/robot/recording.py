@@ -36,8 +36,10 @@ KINDS = {
     "backward_time": "time going back",
     "unmatched": "no matching row in another of the recording's files",
 }
+MIN_ROWS = 3                # fewer usable rows are no recording: velocity needs three samples
 STEP_FACTOR = 100.0        # a time step beyond this many median steps breaks the recording
-MAGNITUDE_FACTOR = 1e6     # |value| beyond this many times its column's median |value| (at least 1) is garbage
+MAGNITUDE_FACTOR = 1e4     # |value| beyond this many times its column's median |value| (at least 1) is garbage
+MAGNITUDE_LIMIT = 1e9      # ... and so is any |value| beyond this in canonical units (rad, m, rad/s, Nm, A, ...)
 LINK_WINDOW = 64           # stretches of consistent time looked back over when chaining them
 
 
@@ -122,14 +124,15 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool)}
     if signals:
         values = np.abs(np.column_stack(signals))
-        bound = MAGNITUDE_FACTOR * np.maximum(1.0, np.median(values, axis=0))
+        bound = np.minimum(MAGNITUDE_FACTOR * np.maximum(1.0, np.median(values, axis=0)), MAGNITUDE_LIMIT)
         garbage["implausible"] = (values > bound).any(axis=1)
         garbage["zero_row"] = (values == 0).all(axis=1) & ~garbage["implausible"]
     rest = np.flatnonzero(~(garbage["implausible"] | garbage["zero_row"]))
     kinds = np.full(n, "", dtype=object)
     for kind, mask in garbage.items():
         kinds[mask] = kind
-    same = np.r_[False, t[rest][1:] == t[rest][:-1]]      # a sample written twice: the first is kept
+    same = np.zeros(len(rest), dtype=bool)                 # a sample written twice: the first is kept
+    same[1:] = t[rest][1:] == t[rest][:-1]
     kinds[rest[same]] = "duplicate_time"
     rest = rest[~same]
     steps = np.diff(t[rest])
@@ -297,9 +300,18 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
     return None, [float(text) for text in texts]
 
 
+_ASCII = bytes(range(128)) + b"?" * 128
+
+
+def _listing(defects: dict[str, Defect]) -> str:
+    return "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
+
+
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
+    if data[:2] == b"\x1f\x8b":
+        raise LogError(f"{name}: a gzip file, not a text recording: decompress it first (gunzip)")
     if data.count(b"\r") != data.count(b"\r\n"):
         raise LogError(f"{name}: holds carriage returns that are not part of a CRLF line end (old Mac line "
                        "ends?): convert the file to LF or CRLF line ends")
@@ -313,6 +325,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     start = int(first)
     if mapping.header:
         header = [f.strip().decode("utf-8", "replace") for f in _fields(line(start), mapping.delimiter)]
+        if start == 0:
+            header[0] = header[0].removeprefix("\ufeff")   # a UTF-8 byte order mark
         n_fields = len(header)
         start += 1
     else:
@@ -323,6 +337,9 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         _delimiter_hint(line(int(first)), mapping.delimiter, name)
     index = _indices(_refs(mapping), header, n_fields, name)
     wanted = sorted(set(index.values()))
+    # numbers are ASCII: any other byte (a text column in another encoding, a damaged line) becomes
+    # "?", so such a field is not a number and nothing reads it as text; offsets do not change
+    data = data.translate(_ASCII)
 
     defects: dict[str, Defect] = {}
 
@@ -353,8 +370,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
             numbers = np.append(numbers, n_lines)
             unterminated = n_lines
     if len(numbers) == 0:
-        found = "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
-        raise LogError(f"{name}: no usable rows" + (f" ({found})" if found else ""))
+        raise LogError(f"{name}: no usable rows" + (f" ({_listing(defects)})" if defects else ""))
 
     signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
     if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
@@ -364,6 +380,10 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
                                   numbers, name=name, drop_backward=drop_backward)
     for kind, d in found.items():
         defects[kind] = d
+    if keep.sum() < MIN_ROWS:
+        count = int(keep.sum())
+        usable = f"only {count} usable row{'s' if count > 1 else ''}" if count else "no usable rows"
+        raise LogError(f"{name}: {usable}" + (f" ({_listing(defects)})" if defects else ""))
     if not keep.all():
         cols = {c: v[keep] for c, v in cols.items()}
         numbers = numbers[keep]

@@ -203,6 +203,9 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     good, found = consistent_rows((t_ns[idx] - mid) / 1e9, [s[idx] for s in signals], numbers[idx], name=path,
                                   drop_backward=drop_backward, unit="message")
     keep[idx[~good]] = False
+    if not keep.any():
+        listing = "; ".join(f"{d.count} with {KINDS[k]} (first at message {d.first_line})" for k, d in found.items())
+        raise LogError(f"{path}: no usable messages ({listing})")
     origin = int(t_ns[keep][0])
     cols["t"] = (t_ns - origin) / 1e9
     defects = {}

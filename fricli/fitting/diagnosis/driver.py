@@ -61,6 +61,8 @@ class Diagnosis:
     unexplained: structure.Structure | None = None    # structure left in the held-out residual
     notes: list[str] = dataclasses.field(default_factory=list)   # for people: what the log cannot decide
     suspected: list[str] = dataclasses.field(default_factory=list)  # chosen, but implausible: not added
+    # chosen, but not added because the held-out MAE would not fall: {"effects": [...], "mae_after": MAE}
+    declined: dict = dataclasses.field(default_factory=dict)
 
     @property
     def cut(self) -> float:
@@ -81,7 +83,7 @@ class Diagnosis:
                "intervals": {"level": INTERVAL_LEVEL, **self.intervals},
                "effects": [{"name": e.name, "significant": e.significant, "gain": e.gain, "params": e.params,
                             "part": e.part, "implausible": e.implausible} for e in self.effects],
-               "added": list(self.added), "model_errors": self.errors, "suspected": list(self.suspected),
+               "added": list(self.added), "model_errors": self.errors, "suspected": list(self.suspected), "declined": dict(self.declined),
                "skipped": dict(self.skipped), "notes": list(self.notes)}
         if self.unexplained is not None:
             out["unexplained_share"] = self.unexplained.share
@@ -196,14 +198,22 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     left = r - design.heldout_prediction(sel.terms) if sel.terms else r
     mae_before = float(np.mean(np.abs(r)))
     mae_after = float(np.mean(np.abs(left))) if sel.terms else mae_before
-    return Diagnosis(effects=results + list(suspects.values()) + others, added=list(sel.added),
+    notes = _twin_notes(design, sel, cache, alpha, min_gain)
+    added, terms, declined = list(sel.added), list(sel.terms), {}
+    if added and mae_after >= mae_before:
+        # less squared error but a larger typical error: a few large residuals (an edge, a
+        # transient) drive the effects, and adding them would make the model worse on most rows
+        declined = {"effects": added, "mae_after": mae_after}
+        results = [dataclasses.replace(e, added=False) for e in results]
+        added, terms, left, mae_after, notes = [], [], r, mae_before, []
+    return Diagnosis(effects=results + list(suspects.values()) + others, added=added,
                      mae_before=mae_before, mae_after=mae_after,
-                     terms=[registry[t] for t in sel.terms], coef={t: coef[t] for t in sel.terms}, rows=n,
+                     terms=[registry[t] for t in terms], coef={t: coef[t] for t in terms}, rows=n,
                      folds=folds, min_gain=min_gain, alpha=alpha, skipped=skipped, tau_unit=ctx.tau_unit,
                      alone={name: max(sc.gain, WORST_GAIN) for name, sc in sel.first.items()},
                      intervals=fold_intervals(r, left, folds),
                      unexplained=structure.analyse(left, sig, alpha),
-                     notes=_twin_notes(design, sel, cache, alpha, min_gain), suspected=list(suspects))
+                     notes=notes, suspected=list(suspects), declined=declined)
 
 
 def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float) -> list[str]:
@@ -217,8 +227,10 @@ def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain
             swapped = others + [t for t in cache[b] if t not in others]
             cmp = selection.compare(design.sse(sel.terms), design.sse(swapped), alpha)
             if not cmp.clear(min_gain):
-                notes.append(f"{a} or {b}: this log does not tell them apart clearly ({a} leaves "
-                             f"{100 * cmp.gain:.0f} % less held-out squared error); {evidence} would")
+                gain = 100 * cmp.gain
+                than = (f"{a} leaves {abs(gain):.0f} % {'less' if gain > 0 else 'more'} held-out squared error"
+                        if abs(gain) >= 0.5 else "both leave the same held-out squared error to within 0.5 %")
+                notes.append(f"{a} or {b}: this log does not tell them apart clearly ({than}); {evidence} would")
     return notes
 
 

@@ -262,6 +262,11 @@ class Drift(_ScaledBy):
     per = 3600.0
     description = "Coulomb and viscous levels growing with time (wear)"
 
+    def factor(self, ctx) -> dict:
+        # held at the log's ends: a trend fitted over minutes says nothing of an hour later
+        t = ctx.signals["t"]
+        return T.dev("t", self.center(ctx), float(np.min(t)), float(np.max(t)))
+
     def applicable(self, ctx):
         if np.ptp(ctx.signals["t"]) <= 0:
             return "the log covers no time"
@@ -405,7 +410,13 @@ class Payload(Effect):
         return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def implausible(self, params, ctx):
-        return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
+        kc = params["kc"]["value"]
+        if kc is not None and kc < 0:
+            # |tau_l| - |tau_g| is the residual itself where no payload loads the gear, so a
+            # fit of it can echo any residual; a real payload only adds friction
+            return (f"kc < 0 is not physical (friction falling as the gear carries more load); tau_l holds "
+                    f"the model's own residual, so the term echoes it rather than a payload")
+        return _ratio_implausible("kc", kc, params["kc"]["unit"])
 
     def summary(self, params):
         return _ratio_text("kc", params["kc"])
@@ -429,9 +440,10 @@ class Gravity(Effect):
         scale = params["scale"]["value"]
         if scale is None or abs(scale - 1.0) <= ROBOT_MODEL_TOLERANCE:
             return None
-        return (f"a gravity scale of {_fmt(scale)} is outside 1 +- {100 * ROBOT_MODEL_TOLERANCE:g} %: no CAD "
-                f"model is that far off; a torque proportional to tau_g also comes from a drive gain or torque "
-                f"constant error, a cable or hose, a counterbalance spring, or a wrong payload")
+        return (f"a gravity scale of {_fmt(scale)} is outside 1 +- {100 * ROBOT_MODEL_TOLERANCE:g} %, more than "
+                f"CAD masses usually miss by (calibrate the robot model to tell); a torque proportional to tau_g "
+                f"also comes from a drive gain or torque constant error, a cable or hose, a counterbalance spring, "
+                f"or a wrong payload")
 
     def params(self, coef, ctx):
         k = coef["tau_g"]
