@@ -414,8 +414,8 @@ class Payload(Effect):
         if kc is not None and kc < 0:
             # |tau_l| - |tau_g| is the residual itself where no payload loads the gear, so a
             # fit of it can echo any residual; a real payload only adds friction
-            return (f"kc < 0 is not physical (friction falling as the gear carries more load); tau_l holds "
-                    f"the model's own residual, so the term echoes it rather than a payload")
+            return ("kc < 0 is not physical (friction falling as the gear carries more load); tau_l holds "
+                    "the model's own residual, so the term echoes it rather than a payload")
         return _ratio_implausible("kc", kc, params["kc"]["unit"])
 
     def summary(self, params):
