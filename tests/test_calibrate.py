@@ -228,6 +228,9 @@ def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     assert "base parameters" in res.stderr and "calibrated 4 joints" in res.stderr
     report = json.loads((tmp_path / "cal.calibration.json").read_text())
     assert json.loads(res.stdout)["fit"] == report["fit"]
+    tied = report["excitation"]["masses_not_determined_alone"]
+    assert tied and (f"excitation: the masses of {', '.join(m.removesuffix('.m') for m in tied)} are not determined "
+                     "alone") in res.stderr
     np.testing.assert_allclose([report["friction"]["joints"][j]["Fv"] for j in "1234"], FRICTION[:, 0], rtol=1e-6)
 
     held_log = write_log(tmp_path / "held.parquet", *held, simulate(model, *held))

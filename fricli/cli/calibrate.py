@@ -139,6 +139,11 @@ def _summary(report: dict) -> list[str]:
             lines.append(f"  {combo} (information {d['information']:.2g} x the prior's)")
         if len(ex["undetermined"]) > 8:
             lines.append(f"  ... and {len(ex['undetermined']) - 8} more (see the report)")
+    tied = ex.get("masses_not_determined_alone") or {}
+    if tied:
+        lines.append(f"excitation: the masses of {', '.join(m.removesuffix('.m') for m in tied)} are not determined "
+                     "alone (each trades with other parameters, see the report): the calibrated torques are what to "
+                     "trust, not each link's mass")
     choice = report.get("prior_choice")
     if choice:
         held, weakest = choice["held_out_rms"], max(choice["grid"])
