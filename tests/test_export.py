@@ -70,7 +70,8 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
 
 
 SIM_TERMS = [T.term("1", T.ONE), T.term("p", T.P), T.term("qd", T.sig_("qd")), T.term("p*pos", T.P, T.POS),
-             T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN),
+             T.term("p*dtemp", T.P, T.dev("temp", 30.0)), T.term("qd*dtemp held", T.sig_("qd"), T.dev("temp", 30.0, 29.0, 31.0)),
+             T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN),
              T.term("tau_l*moving", T.OVERLOAD, T.MOVING), T.term("sat1", {"f": "sat", "scale": 0.05}),
              T.term("sin1@3", {"f": "sin", "name": "q", "w": 3.0}),
              T.term("cos1@3", {"f": "cos", "name": "q", "w": 3.0}),
