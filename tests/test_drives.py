@@ -375,9 +375,10 @@ def test_defects_of_either_file_drop_the_row_from_both(tmp_path, motor_recording
     out = tmp_path / "arm.parquet"
     res = run("import", tmp_path / "pos.csv", tmp_path / "tor.csv", "--mapping", folder / "wrist.toml", "-o", out)
     assert res.exit_code == 0, res.output
-    assert "dropped 1 row with non-numeric or non-finite value (first at line 10)" in res.output
-    assert f"dropped 3 rows with no matching row in another of the recording's files (lines {len(pos) - 2}-{len(pos)})" \
-        in res.output
+    # each file's line numbers, named by the file
+    assert f"dropped 1 row with non-numeric or non-finite value ({tmp_path / 'pos.csv'}: first at line 10)" in res.output
+    assert (f"dropped 3 rows with no matching row in another of the recording's files ({tmp_path / 'pos.csv'}: lines "
+            f"{len(pos) - 2}-{len(pos)})") in res.output
     table = pq.read_table(out)
     assert table.num_rows == 6 * (len(pos) - 4)
     t = _per_joint(table, "t", [5])[:, 0]
@@ -426,7 +427,8 @@ def test_files_joined_by_time(tmp_path, motor_recording):
     res = run("import", tmp_path / "pos.csv", tmp_path / "tor.csv", "--mapping", tmp_path / "map.toml", "-o",
               tmp_path / "arm.parquet")
     assert res.exit_code == 0, res.output
-    assert "dropped 1 row with no matching row in another of the recording's files (line 101)" in res.output
+    assert (f"dropped 1 row with no matching row in another of the recording's files ({tmp_path / 'tor.csv'}: "
+            "line 101)") in res.output
     table = pq.read_table(tmp_path / "arm.parquet")
     keep = np.arange(len(r.t)) != 100
     got = _per_joint(table, "tau_m", tr.joints)

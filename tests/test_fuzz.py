@@ -118,7 +118,8 @@ def predict_batched(data: bytes, tmp_path, model, meta):
         return
     table = pq.read_table(out)
     assert table.num_rows == result.rows
-    # finite but absurd inputs (a flipped exponent bit gives qd = 1e304) may overflow: not finite
+    # a flipped exponent bit in a value (qd = 1e304) is refused like a NaN; one in t (steps of
+    # 1e-300 s) may still overflow the derived columns: the prediction need not be finite
     assert table.schema.field("tau_f_pred").type == pa.float64()
 
 

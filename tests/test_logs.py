@@ -120,14 +120,19 @@ def test_nan_refused_with_count_and_row():
 
 
 @pytest.mark.filterwarnings("error")
-def test_huge_finite_values_are_not_taken_for_infinite_ones():
-    tau = make_table().column("tau_m").to_numpy().copy()
-    tau[[3, 4]] = 1e308                     # their sum overflows; each value is finite
-    log = logs.from_table(make_table().set_column(3, "tau_m", pa.array(tau)), name="x")
-    assert len(log) == 500
-    tau[[5, 6]] = [np.inf, -np.inf]         # their sum is NaN
-    with pytest.raises(LogError, match=r"2 rows.*row 5"):
-        logs.from_table(make_table().set_column(3, "tau_m", pa.array(tau)), name="x")
+def test_absurd_values_are_refused_like_nan_and_time_may_be_large():
+    """Values beyond MAGNITUDE_LIMIT (uninitialised memory) are invalid rows, whose sum may
+    overflow without a warning; one just within the limit is kept; t (absolute time) may be large."""
+    table = make_table()
+    tau = table.column("tau_m").to_numpy().copy()
+    tau[[3, 4]] = 1e308                     # their sum overflows; each value is finite but absurd
+    tau[7] = -logs.MAGNITUDE_LIMIT          # at the limit: kept
+    with pytest.raises(LogError, match=r"2 rows hold NaN, infinite or absurd values .*first at row 3, columns tau_m"):
+        logs.from_table(table.set_column(3, "tau_m", pa.array(tau)), name="x")
+    log = logs.from_table(table.set_column(3, "tau_m", pa.array(tau)), name="x", drop_invalid=True)
+    assert len(log) == 498
+    t = table.column("t").to_numpy() + 1.7e9 # seconds since 1970
+    assert len(logs.from_table(table.set_column(0, "t", pa.array(t)), name="x")) == 500
 
 
 @pytest.mark.parametrize("kind,needle", [("dup", "duplicate"), ("back", "not increasing")])

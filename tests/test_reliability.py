@@ -203,7 +203,8 @@ LOG_CASES = {
     "no-motion-columns": (errors.INPUT, "needs at least one of the columns 'q', 'qd'"),
     "string-column": (errors.INPUT, "column 'tau_m' has type string, expected numbers"),
     "string-time": (errors.INPUT, "column 't' has type string, expected numbers"),
-    "nan-inf": (errors.INPUT, "4 rows hold NaN or infinite values (first at row 50, columns qd, tau_m)"),
+    "nan-inf": (errors.INPUT, "4 rows hold NaN, infinite or absurd values (beyond 1e+09 in magnitude) "
+                "(first at row 50, columns qd, tau_m)"),
     "nulls": (errors.INPUT, "column 'tau_g' has 1 missing values (first at row 7)"),
     "t-decreasing": (errors.INPUT, "'t' is not increasing (first at row 500"),
     "t-duplicate": (errors.INPUT, "duplicate timestamps (first at row 500"),
@@ -287,13 +288,19 @@ def _extreme(name):
     return cols
 
 
+@pytest.mark.filterwarnings("error")
 @pytest.mark.parametrize("case", ["huge-torque", "huge-velocity", "huge-gravity", "tiny-time-steps"])
 @pytest.mark.parametrize("command", LOG_COMMANDS)
 def test_extreme_values_never_give_an_internal_error(inputs, tmp_path, command, case):
-    """Finite but absurd numbers: a result (figures that overflow are JSON null) or a clean error."""
+    """Finite but absurd numbers: refused like NaN (their squares overflow: no figure of them
+    means anything), or a result (figures that overflow are JSON null) or a clean error; never a
+    numpy warning on stderr."""
     log = write_log(tmp_path, case, _extreme(case))
     args = command_args(command, log, inputs["model"], tmp_path) + ([] if command == "report" else ["--json"])
     res = run(*args)
+    if case.startswith("huge"):
+        assert_clean_error(res, errors.INPUT, "NaN, infinite or absurd values (beyond 1e+09 in magnitude)")
+        return
     assert res.exit_code in (errors.OK, errors.DATA, errors.FIT), res.stderr
     assert isinstance(res.exception, (SystemExit, type(None))), res.exception
     assert "internal error" not in res.stderr and "Traceback" not in res.output
@@ -366,7 +373,7 @@ def test_the_pickle_in_the_test_really_runs_code_when_unpickled(inputs, tmp_path
 def test_drop_invalid_drops_with_a_count(inputs, tmp_path, command):
     res = run(*command_args(command, inputs["logs"]["nan-inf"], inputs["model"], tmp_path), "--drop-invalid", "-q")
     assert res.exit_code == 0, res.stderr
-    assert "dropped 4" in res.stderr and "NaN or infinite" in res.stderr
+    assert "dropped 4" in res.stderr and "NaN, infinite or absurd values" in res.stderr
     out = tmp_path / ("out.parquet" if command in ("predict", "estimate-ext") else "out.npz")
     if out.suffix == ".parquet":
         assert pq.read_table(out).num_rows == 4000 - 4

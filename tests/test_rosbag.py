@@ -183,6 +183,27 @@ def test_empty_velocities_leave_qd_to_be_derived(tmp_path):
     assert log.table.column_names == ["t", "joint", "q", "tau_m"]
 
 
+def test_a_velocity_empty_in_some_messages_is_left_out_with_a_warning(tmp_path):
+    msgs = states(40)
+    msgs[10][3] = []
+    write_bag(tmp_path / "run", msgs)
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "-o", "out.parquet"], cwd=tmp_path,
+                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.splitlines()[0] == (
+        "warning: run: 1 message on /joint_states holds no velocity (first at message 11): the velocity of every "
+        "message is left out (qd and qdd are derived from the positions)")
+    assert "qd" not in pq.read_table(tmp_path / "out.parquet").column_names
+
+
+def test_time_going_back_is_shown_from_the_first_message(tmp_path):
+    msgs = states(40)
+    msgs[20], msgs[21] = msgs[21], msgs[20]
+    step = STEP_NS / 1e9          # message 22 holds the stamp of the 21st: times from the first message
+    with pytest.raises(LogError, match=rf"time goes back at message 22 \(t = {20 * step:g} after {21 * step:g};"):
+        bag_log(write_bag(tmp_path / "run", msgs))
+
+
 def test_a_mapping_says_what_the_effort_is(tmp_path):
     path = write_bag(tmp_path / "run", states(30))
     effort = np.array([m[4] for m in states(30)])

@@ -343,7 +343,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                 writer.close()
     if warnings and warn:
         if dropped:
-            warn(f"warning: dropped {dropped} rows with NaN or infinite values")
+            warn(f"warning: dropped {dropped} rows with NaN, infinite or absurd values")
         for message in dict.fromkeys(warnings):
             if not dropped or message.startswith("note:"):
                 warn(message)

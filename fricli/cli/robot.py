@@ -62,7 +62,10 @@ def _derived_text(record: dict) -> str:
 
 
 def _where(entry: dict, unit: str) -> str:
-    """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known."""
+    """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known; for a
+    recording in several files, each file's ('pos.csv: line 101; cur.csv: line 301')."""
+    if "files" in entry:
+        return "; ".join(f"{name}: {_where(d, unit)}" for name, d in entry["files"].items())
     runs = entry.get(f"{unit}s")
     if runs is None:
         return f"first at {unit} {entry[f'first_{unit}']}"
@@ -165,6 +168,11 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
                  {"count": read.reordered.count, "messages": read.reordered.ranges}}
         result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff_hz,
                            unit="message", extra=extra)
+        for field, d in read.partly_empty.items():
+            warn(f"warning: {name}: {d.count} {'messages' if d.count != 1 else 'message'} on {read.topic} "
+                 f"{'hold' if d.count != 1 else 'holds'} no {field} "
+                 f"(first at message {d.first_line}): the {field} of every message is left out"
+                 + (" (qd and qdd are derived from the positions)" if field == "velocity" else ""))
         if read.stamps == "receive":
             say(f"note: {name}: the messages on {read.topic} have zero header stamps: t is the time the bag "
                 "received them", quiet)
@@ -181,7 +189,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
              f"({_where(d, unit)})")
     if bag and read.reordered is not None:
         d = read.reordered
-        warn(f"warning: {name}: {d.count} message{'s' if d.count != 1 else ''} list the joints in another order "
+        warn(f"warning: {name}: {d.count} {'messages list' if d.count != 1 else 'message lists'} the joints in another order "
              f"than the first ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
     if result.meta["unterminated_last_line"]:
         say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "

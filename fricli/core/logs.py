@@ -345,6 +345,11 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
     return tuple(c for c in ROBOT_MODEL if c in found)
 
 
+# No robot signal reaches this magnitude in canonical units (rad, m, rad/s, Nm, N, A, degC);
+# a value beyond it is garbage (uninitialised memory), and squares of it would overflow
+MAGNITUDE_LIMIT = 1e9
+
+
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
                   warn=None) -> np.ndarray | None:
     """Check finiteness and time order. Returns a row mask when rows were dropped."""
@@ -358,20 +363,27 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     if n == 0:
         raise LogError(f"{name}: the log is empty")
     bad = np.zeros(n, dtype=bool)
+    cols = []
     with np.errstate(over="ignore", invalid="ignore"):   # huge finite values may overflow the sum
-        for values in sig.values():
-            if not np.isfinite(np.sum(values)):   # a finite sum holds no NaN or inf; else look row by row
-                bad |= ~np.isfinite(values)
+        for column, values in sig.items():
+            limit = np.inf if column == "t" else MAGNITUDE_LIMIT
+            # a finite sum holds no NaN or inf; only then look row by row
+            if not np.isfinite(np.sum(values)) or values.max() > limit or values.min() < -limit:
+                invalid = ~(np.abs(values) <= limit)
+                if invalid.any():
+                    bad |= invalid
+                    cols.append(column)
     mask = None
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
-        cols = sorted(c for c, v in sig.items() if not np.isfinite(v).all())
+        cols = sorted(cols)
+        what = f"NaN, infinite or absurd values (beyond {MAGNITUDE_LIMIT:g} in magnitude)"
         if not drop_invalid:
-            raise LogError(f"{name}: {int(bad.sum())} rows hold NaN or infinite values "
+            raise LogError(f"{name}: {int(bad.sum())} rows hold {what} "
                            f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
         mask = ~bad
         if warn:
-            warn(f"warning: dropped {int(bad.sum())} of {n} rows with NaN or infinite values ({', '.join(cols)})")
+            warn(f"warning: dropped {int(bad.sum())} of {n} rows with {what} ({', '.join(cols)})")
         for column in sig:
             sig[column] = sig[column][mask]
         if len(sig["t"]) == 0:

@@ -126,6 +126,9 @@ def dropped_record(defects: dict, unit: str = "line") -> dict:
         out[kind] = {"count": d.count, f"first_{unit}": d.first_line, "what": KINDS[kind]}
         if d.ranges is not None:
             out[kind][f"{unit}s"] = d.ranges
+        if d.files:   # a recording in several files: each file's own, by its line numbers
+            out[kind]["files"] = {name: {k: v for k, v in dropped_record({kind: f}, unit)[kind].items() if k != "what"}
+                                  for name, f in d.files.items()}
     return out
 
 

@@ -32,17 +32,12 @@ def _file_mapping(mapping: Mapping, f: int) -> Mapping:
     return dataclasses.replace(mapping, time=time, joints=[jm for jm in joints if jm.columns], files=())
 
 
-def _merge(defects: dict, found: dict) -> None:
+def _merge(defects: dict, found: dict, name: str) -> None:
+    """Add file ``name``'s defects ``found`` to ``defects``: per kind the total, and each file's own."""
     for kind, d in found.items():
-        if kind not in defects:
-            defects[kind] = Defect(d.count, d.first_line, d.ranges)
-            continue
-        old = defects[kind]
-        lines = None
-        if old.ranges is not None and d.ranges is not None:
-            lines = np.unique(np.concatenate([np.arange(a, b + 1) for a, b in old.ranges + d.ranges]))
-        defects[kind] = Defect(old.count + d.count, min(old.first_line, d.first_line),
-                               ranges(lines) if lines is not None else None)
+        files = {**(defects[kind].files if kind in defects else {}), name: d}
+        defects[kind] = Defect(sum(f.count for f in files.values()), min(f.first_line for f in files.values()),
+                               None, files)
 
 
 def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_backward: bool = False) -> Recording:
@@ -61,8 +56,8 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
     for k in keys[1:]:
         common = np.intersect1d(common, k)
     defects: dict[str, Defect] = {}
-    for rec in recs:
-        _merge(defects, rec.defects)
+    for rec, name in zip(recs, names):
+        _merge(defects, rec.defects, name)
     values: dict = {}
     lines = None
     ends = [int(rec.lines[-1]) for rec in recs]
@@ -72,7 +67,7 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
         alone = ~keep if mapping.join == "time" else ~keep & (rec.lines > min(ends[:f] + ends[f + 1:]))
         if alone.any():
             gone = rec.lines[alone]
-            _merge(defects, {"unmatched": Defect(len(gone), int(gone[0]), ranges(gone))})
+            _merge(defects, {"unmatched": Defect(len(gone), int(gone[0]), ranges(gone))}, names[f])
         for ref, v in rec.values.items():
             values[ref if f == 0 else (f, ref)] = v[keep]
         lines = rec.lines[keep] if lines is None else lines

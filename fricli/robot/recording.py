@@ -19,6 +19,7 @@ import re
 
 import numpy as np
 
+from fricli.core import logs
 from fricli.core.errors import LogError
 from fricli.robot.mapping import Mapping
 
@@ -39,7 +40,7 @@ KINDS = {
 MIN_ROWS = 3                # fewer usable rows are no recording: velocity needs three samples
 STEP_FACTOR = 100.0        # a time step beyond this many median steps breaks the recording
 MAGNITUDE_FACTOR = 1e4     # |value| beyond this many times its column's median |value| (at least 1) is garbage
-MAGNITUDE_LIMIT = 1e9      # ... and so is any |value| beyond this in canonical units (rad, m, rad/s, Nm, A, ...)
+MAGNITUDE_LIMIT = logs.MAGNITUDE_LIMIT   # ... and so is any |value| beyond the log contract's
 LINK_WINDOW = 64           # stretches of consistent time looked back over when chaining them
 
 
@@ -48,6 +49,7 @@ class Defect:
     count: int
     first_line: int        # 1-based line number in the file (message number in a bag)
     ranges: list | None = None   # [[first, last], ...] of the dropped lines, when known
+    files: dict | None = None    # a recording in several files: {file name: Defect} (line numbers are each file's)
 
 
 @dataclasses.dataclass
@@ -114,12 +116,14 @@ def _chain(t: np.ndarray, limit: float) -> np.ndarray:
 
 
 def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarray, *, name: str,
-                    drop_backward: bool = False, unit: str = "line") -> tuple[np.ndarray, dict[str, Defect]]:
+                    drop_backward: bool = False, unit: str = "line",
+                    shown_from: float = 0.0) -> tuple[np.ndarray, dict[str, Defect]]:
     """Which rows to keep: not of implausible magnitude, not all zero, and in the longest chain of
     consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR median steps).
     ``t`` [s] and each of ``signals`` (canonical units) have shape (n,); ``numbers`` are the rows'
     line (or message) numbers. Returns the mask of shape (n,) and the defects found; LogError when
-    time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``."""
+    time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``
+    (its message gives times from ``shown_from``)."""
     n = len(t)
     garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool)}
     if signals:
@@ -157,7 +161,8 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     if back and not drop_backward:
         at = int(np.flatnonzero(kinds == "backward_time")[0])
         latest = t[:at][kinds[:at] == ""].max()
-        raise LogError(f"{name}: time goes back at {unit} {numbers[at]} (t = {t[at]:g} after {latest:g}; "
+        raise LogError(f"{name}: time goes back at {unit} {numbers[at]} (t = {t[at] - shown_from:g} after "
+                       f"{latest - shown_from:g}; "
                        f"{back.count} {unit}{'s' if back.count != 1 else ''} before the latest time): use "
                        "--drop-backward to drop them")
     return kinds == "", defects

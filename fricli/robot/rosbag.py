@@ -51,6 +51,8 @@ class Bag:
     origin_ns: int
     reordered: Defect | None
     sha256: str
+    # fields ("velocity", ...) left out because some usable messages had them empty: those messages
+    partly_empty: dict[str, Defect] = dataclasses.field(default_factory=dict)
 
 
 def _rosbags():
@@ -171,6 +173,8 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     if not present["effort"]:
         raise LogError(f"{path}: the messages on {topic} hold no efforts: a log needs a motor torque or current")
     used = [f for f in FIELDS if present[f]]
+    partly = {f: np.flatnonzero(ok & empty[f]) for f in FIELDS if not present[f] and not empty[f][ok].all()}
+    partly = {f: Defect(len(at), int(at[0]) + 1, ranges(at + 1)) for f, at in partly.items()}   # message numbers
     finite = np.all([np.isfinite(values[f]).all(axis=1) for f in used], axis=0)
     kinds[ok & ~finite] = "non_numeric"
     keep = kinds == ""
@@ -201,7 +205,8 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     idx = np.flatnonzero(keep)
     mid = int(np.median(t_ns[idx]))        # differences of integer ns keep the stamps' resolution
     good, found = consistent_rows((t_ns[idx] - mid) / 1e9, [s[idx] for s in signals], numbers[idx], name=path,
-                                  drop_backward=drop_backward, unit="message")
+                                  drop_backward=drop_backward, unit="message",
+                                  shown_from=(int(t_ns[idx[0]]) - mid) / 1e9)   # t from the first message
     keep[idx[~good]] = False
     if not keep.any():
         listing = "; ".join(f"{d.count} with {KINDS[k]} (first at message {d.first_line})" for k, d in found.items())
@@ -220,7 +225,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     turned = keep & (ranks != ranks[keep][0])
     moved = Defect(int(turned.sum()), int(numbers[turned][0]), ranges(numbers[turned])) if turned.any() else None
     return Bag(recording=rec, mapping=mapping, topic=topic, stamps=source, origin_ns=origin, reordered=moved,
-               sha256=_sha256(p))
+               sha256=_sha256(p), partly_empty=partly)
 
 
 def _found(kinds: np.ndarray) -> str:
