@@ -81,3 +81,12 @@ def test_arrays_of_other_types_refused(bad):
     data = modelfile.dumps(META, {"w": bad})
     with pytest.raises(ModelFileError, match="damaged model"):
         modelfile.loads(data)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e300])
+def test_arrays_of_absurd_values_refused(bad):
+    """No fit writes them; loaded, they made every prediction NaN or inf (float32 networks overflow)."""
+    data = modelfile.dumps(META, {"w": np.array([0.5, bad])})
+    with pytest.raises(ModelFileError, match="array 'w' holds NaN, infinite or huge values"):
+        modelfile.loads(data)
+    assert modelfile.loads(modelfile.dumps(META, {"w": np.array([0.5, 3e38])}))[1]["w"][1] == 3e38

@@ -119,6 +119,9 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
     for key, arr in arrays.items():
         if arr.dtype.kind not in "biuf":  # model arrays are real numbers
             raise ModelFileError(f"{name}: damaged model (array {key!r} has type {arr.dtype})")
+        # finite, and within float32 (the precision networks predict in): no fit writes others
+        if arr.dtype.kind == "f" and not (np.abs(arr) <= np.finfo(np.float32).max).all():
+            raise ModelFileError(f"{name}: damaged model (array {key!r} holds NaN, infinite or huge values)")
     return meta, arrays
 
 
