@@ -119,3 +119,12 @@ def test_fixed_model_meets_the_benchmark_error(diagnosed, emps_log):
     assert errors["benchmark"] <= emps.SCIPY_RERUN["asymmetric"]["rel_error"]
     before = emps.model_errors(models.load(base)[0], emps_log)
     assert errors["raw"] < 0.1 * before["raw"]
+
+
+def test_train_base_says_when_training_learned_nothing(emps_path, tmp_path):
+    """Without its inertia (--no-dynamics) the drive's force is mostly M*qdd, which no friction of
+    velocity explains: the held-out error is least at the first steps, and stderr says so."""
+    res = CliRunner().invoke(cli, ["train-base", emps_path, "--cutoff", "100", "--no-gravity", "--no-dynamics",
+                                   "--steps", "500", "--until", "50%", "-o", str(tmp_path / "nn.npz")])
+    assert res.exit_code == 0, res.stderr
+    assert "training learned nothing the held-out rows confirm" in res.stderr

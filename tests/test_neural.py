@@ -512,6 +512,13 @@ def test_adapt_keeps_the_base_when_the_residual_is_noise(harmonic, tmp_path):
     out = json.loads(result.stdout)
     assert out["adapted"] is False and out["kind"] == "dissipative" and out["velocity_groups"] == "moving"
     assert "the base model is kept" in result.stderr and "(the base model unchanged)" in result.stderr
+    held = out["held_out"]   # the message names what failed
+    if held["adapted_rmse"] >= held["base_rmse"]:
+        assert "the residual network makes the held-out rows worse" in result.stderr
+    else:
+        names = ("later half", "earlier half", "slower half", "faster half")
+        for name, r in zip(names, held["half_ratios"] + held["speed_ratios"]):
+            assert (f"{name} x{r:.4f}" in result.stderr) == (r > 1 - learning.MIN_GAIN), name
     written, meta = models.load(str(tmp_path / "a.npz"))
     assert meta["kind"] == "dissipative" and meta["fit"]["adapted"] is False
     held = meta["fit"]["held_out"]

@@ -44,6 +44,9 @@ runs = {
     "train-base-minibatch": ["train-base", f"{sample}/joint2_base.parquet", "-o", "selmic.npz", "--arch", "selmic",
                              "--steps", "100", "--batch-size", "64", "--seed", "3"],
     "adapt": ["adapt", "nn.npz", f"{sample}/joint2_adapt.parquet", "-o", "adapted.npz", "--epochs", "10", "--json"],
+    # the base spelled another way (as a fleet spells it): the same bytes
+    "adapt-abs": ["adapt", os.path.abspath("nn.npz"), f"{sample}/joint2_adapt.parquet", "-o", "adapted_abs.npz",
+                  "--epochs", "10"],
     "diagnose": ["diagnose", "lugre.npz", f"{sample}/joint2_extended_asym.parquet", "--fix", "-o", "fixed.npz",
                  "--folds", "5", "--json"],
     "predict": ["predict", "adapted.npz", f"{sample}/joint2_extended_asym.parquet", "-o", "pred.parquet",
@@ -88,7 +91,8 @@ def test_same_bytes_in_separate_processes_and_across_blas_thread_counts(tmp_path
     files = sorted(p.name for p in one.iterdir())
     assert files == sorted(p.name for p in two.iterdir())
     outputs = [f for f in files if f.endswith((".npz", ".parquet"))]
-    assert len(outputs) == 9
+    assert len(outputs) == 10
+    assert (one / "adapted.npz").read_bytes() == (one / "adapted_abs.npz").read_bytes()
     for name in files:
         if name == "threads.txt":
             continue

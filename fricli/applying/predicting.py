@@ -122,7 +122,7 @@ def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
     found: dict = {}
     try:
         for group in range(pf.num_row_groups):
-            column = pf.read_row_group(group, columns=["joint"]).column("joint")
+            column = pf.read_row_group(group, columns=["joint"], use_threads=False).column("joint")
             found.update(dict.fromkeys(pc.unique(column).to_pylist()))
     except Exception as exc:
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
@@ -144,10 +144,10 @@ def _batches(pf: pq.ParquetFile, name: str, batch_rows: int, whole: bool) -> Ite
     schema = pf.schema_arrow
     try:
         if whole:
-            yield 0, pf.read()
+            yield 0, pf.read(use_threads=False)
             return
         offset = 0
-        for batch in pf.iter_batches(batch_size=batch_rows):
+        for batch in pf.iter_batches(batch_size=batch_rows, use_threads=False):
             table = pa.Table.from_batches([batch])
             if table.schema.metadata != schema.metadata:
                 table = table.replace_schema_metadata(schema.metadata)

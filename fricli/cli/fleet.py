@@ -131,8 +131,10 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
 
 
 def trend_table(result, rule) -> str:
-    head = f"{'robot':<12} {'joint':<6} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
-                                                               for p in rule.params) + "  flag"
+    rw = max([12] + [len(str(t.robot)) for t in result])
+    jw = max([6] + [len(str(t.joint)) for t in result])
+    head = f"{'robot':<{rw}} {'joint':<{jw}} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
+                                                                   for p in rule.params) + "  flag"
     lines = [head]
     for t in result:
         cells = []
@@ -141,5 +143,5 @@ def trend_table(result, rule) -> str:
             cells.append(f"{'-' if lv is None else f'{100 * lv:+.1f}%':>9} "
                          f"{'-' if gr is None or gr != gr else f'{100 * gr:+.2f}%':>8}")
         flag = "WEAR: " + "; ".join(t.reasons) if t.flagged else t.note
-        lines.append(f"{t.robot:<12} {t.joint:<6} {len(t.dates):>4}  " + "  ".join(cells) + f"  {flag}".rstrip())
+        lines.append(f"{t.robot:<{rw}} {t.joint:<{jw}} {len(t.dates):>4}  " + "  ".join(cells) + f"  {flag}".rstrip())
     return "\n".join(lines)

@@ -7,7 +7,7 @@ import click
 from fricli.fitting import learning, training_data
 from fricli.cli import cli
 from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
-                                log_reading, output_option, progress_enabled, say, spec_options, wrote)
+                                log_reading, output_option, progress_enabled, say, spec_options, warn, wrote)
 
 
 class _Progress:
@@ -68,8 +68,20 @@ def _decision(summary: dict, tau: str) -> str:
                   if held.get("speed_ratios") else "") + ")")
     if summary["adapted"]:
         return f"{figures}; the residual network is kept"
-    return (f"{figures}; the residual network does not help consistently (by {100 * learning.MIN_GAIN:g} % "
-            f"on each half in time and in speed, and in most pieces of the log): the base model is kept")
+    if held["adapted_rmse"] >= held["base_rmse"]:
+        verdict = "makes the held-out rows worse"
+    else:
+        limit = 1.0 - learning.MIN_GAIN
+        failed = [f"{name} x{r:.4f}" for name, r in zip(("later half", "earlier half", "slower half", "faster half"),
+                                                       held["half_ratios"] + held.get("speed_ratios", []))
+                  if r > limit]
+        if not held["gain_mean"] > learning.SIGNIFICANCE * held["gain_se"]:
+            failed.append(f"gain per piece {held['gain_mean'] / held['gain_se']:.2g} standard errors"
+                          if held["gain_se"] > 0 else "no gain per piece")
+        verdict = (f"does not help consistently (it must lower the RMS by {100 * learning.MIN_GAIN:g} % on each "
+                   f"half in time and in speed, with a gain per piece above {learning.SIGNIFICANCE:g} standard "
+                   f"errors; here {', '.join(failed)})")
+    return f"{figures}; the residual network {verdict}: the base model is kept"
 
 
 @cli.command("train-base")
@@ -129,6 +141,10 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
             f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+        if summary["steps"] >= 100 and summary["best_step"] <= summary["steps"] // 100:
+            warn(f"warning: {the_log.name}{where}: the validation error was least at step {summary['best_step']} "
+                 f"of {summary['steps']}: training learned nothing the held-out rows confirm; the target may hold "
+                 "what no friction of velocity and load gives (fricli diagnose says what)")
         say(wrote(out), quiet)
         return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}
 

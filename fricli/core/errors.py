@@ -62,7 +62,8 @@ TABLE: tuple[ExitCode, ...] = (
              "left in place"),
     ExitCode(DATA, "DATA", "the log holds too little for the job (too short, no motion)",
              "a valid log holds too little for the job (too short, no motion, no samples in one "
-             "direction)"),
+             "direction) or lacks a robot-model column it needs (`tau_g`, `tau_dyn`: unknown, not zero; "
+             "[log format](log-format.md#robot-model-columns))"),
     ExitCode(OUTPUT, "OUTPUT", "an output could not be written",
              "an output could not be written (missing folder, disk full, permissions)"),
     ExitCode(LOCKED, "LOCKED", "another job holds the lock on the output",

@@ -183,7 +183,9 @@ def read_table(path: str) -> tuple[pa.Table, str]:
     name = "stdin" if path == "-" else path
     pf = parquet_file(data, name)
     try:
-        table = pf.read()
+        # every pyarrow read in fricli is single-threaded: its reader threads now and then abort
+        # the interpreter at exit on a loaded machine (docs/reliability.md)
+        table = pf.read(use_threads=False)
     except Exception as exc:
         raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
     return table, hashlib.sha256(data).hexdigest()

@@ -115,7 +115,7 @@ def slice_table(table: pa.Table, window: Window | None, name: str = "log") -> pa
 def limits_of_file(pf, window: Window, name: str = "log") -> tuple[float, float]:
     """(lo, hi) [s] of ``window`` over a Parquet file read in batches (``pq.ParquetFile``): its
     ``t`` column alone is read for the time span. DataError when the window holds no row."""
-    t = times(pf.read(columns=["t"])) if "t" in pf.schema_arrow.names else None
+    t = times(pf.read(columns=["t"], use_threads=False)) if "t" in pf.schema_arrow.names else None
     if t is None:
         return -np.inf, np.inf
     lo, hi = window.limits(t)

@@ -12,6 +12,7 @@ with the same options write the same bytes.
 from __future__ import annotations
 
 import dataclasses
+import os
 import time
 from typing import Callable
 
@@ -228,7 +229,7 @@ def _adapt(data, output, opts, job, base, on_eval) -> Made:
         min_speed=opts["min_speed"], on_eval=on_eval, base_envelope=models.envelope(base_meta, base))
     models.save_for_log(output, model, data, rows_used=summary["rows_used"], seed=opts["seed"], fit=summary, job=job,
                         envelope=base_meta.get("envelope"),
-                        base={"path": base, "kind": base_meta.get("kind"),
+                        base={"name": os.path.basename(base), "kind": base_meta.get("kind"),
                               "provenance": base_meta.get("provenance", {})})
     return Made("adapt", output, data, model, summary, base=base, base_meta=base_meta)
 
@@ -254,7 +255,7 @@ def fix_model(base_model, data, output: str, opts: dict, job: dict, base: str, b
     fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
                carried=fixed.carried, refitted=fixed.refitted)
     models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
-                        base={"path": base, "kind": base_model.kind, **base_record})
+                        base={"name": os.path.basename(base), "kind": base_model.kind, **base_record})
     return Made("diagnose", output, data, fixed, fit, base=base, base_meta=base_meta, diagnosis=result)
 
 

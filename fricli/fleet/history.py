@@ -109,7 +109,7 @@ def read(history: str) -> pa.Table:
         robot = os.path.basename(folder).removeprefix("robot=")
         for path in sorted(glob.glob(os.path.join(glob.escape(folder), "*.parquet"))):
             try:
-                table = pq.ParquetFile(path).read()
+                table = pq.ParquetFile(path).read(use_threads=False)
             except (pa.ArrowInvalid, OSError) as exc:
                 raise LogError(f"{path}: cannot read this part of the history ({str(exc).splitlines()[0]})") from None
             missing = [f.name for f in SCHEMA if f.name not in table.column_names]

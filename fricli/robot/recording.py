@@ -278,7 +278,7 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     body = b"\n".join([data[a:b] for a, b in zip(starts.tolist(), ends.tolist())]) + b"\n"
     names = [f"c{i}" for i in range(n_fields)]
     table = pcsv.read_csv(
-        pa.BufferReader(body), read_options=pcsv.ReadOptions(column_names=names),
+        pa.BufferReader(body), read_options=pcsv.ReadOptions(column_names=names, use_threads=False),
         parse_options=pcsv.ParseOptions(delimiter=delimiter, quote_char=False, ignore_empty_lines=False),
         convert_options=pcsv.ConvertOptions(column_types={names[i]: pa.string() for i in wanted},
                                             include_columns=[names[i] for i in wanted]))
