@@ -48,6 +48,28 @@ def test_no_payload_is_reported_as_none():
     found = payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau), "flange")
     assert not found.detected
     assert abs(found.mass) < 0.05
+    assert found.verdict in ("none", "negative")
+
+
+def test_a_negative_mass_is_a_robot_model_error_and_a_loose_one_is_not_declared():
+    """A robot model heavier at the flange than the arm (its payload declared but absent) gives a
+    negative mass; a payload whose torques drown in noise is detected but not determined."""
+    from fricli.cli.payload import summary
+
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(6), None)
+    heavy = RobotModel(URDF, "cad", payload=TRUE)      # the model carries what the arm does not
+    found = payload.identify(heavy, motion(t, q, qd, qdd, tau), "flange")
+    assert found.verdict == "negative" and found.mass == pytest.approx(-TRUE.mass, rel=1e-6)
+    lines = summary(found)
+    assert "below zero: a negative mass is no payload but a robot-model error" in lines[0]
+    assert not any(line.startswith("declare it") for line in lines)
+    rng = np.random.default_rng(7)
+    t, q, qd, qdd, tau = simulate(rng, TRUE)
+    found = payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau + rng.normal(0.0, 40.0, tau.shape)),
+                             "flange")
+    assert found.detected and found.verdict == "undetermined", found.report()   # 1.46 +- 0.26 kg here
+    lines = summary(found)
+    assert lines[1].startswith("not determined:") and not any(line.startswith("declare it") for line in lines)
 
 
 def test_the_printed_declaration_reproduces_the_torques(tmp_path):

@@ -45,18 +45,30 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet):
 
 def summary(found) -> list[str]:
     """The console lines of an identified payload."""
+    from fricli.robot.payload import DETERMINED_COM, DETERMINED_MASS
+
     m, (sm, *sc) = found.mass, found.stderr
+    verdict = found.verdict
     if found.detected:
         com = ", ".join(f"{c:.4f}" for c in found.com)
         err = ", ".join(f"{s:.2g}" for s in sc)
         lines = [f"payload at {found.frame} on {found.rows:,} rows: mass {m:.4g} kg (standard error {sm:.2g}), "
                  f"centre of mass ({com}) m in {found.frame}'s frame (standard errors {err})"]
+        if verdict == "undetermined":
+            lines.append(f"not determined: the mass is not known to {100 * DETERMINED_MASS:g} % or the centre of mass "
+                         f"to {DETERMINED_COM:g} m (one standard error): the log turns the payload through too little, "
+                         "or the load is not a constant mass (a push, a cable); nothing to declare")
+    elif verdict == "negative":
+        lines = [f"no payload at {found.frame} on {found.rows:,} rows: mass {m:.3g} kg, {abs(m) / sm:.0f} standard "
+                 f"errors ({sm:.2g}) below zero: a negative mass is no payload but a robot-model error the size of "
+                 f"that mass at {found.frame} (link masses, drive gains): calibrate the robot model (fricli calibrate) "
+                 "and look again"]
     else:
         lines = [f"no payload at {found.frame} on {found.rows:,} rows: mass {m:.3g} kg, within "
                  f"{payload_significance()} standard errors ({sm:.2g}) of zero"]
     lines.append("RMS of tau_m minus the robot model and linear friction [Nm], without -> with the payload:")
     lines += [f"  joint {j}: {a:.4g} -> {b:.4g}" for j, a, b in zip(found.joints, found.rms_without, found.rms_with)]
-    if found.detected:
+    if verdict == "payload":
         lines.append(f"declare it: fricli import ... --payload-mass {m:.4g} --payload-com "
                      + " ".join(f"{c:.4g}" for c in found.com) + f" --payload-frame {found.frame}")
     return lines

@@ -26,6 +26,9 @@ from fricli.numerics.threads import pinned
 from fricli.robot.dynamics import pinocchio
 
 SIGNIFICANCE = 3.0   # a payload is reported as detected when its mass exceeds this many standard errors
+# ... and as determined when its mass is known to within this share and its centre of mass to
+# within this distance [m] (one standard error): else it is no constant load the log determines
+DETERMINED_MASS, DETERMINED_COM = 0.1, 0.1
 
 
 @dataclasses.dataclass
@@ -47,8 +50,21 @@ class IdentifiedPayload:
         """Whether the mass stands out of its noise: more than SIGNIFICANCE standard errors."""
         return bool(self.mass > SIGNIFICANCE * self.stderr[0])
 
+    @property
+    def verdict(self) -> str:
+        """"payload" (detected and determined: declare it), "undetermined" (detected, but its mass
+        or centre of mass is not pinned down), "none" (within SIGNIFICANCE standard errors of
+        zero) or "negative" (below: no payload does that; the robot model is off)."""
+        if self.mass < -SIGNIFICANCE * self.stderr[0]:
+            return "negative"
+        if not self.detected:
+            return "none"
+        if self.stderr[0] > DETERMINED_MASS * self.mass or (self.stderr[1:] > DETERMINED_COM).any():
+            return "undetermined"
+        return "payload"
+
     def report(self) -> dict:
-        return {"frame": self.frame, "detected": self.detected, "mass": self.mass, "com": [float(v) for v in self.com],
+        return {"frame": self.frame, "detected": self.detected, "verdict": self.verdict, "mass": self.mass, "com": [float(v) for v in self.com],
                 "stderr": {"mass": float(self.stderr[0]), "com": [float(v) for v in self.stderr[1:]]},
                 "rows": self.rows,
                 "joints": {str(j): {"rms_without": float(a), "rms_with": float(b),
