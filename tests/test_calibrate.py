@@ -295,8 +295,9 @@ def test_refusals(arm, tmp_path):
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.INPUT and "--match" in res.stderr
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
-    assert res.returncode == errors.DATA and "joint 3 does not move" in res.stderr
+    assert res.returncode == errors.DATA and "joint 3 is held still (position span under 0.01 rad)" in res.stderr
     qd[700:710, 2] = 0.5           # ten rows of motion: its friction has too few rows to be fitted
+    q[700:, 2] += np.minimum(np.arange(len(t) - 700), 10) * 0.005
     log = write_log(tmp_path / "brief.parquet", t, q, qd, qdd, simulate(model, t, q, qd, qdd))
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.DATA and "joint 3 is in motion in 10 rows" in res.stderr, res.stderr
@@ -323,3 +324,24 @@ def test_stribeck_friction_is_found_with_the_rigid_body(arm):
     np.testing.assert_allclose([fr["joints"][j]["Fs"] - fr["joints"][j]["Fc"] for j in "1234"], bump, rtol=1e-6)
     after = max(f["rms_after"] for f in cal.report["fit"].values())
     assert after < 1e-6 * min(f["rms_after"] for f in linear.report["fit"].values())
+
+
+def test_poor_excitation_and_an_unexplained_offset_are_flagged(arm):
+    """A run of small motions leaves the base regressor ill-conditioned; a constant torque the
+    rigid body cannot give (a spring, a cable) ends up as a friction offset above the Coulomb level."""
+    model = arm[0]
+    robot = RobotModel(URDF, "cad")
+    small = harmonics(np.random.default_rng(1), 1500, (0.2, 0.45, 0.7, 1.1), 0.02)
+    cal = cb.calibrate(robot, motion(*small, simulate(model, *small, rng=np.random.default_rng(2), noise=0.05)))
+    assert cal.report["excitation"]["condition_number_scaled"] > cb.POOR_EXCITATION
+    assert cal.report["suspicious"][0].startswith("the run excites the arm's dynamics poorly")
+    fit = arm[2]
+    tau = simulate(model, *fit)
+
+    def offsets(tau):
+        return [w for w in cb.calibrate(robot, motion(*fit, tau)).report["suspicious"] if "friction offset" in w]
+
+    assert offsets(tau) == []
+    tau[:, 1] += 10.0                       # joint 2: Fc 7 Nm
+    flagged = offsets(tau)
+    assert len(flagged) == 1 and flagged[0].startswith("joint j2: friction offset 9.5 exceeds its Coulomb level 7")

@@ -21,6 +21,14 @@ def relative_error(y: np.ndarray, y_pred: np.ndarray) -> float:
 
 #: a row is in motion when |qd| exceeds this share of the log's top speed (docs/log-format.md, "In motion")
 REST_SHARE = 0.02
+#: a joint whose position spans less than this over a whole log [rad or m] is held still (its
+#: in-motion rows are velocity noise): a log of one joint at a time holds the others so
+HELD_SPAN = 0.01
+
+
+def held_still(q: np.ndarray) -> np.ndarray:
+    """Columns of ``q`` (n, joints) [rad or m] whose span is under HELD_SPAN, (joints,) bool."""
+    return np.ptp(q, axis=0) < HELD_SPAN if len(q) else np.ones(q.shape[1], dtype=bool)
 
 
 def in_motion(qd: np.ndarray, share: float = REST_SHARE) -> np.ndarray:

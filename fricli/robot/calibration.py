@@ -55,6 +55,7 @@ PRIOR_START = 0.5          # the fixed strength whose fit gives the cross-valida
 DEFAULT_EDGE_S = 0.5       # rows dropped at each end [s]: the zero-phase filter's and differences' transients
 MIN_LENGTH = 0.1           # m: the length scale of a body whose CAD centre of mass is closer to its joint
 SUSPICIOUS = 0.30          # a mass or armature this far from its prior value is flagged
+POOR_EXCITATION = 1e3      # a scaled base regressor's condition number above this is flagged (varied runs: 10-300)
 UNDETERMINED = 1.0         # a direction whose data information is below the prior's stays at CAD
 NUMERIC_ZERO = 1e-10       # ... or below this share of the best-determined direction's
 MAX_ITERATIONS = 30
@@ -339,12 +340,13 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         raise ValueError(f"unknown friction kind {friction!r}")
     nj = len(robot.joints)
     keep = edge_rows(motion.t, edge_s)
-    moving = np.abs(motion.qd[keep]).max(axis=0) if keep.any() else np.zeros(nj)
     if keep.sum() < MIN_ROWS:
         raise DataError(f"the log has {int(keep.sum())} rows more than {edge_s:g} s from its ends: too few to calibrate")
-    still = [str(motion.names[j]) for j in range(nj) if moving[j] == 0]
+    still = [str(motion.names[j]) for j in np.flatnonzero(metrics.held_still(motion.q[keep]))]
     if still:
-        raise DataError(f"joint {still[0]} does not move in the log: its friction cannot be identified")
+        raise DataError(f"joint{'s' if len(still) > 1 else ''} {', '.join(still)} "
+                        f"{'are' if len(still) > 1 else 'is'} held still (position span under {metrics.HELD_SPAN:g} "
+                        "rad): calibration needs every joint of the arm in motion, as in an excitation run")
     q, qd, qdd, tau = motion.q[keep], motion.qd[keep], motion.qdd[keep], motion.tau[keep]
     n = len(q)
     # fitted in each motor's units seen at its own joint (ratio / g; with one rotor per joint: the identity)
@@ -450,6 +452,12 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     report["links"] = link_table(cal)
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal, excitation["masses_not_determined_alone"])
+    if excitation["condition_number_scaled"] > POOR_EXCITATION:
+        report["suspicious"].insert(0, (
+            f"the run excites the arm's dynamics poorly: condition number {excitation['condition_number_scaled']:.3g} "
+            f"of the scaled base regressor (above {POOR_EXCITATION:g}; a varied excitation run gives tens to a few "
+            "hundred): parameters it barely sees are fitted to whatever else moves the torques (a push, a held "
+            "load, noise); check the calibrated model on another run before using it"))
     return cal
 
 
@@ -807,6 +815,11 @@ def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
             out.append(f"joint {cal.joints[j]}: armature {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
                        "also consistent with: a drive gain off on that joint; inertia of the link's own axis "
                        "that the data cannot tell from the armature")
+        fc, offset = cal.x[11 * nj + 3 * j + 1], cal.x[11 * nj + 3 * j + 2]
+        if abs(offset) > max(fc, 0.0):
+            out.append(f"{cal.motor_of(j)}: friction offset {offset:.4g} exceeds its Coulomb level {fc:.4g}: a "
+                       "torque the rigid-body model does not explain is taken for friction; also consistent with: "
+                       f"{causes}")
     return out
 
 
