@@ -333,3 +333,30 @@ def test_shell_pipeline(tmp_path, model_file):
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["3000", "True"]
     assert "friction error" in proc.stderr
+
+
+def test_a_model_of_another_robot_models_torques_is_named(tmp_path, model_file):
+    """A model records the robot model (URDF sha256, gravity, rotor inertias, payload) of the log it
+    was fitted on; applied to a log whose tau_g and tau_dyn came from another, every command says so."""
+    robot = {"urdf_sha256": "a" * 64, "gravity": [0.0, 0.0, -9.81], "rotor_inertia": {"2": 0.5}, "payload": None}
+
+    def log_with(record, name):
+        table = make_table(500)
+        table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                               b"fricli.dynamics": json.dumps(record).encode()})
+        pq.write_table(table, tmp_path / name)
+        return logs.load_log(str(tmp_path / name))
+
+    same, other = log_with(robot, "same.parquet"), log_with({**robot, "rotor_inertia": {"2": 0.9}}, "other.parquet")
+    assert models.provenance(same, rows_used=10)["robot_model"] == robot
+    meta = {"provenance": {"robot_model": robot}}
+    assert models.robot_model_note(meta, same) is None and models.robot_model_note({}, other) is None
+    assert "(differing in rotor inertias)" in models.robot_model_note(meta, other, "m.npz")
+    models.save(model_file, LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"],
+                provenance={"robot_model": robot})
+    for name, warned in (("same.parquet", False), ("other.parquet", True)):
+        res = invoke("predict", model_file, tmp_path / name, "-o", tmp_path / "p.parquet", "-q")
+        assert res.exit_code == 0, res.stderr
+        assert ("another robot model" in res.stderr) == warned, res.stderr
+        res = invoke("evaluate", "--model", model_file, "--log", tmp_path / name, "-q")
+        assert ("another robot model" in res.stderr) == warned, res.stderr

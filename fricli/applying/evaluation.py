@@ -24,6 +24,7 @@ class Result:
     joint: object = None           # the log's joint the row is for (None: no joint column)
     extrapolation: dict | None = None   # rows outside the model's training envelope (None: no envelope)
     unit: str = "Nm"               # of the errors: Nm, or N on a linear axis
+    robot_model: str | None = None  # a warning: the model was fitted on another robot model's torques
 
 
 def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None = None,
@@ -40,7 +41,8 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
         external_moving = metrics.errors(sig["tau_ext"][moving], est[moving])
     return Result(model_name, log_name, metrics.errors(target, pred), external,
                   metrics.errors(target[moving], pred[moving]), external_moving,
-                  extrapolation=share_outside(models.envelope(meta, model_name), sig), unit=log.units["tau"])
+                  extrapolation=share_outside(models.envelope(meta, model_name), sig), unit=log.units["tau"],
+                  robot_model=models.robot_model_note(meta, log, model_name))
 
 
 def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_hz: float | None = None,

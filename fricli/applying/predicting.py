@@ -345,7 +345,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
         if dropped:
             warn(f"warning: dropped {dropped} rows with NaN, infinite or absurd values")
         for message in dict.fromkeys(warnings):
-            if not dropped or message.startswith("note:"):
+            if not dropped or not message.startswith("warning: dropped "):
                 warn(message)
     per_joint = None
     n_outside = sum(st.outside for st in streams.values())
@@ -387,6 +387,9 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
                          drop_invalid=reading.drop_invalid, zero=reading.zero)
     if st.t_last is None:
         models.check_log(st.meta, log, st.model_name)
+        note = models.robot_model_note(st.meta, log)
+        if note:
+            warnings.append(note)
     sig = log.signals
     t = sig["t"]
     if st.t_last is not None and not t[0] > st.t_last:

@@ -206,6 +206,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
             coupled.add_partners(base, data, table, **reading)   # what the model reads (a group's member)
             data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
             models.check_log(meta, data, pairs[j])
+            note = models.robot_model_note(meta, data, pairs[j])
+            if note and echo:
+                warn(note)
             result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
                                      max_effects=max_effects, accept_implausible=accept_implausible)
             if echo:

@@ -10,7 +10,7 @@ from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
 from fricli.cli.options import (Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
-                                reading_kwargs, say)
+                                reading_kwargs, say, warn)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -66,6 +66,8 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     for r in results:
         if r.extrapolation is not None and not quiet:
             say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation, r.joint if several else None)}")
+    for note in dict.fromkeys(r.robot_model for r in results if r.robot_model):
+        warn(note)
 
 
 @cli.command("report")

@@ -21,6 +21,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import hashlib
+import json
 import os
 import shutil
 import sys
@@ -350,6 +351,31 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
 # No robot signal reaches this magnitude in canonical units (rad, m, rad/s, Nm, N, A, degC);
 # a value beyond it is garbage (uninitialised memory), and squares of it would overflow
 MAGNITUDE_LIMIT = 1e9
+
+
+def robot_record(schema: pa.Schema) -> dict:
+    """What the log's tau_g and tau_dyn came from, as ``fricli dynamics`` (preferred: it replaces
+    them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded."""
+    meta = schema.metadata or {}
+    for key in (b"fricli.dynamics", b"fricli.import"):
+        if key in meta:
+            try:
+                record = json.loads(meta[key])
+            except ValueError:
+                continue
+            record = record.get("robot", record) if key == b"fricli.import" else record
+            if isinstance(record, dict):
+                return record
+    return {}
+
+
+def robot_model(schema: pa.Schema) -> dict | None:
+    """The robot model of a log's tau_g and tau_dyn: its URDF's sha256, gravity, rotor inertias and
+    payload (what changes them); None when the log does not record one."""
+    record = robot_record(schema)
+    if not record.get("urdf_sha256"):
+        return None
+    return {k: record.get(k) for k in ("urdf_sha256", "gravity", "rotor_inertia", "payload")}
 
 
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,

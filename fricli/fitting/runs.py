@@ -91,7 +91,11 @@ def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base:
     data = logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
                            warn=warn, **reading)
     if base is not None:
-        coupled.add_partners(coupled.view(models.load(base)[0], data.joint), data, table, **reading)
+        model, meta = models.load(base)
+        coupled.add_partners(coupled.view(model, data.joint), data, table, **reading)
+        note = models.robot_model_note(meta, data, base)
+        if note and warn:
+            warn(note)
     return data
 
 

@@ -112,14 +112,37 @@ def check_log(meta: dict, log, model_name: str = "model") -> None:
                              f"but the log {log.name} is in {lu['q']}, {lu['tau']}")
 
 
+def robot_model_note(meta: dict, log, model_name: str | None = None) -> str | None:
+    """A warning when the model was fitted on a log whose tau_g and tau_dyn came from another robot
+    model (URDF, gravity, rotor inertias, payload) than ``log``'s: its friction target differs, so
+    its friction does too. None when they agree or either is unrecorded. Without ``model_name`` the
+    line is the same for every joint's model of a folder (one line for all)."""
+    from fricli.core import logs
+
+    fitted, here = (meta.get("provenance") or {}).get("robot_model"), logs.robot_model(log.table.schema)
+    if not fitted or not here or fitted == here:
+        return None
+    what = {"urdf_sha256": "URDF", "gravity": "gravity", "rotor_inertia": "rotor inertias", "payload": "payload"}
+    differ = [name for key, name in what.items() if fitted.get(key) != here.get(key)]
+    who = f"{model_name}: fitted" if model_name else "the model was fitted"
+    return (f"warning: {who} on tau_g and tau_dyn of another robot model than {log.name}'s (differing in "
+            f"{', '.join(differ)}): the friction it learned holds what that model got wrong; import the log with the "
+            "model's URDF and options, or refit")
+
+
 def provenance(log, *, rows_used: int, seed: int | None = None, **extra) -> dict:
     """Where a model came from: enough to reproduce it (no wall-clock time). A command's options,
     the seed among them, are recorded once, in ``job`` (``extra``); ``seed`` is kept here only for
     a model written without one."""
     import os
 
+    from fricli.core import logs
+
     out = {"log_sha256": log.sha256, "log_name": os.path.basename(log.name), "log_rows": len(log),
            "rows_used": int(rows_used), "derived": log.derived}
+    robot = logs.robot_model(log.table.schema)
+    if robot is not None:
+        out["robot_model"] = robot
     if "job" not in extra:
         out["seed"] = seed
     out.update(extra)

@@ -36,7 +36,6 @@ little: directions the run does not excite stay at CAD, and the report names the
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import xml.etree.ElementTree as ET
 
@@ -88,7 +87,7 @@ def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[
     names = logs.joints_of(table, name)
     if names is None or names == [None]:
         raise LogError(f"{name}: the log has no 'joint' column: calibration needs every joint of the arm")
-    record = _robot_record(table)
+    record = logs.robot_record(table.schema)
     urdf_names = dict(urdf_names or {})
     unknown = sorted(set(urdf_names) - {str(j) for j in names})
     if unknown:
@@ -178,20 +177,6 @@ def motor_units(gain: np.ndarray, stribeck: bool = False) -> np.ndarray:
 def reflected(ratio: np.ndarray, rotor: np.ndarray) -> np.ndarray:
     """R^T diag(J_m) R (joints, joints) [kg m^2]: rotor inertias ``rotor`` (joints,) seen at the joints."""
     return ratio.T @ (rotor[:, None] * ratio)
-
-
-def _robot_record(table) -> dict:
-    meta = table.schema.metadata or {}
-    for key in (b"fricli.dynamics", b"fricli.import"):
-        if key in meta:
-            try:
-                record = json.loads(meta[key])
-            except ValueError:
-                continue
-            record = record.get("robot", record) if key == b"fricli.import" else record
-            if isinstance(record, dict):
-                return record
-    return {}
 
 
 def edge_rows(t: np.ndarray, edge_s: float) -> np.ndarray:
@@ -912,7 +897,7 @@ def refuse_inconsistent(cal: Calibration) -> None:
 
 def recorded_urdf(table) -> str | None:
     """The URDF the log's tau_g and tau_dyn came from, as ``import``/``dynamics`` recorded it (None: none)."""
-    return _robot_record(table).get("urdf") or None
+    return logs.robot_record(table.schema).get("urdf") or None
 
 
 def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
@@ -922,7 +907,7 @@ def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: flo
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
 
-    record = _robot_record(table)
+    record = logs.robot_record(table.schema)
     if not record.get("joints"):
         raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
     gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
