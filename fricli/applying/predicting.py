@@ -355,7 +355,9 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
         has_ext = has_ext or st.ext.n > 0
     if several:
         per_joint = {str(j): {"rows": st.rows, "model": st.model_name, "friction": st.fric.result(),
-                              **({"external": st.ext.result()} if st.ext.n else {})} for j, st in streams.items()}
+                              **({"external": st.ext.result()} if st.ext.n else {}),
+                              **({"outside": st.outside} if st.env is not None else {})}
+                     for j, st in streams.items()}
     only = next(iter(streams)) if not several else None
     return Result(rows=rows, joint=only, unit=unit or "Nm", friction=fric.result(),
                   external=ext_err.result() if has_ext else None, batches=batches, read_whole=reason,

@@ -72,8 +72,10 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         if result.external is not None:
             say(f"external torque error against tau_ext: {_figures(result.external, result.unit)}")
         for j, figures in (result.per_joint or {}).items():
+            outside = figures.get("outside")
             say(f"  joint {j} ({figures['rows']:,} rows, {figures['model']}): friction {_figures(figures['friction'], result.unit)}"
-                + (f"; external {_figures(figures['external'], result.unit)}" if "external" in figures else ""))
+                + (f"; external {_figures(figures['external'], result.unit)}" if "external" in figures else "")
+                + (f"; {outside:,} row{'s' if outside != 1 else ''} outside the training envelope" if outside else ""))
         if result.extrapolation is not None:
             say(extrapolation_line(result.extrapolation))
     if as_json:
