@@ -211,6 +211,9 @@ def test_joints_failing_for_one_reason_are_named_together(tmp_path):
 def test_train_base_adapt_and_diagnose_fix_into_folders(files, tmp_path):
     res = run("train-base", files["arm"], "-o", tmp_path / "nn", "--steps", "5", "--max-samples", "200", "-q")
     assert res.exit_code == 0, res.stderr
+    res = run("predict", tmp_path / "nn", files["arm"], "-o", tmp_path / "p.parquet", "--json", "-q")
+    report = json.loads(res.stdout)      # each joint's rows outside its model's envelope, and their sum
+    assert sum(report["per_joint"][j]["outside"] for j in ("2", "4")) == report["extrapolation"]["rows"]
     res = run("adapt", tmp_path / "nn", files["arm"], "-o", tmp_path / "ad", "--epochs", "1", "-q")
     assert res.exit_code == 0, res.stderr
     res = run("diagnose", files["set"], files["arm"], "--fix", "-o", tmp_path / "fixed", "--json", "-q")
