@@ -20,7 +20,7 @@ import dataclasses
 import numpy as np
 
 from fricli.core import metrics
-from fricli.core.errors import FitError, LogError, ModelFileError
+from fricli.core.errors import DataError, FitError, ModelFileError
 from fricli.robot import calibration
 from fricli.numerics.threads import pinned
 from fricli.robot.dynamics import pinocchio
@@ -104,7 +104,7 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
     rows = calibration.edge_rows(motion.t, edge_s)
     q, qd, qdd, tau = (a[rows] for a in (motion.q, motion.qd, motion.qdd, motion.tau))
     if len(q) < 20:
-        raise LogError(f"{len(q)} rows after dropping {edge_s:g} s at each end: too few to identify a payload")
+        raise DataError(f"{len(q)} rows after dropping {edge_s:g} s at each end: too few to identify a payload")
     tau_g, tau_dyn = robot.terms(q, qd, qdd, np.nan_to_num(motion.rotor_inertia))   # NaN: none recorded
     residual = tau - tau_g - tau_dyn
     y_b, placement = body_regressor(robot, frame, q, qd, qdd)
