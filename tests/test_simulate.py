@@ -9,7 +9,7 @@ import pyarrow.parquet as pq
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE
+from conftest import ROOT, SAMPLE
 from fricli.core import logs
 from fricli.numerics import physics
 from fricli.cli import cli
@@ -386,3 +386,13 @@ def test_sample_data_regenerates_identically(tmp_path):
                 np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12, err_msg=f"{name}: {column}")
             else:
                 assert (a == b).all(), f"{name}: {column}"
+
+
+def test_the_sample_figures_in_the_docs_are_current():
+    """docs/simulator.md's table and figures of sample_data/ are what docs/make_sample_figures.py writes."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_sample_figures", ROOT / "docs" / "make_sample_figures.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.section() in (ROOT / "docs" / "simulator.md").read_text()

@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from conftest import ROOT, shared_data
-from fricli.core import errors
+from fricli.core import errors, logs
 from fricli.robot.mapping import Payload, parse_mapping
 
 # two-link planar arm, both axes along z: masses [kg], lengths [m], centre-of-mass distances
@@ -147,6 +147,25 @@ def test_not_a_urdf_is_a_model_error():
 
     with pytest.raises(errors.ModelFileError, match="not a usable URDF"):
         RobotModel("<robot name='x'><link", "bad.urdf")
+
+
+@pytest.mark.parametrize("text, why", [
+    ("<robot name='x'><link name='a'><bad", "Error=XML_ERROR_PARSING_ELEMENT ErrorID=6 (0x6) Line number=1: "
+                                            "XMLElement name=bad"),
+    ("<robot name='x'><link name='a'/><joint name='j' type='revolute'><parent link='a'/><child link='b'/>"
+     "</joint></robot>", "Joint [j] is of type REVOLUTE but it does not specify limits")])
+def test_the_urdf_parsers_complaint_is_the_one_error_line(tmp_path, text, why):
+    """The URDF parser writes to the process's stderr itself: its complaint becomes the reason of
+    fricli's one line, and nothing else reaches stderr."""
+    pytest.importorskip("pinocchio")
+    (tmp_path / "bad.urdf").write_text(text)
+    pq.write_table(logs.table_from_arrays({"t": np.arange(5.0), "q": np.zeros(5), "tau_m": np.zeros(5)}, {}),
+                   tmp_path / "x.parquet")
+    done = subprocess.run([sys.executable, "-m", "fricli", "dynamics", "x.parquet", "--urdf", "bad.urdf", "--match",
+                           "name", "-o", "y.parquet"], cwd=tmp_path, capture_output=True, text=True,
+                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert done.returncode == errors.MODEL
+    assert done.stderr.splitlines() == [f"fricli: error: bad.urdf: not a usable URDF ({why})"], done.stderr
 
 
 # ---------------------------------------------------------------------- the command

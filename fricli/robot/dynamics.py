@@ -28,7 +28,11 @@ agree); its off-diagonal part, ``RobotModel.cross_inertia``, is added to tau_dyn
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
+import sys
+import tempfile
 
 import numpy as np
 
@@ -48,6 +52,24 @@ def pinocchio():
     return pin
 
 
+@contextlib.contextmanager
+def _c_stderr():
+    """What C code writes to file descriptor 2 meanwhile, kept from the user: yields a function
+    giving its lines (stripped, without empty ones) once the block has ended."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    lines: list[str] = []
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lambda: lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            lines += [ln.strip() for ln in tmp.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+
+
 class RobotModel:
     """A URDF's rigid-body model with a gravity vector [m/s^2] and an optional point payload."""
 
@@ -56,9 +78,12 @@ class RobotModel:
         self.name = name
         self.sha256 = hashlib.sha256(urdf_text.encode("utf-8")).hexdigest()
         try:
-            model = pin.buildModelFromXML(urdf_text)
+            with _c_stderr() as said:    # the URDF parser prints its complaints itself
+                model = pin.buildModelFromXML(urdf_text)
         except Exception as exc:  # pinocchio raises ValueError/RuntimeError for bad XML
-            raise ModelFileError(f"{name}: not a usable URDF ({str(exc).splitlines()[0] if str(exc) else exc})") from None
+            why = " ".join(" ".join(said()[:1]).removeprefix("Error:").split()) or (
+                str(exc).splitlines()[0] if str(exc) else str(exc))
+            raise ModelFileError(f"{name}: not a usable URDF ({why})") from None
         if model.nv == 0:
             raise ModelFileError(f"{name}: the URDF has no moving joints")
         self.joints = list(model.names)[1:]
