@@ -299,10 +299,17 @@ def test_warning_vanishing_coulomb_level():
 
 def test_warning_load_slope_without_a_varying_gravity_torque():
     # |tau_g| within 0.1 Nm: the slopes rest on a gravity torque that hardly changes
-    flagged = warnings_of(sweep_signals(seed=3, amp=0.1, p=dict(TRUE, kc=2.0, ks=2.5)))
+    flagged = warnings_of(sweep_signals(seed=3, amp=0.1, p=dict(TRUE, kc=0.5, ks=0.6)))
     assert len(flagged) == 1 and flagged[0].startswith("load slope kc = ")
     assert "leave tau_g out of the log" in flagged[0]
-    assert warnings_of(sweep_signals(seed=3, p=dict(TRUE, kc=2.0, ks=2.5))) == []    # |tau_g| up to 43 Nm
+    assert warnings_of(sweep_signals(seed=3, p=dict(TRUE, kc=0.5, ks=0.6))) == []    # |tau_g| up to 43 Nm
+
+
+def test_warning_load_slope_above_one():
+    """A friction growing faster than the load on the gear: a tau_g the robot model gets wrong."""
+    flagged = warnings_of(sweep_signals(seed=3, p=dict(TRUE, kc=2.0, ks=2.5)))
+    assert len(flagged) == 1 and flagged[0].startswith("load slope kc = ")
+    assert " and ks = " in flagged[0] and "above 1" in flagged[0] and "fricli calibrate" in flagged[0]
 
 
 def test_warnings_reach_stderr_and_the_model_file(tmp_path):

@@ -472,6 +472,12 @@ class LuGreIdentifier:
                            f"static-curve rows ({100 * (hi - lo) / fc:.1f} % of the Coulomb level): the joint "
                            "carries (nearly) no changing gravity torque. If it carries none, leave tau_g out of the "
                            "log (kc = ks = 0 then); otherwise log poses with other gravity torques")
+        steep = [k for k in ("kc", "ks") if abs(p[k]) > 1.0]
+        if steep:
+            which = " and ".join(f"{k} = {p[k]:.3g} {tau}/{tau}" for k in steep)
+            out.append(f"load slope {which}: above 1, the friction would grow faster than the gravity load on "
+                       "the gear, which no gear does; the shape more likely comes from tau_g (a gravity or payload "
+                       "error of the robot model: fricli calibrate, fricli diagnose) than from friction")
         return out
 
     # --------------------------------------------------------------------- fit
