@@ -19,9 +19,12 @@ from test_calibrate import FRICTION, URDF, fricli, harmonics, write_log  # noqa:
 TRUE = Payload(mass=1.7, com=(0.05, -0.03, 0.12), frame="flange")
 
 
-def simulate(rng, carried: Payload | None, n=1500):
-    """q, qd, qdd, tau_m of the arm (URDF's own inertias) carrying ``carried``, plus linear friction."""
+def simulate(rng, carried: Payload | None, n=1500, held=()):
+    """q, qd, qdd, tau_m of the arm (URDF's own inertias) carrying ``carried``, plus linear friction;
+    the joints ``held`` (indices) stay at 0.3 rad."""
     t, q, qd, qdd = harmonics(rng, n, (0.2, 0.45, 0.7, 1.1), 0.25)
+    for j in held:
+        q[:, j], qd[:, j], qdd[:, j] = 0.3, 0.0, 0.0
     robot = RobotModel(URDF, "true", payload=carried)
     tau_g, tau_dyn = robot.terms(q, qd, qdd)
     tau = tau_g + tau_dyn + FRICTION[:, 0] * qd + FRICTION[:, 1] * np.sign(qd) + FRICTION[:, 2]
@@ -110,3 +113,15 @@ def test_bad_input_is_one_line(tmp_path):
     frame = fricli("payload", "dyn.parquet", "--frame", "tool9", cwd=tmp_path)
     assert frame.returncode == errors.MODEL and "the frames are: " in frame.stderr
     assert len(frame.stderr.strip().splitlines()) == 1
+
+
+def test_joints_held_still_are_left_out():
+    """A held joint holds any torque up to its breakaway: its rows say nothing of the payload."""
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(8), TRUE, held=(0, 2))
+    tau[:, [0, 2]] += 3.0                      # whatever its last motion left it holding
+    found = payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau), "flange")
+    assert found.held == [1, 3] and set(found.report()["joints"]) == {"2", "4"}
+    assert found.verdict == "payload" and found.mass == pytest.approx(TRUE.mass, rel=1e-6)
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(8), TRUE, held=(0, 1, 2, 3))
+    with pytest.raises(errors.DataError, match="every joint is held still"):
+        payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau), "flange")

@@ -67,7 +67,8 @@ def summary(found) -> list[str]:
         lines = [f"no payload at {found.frame} on {found.rows:,} rows: mass {m:.3g} kg, within "
                  f"{payload_significance()} standard errors ({sm:.2g}) of zero"]
     lines.append("RMS of tau_m minus the robot model and linear friction [Nm], without -> with the payload:")
-    lines += [f"  joint {j}: {a:.4g} -> {b:.4g}" for j, a, b in zip(found.joints, found.rms_without, found.rms_with)]
+    lines += [f"  joint {j}: held still, not used" if j in found.held else f"  joint {j}: {a:.4g} -> {b:.4g}"
+              for j, a, b in zip(found.joints, found.rms_without, found.rms_with)]
     if verdict == "payload":
         lines.append(f"declare it: fricli import ... --payload-mass {m:.4g} --payload-com "
                      + " ".join(f"{c:.4g}" for c in found.com) + f" --payload-frame {found.frame}")

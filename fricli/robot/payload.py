@@ -44,6 +44,7 @@ class IdentifiedPayload:
     rms_without: np.ndarray      # (joints,) [Nm] RMS of the residual with linear friction alone
     rms_with: np.ndarray         # (joints,) [Nm] with the payload too
     friction: np.ndarray         # (joints, 3) Fv, Fc, offset fitted with the payload
+    held: list = dataclasses.field(default_factory=list)   # joints held still: not used (no figures)
 
     @property
     def detected(self) -> bool:
@@ -66,10 +67,11 @@ class IdentifiedPayload:
     def report(self) -> dict:
         return {"frame": self.frame, "detected": self.detected, "verdict": self.verdict, "mass": self.mass, "com": [float(v) for v in self.com],
                 "stderr": {"mass": float(self.stderr[0]), "com": [float(v) for v in self.stderr[1:]]},
-                "rows": self.rows,
+                "rows": self.rows, "held": [str(j) for j in self.held],
                 "joints": {str(j): {"rms_without": float(a), "rms_with": float(b),
                                     "Fv": float(f[0]), "Fc": float(f[1]), "offset": float(f[2])}
-                           for j, a, b, f in zip(self.joints, self.rms_without, self.rms_with, self.friction)}}
+                           for j, a, b, f in zip(self.joints, self.rms_without, self.rms_with, self.friction)
+                           if j not in self.held}}
 
 
 def body_regressor(robot, frame: str, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> tuple[np.ndarray, object]:
@@ -108,7 +110,12 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
     tau_g, tau_dyn = robot.terms(q, qd, qdd, np.nan_to_num(motion.rotor_inertia))   # NaN: none recorded
     residual = tau - tau_g - tau_dyn
     y_b, placement = body_regressor(robot, frame, q, qd, qdd)
-    moving = [metrics.in_motion(qd[:, j]) for j in range(qd.shape[1])]
+    # a joint held still holds any torque up to its breakaway: its rows say nothing of the payload
+    held = metrics.held_still(q)
+    if held.all():
+        raise DataError(f"every joint is held still (position span under {metrics.HELD_SPAN:g} rad): no motion "
+                        "to identify a payload from")
+    moving = [metrics.in_motion(qd[:, j]) & ~held[j] for j in range(qd.shape[1])]
     friction = [np.column_stack([qd[m, j], np.sign(qd[m, j]), np.ones(int(m.sum()))]) for j, m in enumerate(moving)]
     proj = [np.linalg.pinv(a) for a in friction]
 
@@ -137,15 +144,16 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
     if not fit.success:
         raise FitError(f"no payload fits the torques at {frame} (least squares: {fit.message})")
     out, coef = parts(fit.x)
-    dof = max(len(fit.fun) - 4 - 3 * len(moving), 1)
+    dof = max(len(fit.fun) - 4 - 3 * int((~held).sum()), 1)
     try:
         cov = np.linalg.inv(fit.jac.T @ fit.jac) * float(fit.fun @ fit.fun) / dof
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         stderr = np.full(4, np.inf)
-    rms = lambda parts_: np.array([np.sqrt(np.mean(r ** 2)) for r in parts_])  # noqa: E731
+    rms = lambda parts_: np.array([np.sqrt(np.mean(r ** 2)) if r.size else np.nan for r in parts_])  # noqa: E731
     return IdentifiedPayload(frame=frame, mass=float(fit.x[0]), com=fit.x[1:].copy(), stderr=stderr, rows=int(len(q)),
-                   joints=list(motion.names), rms_without=rms(none), rms_with=rms(out), friction=np.array(coef))
+                             joints=list(motion.names), rms_without=rms(none), rms_with=rms(out), friction=np.array(coef),
+                             held=[motion.names[j] for j in np.flatnonzero(held)])
 
 
 def identify_log(table, name: str, frame: str, *, urdf: str | None = None, cutoff_hz: float | None = None,
