@@ -308,8 +308,9 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
 _ASCII = bytes(range(128)) + b"?" * 128
 
 
-def _listing(defects: dict[str, Defect]) -> str:
-    return "; ".join(f"{d.count} with {KINDS[k]} (first at line {d.first_line})" for k, d in defects.items())
+def listing(defects: dict[str, Defect], unit: str = "line") -> str:
+    """'3 with all values zero (first at line 1); ...': what was dropped, for a refusal's message."""
+    return "; ".join(f"{d.count} with {KINDS[k]} (first at {unit} {d.first_line})" for k, d in defects.items())
 
 
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
@@ -375,7 +376,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
             numbers = np.append(numbers, n_lines)
             unterminated = n_lines
     if len(numbers) == 0:
-        raise LogError(f"{name}: no usable rows" + (f" ({_listing(defects)})" if defects else ""))
+        raise LogError(f"{name}: no usable rows" + (f" ({listing(defects)})" if defects else ""))
 
     signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
     if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
@@ -388,7 +389,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     if keep.sum() < MIN_ROWS:
         count = int(keep.sum())
         usable = f"only {count} usable row{'s' if count > 1 else ''}" if count else "no usable rows"
-        raise LogError(f"{name}: {usable}" + (f" ({_listing(defects)})" if defects else ""))
+        raise LogError(f"{name}: {usable}" + (f" ({listing(defects)})" if defects else ""))
     if not keep.all():
         cols = {c: v[keep] for c, v in cols.items()}
         numbers = numbers[keep]

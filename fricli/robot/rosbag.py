@@ -25,7 +25,7 @@ import numpy as np
 
 from fricli.core.errors import LogError, MissingDependencyError
 from fricli.robot.mapping import Column, JointMap, Mapping, effort_column
-from fricli.robot.recording import KINDS, Defect, Recording, consistent_rows, ranges
+from fricli.robot.recording import KINDS, Defect, Recording, consistent_rows, listing, ranges
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 INSTALL = "pip install 'fricli[ros]'"
@@ -209,8 +209,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                                   shown_from=(int(t_ns[idx[0]]) - mid) / 1e9)   # t from the first message
     keep[idx[~good]] = False
     if not keep.any():
-        listing = "; ".join(f"{d.count} with {KINDS[k]} (first at message {d.first_line})" for k, d in found.items())
-        raise LogError(f"{path}: no usable messages ({listing})")
+        raise LogError(f"{path}: no usable messages ({listing(found, 'message')})")
     origin = int(t_ns[keep][0])
     cols["t"] = (t_ns - origin) / 1e9
     defects = {}
