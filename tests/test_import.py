@@ -422,6 +422,24 @@ def test_a_file_of_uninitialised_memory_is_refused():
         parse(["%.2f,1e150,-3e150,2e150,1e150,7e149,5e150,ok" % (100 + k * 0.01) for k in range(40)])
 
 
+def test_files_that_are_not_text_recordings_are_named():
+    """Each kind is refused with what it is; UTF-16 text (a spreadsheet's "Unicode text") is read."""
+    m = mapping(MAPPING)
+    for data, what in ((b"PAR1" + bytes(200), "a Parquet file"), (b"PK\x03\x04" + bytes(200), "a zip archive"),
+                       (bytes(range(256)) * 8, "a binary file"), (b"\xff\xfe\x00\xd8", "starts like UTF-16")):
+        with pytest.raises(recording.LogError, match=what):
+            recording.read_recording(data, m, "rec.csv")
+    text = "\r\n".join(rows()) + "\r\n"
+    for codec in ("utf-16", "utf-16-be"):
+        data = text.encode(codec)
+        if codec == "utf-16-be":
+            data = b"\xfe\xff" + data
+        got = recording.read_recording(data, m, "rec.csv")
+        want = recording.read_recording(text.encode(), m, "rec.csv")
+        assert not got.defects and got.lines.tolist() == want.lines.tolist()
+        assert all(np.array_equal(got.values[k], want.values[k]) for k in want.values)
+
+
 def test_controller_dump_defects_in_the_command(tmp_path):
     """Not text, bad option values: one line each, with the documented code."""
     import gzip

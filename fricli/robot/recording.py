@@ -318,6 +318,19 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     usable, a named column is missing, or time goes back without ``drop_backward``."""
     if data[:2] == b"\x1f\x8b":
         raise LogError(f"{name}: a gzip file, not a text recording: decompress it first (gunzip)")
+    if data[:4] == b"PAR1":
+        raise LogError(f"{name}: a Parquet file, not a text recording: fricli's commands read Parquet logs "
+                       "directly (docs/log-format.md)")
+    if data[:4] == b"PK\x03\x04":
+        raise LogError(f"{name}: a zip archive (a spreadsheet workbook?), not a text recording: "
+                       "extract it, or save the sheet as CSV")
+    if data[:2] in (b"\xff\xfe", b"\xfe\xff"):   # "Unicode text" as spreadsheets on Windows save it
+        try:
+            data = data.decode("utf-16").encode("utf-8")
+        except UnicodeDecodeError:
+            raise LogError(f"{name}: starts like UTF-16 text but is not: save it as UTF-8") from None
+    if b"\x00" in data[:65536]:
+        raise LogError(f"{name}: a binary file (it holds NUL bytes), not a text recording")
     if data.count(b"\r") != data.count(b"\r\n"):
         raise LogError(f"{name}: holds carriage returns that are not part of a CRLF line end (old Mac line "
                        "ends?): convert the file to LF or CRLF line ends")
