@@ -167,6 +167,7 @@ def test_stdin_to_stdout_in_processes(tmp_path):
 def test_help_has_an_example(command):
     res = CliRunner().invoke(cli, [command, "-h"])
     assert res.exit_code == 0 and "Example:" in res.stdout and res.stderr == ""
+    assert "None" not in res.stdout   # e.g. an unbounded range shown as "x<=None"
 
 
 # ------------------------------------------------------------- what a newcomer runs into first

@@ -20,6 +20,9 @@ class Number(click.FloatRange):
     def __init__(self, min=None, max=None, min_open=False, max_open=False):
         super().__init__(min=min, max=max, min_open=min_open, max_open=max_open)
 
+    def _describe_range(self) -> str:
+        return "" if self.min is None and self.max is None else super()._describe_range()
+
     def convert(self, value, param, ctx):
         number = super().convert(value, param, ctx)
         if not math.isfinite(number):
