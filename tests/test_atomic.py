@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import fcntl
 import os
+import stat
 import subprocess
 import sys
 import threading
@@ -162,3 +163,23 @@ def test_a_failed_write_leaves_the_previous_file_and_no_temporary_file(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.npz"]
     with pytest.raises(OutputError, match="does not exist"):
         atomic.atomic_write_bytes(str(tmp_path / "nope" / "m.npz"), b"")
+
+
+def test_a_fifo_is_written_as_it_is_not_replaced(tmp_path):
+    """A FIFO or a device (/dev/null) named as the output stays what it is."""
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(open(fifo, "rb").read()))
+    reader.start()
+    atomic.atomic_write_bytes(str(fifo), b"x" * 100_000)
+    reader.join(timeout=30)
+    assert got == [b"x" * 100_000]
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and sorted(p.name for p in tmp_path.iterdir()) == ["fifo"]
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="no /dev/full on this system")
+def test_a_full_device_is_an_output_error():
+    with pytest.raises(OutputError, match="cannot write /dev/full: No space left on device"):
+        atomic.atomic_write_bytes("/dev/full", b"x" * 100_000)
+    assert stat.S_ISCHR(os.stat("/dev/full").st_mode)

@@ -102,6 +102,14 @@ def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
     assert {j["status"] for j in json.loads(second.stdout)["jobs"]} == {"unchanged"}
     assert sorted((folder / "history").rglob("*.parquet")) == files  # nothing appended
 
+    # robot001's rows lost (a run interrupted before it wrote them): its models are up to date,
+    # yet its jobs run again so that the history catches up
+    shutil.rmtree(folder / "history" / "robot=robot001")
+    fourth = fricli("fleet", "fleet.toml", cwd=folder)
+    assert "4 jobs: 2 ok, 2 unchanged, 0 failed" in fourth.stdout, fourth.stdout + fourth.stderr
+    assert [(r["robot"], r["joint"]) for r in history_rows(folder)] == [
+        ("robot001", "1"), ("robot001", "2"), ("robot002", "1"), ("robot002", "2")]
+
     bad = folder / "robot002/joint2/2026-01-01.parquet"
     bad.write_bytes(b"PAR1 this is not a parquet file")
     third = fricli("fleet", "fleet.toml", cwd=folder)
@@ -387,3 +395,15 @@ def test_the_fleet_prints_the_warnings_identify_prints(tmp_path):
     assert [line for line in res.stderr.splitlines() if line.startswith("warning: ")] == \
         [f"warning: r1 joint 4 2026-05-04: {line}" for line in said]
     assert json.loads(res.stdout)["jobs"][0]["warnings"] == said
+
+
+def test_simulate_fleet_never_writes_over_a_users_folder(tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "fleet.toml").write_text("my manifest")
+    (tmp_path / "a-file").write_text("mine too")
+    for target in (mine, tmp_path / "a-file", tmp_path / "a-file" / "sub"):
+        res = invoke("simulate", "--fleet", "1x1x1", "-o", target, cwd=tmp_path)
+        assert res.returncode == errors.OUTPUT and res.stderr.startswith("fricli: error: "), res.stderr
+    assert (mine / "fleet.toml").read_text() == "my manifest" and sorted(p.name for p in mine.iterdir()) == ["fleet.toml"]
+    assert (tmp_path / "a-file").read_text() == "mine too"

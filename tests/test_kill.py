@@ -95,3 +95,33 @@ def test_sigkill_while_writing_the_model_leaves_only_a_temporary_file(tmp_path):
     assert names(tmp_path) == ["log.parquet", "model.npz"]
     assert model.read_bytes() != previous
 
+
+
+def test_sigterm_during_training_keeps_the_previous_model_and_tidies_up(tmp_path):
+    """SIGTERM (kill, timeout, a service manager) is an interruption: exit 143, nothing left behind."""
+    log, model, previous = setup(tmp_path)
+    proc = fricli("train-base", log, "-o", model, "--steps", 10**9, "--seed", "1", "-q", cwd=tmp_path)
+    wait_until((tmp_path / ".model.npz.lock").exists, proc)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == errors.TERMINATED
+    assert proc.stderr.read().decode().splitlines()[-1] == "fricli: terminated"
+    assert model.read_bytes() == previous
+    assert names(tmp_path) == ["log.parquet", "model.npz"]
+
+
+def test_sigterm_while_stdin_is_spooled_leaves_no_spool(tmp_path):
+    log, model, _ = setup(tmp_path)
+    spool = tmp_path / "tmp"
+    spool.mkdir()
+    code = "from fricli.cli import main\nimport sys\nsys.argv = ['fricli', *sys.argv[1:]]\nmain()\n"
+    env = dict(os.environ, TMPDIR=str(spool), PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-c", code, "predict", str(model), "-", "-o", str(tmp_path / "p.parquet")],
+                            cwd=tmp_path, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdin.write(open(log, "rb").read(1000))    # part of the log; stdin stays open
+    proc.stdin.flush()
+    wait_until(lambda: any(spool.iterdir()), proc)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == errors.TERMINATED
+    proc.stdin.close()
+    assert list(spool.iterdir()) == [] and not (tmp_path / "p.parquet").exists()

@@ -75,6 +75,11 @@ def _bad_logs(folder):
     variant("t-decreasing", lambda c: c["t"].__setitem__(500, c["t"][498]))
     variant("t-duplicate", lambda c: c["t"].__setitem__(500, c["t"][499]))
     variant("unknown-unit", lambda c: None, dict(UNITS, tau_m="furlongs"))
+    variant("bool-column", lambda c: c.update(qd=c["qd"] > 0))
+    doubled = no_inertia(logs.table_from_arrays(good_columns(), UNITS))
+    doubled = doubled.append_column(doubled.schema.field("tau_m"), doubled.column("tau_m"))
+    pq.write_table(doubled, folder / "duplicate-column.parquet")
+    out["duplicate-column"] = str(folder / "duplicate-column.parquet")
     variant("current-no-kt", lambda c: c.update(i_m=c.pop("tau_m") / 0.2), dict(UNITS, i_m="A"))
     variant("joint-2", lambda c: c.update(joint=np.full(len(c["t"]), 2)))
     linear = {"t": "s", "q": "m", "qd": "m/s", "qdd": "m/s^2", "tau_m": "N", "tau_g": "N"}
@@ -208,7 +213,9 @@ LOG_CASES = {
     "nulls": (errors.INPUT, "column 'tau_g' has 1 missing values (first at row 7)"),
     "t-decreasing": (errors.INPUT, "'t' is not increasing (first at row 500"),
     "t-duplicate": (errors.INPUT, "duplicate timestamps (first at row 500"),
-    "unknown-unit": (errors.INPUT, "unknown unit 'furlongs'"),
+    "unknown-unit": (errors.INPUT, "column 'tau_m' has an unknown unit 'furlongs'"),
+    "bool-column": (errors.INPUT, "column 'qd' has type bool, expected numbers"),
+    "duplicate-column": (errors.INPUT, "column 'tau_m' appears 2 times"),
     "current-no-kt": (errors.INPUT, "give --kt"),
     "two-joints": (errors.INPUT, "the log holds joints 2, 4: choose one with --joint"),
 }

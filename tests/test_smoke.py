@@ -5,6 +5,7 @@ interpreter exit, turning a success into a failure code)."""
 import importlib.util
 import io
 import os
+import pathlib
 import re
 import subprocess
 import sys
@@ -254,3 +255,48 @@ def test_deploy_doc_names_the_files_and_symbols_the_code_writes(tmp_path):
     for symbol in quoted_steps:
         assert f"double {symbol}(" in (arm if symbol.startswith("arm") else default), symbol
     assert "Link with -lm" in arm.split("*/")[0] and "Link with `-lm`" in doc
+
+
+def test_an_output_that_names_an_input_is_refused(tmp_path):
+    """Nothing the user had is overwritten by a mistyped -o: the input stays byte for byte."""
+    log = tmp_path / "log.parquet"
+    log.write_bytes((SAMPLE / "joint2_base.parquet").read_bytes())
+    model = tmp_path / "m.npz"
+    models.save(str(model), LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    (tmp_path / "link.parquet").symlink_to(log)
+    before = {p: p.read_bytes() for p in (log, model)}
+    runner = CliRunner()
+    for args, named in ((["identify", log, "-o", log], "LOG"), (["predict", model, log, "-o", model], "MODEL"),
+                        (["adapt", model, log, "-o", model], "BASE"),
+                        (["predict", model, tmp_path / "link.parquet", "-o", log], "LOG"),
+                        (["export", model, "-o", model], "MODEL"),
+                        (["calibrate", log, "--urdf", model, "-o", tmp_path / "c.urdf", "--report", log], "LOG")):
+        res = runner.invoke(cli, [str(a) for a in args])
+        assert res.exit_code == errors.USAGE, (args, res.output)
+        assert "it would be overwritten" in res.stderr and named in res.stderr, res.stderr
+    assert {p: p.read_bytes() for p in (log, model)} == before
+    res = runner.invoke(cli, ["calibrate", str(log), "--urdf", "u.urdf", "-o", "same", "--report", "same"])
+    assert res.exit_code == errors.USAGE and "name the same file" in res.stderr
+    for args, says in ((["calibrate", log, "--urdf", "u.urdf", "-o", "-", "--json"], "give the report a file"),
+                       (["calibrate", log, "--urdf", "u.urdf", "-o", "-", "--report", "-"], "give the report a file"),
+                       (["report", model, log, "-o", "-"], "stdout (-) cannot take it"),
+                       (["demo", "-o", "-"], "stdout (-) cannot take it")):
+        res = runner.invoke(cli, [str(a) for a in args])
+        assert res.exit_code == errors.USAGE and says in res.stderr, (args, res.stderr)
+    assert not (pathlib.Path.cwd() / "-").exists()
+
+
+@pytest.mark.parametrize("stdout", ["closed", "full"])
+def test_stdout_that_cannot_be_written_is_an_output_error(tmp_path, stdout):
+    model = tmp_path / "m.npz"
+    models.save(str(model), LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    if stdout == "full" and not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full on this system")
+    for args in (["predict", model, SAMPLE / "joint2_adapt.parquet", "-o", "-", "-q"], ["inspect", model],
+                 ["export", model, "-o", "-"]):
+        with open("/dev/full" if stdout == "full" else os.devnull, "wb") as full:
+            res = subprocess.run([sys.executable, "-m", "fricli", *map(str, args)], cwd=tmp_path, env=base_env(),
+                                 stdout=full, stderr=subprocess.PIPE, timeout=300,
+                                 preexec_fn=(lambda: os.close(1)) if stdout == "closed" else None)
+        check(args[0], res, errors.OUTPUT)
+        assert res.stderr.decode().startswith("fricli: error: cannot write"), res.stderr

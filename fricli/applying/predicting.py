@@ -102,7 +102,7 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     if os.path.isdir(path):
         raise LogError(f"{path}: is a folder, not a log")
     try:
-        return pq.ParquetFile(path, **logs.STREAMING), path
+        pf = pq.ParquetFile(path, **logs.STREAMING)
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -112,6 +112,7 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     except Exception:
         with open(path, "rb") as fh:
             raise LogError(logs.not_parquet(path, fh.read(4))) from None
+    return logs.unique_columns(pf, path), path
 
 
 def file_joints(pf: pq.ParquetFile, name: str) -> list | None:

@@ -5,7 +5,9 @@ the exit code documented in docs/exit-codes.md; click keeps exit code 2 for usag
 
 from __future__ import annotations
 
+import errno
 import importlib
+import signal
 import sys
 
 import click
@@ -38,6 +40,9 @@ COMMANDS = {
 }
 
 
+_OUTPUT_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EBADF)   # writing failed: exit OUTPUT
+
+
 class FricliGroup(click.Group):
     """Loads each command from ``COMMANDS`` when it is first needed and turns library errors
     into one line on stderr with their exit code."""
@@ -54,12 +59,18 @@ class FricliGroup(click.Group):
 
     def invoke(self, ctx: click.Context):
         try:
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+            if sys.stdout is not None:
+                sys.stdout.flush()    # a full disk shows here, not after the exit code is set
+            return result
         except errors.FricliError as exc:
             if ctx.meta.get("fricli.debug"):
                 raise
             click.echo(f"fricli: error: {errors.one_line(str(exc))}", err=True)
             ctx.exit(exc.exit_code)
+        except errors.Terminated:
+            click.echo("fricli: terminated", err=True)
+            ctx.exit(errors.TERMINATED)
         except KeyboardInterrupt:
             click.echo("fricli: interrupted", err=True)
             ctx.exit(errors.INTERRUPTED)
@@ -74,6 +85,9 @@ class FricliGroup(click.Group):
         except Exception as exc:
             if ctx.meta.get("fricli.debug"):
                 raise
+            if isinstance(exc, OSError) and exc.errno in _OUTPUT_ERRNOS:
+                click.echo(f"fricli: error: cannot write the output: {exc.strerror}", err=True)
+                ctx.exit(errors.OUTPUT)
             first = errors.one_line(str(exc).splitlines()[0]) if str(exc) else ""
             click.echo(f"fricli: internal error: {type(exc).__name__}: {first} (run with --debug for details)", err=True)
             ctx.exit(errors.FAILURE)
@@ -96,5 +110,24 @@ def cli() -> None:
 
 
 
+def _terminate(_signum, _frame):
+    raise errors.Terminated()
+
+
+class _ClosedStdout:
+    """Stands in for a closed stdout (``>&-``): writing to it is an output error, not an internal one."""
+
+    def write(self, _data):
+        raise OSError(errno.EBADF, "stdout is closed")
+
+    buffer = property(lambda self: self)
+    closed = False
+    flush = close = lambda self: None   # noqa: E731
+    isatty = lambda self: False          # noqa: E731
+
+
 def main() -> None:
+    if sys.stdout is None:
+        sys.stdout = _ClosedStdout()
+    signal.signal(signal.SIGTERM, _terminate)
     cli(prog_name="fricli")

@@ -60,9 +60,9 @@ class PriorStrength(click.ParamType):
               help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's); "
                    "no effect on a log that holds both.")
 @click.option("--report", "report_file", default=None, metavar="REPORT.json",
-              help="Where to write the report (default: OUT.calibration.json beside the URDF).")
+              help="Where to write the report (default: OUT.calibration.json beside the URDF; none with -o -).")
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
-@output_option(help="The calibrated URDF.")
+@output_option(help="The calibrated URDF (- for stdout).")
 @common
 def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consistency, edge, cutoff, report_file, as_json,
                   output, quiet):
@@ -91,6 +91,8 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
 
+    if output == "-" and (as_json or report_file == "-"):
+        raise click.UsageError("-o - writes the URDF to stdout: give the report a file (--report REPORT.json)")
     names = urdf_joint_names(urdf_pairs)
     if names and match is None:
         match = "name"
@@ -115,13 +117,14 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     cb.refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:
         text = cb.calibrated_urdf(fh.read(), urdf, cal)
-    where = report_file or report_path(output)
+    where = report_file or (None if output == "-" else report_path(output))
     report["report"] = where
-    body = json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
-    atomic_write_bytes(where, body.encode())
     atomic_write_bytes(output, text.encode())
+    if where:
+        body = json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
+        atomic_write_bytes(where, body.encode())
     say(f"calibrated {len(cal.joints)} joints of {urdf} on {report['rows']:,} rows of {name} -> {output} "
-        f"(report: {where})", quiet)
+        f"(report: {where or 'none'})", quiet)
     if as_json:
         emit_json(report)
 

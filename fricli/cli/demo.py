@@ -7,11 +7,11 @@ import os
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import common, say
+from fricli.cli.options import Folder, common, say
 
 
 @cli.command("demo")
-@click.option("-o", "--output", default="demo-out", show_default=True, type=click.Path(file_okay=False),
+@click.option("-o", "--output", default="demo-out", show_default=True, type=Folder(),
               help="Folder for the models, tables and report.")
 @click.option("--data", default="sample_data", show_default=True, type=click.Path(file_okay=False),
               help="Folder with the sample logs; missing logs are simulated (same seeds, same data).")

@@ -9,7 +9,7 @@ import click
 from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
-from fricli.cli.options import (Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
+from fricli.cli.options import (Folder, Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
                                 reading_kwargs, say, warn)
 
 
@@ -73,7 +73,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @cli.command("report")
 @click.argument("model", type=click.Path())
 @click.argument("log")
-@click.option("-o", "--output", required=True, type=click.Path(file_okay=False), help="Folder for the figures and index.html.")
+@click.option("-o", "--output", required=True, type=Folder(), help="Folder for the figures and index.html.")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
               help="Zero-phase low-pass [Hz] on the external-torque estimate (default: none, as in evaluate and "
                    "estimate-ext; --lowpass 5 smooths it).")

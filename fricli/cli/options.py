@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+import os
 import sys
 
 import click
@@ -30,14 +32,65 @@ class Number(click.FloatRange):
         return number
 
 
+class Folder(click.Path):
+    """An output folder: "-" (stdout) is refused, not taken as a folder's name."""
+
+    def __init__(self):
+        super().__init__(file_okay=False)
+
+    def convert(self, value, param, ctx):
+        if value == "-":
+            self.fail("this output is a folder: stdout (-) cannot take it; give a folder name", param, ctx)
+        return super().convert(value, param, ctx)
+
+
 def _set_debug(ctx: click.Context, _param, value: bool) -> bool:
     if value:
         ctx.meta["fricli.debug"] = True
     return value
 
 
+OUTPUTS = {"output": "-o", "report_file": "--report"}   # the parameters that name a file a command writes
+
+
+def _paths(value) -> list[str]:
+    """The existing files and folders a parameter's value names (a path, a NAME=PATH, or several)."""
+    if isinstance(value, (list, tuple)):
+        return [p for v in value for p in _paths(v)]
+    if not isinstance(value, str) or value == "-":
+        return []
+    return [p for p in dict.fromkeys((value, value.partition("=")[2])) if p and os.path.exists(p)]
+
+
+def distinct_outputs(params: dict) -> None:
+    """Refuse (USAGE) an output that names one of the command's input files, or another output:
+    writing it would destroy what the command reads."""
+    outputs = {name: params[name] for name in OUTPUTS if isinstance(params.get(name), str) and params[name] != "-"}
+    if len({os.path.abspath(p) for p in outputs.values()}) < len(outputs):
+        raise click.UsageError(f"{' and '.join(OUTPUTS[n] for n in outputs)} name the same file: choose two")
+    for name, path in outputs.items():
+        if not os.path.exists(path):
+            continue
+        others = [(n, v) for n, v in params.items() if n != name]
+        for other, value in others:
+            for found in _paths(value):
+                if os.path.samefile(found, path):
+                    what = OUTPUTS.get(other) or other.upper()
+                    raise click.UsageError(f"{OUTPUTS[name]} {path} is also {what} {found}: it would be overwritten; "
+                                           "choose another output")
+
+
 def common(f):
-    """--quiet and --debug."""
+    """--quiet and --debug; and outputs distinct from the inputs (``distinct_outputs``)."""
+
+    command = f
+
+    @functools.wraps(command)
+    def checked(**params):
+        distinct_outputs(params)
+        return command(**params)
+
+    f = checked
     f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
                      help="Show the full traceback on errors.")(f)
     f = click.option("-q", "--quiet", is_flag=True, help="No progress bars or messages on stderr (warnings and errors still go there).")(f)

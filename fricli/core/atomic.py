@@ -25,6 +25,7 @@ import fcntl
 import glob
 import os
 import secrets
+import stat
 import sys
 from typing import BinaryIO, Callable, Iterator
 
@@ -95,15 +96,26 @@ def _create_temp(path: str, folder: str, name: str) -> tuple[int, str]:
 def atomic_open(path: str) -> Iterator[BinaryIO]:
     """Open ``path`` for binary writing; the file appears only if the block succeeds.
 
-    ``path == "-"`` yields stdout's binary buffer instead.
+    ``path == "-"`` yields stdout's binary buffer instead; a device or FIFO (``/dev/null``) is
+    written as it is.
     """
     if path == "-":
-        yield sys.stdout.buffer
-        sys.stdout.buffer.flush()
+        if sys.stdout is None or sys.stdout.closed:
+            raise OutputError("cannot write to stdout: it is closed")
+        try:
+            yield sys.stdout.buffer
+            sys.stdout.buffer.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise OutputError(f"cannot write to stdout: {exc.strerror or exc}") from exc
         return
     folder, name = os.path.split(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise OutputError(f"cannot write {path}: folder {folder} does not exist")
+    if os.path.exists(path) and not os.path.isdir(path) and not stat.S_ISREG(os.stat(path).st_mode):
+        yield from _write_through(path)     # a device or a FIFO: written as it is, never replaced
+        return
     remove_stale_temps(path)  # left by a job killed with SIGKILL
     fd, temp = _create_temp(path, folder, name)
     fh = os.fdopen(fd, "wb")
@@ -129,6 +141,14 @@ def atomic_open(path: str) -> Iterator[BinaryIO]:
             os.fsync(dfd)
         finally:
             os.close(dfd)
+
+
+def _write_through(path: str) -> Iterator[BinaryIO]:
+    try:
+        with open(path, "wb") as fh:
+            yield fh
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
 def atomic_write_bytes(path: str, data: bytes) -> None:

@@ -28,6 +28,7 @@ SOME_FAILED = 11
 NOTHING_RAN = 12
 WEAR = 13
 INTERRUPTED = 130
+TERMINATED = 143
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,7 +83,10 @@ TABLE: tuple[ExitCode, ...] = (
              "installed, the scheduler cannot be reached, or every job failed"),
     ExitCode(WEAR, "WEAR", "trend: at least one joint is flagged for wear",
              "`trend`: at least one joint is flagged for wear (see [fleet.md](fleet.md#wear-trends))"),
-    ExitCode(INTERRUPTED, "INTERRUPTED", "interrupted (Ctrl-C)", "interrupted (Ctrl-C)"),
+    ExitCode(INTERRUPTED, "INTERRUPTED", "interrupted (Ctrl-C)", "interrupted (Ctrl-C, SIGINT)"),
+    ExitCode(TERMINATED, "TERMINATED", "terminated (SIGTERM)",
+             "terminated by SIGTERM (`kill`, `timeout`, a service manager stopping the job); like 130, "
+             "nothing half-written is left"),
 )
 BY_CODE = {row.code: row for row in TABLE}
 BY_NAME = {row.name: row for row in TABLE}
@@ -110,6 +114,10 @@ def one_line(text: str) -> str:
     """``text`` as one printable line: line breaks and terminal escapes that a message quotes from
     a file (a joint name, a unit) are shown escaped."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every clean-up that runs for an interruption runs."""
 
 
 class FricliError(Exception):

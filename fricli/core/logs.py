@@ -18,6 +18,7 @@ the options --no-gravity/--no-dynamics, or the schema metadata key ``fricli.zero
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import hashlib
@@ -110,6 +111,15 @@ def field_unit(field: pa.Field) -> str | None:
     return raw.decode("utf-8", "replace") if raw is not None else None
 
 
+def _field_spelling(field: pa.Field, name: str) -> str:
+    """The canonical spelling of a known column's unit; LogError naming the log and column."""
+    unit = field_unit(field)
+    try:
+        return canonical_unit(unit)
+    except LogError:
+        raise LogError(f"{name}: column {field.name!r} has an unknown unit {unit!r} (docs/log-format.md)") from None
+
+
 # ---------------------------------------------------------------------------- reading
 
 
@@ -127,9 +137,19 @@ def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
         # an Arrow buffer, not a Python file object: pyarrow's reader threads reading through
         # Python now and then abort the interpreter at exit ("terminate called without an active
         # exception"); pre_buffer would keep a second copy
-        return pq.ParquetFile(pa.BufferReader(data), pre_buffer=False)
+        pf = pq.ParquetFile(pa.BufferReader(data), pre_buffer=False)
     except Exception:  # pyarrow raises several types for corrupt input
         raise LogError(not_parquet(name, data[:4])) from None
+    return unique_columns(pf, name)
+
+
+def unique_columns(pf: pq.ParquetFile, name: str) -> pq.ParquetFile:
+    """``pf``, or LogError when a column name appears twice (no column could be told which)."""
+    seen = collections.Counter(pf.schema_arrow.names)
+    twice = [c for c, k in seen.items() if k > 1]
+    if twice:
+        raise LogError(f"{name}: column {twice[0]!r} appears {seen[twice[0]]} times")
+    return pf
 
 
 def not_parquet(name: str, head: bytes) -> str:
@@ -175,7 +195,7 @@ def stdin_parquet() -> pq.ParquetFile:
         source.close()
         raise LogError(message) from None
     weakref.finalize(pf, source.close)   # the ParquetFile reads the file but does not own it
-    return pf
+    return unique_columns(pf, "stdin")
 
 
 def read_table(path: str) -> tuple[pa.Table, str]:
@@ -227,7 +247,7 @@ def axis_of(schema: pa.Schema, name: str) -> str:
         unit = field_unit(field)
         if unit is None or field.name not in _EXPECTED:
             continue
-        dim = _UNITS[canonical_unit(unit)][0]
+        dim = _UNITS[_field_spelling(field, name)][0]
         if dim in ("angle", "angle/s", "angle/s2", "torque"):
             kinds.add("rotary")
         elif dim in ("length", "length/s", "length/s2", "force"):
@@ -270,7 +290,7 @@ def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
 def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> np.ndarray:
     col = table.column(column)
     typ = col.type
-    if not (pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_boolean(typ)):
+    if not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
         raise LogError(f"{name}: column {column!r} has type {typ}, expected numbers")
     if col.null_count:
         first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
@@ -291,8 +311,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
         values = _numeric(table, column, name)
         unit = field_unit(field)
         if unit is not None and column in _EXPECTED:
-            spelling = canonical_unit(unit)
-            dim, factor = _UNITS[spelling]
+            dim, factor = _UNITS[_field_spelling(field, name)]
             if dim != _EXPECTED[column][axis]:
                 raise LogError(f"{name}: column {column!r} has unit {unit!r}, which does not fit a {axis} axis")
             if factor != 1.0:

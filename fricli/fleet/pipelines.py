@@ -40,7 +40,10 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
            "effects": [], "warnings": []}
     try:
         opts = options_of(job)
-        os.makedirs(os.path.dirname(job.model), exist_ok=True)
+        try:
+            os.makedirs(os.path.dirname(job.model), exist_ok=True)
+        except OSError as exc:
+            raise errors.OutputError(f"cannot write {job.model}: {exc.strerror or exc}") from None
         table, out["sha256"] = logs.read_table(job.log)
         runs.check_table(table, job.log, opts)
         made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts, base=job.base), job.model, opts, base=job.base,

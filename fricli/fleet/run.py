@@ -88,6 +88,8 @@ def run_id(now: dt.datetime) -> str:
 def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None = None,
         if_changed: bool = True, on_done: Callable[[int, int], None] | None = None) -> Outcome:
     """Run every job of ``manifest`` and append the rows of the jobs that ran to its history.
+    A job whose model is up to date but whose history row is missing (an interrupted run, a
+    history that could not be written) runs again, so the history catches up.
 
     ``on_done(done, total)`` is called as jobs finish (for a progress bar)."""
     now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
@@ -95,22 +97,45 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
     jobs = list(manifest.jobs)
     results: list = [None] * len(jobs)
     if jobs:
-        distributed = _distributed()
         with client(scheduler, workers) as c:
-            futures = c.map(pipelines.run, jobs, if_changed=if_changed, pure=False)
-            index = {f.key: i for i, f in enumerate(futures)}
-            for done, future in enumerate(distributed.as_completed(futures), 1):
-                i = index[future.key]
-                try:
-                    results[i] = future.result()
-                except Exception as exc:  # the worker died or the task could not be sent
-                    results[i] = {"status": "failed", "seconds": float("nan"),
-                                  "reason": errors.one_line(f"worker lost the job: {type(exc).__name__}: {exc}")}
-                if on_done:
-                    on_done(done, len(jobs))
+            _run_jobs(c, jobs, range(len(jobs)), results, if_changed, on_done)
+            recorded = _recorded(manifest.history)
+            again = [i for i, res in enumerate(results) if res["status"] == "unchanged" and recorded is not None
+                     and (jobs[i].robot, str(jobs[i].joint), res["sha256"]) not in recorded]
+            if again:
+                _run_jobs(c, jobs, again, results, False, on_done)
     rows = [history.row(job, res, run, now) for job, res in zip(jobs, results) if res["status"] != "unchanged"]
     written = history.append(manifest.history, rows, run) if rows else []
     return Outcome(run=run, jobs=jobs, results=results, written=written)
+
+
+def _run_jobs(c, jobs: list, which, results: list, if_changed: bool, on_done) -> None:
+    """Run ``jobs[i]`` for i in ``which`` on client ``c`` into ``results[i]``."""
+    distributed = _distributed()
+    futures = c.map(pipelines.run, [jobs[i] for i in which], if_changed=if_changed, pure=False)
+    index = {f.key: i for f, i in zip(futures, which)}
+    for done, future in enumerate(distributed.as_completed(futures), 1):
+        i = index[future.key]
+        try:
+            results[i] = future.result()
+        except Exception as exc:  # the worker died or the task could not be sent
+            results[i] = {"status": "failed", "seconds": float("nan"),
+                          "reason": errors.one_line(f"worker lost the job: {type(exc).__name__}: {exc}")}
+        if on_done:
+            on_done(done, len(futures))
+
+
+def _recorded(path: str) -> set | None:
+    """(robot, joint, log sha256) of the history's ok rows: empty without a history yet, None when
+    it cannot be read (then nothing runs again for it)."""
+    if not os.path.isdir(path):
+        return set()
+    try:
+        table = history.read(path)
+    except errors.FricliError:
+        return None
+    cols = [table.column(c).to_pylist() for c in ("robot", "joint", "log_sha256", "status")]
+    return {(r, str(j), h) for r, j, h, status in zip(*cols) if status == "ok"}
 
 
 def table(outcome: Outcome) -> str:

@@ -20,6 +20,7 @@ import os
 import numpy as np
 
 from fricli.core import atomic
+from fricli.core.errors import OutputError
 from fricli.sim import joints, simulator
 
 DAY_SD = 0.02              # day-to-day variation of the friction levels (relative sd)
@@ -101,11 +102,17 @@ def manifest_text(robot_names: list[str], joint_numbers: list[int]) -> str:
 def simulate_fleet(folder: str, *, robots: int = 4, joints_per_robot: int = 6, days: int = 1, wearing: int = 0,
                    seed: int = 0, rate: float = DEFAULT_RATE, start: dt.date = dt.date(2026, 1, 1),
                    map_fn=map) -> list[FleetJoint]:
-    """Write the fleet's logs, manifest and truth under ``folder``; returns its joints.
+    """Write the fleet's logs, manifest and truth under ``folder`` (new, or empty; OutputError
+    otherwise); returns its joints.
 
     ``map_fn`` runs the per-log simulations (the built-in ``map``, or a pool's map)."""
     fleet = plan(robots, joints_per_robot, wearing=wearing, days=days, seed=seed)
-    os.makedirs(folder, exist_ok=True)
+    if os.path.isdir(folder) and os.listdir(folder):
+        raise OutputError(f"{folder}: the folder exists and is not empty: simulate a fleet into a new folder")
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot write {folder}: {exc.strerror or exc}") from None
     tasks = [(folder, fj, day, start, seed, rate) for fj in fleet for day in range(days)]
     truth_days = list(map_fn(_write_day, tasks))
     truth = {"seed": seed, "days": days, "start": start.isoformat(), "rate_hz": rate, "day_sd": DAY_SD,
