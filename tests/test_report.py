@@ -119,6 +119,19 @@ def test_report_page_captions_and_units(nn_model, tmp_path):
     assert "Adam step" in dict(page.figures)["loss.png"]
 
 
+def test_an_interrupted_report_leaves_the_previous_one_whole(nn_model, tmp_path, monkeypatch):
+    out = tmp_path / "rep"
+    assert CliRunner().invoke(cli, ["report", nn_model, ASYM, "-o", str(out), "-q"]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(report, "fig_quadrants", interrupted)   # after three figures are written
+    res = CliRunner().invoke(cli, ["report", nn_model, str(SAMPLE / "joint2_adapt.parquet"), "-o", str(out)])
+    assert res.exit_code == 130, res.output
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before     # no file of the new one, no stage
+
+
 def _axis_units(fig) -> list[str]:
     """Axes of a drawn figure whose numeric tick labels have no unit in the axis label."""
     bad = []

@@ -280,7 +280,8 @@ def test_an_output_that_names_an_input_is_refused(tmp_path):
     for args, says in ((["calibrate", log, "--urdf", "u.urdf", "-o", "-", "--json"], "give the report a file"),
                        (["calibrate", log, "--urdf", "u.urdf", "-o", "-", "--report", "-"], "give the report a file"),
                        (["report", model, log, "-o", "-"], "stdout (-) cannot take it"),
-                       (["demo", "-o", "-"], "stdout (-) cannot take it")):
+                       (["demo", "-o", "-"], "stdout (-) cannot take it"),
+                       (["evaluate", "--model", model, "--log", "a=-", "--log", "b=-"], "can be read only once")):
         res = runner.invoke(cli, [str(a) for a in args])
         assert res.exit_code == errors.USAGE and says in res.stderr, (args, res.stderr)
     assert not (pathlib.Path.cwd() / "-").exists()

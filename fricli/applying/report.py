@@ -4,10 +4,14 @@ one log (matplotlib's object API on the Agg canvas: no pyplot state). The page i
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import html
 import io
 import os
+import shutil
+import tempfile
+from typing import Iterator
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -286,10 +290,37 @@ def make_folder(folder: str) -> None:
         raise OutputError(f"cannot create {folder}: {exc.strerror}") from None
 
 
+@contextlib.contextmanager
+def staged(folder: str) -> Iterator[str]:
+    """A fresh hidden folder inside ``folder`` to write a report into; when the block succeeds its
+    files are moved into ``folder`` (each index.html after its figures), so an interrupted or
+    failed report leaves the previous one whole, never a mix of two."""
+    make_folder(folder)
+    try:
+        stage = tempfile.mkdtemp(prefix=".report.", suffix=".tmp", dir=folder)
+    except OSError as exc:
+        raise OutputError(f"cannot write {folder}: {exc.strerror}") from None
+    try:
+        yield stage
+        files = [os.path.relpath(os.path.join(d, f), stage) for d, _, names in os.walk(stage) for f in names]
+        for rel in sorted(files, key=lambda r: (os.path.basename(r) == "index.html", -r.count(os.sep), r)):
+            os.makedirs(os.path.join(folder, os.path.dirname(rel)), exist_ok=True)
+            os.replace(os.path.join(stage, rel), os.path.join(folder, rel))
+    except OSError as exc:
+        raise OutputError(f"cannot write {folder}: {exc.strerror}") from None
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
 def write_reports(runs: list[tuple[str, logs.Log]], folder: str, *, lowpass_hz: float | None = 5.0,
                   seed: int = 0) -> dict:
     """One report per (model file, joint's log) in ``folder/joint_<name>/`` and an index.html
     linking them with each joint's errors; a single run is written into ``folder`` itself."""
+    with staged(folder) as stage:
+        return _write_reports(runs, stage, lowpass_hz=lowpass_hz, seed=seed)
+
+
+def _write_reports(runs: list[tuple[str, logs.Log]], folder: str, *, lowpass_hz: float | None, seed: int) -> dict:
     from fricli.core.modelset import file_name
 
     if len(runs) == 1:

@@ -62,9 +62,17 @@ def _paths(value) -> list[str]:
     return [p for p in dict.fromkeys((value, value.partition("=")[2])) if p and os.path.exists(p)]
 
 
-def distinct_outputs(params: dict) -> None:
-    """Refuse (USAGE) an output that names one of the command's input files, or another output:
-    writing it would destroy what the command reads."""
+def _stdin_uses(value) -> int:
+    if isinstance(value, (list, tuple)):
+        return sum(_stdin_uses(v) for v in value)
+    return int(isinstance(value, str) and (value == "-" or value.endswith("=-")))
+
+
+def check_paths(params: dict) -> None:
+    """Refuse (USAGE) an output that names one of the command's input files, or another output
+    (writing it would destroy what the command reads), and stdin (-) named as more than one input."""
+    if sum(_stdin_uses(v) for n, v in params.items() if n not in OUTPUTS) > 1:
+        raise click.UsageError("stdin (-) can be read only once: give at most one input as -")
     outputs = {name: params[name] for name in OUTPUTS if isinstance(params.get(name), str) and params[name] != "-"}
     if len({os.path.abspath(p) for p in outputs.values()}) < len(outputs):
         raise click.UsageError(f"{' and '.join(OUTPUTS[n] for n in outputs)} name the same file: choose two")
@@ -81,13 +89,13 @@ def distinct_outputs(params: dict) -> None:
 
 
 def common(f):
-    """--quiet and --debug; and outputs distinct from the inputs (``distinct_outputs``)."""
+    """--quiet and --debug; and the paths checked (``check_paths``)."""
 
     command = f
 
     @functools.wraps(command)
     def checked(**params):
-        distinct_outputs(params)
+        check_paths(params)
         return command(**params)
 
     f = checked
