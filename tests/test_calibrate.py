@@ -10,6 +10,7 @@ import pytest
 
 from conftest import ROOT
 from fricli.core import errors, logs
+from fricli.core.errors import DataError
 
 pin = pytest.importorskip("pinocchio")
 
@@ -345,3 +346,22 @@ def test_poor_excitation_and_an_unexplained_offset_are_flagged(arm):
     tau[:, 1] += 10.0                       # joint 2: Fc 7 Nm
     flagged = offsets(tau)
     assert len(flagged) == 1 and flagged[0].startswith("joint j2: friction offset 9.5 exceeds its Coulomb level 7")
+
+
+def test_a_log_too_large_for_memory_is_refused_before_the_regressor(arm, monkeypatch):
+    model, _, fit, _ = arm
+    robot = RobotModel(URDF, "cad")
+    monkeypatch.setattr(cb, "available_memory", lambda: 10 * 2**20)     # 10 MiB
+    with pytest.raises(DataError, match=r"calibrating 1,400 samples of 4 joints needs about 0\.015 GiB of memory, "
+                                        r"0\.0098 GiB are available: calibrate on part of the log \(--from, --until\)"):
+        cb.calibrate(robot, motion(*fit, simulate(model, *fit)))
+
+
+def test_from_and_until_calibrate_on_part_of_the_log(arm, tmp_path):
+    model, _, fit, _ = arm
+    log = write_log(tmp_path / "fit.parquet", *fit, simulate(model, *fit))
+    (tmp_path / "cad.urdf").write_text(URDF)
+    res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", "--until", "50%",
+                 cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "calibrating 4 joints on 750 samples" in res.stderr

@@ -797,6 +797,7 @@ def test_fix_calibrate_writes_the_urdf_and_the_error_falls(arm_with_cad_errors):
     done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
                                     "-o", str(fixed), "--json", "-q"])
     assert done.exit_code == 0, done.output
+    assert "another robot model" not in done.stderr     # the models are refitted on the recomputed log
     robot = json.loads(done.stdout)["robot_model"]
     assert cal.exists() and (root / "cal.calibration.json").exists()
     assert len(robot["joints"]) >= 2

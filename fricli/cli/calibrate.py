@@ -8,7 +8,7 @@ import math
 
 import click
 
-from fricli.cli.options import Number, common, emit_json, output_option, say, warn
+from fricli.cli.options import Number, common, emit_json, output_option, read_log, say, warn, window_options
 
 
 def report_path(output: str) -> str:
@@ -61,6 +61,7 @@ class PriorStrength(click.ParamType):
                    "no effect on a log that holds both.")
 @click.option("--report", "report_file", default=None, metavar="REPORT.json",
               help="Where to write the report (default: OUT.calibration.json beside the URDF; none with -o -).")
+@window_options
 @click.option("--json", "as_json", is_flag=True, help="Print the report as JSON on stdout.")
 @output_option(help="The calibrated URDF (- for stdout).")
 @common
@@ -86,7 +87,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.options import _json_safe
     from fricli.cli.robot import urdf_joint_names
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
@@ -97,13 +98,14 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     if names and match is None:
         match = "name"
     robot = load_model(urdf, Mapping(time=None, joints=[], gravity=tuple(gravity)))
-    table, _ = read_table(log)
+    table, _ = read_log(log)
     name = "stdin" if log == "-" else log
     if cutoff is not None and {"qd", "qdd"} <= set(table.column_names):
         warn(f"note: --cutoff has no effect: {name} holds qd and qdd (derive them again with fricli import "
              "--cutoff, or leave qdd out of the log)")
     motion = cb.read_motion(table, name, robot, match=match, urdf_names=names,
                             cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    say(f"calibrating {len(robot.joints)} joints on {len(motion.t):,} samples of {name} ...", quiet)
     cal = cb.calibrate(robot, motion, prior=prior, edge_s=edge, enforce=consistency == "enforce", friction=friction)
     report = {"log": name, "urdf": urdf, "output": output, **cal.report}
     for line in _summary(report):

@@ -230,7 +230,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     else:
         results, folder_run = diagnose_all(table_), several
     if several and robot is None:
-        robot = _robot_model_check(results, table_, name, log, urdf, cutoff)
+        robot = _robot_model_check(results, table_, name, log, urdf, cutoff, quiet)
     if robot is not None and not as_json:
         click.echo(robot["summary"])
     if as_json:
@@ -254,7 +254,7 @@ def _fix_refitted(table, digest: str, name: str, output: str, source, report) ->
     results = {}
 
     def work(j):
-        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j])
+        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j], refitted=True)
         out = modelset.path_for(folder, data.joint)
         base, meta = models.load(pairs[j])
         base = refit(base, data)
@@ -289,6 +289,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     path = _urdf_of(table, urdf)
     if path is None:
         raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
+    say(f"calibrating the robot model of {path} on {name} ...", quiet)
     cal, text, new = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
     atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
@@ -306,7 +307,8 @@ def _fit_lines(cal, joints_: list) -> str:
                      for j in joints_ if str(j) in fit)
 
 
-def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | None, cutoff) -> dict | None:
+def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | None, cutoff,
+                       quiet: bool = False) -> dict | None:
     """Once per whole-arm log imported with a URDF: gravity or acceleration errors on several joints are the
     robot model's; the calibration that fixes them and, when the URDF is at hand, what it changes."""
     from fricli.robot import calibration as cb
@@ -325,6 +327,8 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | No
         summary += " (give --urdf to see what it changes)"
         out["summary"] = summary
         return out
+    say(f"robot-model errors on joints {who}: calibrating the robot model on {name} to show what it changes ...",
+        quiet)
     try:
         cal, _, _ = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     except FricliError as exc:       # the check is advice: the diagnosis stands without it

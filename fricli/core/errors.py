@@ -64,7 +64,8 @@ TABLE: tuple[ExitCode, ...] = (
     ExitCode(DATA, "DATA", "the log holds too little for the job (too short, no motion)",
              "a valid log holds too little for the job (too short, no motion, no samples in one "
              "direction) or lacks a robot-model column it needs (`tau_g`, `tau_dyn`: unknown, not zero; "
-             "[log format](log-format.md#robot-model-columns))"),
+             "[log format](log-format.md#robot-model-columns)); for `fricli calibrate`, also a log longer than "
+             "the memory available allows (calibrate on part of it with `--from`/`--until`)"),
     ExitCode(OUTPUT, "OUTPUT", "an output could not be written",
              "an output could not be written (missing folder, disk full, permissions)"),
     ExitCode(LOCKED, "LOCKED", "another job holds the lock on the output",

@@ -458,7 +458,8 @@ class LuGreIdentifier:
         slow = float(np.percentile(speed, 5))
         scale = max(fs, float(model.steady_state(np.array([slow]), np.array([load]))[0]))
         if fc < MINOR * scale:
-            level = "Fc + kc |tau_g| at the median |tau_g|" if stages["static"]["load"] else "Fc"
+            level = (f"Fc + kc |tau_g| at the median |tau_g| ({load:.3g} {tau})" if stages["static"]["load"]
+                     else "Fc")
             out.append(f"the Coulomb level vanishes: {level} = {fc:.3g} {tau} is {100 * fc / scale:.1f} % of "
                        f"{'Fs' if scale == fs else 'the friction at the slowest steady speeds'} ({scale:.3g} {tau}). "
                        "Check the sign and scale of tau_m (--kt) and that tau_g and tau_dyn are not counted "

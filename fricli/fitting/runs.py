@@ -81,10 +81,12 @@ def check_table(table, name: str, opts: dict) -> None:
     logs.require_robot_model(table.schema, name, zero(opts))
 
 
-def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base: str | None = None) -> logs.Log:
+def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base: str | None = None,
+         refitted: bool = False) -> logs.Log:
     """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options; with
     ``base`` (the input model file of adapt and diagnose) also the other joints' velocities it
-    reads (a coupled group's, ``coupled.add_partners``)."""
+    reads (a coupled group's, ``coupled.add_partners``), and a warning when it was fitted on another
+    robot model than the log's, unless the job refits it on this log (``refitted``)."""
     from fricli.models import coupled
 
     reading = dict(kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], zero=zero(opts))
@@ -93,7 +95,7 @@ def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base:
     if base is not None:
         model, meta = models.load(base)
         coupled.add_partners(coupled.view(model, data.joint), data, table, **reading)
-        note = models.robot_model_note(meta, data, base)
+        note = None if refitted else models.robot_model_note(meta, data, base)
         if note and warn:
             warn(note)
     return data
