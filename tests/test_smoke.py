@@ -301,3 +301,23 @@ def test_stdout_that_cannot_be_written_is_an_output_error(tmp_path, stdout):
                                  preexec_fn=(lambda: os.close(1)) if stdout == "closed" else None)
         check(args[0], res, errors.OUTPUT)
         assert res.stderr.decode().startswith("fricli: error: cannot write"), res.stderr
+
+
+def test_binary_output_to_a_terminal_is_refused_and_text_is_written(tmp_path):
+    import pty
+
+    model = tmp_path / "m.npz"
+    models.save(str(model), LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    primary, terminal = pty.openpty()
+    try:
+        for args, code in ((["predict", model, SAMPLE / "joint2_adapt.parquet", "-o", "-", "-q"], errors.OUTPUT),
+                           (["identify", SAMPLE / "joint2_base.parquet", "-o", "-", "-q"], errors.OUTPUT),
+                           (["export", model, "-o", "-"], errors.OK)):
+            res = subprocess.run([sys.executable, "-m", "fricli", *map(str, args)], cwd=tmp_path, env=base_env(),
+                                 stdout=terminal, stderr=subprocess.PIPE, timeout=300)
+            check(args[0], res, code)
+            if code:
+                assert res.stderr.decode().startswith("fricli: error: stdout is a terminal"), res.stderr
+    finally:
+        os.close(primary)
+        os.close(terminal)

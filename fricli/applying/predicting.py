@@ -295,7 +295,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
             raise ModelFileError(f"{st.model_name}: the model file records no training envelope (written by an "
                                  "older fricli): --flag-extrapolation needs one")
     any_env = any(st.env is not None for st in streams.values())
-    with atomic_open(out_path) as fh, ThreadPoolExecutor(max_workers=1) as io:
+    with atomic_open(out_path, binary=True) as fh, ThreadPoolExecutor(max_workers=1) as io:
         # the next batch is read and the last one written (pyarrow releases the GIL while it
         # decompresses and compresses) while this one is checked and predicted
         writer = pending = None

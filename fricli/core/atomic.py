@@ -93,15 +93,18 @@ def _create_temp(path: str, folder: str, name: str) -> tuple[int, str]:
 
 
 @contextlib.contextmanager
-def atomic_open(path: str) -> Iterator[BinaryIO]:
+def atomic_open(path: str, *, binary: bool = False) -> Iterator[BinaryIO]:
     """Open ``path`` for binary writing; the file appears only if the block succeeds.
 
-    ``path == "-"`` yields stdout's binary buffer instead; a device or FIFO (``/dev/null``) is
-    written as it is.
+    ``path == "-"`` yields stdout's binary buffer instead (refused on a terminal for ``binary``
+    content: Parquet, a model file); a device or FIFO (``/dev/null``) is written as it is.
     """
     if path == "-":
         if sys.stdout is None or sys.stdout.closed:
             raise OutputError("cannot write to stdout: it is closed")
+        if binary and sys.stdout.isatty():
+            raise OutputError("stdout is a terminal: redirect the binary output to a file (> FILE) or a "
+                              "command (| fricli ...), or give -o FILE")
         try:
             yield sys.stdout.buffer
             sys.stdout.buffer.flush()
@@ -151,8 +154,8 @@ def _write_through(path: str) -> Iterator[BinaryIO]:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
-def atomic_write_bytes(path: str, data: bytes) -> None:
-    with atomic_open(path) as fh:
+def atomic_write_bytes(path: str, data: bytes, *, binary: bool = False) -> None:
+    with atomic_open(path, binary=binary) as fh:
         fh.write(data)
 
 

@@ -597,7 +597,7 @@ def parquet_options(schema: pa.Schema) -> dict:
 
 def write_table(table: pa.Table, path: str) -> None:
     """Write Parquet atomically (``-`` for stdout) with ``parquet_options``. Same table, same bytes."""
-    with atomic_open(path) as fh:
+    with atomic_open(path, binary=True) as fh:
         pq.write_table(table, fh, **parquet_options(table.schema))
 
 

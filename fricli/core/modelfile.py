@@ -130,7 +130,7 @@ def read(path: str) -> tuple[dict, dict[str, np.ndarray]]:
 
 
 def write(path: str, meta: dict, arrays: dict[str, np.ndarray]) -> None:
-    atomic_write_bytes(path, dumps(meta, arrays))
+    atomic_write_bytes(path, dumps(meta, arrays), binary=True)
 
 
 def base_meta() -> dict:
