@@ -103,10 +103,11 @@ def test_the_command_reads_a_bag_and_records_it(tmp_path):
     assert meta["time_origin_ns"] == START_NS and meta["rows"] == 120 and meta["dropped"] == {}
 
 
-def test_zero_stamps_fall_back_to_receive_times(tmp_path):
+@pytest.mark.parametrize("stamp", [0, START_NS])
+def test_unset_or_constant_stamps_fall_back_to_receive_times(tmp_path, stamp):
     msgs = states(40)
     for m in msgs:
-        m[0] = 0
+        m[0] = stamp
     read, log = bag_log(write_bag(tmp_path / "run", msgs))
     assert read.stamps == "receive" and read.recording.defects == {}
     t = log.table.column("t").to_numpy()[:40]
@@ -171,8 +172,34 @@ def test_a_bag_of_zero_messages_is_refused(tmp_path):
     msgs = states(40)
     for m in msgs:
         m[2:] = [np.zeros(6), np.zeros(6), np.zeros(6)]
-    with pytest.raises(LogError, match=r"no usable messages \(40 with all values zero"):
+    with pytest.raises(LogError, match=r"no usable messages on /joint_states \(40 with all values zero"):
         bag_log(write_bag(tmp_path / "run", msgs))
+
+
+def test_fewer_than_three_messages_are_refused(tmp_path):
+    with pytest.raises(LogError, match=r"only 2 usable messages on /joint_states"):
+        bag_log(write_bag(tmp_path / "run", states(2)))
+
+
+def test_messages_the_metadata_lists_but_cannot_be_read_are_counted(tmp_path):
+    path = write_bag(tmp_path / "run", states(40), "sqlite3")
+    meta = path / "metadata.yaml"
+    meta.write_text(meta.read_text().replace("message_count: 40", "message_count: 45"))
+    assert read_bag(str(path)).unread == 5
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "-o", "out.parquet"], cwd=tmp_path,
+                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0 and res.stderr.startswith(
+        "warning: run: 5 of the messages the bag's metadata lists on /joint_states could not be read"), res.stderr
+
+
+def test_a_damaged_bag_is_an_input_error(tmp_path):
+    path = write_bag(tmp_path / "run", states(40))
+    data = next(path.glob("*.mcap"))
+    raw = bytearray(data.read_bytes())
+    raw[len(raw) // 3:len(raw) // 3 + 200] = b"\xff" * 200
+    data.write_bytes(bytes(raw))
+    with pytest.raises(LogError, match="not a readable ROS bag"):
+        bag_log(path)
 
 
 def test_empty_velocities_leave_qd_to_be_derived(tmp_path):

@@ -174,8 +174,11 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
                  f"(first at message {d.first_line}): the {field} of every message is left out"
                  + (" (qd and qdd are derived from the positions)" if field == "velocity" else ""))
         if read.stamps == "receive":
-            say(f"note: {name}: the messages on {read.topic} have zero header stamps: t is the time the bag "
-                "received them", quiet)
+            say(f"note: {name}: the messages on {read.topic} all have the same header stamp (unset or set once): "
+                "t is the time the bag received them", quiet)
+        if read.unread:
+            warn(f"warning: {name}: {read.unread} of the messages the bag's metadata lists on {read.topic} could not "
+                 "be read (a damaged or unfinished file): they are missing from the log")
     elif mapping.files:
         result = import_files([read_bytes(r) for r in recordings], mapping, list(recordings), model=model,
                               cutoff_hz=cutoff_hz, drop_backward=drop_backward)

@@ -25,7 +25,7 @@ import numpy as np
 
 from fricli.core.errors import LogError, MissingDependencyError
 from fricli.robot.mapping import Column, JointMap, Mapping, effort_column
-from fricli.robot.recording import KINDS, Defect, Recording, consistent_rows, listing, ranges
+from fricli.robot.recording import KINDS, MIN_ROWS, Defect, Recording, consistent_rows, listing, ranges
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 INSTALL = "pip install 'fricli[ros]'"
@@ -53,6 +53,7 @@ class Bag:
     sha256: str
     # fields ("velocity", ...) left out because some usable messages had them empty: those messages
     partly_empty: dict[str, Defect] = dataclasses.field(default_factory=dict)
+    unread: int = 0     # messages the bag's metadata lists on the topic that could not be read
 
 
 def _rosbags():
@@ -108,15 +109,18 @@ def _messages(path: str, topic: str | None):
                 raise LogError(f"{path}: topic {topic} " + (f"is {kind}, not {JOINT_STATE}" if kind else
                                "is not in the bag") + f" (JointState topics: {', '.join(states) or 'none'})")
             connections = [c for c in reader.connections if c.topic == topic]
+            listed = sum(int(c.msgcount or 0) for c in connections)
             out = []
             for conn, received, raw in reader.messages(connections=connections):
                 msg = reader.deserialize(raw, conn.msgtype)
                 stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
                 out.append((received, stamp, tuple(msg.name),
                             *(np.asarray(getattr(msg, f), dtype=np.float64) for f in FIELDS)))
-    except (AnyReaderError, OSError) as exc:
-        raise LogError(f"{path}: not a readable ROS bag ({exc})") from None
-    return topic, out, p
+    except LogError:
+        raise
+    except Exception as exc:   # AnyReaderError, OSError, and what a damaged file makes its decoders raise
+        raise LogError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {exc})") from None
+    return topic, out, p, listed
 
 
 def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None, *,
@@ -124,7 +128,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     """Read the JointState topic of the bag at ``path``. ``mapping`` (``parse_bag_mapping``) names
     the joints to import and what their effort is; without it the joints that the most messages name,
     effort as joint-side torque [Nm]. LogError (exit 3) when nothing is usable."""
-    topic, msgs, p = _messages(path, topic)
+    topic, msgs, p, listed = _messages(path, topic)
     if not msgs:
         raise LogError(f"{path}: topic {topic} holds no messages")
     if mapping is None or not mapping.joints:
@@ -181,7 +185,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     if not keep.any():
         raise LogError(f"{path}: no usable message on {topic} ({_found(kinds)})")
     stamps = np.array([m[1] for m in msgs], dtype=np.int64)
-    source = "receive" if (stamps[keep] == 0).all() else "header"
+    source = "receive" if np.unique(stamps[keep]).size == 1 else "header"   # unset, or set once
     t_ns = stamps if source == "header" else np.array([m[0] for m in msgs], dtype=np.int64)
     numbers = np.arange(1, n + 1)
 
@@ -208,8 +212,10 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                                   drop_backward=drop_backward, unit="message",
                                   shown_from=(int(t_ns[idx[0]]) - mid) / 1e9)   # t from the first message
     keep[idx[~good]] = False
-    if not keep.any():
-        raise LogError(f"{path}: no usable messages ({listing(found, 'message')})")
+    if keep.sum() < MIN_ROWS:
+        count = int(keep.sum())
+        usable = f"only {count} usable message{'s' if count > 1 else ''}" if count else "no usable messages"
+        raise LogError(f"{path}: {usable} on {topic}" + (f" ({listing(found, 'message')})" if found else ""))
     origin = int(t_ns[keep][0])
     cols["t"] = (t_ns - origin) / 1e9
     defects = {}
@@ -224,7 +230,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     turned = keep & (ranks != ranks[keep][0])
     moved = Defect(int(turned.sum()), int(numbers[turned][0]), ranges(numbers[turned])) if turned.any() else None
     return Bag(recording=rec, mapping=mapping, topic=topic, stamps=source, origin_ns=origin, reordered=moved,
-               sha256=_sha256(p), partly_empty=partly)
+               sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0))
 
 
 def _found(kinds: np.ndarray) -> str:
