@@ -226,7 +226,8 @@ def test_command_reports_defects_and_writes_atomically(tmp_path):
     (tmp_path / "map.toml").write_text(MAPPING)
     res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", "out.parquet", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
-    assert "warning: rec.csv: dropped 1 row with wrong number of fields (first at line 5)" in res.stderr
+    assert "warning: rec.csv: dropped 1 row with wrong number of fields (first at line 5: 2 fields, 8 expected)" \
+        in res.stderr
     assert "imported 39 rows x 2 joints from rec.csv -> out.parquet" in res.stderr
     table = pq.read_table(tmp_path / "out.parquet")
     meta = json.loads(table.schema.metadata[b"fricli.import"])
@@ -409,6 +410,25 @@ def test_a_byte_order_mark_before_a_header_is_ignored():
     assert len(result.recording.lines) == 40
 
 
+def test_what_is_wrong_with_the_first_bad_row_is_shown():
+    """A decimal comma, a date, a delimiter ending the line: the refusal shows the first one."""
+    header = MAPPING.replace("column = 1", 'column = "t"').replace("time = ", "header = true\ntime = ")
+    head = "t,q1,q2,qd1,qd2,i1,i2,status\n"
+    semicolon = head.replace(",", ";") + "\n".join(r.replace(",", ";").replace(".", ",") for r in rows()) + "\n"
+    dates = head + "\n".join(f"2026-11-25T10:00:{k:02d}," + r.split(",", 1)[1] for k, r in enumerate(rows())) + "\n"
+    trailing = head + "\n".join(r + "," for r in rows()) + "\n"
+    for data, text, says in ((semicolon, 'delimiter = ";"\n' + header, "'100,00' in column 't': a decimal comma"),
+                             (dates, header, "'2026-11-25T10:00:00' in column 't': a date and time"),
+                             (trailing, header, "first at line 2: 9 fields, 8 expected (a delimiter ends the line)")):
+        with pytest.raises(recording.LogError, match=re.escape(says)):
+            import_recording(data.encode(), mapping(text), "rec.csv")
+    quoted = head.replace("t,", '"t",')
+    assert len(import_recording((quoted + "\n".join(rows()) + "\n").encode(), mapping(header), "rec.csv")
+               .recording.lines) == 40                                       # "t" as R writes a header
+    with pytest.raises(recording.LogError, match=re.escape("no column 't' in the header line (it has 'time', 'q1'")):
+        import_recording((head.replace("t,", "time,") + "\n".join(rows()) + "\n").encode(), mapping(header), "x")
+
+
 def test_a_single_glitch_of_absurd_current_is_dropped():
     lines = rows(60)
     fields = lines[29].split(",")
@@ -456,3 +476,14 @@ def test_controller_dump_defects_in_the_command(tmp_path):
         assert res.returncode == errors.USAGE, (bad, res.stderr)
         assert res.stderr.splitlines()[-1].startswith(f"Error: Invalid value for '{bad[0]}'"), res.stderr
     assert not (tmp_path / "out.parquet").exists()
+
+
+def test_a_time_step_no_controller_samples_at_is_flagged(tmp_path):
+    (tmp_path / "map.toml").write_text(MAPPING.replace('unit = "s"', 'unit = "s", scale = 1e6'))   # a wrong scale
+    (tmp_path / "rec.csv").write_text("\n".join(rows()) + "\n")
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0 and res.stderr.startswith(
+        "warning: rec.csv: the median time step is 1e+04 s, which no controller samples at"), res.stderr
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0 and "median time step" not in res.stderr

@@ -61,6 +61,9 @@ def _derived_text(record: dict) -> str:
     return f", derived {' and '.join(derived['columns'])} ({lowpass}, central differences)"
 
 
+PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
+
+
 def _where(entry: dict, unit: str) -> str:
     """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known; for a
     recording in several files, each file's ('pos.csv: line 101; cur.csv: line 301')."""
@@ -189,11 +192,15 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     for kind, d in result.meta["dropped"].items():
         rows = unit if unit == "message" else "row"
         warn(f"warning: {name}: dropped {d['count']} {rows}{'s' if d['count'] != 1 else ''} with {d['what']} "
-             f"({_where(d, unit)})")
+             f"({_where(d, unit)}{': ' + d['example'] if d.get('example') else ''})")
     if bag and read.reordered is not None:
         d = read.reordered
         warn(f"warning: {name}: {d.count} {'messages list' if d.count != 1 else 'message lists'} the joints in another order "
              f"than the first ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
+    step = result.meta["time_step_s"]
+    if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+        warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the time "
+             "column's unit in the mapping (s or ms; a scale for other units, e.g. 1e-9 for ns)")
     if result.meta["unterminated_last_line"]:
         say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
             "complete and kept", quiet)

@@ -126,6 +126,8 @@ def dropped_record(defects: dict, unit: str = "line") -> dict:
         out[kind] = {"count": d.count, f"first_{unit}": d.first_line, "what": KINDS[kind]}
         if d.ranges is not None:
             out[kind][f"{unit}s"] = d.ranges
+        if d.example:
+            out[kind]["example"] = d.example
         if d.files:   # a recording in several files: each file's own, by its line numbers
             out[kind]["files"] = {name: {k: v for k, v in dropped_record({kind: f}, unit)[kind].items() if k != "what"}
                                   for name, f in d.files.items()}
@@ -175,7 +177,7 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "dropped": dropped_record(rec.defects, unit),
         "unterminated_last_line": int(rec.unterminated) if rec.unterminated else None,
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
-        "robot": robot,
+        "robot": robot, "time_step_s": float(np.median(np.diff(t))) if n > 1 else None,
     }
     schema_meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()}
     if tr is not None and tr.coupled_groups():   # for identify --coupling (a diagonal one is fully applied)

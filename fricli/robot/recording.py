@@ -50,6 +50,7 @@ class Defect:
     first_line: int        # 1-based line number in the file (message number in a bag)
     ranges: list | None = None   # [[first, last], ...] of the dropped lines, when known
     files: dict | None = None    # a recording in several files: {file name: Defect} (line numbers are each file's)
+    example: str | None = None   # what is wrong with the first one, when it helps to see it
 
 
 @dataclasses.dataclass
@@ -210,7 +211,8 @@ def _indices(refs, header: list[str] | None, n_fields: int, name: str) -> dict[i
             if header is None:
                 raise LogError(f"{name}: the mapping names column {ref!r} but has header = false: use an index")
             if ref not in header:
-                raise LogError(f"{name}: no column {ref!r} in the header line")
+                shown = ", ".join(repr(h) for h in header[:12]) + (", ..." if len(header) > 12 else "")
+                raise LogError(f"{name}: no column {ref!r} in the header line (it has {shown})")
             if header.count(ref) > 1:
                 raise LogError(f"{name}: column {ref!r} appears twice in the header line")
             out[ref] = header.index(ref)
@@ -256,7 +258,17 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
 _NUMBER = r"^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$"
 
 
-def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defect):
+def _not_a_number(text: str, column: str) -> str:
+    """The first non-number of a column, and what it looks like when that is telling."""
+    hint = ""
+    if re.fullmatch(r"[-+]?[0-9]*,[0-9]+", text):
+        hint = ": a decimal comma (fricli reads decimal points; convert the file)"
+    elif re.search(r"[0-9]-[0-9]", text) and ":" in text:
+        hint = ": a date and time (map a time in seconds, or give the sample rate: docs/robot-import.md)"
+    return f"{text[:40]!r} in column {column}{hint}"
+
+
+def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defect, label=str):
     """Lines ``start:stop``, reporting the wrong field counts and non-numbers; vectorised (numpy
     for the field counts, pyarrow for the numbers), so a few bad rows cost little more."""
     import pyarrow as pa
@@ -271,7 +283,11 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     fields = np.searchsorted(marks, ends) - np.searchsorted(marks, starts) + 1
     wrong = fields != n_fields
     if wrong.any():
-        defect("field_count", int(numbers[wrong][0]), int(wrong.sum()))
+        first = int(np.flatnonzero(wrong)[0])
+        example = f"{fields[first]} fields, {n_fields} expected"
+        if data[ends[first] - 1:ends[first]] == delimiter.encode():
+            example += " (a delimiter ends the line)"
+        defect("field_count", int(numbers[first]), int(wrong.sum()), example)
         starts, ends, numbers = starts[~wrong], ends[~wrong], numbers[~wrong]
     if len(numbers) == 0:
         return {c: np.empty(0) for c in wanted}, numbers
@@ -289,7 +305,9 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     for text in texts.values():
         ok &= np.asarray(pc.match_substring_regex(text, _NUMBER).to_numpy(zero_copy_only=False), dtype=bool)
     if not ok.all():
-        defect("non_numeric", int(numbers[~ok][0]), int((~ok).sum()))
+        row = int(np.flatnonzero(~ok)[0])
+        bad = next(i for i, text in texts.items() if not re.match(_NUMBER, text[row].as_py() or ""))
+        defect("non_numeric", int(numbers[row]), int((~ok).sum()), _not_a_number(texts[bad][row].as_py() or "", label(bad)))
     keep = pa.array(ok)
     cols = {i: pc.cast(pc.filter(text, keep), pa.float64()).to_numpy() for i, text in texts.items()}
     return cols, numbers[ok]
@@ -310,7 +328,8 @@ _ASCII = bytes(range(128)) + b"?" * 128
 
 def listing(defects: dict[str, Defect], unit: str = "line") -> str:
     """'3 with all values zero (first at line 1); ...': what was dropped, for a refusal's message."""
-    return "; ".join(f"{d.count} with {KINDS[k]} (first at {unit} {d.first_line})" for k, d in defects.items())
+    return "; ".join(f"{d.count} with {KINDS[k]} (first at {unit} {d.first_line}"
+                     f"{': ' + d.example if d.example else ''})" for k, d in defects.items())
 
 
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
@@ -344,6 +363,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     start = int(first)
     if mapping.header:
         header = [f.strip().decode("utf-8", "replace") for f in _fields(line(start), mapping.delimiter)]
+        header = [h[1:-1] if len(h) > 1 and h[0] == h[-1] == '"' else h for h in header]   # "name", as R writes it
         if start == 0:
             header[0] = header[0].removeprefix("\ufeff")   # a UTF-8 byte order mark
         n_fields = len(header)
@@ -362,11 +382,11 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
 
     defects: dict[str, Defect] = {}
 
-    def defect(kind: str, line_number: int, count: int = 1) -> None:
+    def defect(kind: str, line_number: int, count: int = 1, example: str | None = None) -> None:
         if kind in defects:
             defects[kind].count += count
         else:
-            defects[kind] = Defect(count, line_number)
+            defects[kind] = Defect(count, line_number, example=example)
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
     n_body = n_lines - 1 if not terminated and n_lines > start else n_lines
@@ -378,7 +398,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     if fast is not None and fast[1] == len(numbers):
         cols, _ = fast
     else:  # slow path: find every bad row
-        cols, numbers = _careful(data, starts, ends, start, n_body, n_fields, wanted, mapping.delimiter, defect)
+        cols, numbers = _careful(data, starts, ends, start, n_body, n_fields, wanted, mapping.delimiter, defect,
+                                 label=lambda i: repr(header[i]) if header else str(i + 1))
     unterminated = None
     if n_body < n_lines and line(n_lines - 1).strip():
         kind, row = _parse_row(_fields(line(n_lines - 1), mapping.delimiter), n_fields, wanted)
