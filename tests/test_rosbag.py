@@ -1,6 +1,7 @@
 """fricli import of ROS bags: sensor_msgs/JointState in rosbag2 (MCAP, sqlite3) and ROS 1 bags."""
 
 import json
+import re
 import subprocess
 import sys
 import tomllib
@@ -150,8 +151,9 @@ def test_each_defect_of_a_bag_is_reported_by_message(tmp_path):
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert res.returncode == 0, res.stderr
     assert res.stderr.splitlines() == [
-        "warning: run: dropped 1 message with joints missing (message 21)",
-        "warning: run: dropped 1 message with non-numeric or non-finite value (message 31)",
+        "warning: run: dropped 1 message with joints missing (message 21: no 'joint_6' among joint_1, joint_2, joint_3, "
+        "joint_4, joint_5)",
+        "warning: run: dropped 1 message with non-numeric or non-finite value (message 31: effort of joint_3 is nan)",
         "warning: run: dropped 1 message with time going back (message 12)",
         "warning: run: 2 messages list the joints in another order than the first (messages 41-42): reordered by name",
         "imported 97 messages x 6 joints from /joint_states in run -> out.parquet"]
@@ -200,6 +202,17 @@ def test_a_damaged_bag_is_an_input_error(tmp_path):
     data.write_bytes(bytes(raw))
     with pytest.raises(LogError, match="not a readable ROS bag"):
         bag_log(path)
+
+
+def test_a_refusal_names_the_joint_that_is_missing_or_not_finite(tmp_path):
+    msgs = states(40)
+    for m in msgs:
+        m[4] = np.where(np.arange(6) == 5, np.nan, m[4])          # joint_6 publishes no effort
+    with pytest.raises(LogError, match=re.escape("(first: effort of joint_6 is nan)); a joint that never has")):
+        bag_log(write_bag(tmp_path / "nan", msgs))
+    typo = parse_bag_mapping(tomllib.loads("".join(f'[[joints]]\nname = "{n}"\n' for n in NAMES[:5] + ["joint6"])))
+    with pytest.raises(LogError, match=re.escape("joints missing (first: no 'joint6' among joint_1, joint_2")):
+        bag_log(write_bag(tmp_path / "run", states(40)), typo)
 
 
 def test_empty_velocities_leave_qd_to_be_derived(tmp_path):

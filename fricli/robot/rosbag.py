@@ -149,6 +149,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     ranks = np.full(n, -1)               # which order the joints come in, per message
     orders: dict[tuple, tuple] = {}      # names of a message -> (indices of the log's joints, rank)
     keys: dict[tuple | None, int] = {}   # order of the log's joints in a message -> rank
+    examples: dict[str, str] = {}        # what is wrong with the first message of each kind
     for k, (_, _, msg_names, *arrays) in enumerate(msgs):
         if msg_names not in orders:
             where = {m: i for i, m in enumerate(msg_names)}
@@ -158,6 +159,9 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
         index, rank = orders[msg_names]
         if index is None or len(set(msg_names)) != len(msg_names):
             kinds[k] = "missing_joints"
+            absent = [m for m in names if m not in msg_names]
+            examples.setdefault("missing_joints", f"no {absent[0]!r} among {', '.join(msg_names[:8]) or 'no names'}"
+                                if absent else "a joint named twice")
             continue
         if any(len(a) not in (0, len(msg_names)) for a in arrays):
             kinds[k] = "malformed"
@@ -170,7 +174,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                 empty[f][k] = True
     ok = kinds == ""
     if not ok.any():
-        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds)})")
+        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds, examples)})")
     present = {f: not empty[f][ok].any() for f in FIELDS}     # a field empty in any message is not used
     if not present["position"] and not present["velocity"]:
         raise LogError(f"{path}: the messages on {topic} hold neither positions nor velocities")
@@ -181,9 +185,16 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     partly = {f: Defect(len(at), int(at[0]) + 1, ranges(at + 1)) for f, at in partly.items()}   # message numbers
     finite = np.all([np.isfinite(values[f]).all(axis=1) for f in used], axis=0)
     kinds[ok & ~finite] = "non_numeric"
+    if (ok & ~finite).any():
+        k = int(np.flatnonzero(ok & ~finite)[0])
+        f = next(f for f in used if not np.isfinite(values[f][k]).all())
+        j = int(np.flatnonzero(~np.isfinite(values[f][k]))[0])
+        examples["non_numeric"] = f"{f} of {names[j]} is {values[f][k, j]}"
     keep = kinds == ""
     if not keep.any():
-        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds)})")
+        hint = "; a joint that never has a value can be left out: a mapping lists the joints to import" \
+            if "non_numeric" in examples and len(names) > 1 else ""
+        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds, examples)}){hint}")
     stamps = np.array([m[1] for m in msgs], dtype=np.int64)
     source = "receive" if np.unique(stamps[keep]).size == 1 else "header"   # unset, or set once
     t_ns = stamps if source == "header" else np.array([m[0] for m in msgs], dtype=np.int64)
@@ -222,7 +233,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     for kind in KINDS:
         at = np.flatnonzero(kinds == kind)
         if len(at):
-            defects[kind] = Defect(len(at), int(numbers[at[0]]), ranges(numbers[at]))
+            defects[kind] = Defect(len(at), int(numbers[at[0]]), ranges(numbers[at]), example=examples.get(kind))
         elif kind in found:
             defects[kind] = found[kind]
     rec = Recording(values={ref: v[keep] for ref, v in cols.items()}, lines=numbers[keep], defects=defects,
@@ -233,6 +244,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0))
 
 
-def _found(kinds: np.ndarray) -> str:
+def _found(kinds: np.ndarray, examples: dict) -> str:
     counts = collections.Counter(k for k in kinds if k)
-    return "; ".join(f"{c} with {KINDS[k]}" for k, c in counts.items())
+    return "; ".join(f"{c} with {KINDS[k]}" + (f" (first: {examples[k]})" if k in examples else "")
+                     for k, c in counts.items())
