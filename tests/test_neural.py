@@ -591,3 +591,23 @@ def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves
     assert cv["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
     # every selected row served for training (in four folds of five) and none is set apart
     assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]
+
+
+def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):
+    """Ten minutes of velocity steps lie too close together for the level histogram (no levels):
+    train-base then trains on the steady rows, not on the ramps between them, and stays as good
+    as the LuGre model on the log."""
+    log = str(tmp_path / "long.parquet")
+    runner = CliRunner()
+    for args in (["simulate", "--scenario", "extended", "--duration", "600", "--joint", "2", "--friction-state", "base",
+                  "--seed", "2", "-o", log, "-q"], ["identify", log, "-o", str(tmp_path / "lugre.npz"), "-q"]):
+        assert runner.invoke(cli, args).exit_code == 0
+    res = runner.invoke(cli, ["train-base", log, "-o", str(tmp_path / "nn.npz"), "--json", "-q"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    assert summary["velocity_groups"] == "moving" and summary["plateaus"] is True
+    data = logs.from_table(logs.read_table(log)[0], name=log)
+    target = logs.friction_target(data.signals)
+    mae = {name: float(np.mean(np.abs(models.load(str(tmp_path / f"{name}.npz"))[0].predict(data.signals)[0] - target)))
+           for name in ("nn", "lugre")}
+    assert mae["nn"] <= 1.1 * mae["lugre"], mae

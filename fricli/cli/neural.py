@@ -44,13 +44,14 @@ def _rows_used(summary: dict, tau: str) -> str:
     """How train-base chose its rows, for its message."""
     mode, val = summary["velocity_groups"], summary["val_rows"]
     cv = summary.get("cross_validation")
+    rows, why = (("steady rows", "velocity plateaus too close together to group by speed") if summary.get("plateaus")
+                 else ("rows in motion", "no steady velocity levels in the log"))
     if mode == "moving" and cv is not None:
-        return (f"rows in motion (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
-                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g} {tau}; "
-                "no steady velocity levels in the log)")
+        return (f"{rows} (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
+                f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g} {tau}; {why})")
     if mode == "moving":
-        return (f"rows in motion ({val} for validation in {summary['groups']} of "
-                f"{training_data.PIECES} time blocks; no steady velocity levels in the log)")
+        return (f"{rows} ({val} for validation in {summary['groups']} of "
+                f"{training_data.PIECES} time blocks; {why})")
     return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
 
 

@@ -10,6 +10,7 @@ import numpy as np
 
 from fricli.core import logs, metrics
 from fricli.fitting import training_data
+from fricli.fitting.identify import steady_state_mask
 from fricli.core.envelope import share_outside
 from fricli.core.errors import DataError, FitError
 from fricli.models.base import FrictionModel
@@ -142,8 +143,12 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     if not sweeping.any():
         raise DataError(f"{name}: the log holds no motion (qd is zero everywhere)")
     check_motion(name, sig["qd"], sweeping, "train-base")
+    # velocity plateaus too many or too close together to tell apart by speed (a long stepped
+    # log): without levels, train on the plateaus, not on the ramps between them
+    steady = moving & steady_state_mask(sig["t"], sig["qd"])
+    plateaus = bool(steady.sum() >= training_data.PLATEAU_SHARE * moving.sum())
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
-                               rng=rng, keep=sweeping, moving=moving)
+                               rng=rng, keep=sweeping, moving=steady if plateaus else moving)
     if sel.mode == "moving":
         check_motion(name, sig["qd"], moving, "train-base")
 
@@ -195,7 +200,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             if bristles == "on" or check["helps"]:
                 model.fit_bristles(sig, target, sel.train)
     pred = model.predict(sig)[0]
-    summary = {"arch": arch, **sel.summary(), "best_step": int(model.best_step_), "steps": int(model.steps_),
+    summary = {"arch": arch, **sel.summary(), "plateaus": plateaus and sel.mode == "moving",
+               "best_step": int(model.best_step_), "steps": int(model.steps_),
                "schedule": schedule, "max_steps": int(steps),
                "velocity_input": velocity_input, "v0": model.v0_,
                "train": _errors(target, pred, sel.train), "moving": _errors(target, pred, np.flatnonzero(moving)),

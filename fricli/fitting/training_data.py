@@ -45,6 +45,7 @@ WIDE_SHARE = 0.1         # ... except for this share of the rows in levels
 CONTINUOUS_BINS = 32
 PIECES = 10              # validation pieces per run
 MIN_RUN = 20             # shorter runs (rows) all go to training
+PLATEAU_SHARE = 0.5      # steady rows (identify's rule) in this share of the rows in motion: a log of plateaus
 
 
 @dataclasses.dataclass
