@@ -289,6 +289,19 @@ def test_warning_stribeck_velocity_spanning_the_speeds():
     assert warnings_of(sweep_signals(seed=3)) == []                      # vs = 0.04 rad/s, speeds to 0.7
 
 
+def test_warning_a_breakaway_no_row_determines():
+    """A Stribeck bump far below every static-curve speed (a degenerate fit of a long log with drift
+    and ripple gave vs = 7e-7 rad/s, Fs = 38,785 Nm) is named as such."""
+    sig = sweep_signals(seed=3)
+    ident = LuGreIdentifier().fit(sig)
+    p = ident.model_.parameters()
+    units = {"tau": "Nm", "qd": "rad/s"}
+    odd = LuGreModel(**dict(p, vs=1e-6, fs=1000.0))
+    flagged = ident._plausibility(sig, ident.steady_, odd, ident.fit_, units)
+    assert any(w.startswith("the Stribeck velocity vs = 1e-06 rad/s lies far below the slowest speed") for w in flagged)
+    assert not any("lies far below" in w for w in ident._plausibility(sig, ident.steady_, ident.model_, ident.fit_, units))
+
+
 def test_warning_vanishing_coulomb_level():
     no_load = dict(TRUE, kc=0.0, ks=0.0)
     flagged = warnings_of(sweep_signals(seed=3, amp=0.0, p=dict(no_load, fc=0.1)))

@@ -455,6 +455,12 @@ class LuGreIdentifier:
                        "is still to come, so the curve shapes the velocity dependence instead of the breakaway "
                        "at low speed. Log constant-velocity levels well below vs, or try a neural model with a "
                        "free velocity law (fricli train-base)")
+        slowest = float(speed.min())
+        if stages["static"]["stribeck"] and fs - fc > MINOR * fs and p["vs"] < MINOR * slowest:
+            out.append(f"the Stribeck velocity vs = {p['vs']:.3g} {vu} lies far below the slowest speed of the "
+                       f"static-curve rows ({slowest:.3g} {vu}): no row determines the breakaway Fs = {fs:.3g} {tau}, "
+                       "which the model nonetheless applies near rest. Log slow constant-velocity motion, or look "
+                       "for what else changes the friction along the log (fricli diagnose: drift, ripple)")
         slow = float(np.percentile(speed, 5))
         scale = max(fs, float(model.steady_state(np.array([slow]), np.array([load]))[0]))
         if fc < MINOR * scale:
