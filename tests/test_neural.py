@@ -611,3 +611,5 @@ def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):
     mae = {name: float(np.mean(np.abs(models.load(str(tmp_path / f"{name}.npz"))[0].predict(data.signals)[0] - target)))
            for name in ("nn", "lugre")}
     assert mae["nn"] <= 1.1 * mae["lugre"], mae
+    res = runner.invoke(cli, ["adapt", str(tmp_path / "lugre.npz"), log, "-o", str(tmp_path / "a.npz"), "--epochs", "1"])
+    assert res.exit_code == 0 and "--max-seconds 60 adapts on the first minute of the 600 s" in res.stderr, res.output

@@ -229,6 +229,10 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
             say(f"{100 * outside['share']:.1f} % of the rows used ({outside['rows']:,} of {outside['of']:,}) lie "
                 "outside the base model's training envelope", quiet)
         say(_decision(summary, tau), quiet)
+        if summary["seconds_used"] > learning.LONG_ADAPT_S:
+            say(f"note: NN_add is made for under a minute of data and trains on every row of what it is given; "
+                f"--max-seconds 60 adapts on the first minute of the {summary['seconds_used']:.0f} s, in a fraction "
+                "of the time", quiet)
         say(wrote(out) + ("" if summary["adapted"] else " (the base model unchanged)"), quiet)
         return {"model": out, "kind": made.model.kind, "base": base_path, "seconds": round(made.seconds, 3),
                 **summary}

@@ -19,6 +19,8 @@ from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
 from fricli.numerics.threads import pinned
 
+LONG_ADAPT_S = 300.0     # s: adapt says that a minute would do when it is given more than this
+
 ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
 DEFAULT_ARCH = "dissipative"
 DEFAULT_HIDDEN = {"dissipative": (30, 30), "mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
