@@ -365,3 +365,26 @@ def test_from_and_until_calibrate_on_part_of_the_log(arm, tmp_path):
                  cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert "calibrating 4 joints on 750 samples" in res.stderr
+
+
+def test_the_gravity_recorded_with_the_log_is_used(arm, tmp_path):
+    """A tilted base: the gravity given to dynamics (or import) is the one calibrate and a later
+    dynamics use unless told otherwise."""
+    model, _, fit, _ = arm
+    raw = write_log(tmp_path / "raw.parquet", *fit, simulate(model, *fit))
+    (tmp_path / "cad.urdf").write_text(URDF)
+    tilted = ["--gravity", "0", "-3.355", "-9.218"]
+    for args in (["dynamics", raw, "--urdf", "cad.urdf", "--match", "order", *tilted, "-o", "log.parquet"],
+                 ["dynamics", "log.parquet", "--urdf", "cad.urdf", "--match", "order", "-o", "again.parquet"]):
+        res = fricli(*args, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+    first, again = (logs.read_table(str(tmp_path / f))[0] for f in ("log.parquet", "again.parquet"))
+    assert logs.robot_record(again.schema)["gravity"] == [0.0, -3.355, -9.218]
+    assert first.column("tau_g").equals(again.column("tau_g"))
+    reports = []
+    for extra in ([], tilted):
+        res = fricli("calibrate", "log.parquet", "--urdf", "cad.urdf", "-o", "cal.urdf", "--prior", "0.5", "--json",
+                     *extra, cwd=tmp_path)
+        assert res.returncode == 0, res.stderr
+        reports.append(json.loads(res.stdout)["fit"])
+    assert reports[0] == reports[1]

@@ -42,8 +42,9 @@ class PriorStrength(click.ParamType):
               help="How log joints match URDF joints (default: as recorded by fricli import/dynamics).")
 @click.option("--urdf-joint", "urdf_pairs", multiple=True, metavar="JOINT=NAME",
               help="The URDF joint of a log joint, with --match name. Repeatable.")
-@click.option("--gravity", nargs=3, type=Number(), default=(0.0, 0.0, -9.81), show_default=True, metavar="X Y Z",
-              help="Gravity in the URDF's base frame [m/s^2].")
+@click.option("--gravity", nargs=3, type=Number(), default=None, metavar="X Y Z",
+              help="Gravity in the URDF's base frame [m/s^2] (default: as recorded by fricli import/dynamics, "
+                   "else 0 0 -9.81).")
 @click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
               help="Friction identified with the rigid body: linear = Fv*qd + Fc*sign(qd) + offset per joint "
                    "(IDIM-LS); stribeck adds the LuGre static curve's bump (Fs - Fc) exp(-(qd/vs)^2).")
@@ -87,7 +88,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.options import _json_safe
     from fricli.cli.robot import urdf_joint_names
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
@@ -97,9 +98,9 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     names = urdf_joint_names(urdf_pairs)
     if names and match is None:
         match = "name"
-    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=tuple(gravity)))
     table, _ = read_log(log)
     name = "stdin" if log == "-" else log
+    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity)))
     if cutoff is not None and {"qd", "qdd"} <= set(table.column_names):
         warn(f"note: --cutoff has no effect: {name} holds qd and qdd (derive them again with fricli import "
              "--cutoff, or leave qdd out of the log)")

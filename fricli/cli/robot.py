@@ -34,7 +34,8 @@ def urdf_options(f):
                      callback=_pairs("--rotor-inertia", nonnegative=True),
                      help="Reflected rotor inertia [kg m^2] added to the joint's mass-matrix diagonal. Repeatable."),
         click.option("--gravity", nargs=3, type=Number(), default=None, metavar="X Y Z",
-                     help="Gravity in the URDF's base frame [m/s^2] (default 0 0 -9.81; import: the mapping's if given)."),
+                     help="Gravity in the URDF's base frame [m/s^2] (default 0 0 -9.81; import: the mapping's if given; "
+                          "dynamics: the one the log's tau_g was computed with, if recorded)."),
         click.option("--payload-mass", type=Number(min=0), default=None, help="Known payload mass [kg]."),
         click.option("--payload-com", nargs=3, type=Number(), default=None, metavar="X Y Z",
                      help="Payload centre of mass [m] in the payload frame (default 0 0 0)."),
@@ -236,7 +237,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_table, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, read_table, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.dynamics import load_model
     from fricli.robot.logterms import add_terms
@@ -247,10 +248,10 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     payload = None
     if payload_mass is not None or payload_com is not None or payload_frame is not None:
         payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
-    robot = mp.Mapping(time=None, joints=[], gravity=tuple(gravity) if gravity else (0.0, 0.0, -9.81), payload=payload)
-    model = load_model(urdf, robot)
     table, _ = read_table(log)
     name = "stdin" if log == "-" else log
+    robot = mp.Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity), payload=payload)
+    model = load_model(urdf, robot)
     table, record = add_terms(table, model, name, match=match, urdf_names=names,
                               rotor_inertia=inertia_pairs,
                               gravity=robot.gravity, payload=payload,

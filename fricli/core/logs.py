@@ -372,6 +372,17 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
 MAGNITUDE_LIMIT = 1e9
 
 
+DEFAULT_GRAVITY = (0.0, 0.0, -9.81)   # m/s^2 in the URDF's base frame, as a level-mounted arm sees it
+
+
+def gravity_of(schema: pa.Schema, given=None) -> tuple:
+    """Gravity for the log's robot model: ``given`` (an option), else what import/dynamics recorded
+    with the log's tau_g (a tilted base), else ``DEFAULT_GRAVITY``."""
+    if given:
+        return tuple(float(g) for g in given)
+    return tuple(robot_record(schema).get("gravity") or DEFAULT_GRAVITY)
+
+
 def robot_record(schema: pa.Schema) -> dict:
     """What the log's tau_g and tau_dyn came from, as ``fricli dynamics`` (preferred: it replaces
     them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded."""

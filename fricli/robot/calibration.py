@@ -934,7 +934,7 @@ def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: flo
     record = logs.robot_record(table.schema)
     if not record.get("joints"):
         raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
-    gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
+    gravity = logs.gravity_of(table.schema)
     robot = load_model(urdf or record.get("urdf"), Mapping(time=None, joints=[], gravity=gravity))
     return record, robot, read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
 
@@ -950,7 +950,7 @@ def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRI
     from fricli.robot.logterms import add_terms
 
     record, robot, motion = recorded_motion(table, name, urdf, cutoff_hz=cutoff_hz)
-    gravity = tuple(record.get("gravity") or (0.0, 0.0, -9.81))
+    gravity = logs.gravity_of(table.schema)
     cal = calibrate(robot, motion, prior=prior, friction=friction)
     refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:
