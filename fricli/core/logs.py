@@ -470,7 +470,9 @@ def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> n
     from scipy import signal  # imported here: it costs about a second at start-up
 
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
-    return signal.sosfiltfilt(sos, x)
+    # padded by the ends' odd reflection over three periods of the cut-off (scipy's default pads a
+    # few samples, so a low cut-off left a transient in the first and last tenth of a second)
+    return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
 
 
 def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
