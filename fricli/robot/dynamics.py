@@ -138,8 +138,12 @@ class RobotModel:
             raise ModelFileError(f"{self.name}: joint {dup!r} is matched by two log joints")
         unmatched = [j for j in self.joints if j not in urdf_names]
         if unmatched:
-            raise ModelFileError(f"{self.name}: joint {unmatched[0]!r} is not in the log (every moving joint "
-                                 "needs its position)")
+            kind = self.kinds[self.joints.index(unmatched[0])]
+            raise ModelFileError(f"{self.name}: joint {unmatched[0]!r} ({'prismatic' if kind == 'linear' else 'revolute'}"
+                                 f"{', and ' + str(len(unmatched) - 1) + ' more' if len(unmatched) > 1 else ''}) is not "
+                                 "in the log: every moving joint needs its position. A joint the controller does not "
+                                 "record (a gripper's fingers) can be made type=\"fixed\" in a copy of the URDF "
+                                 "(docs/robot-import.md)")
         return [self.joints.index(u) for u in urdf_names]
 
     def terms(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,

@@ -305,7 +305,8 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
         _fail(name, "joint names must be all integers or all strings")
     kinds = {c.kind for j in joints for c in j.columns.values()} - {None}
     if len(kinds) > 1:
-        _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately)")
+        _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately; with --urdf, "
+                    "map the arm's joints and make the others type=\"fixed\" in a copy of the URDF)")
     transmission = _transmission(doc["transmission"], joints, f"{name}: transmission") if motor_side else None
     if transmission is not None and "rotor_inertia" in doc["transmission"] and any(j.rotor_inertia for j in joints):
         _fail(name, "rotor inertias are given twice: per joint (joint side) and in [transmission] (motor side)")
