@@ -114,12 +114,17 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
               help="With --fix on a whole-arm log: calibrate the robot model (as fricli calibrate), write CAL.urdf "
                    "and its report, recompute tau_g and tau_dyn from it, refit each joint's friction model and "
                    "diagnose again.")
+@click.option("--calibrate-friction", "calibrate_friction", type=click.Choice(["linear", "stribeck"]),
+              default="linear", show_default=True,
+              help="The friction fitted with the robot model by --calibrate (as fricli calibrate --friction); "
+                   "stribeck when the joints' friction rises at low speed (harmonic drives), so that the bump is "
+                   "not taken up by the inertial parameters.")
 @log_reading
 @if_changed_option
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
-                 urdf, calibrated, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
+                 urdf, calibrated, calibrate_friction, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -162,6 +167,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("--if-changed applies to --fix (the model it writes)")
     if calibrated and not fix:
         raise click.UsageError("--calibrate applies to --fix (it recomputes the log before fixing the friction)")
+    if calibrate_friction != "linear" and not calibrated:
+        raise click.UsageError("--calibrate-friction applies to --calibrate")
     if output:
         folder = os.path.dirname(os.path.abspath(output))
         if not os.path.isdir(folder):
@@ -221,7 +228,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     robot = None
     if calibrated:
         before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
-        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet)
+        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet, calibrate_friction)
         results, folder_run = _fix_refitted(table_, digest, name, output, source, report), True
         robot = _calibrated_record(before, results, cal, calibrated)
     elif fix:
@@ -277,7 +284,7 @@ def _urdf_of(table, urdf: str | None) -> str | None:
     return recorded if recorded and os.path.isfile(recorded) else None
 
 
-def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool):
+def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool, friction: str = "linear"):
     """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
     import json
 
@@ -290,7 +297,8 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     if path is None:
         raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
     say(f"calibrating the robot model of {path} on {name} ...", quiet)
-    cal, text, new = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+    cal, text, new = cb.recalibrate(table, name, path, friction=friction,
+                                    cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
     atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
                                           + "\n").encode())
