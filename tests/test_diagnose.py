@@ -807,6 +807,17 @@ def test_fix_calibrate_writes_the_urdf_and_the_error_falls(arm_with_cad_errors):
     assert sorted(p.name for p in fixed.iterdir()) == [f"joint_{j}.npz" for j in (1, 2, 3, 4)]
 
 
+def test_calibrate_friction_is_the_calibrations(arm_with_cad_errors):
+    root, log = arm_with_cad_errors
+    cal = root / "cal-stribeck.urdf"
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
+                                    "--calibrate-friction", "stribeck", "-o", str(root / "fixed-s"), "-q"])
+    assert done.exit_code == 0, done.output
+    assert json.loads((root / "cal-stribeck.calibration.json").read_text())["friction"]["kind"] == "stribeck"
+    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--calibrate-friction", "stribeck"])
+    assert done.exit_code == 2 and "--calibrate-friction applies to --calibrate" in done.output
+
+
 def test_calibrate_needs_fix_and_a_whole_arm(arm_with_cad_errors):
     root, log = arm_with_cad_errors
     done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--calibrate", str(root / "c.urdf")])
