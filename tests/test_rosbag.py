@@ -155,7 +155,7 @@ def test_each_defect_of_a_bag_is_reported_by_message(tmp_path):
         "joint_4, joint_5)",
         "warning: run: dropped 1 message with non-numeric or non-finite value (message 31: effort of joint_3 is nan)",
         "warning: run: dropped 1 message with time going back (message 12)",
-        "warning: run: 2 messages list the joints in another order than the first (messages 41-42): reordered by name",
+        "warning: run: 2 messages list the joints in another order than most messages (messages 41-42): reordered by name",
         "imported 97 messages x 6 joints from /joint_states in run -> out.parquet"]
 
 
@@ -176,6 +176,15 @@ def test_a_bag_of_zero_messages_is_refused(tmp_path):
         m[2:] = [np.zeros(6), np.zeros(6), np.zeros(6)]
     with pytest.raises(LogError, match=r"no usable messages on /joint_states \(40 with all values zero"):
         bag_log(write_bag(tmp_path / "run", msgs))
+
+
+def test_one_odd_first_message_is_the_one_reordered(tmp_path):
+    msgs = states(40)
+    order = [5, 0, 1, 2, 3, 4]
+    msgs[0] = [msgs[0][0], [NAMES[i] for i in order], *(a[order] for a in msgs[0][2:])]
+    read, log = bag_log(write_bag(tmp_path / "run", msgs))
+    assert (read.reordered.count, read.reordered.ranges) == (1, [[1, 1]])
+    assert log.table.column("joint").to_pylist()[::40] == NAMES
 
 
 def test_fewer_than_three_messages_are_refused(tmp_path):

@@ -197,7 +197,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     if bag and read.reordered is not None:
         d = read.reordered
         warn(f"warning: {name}: {d.count} {'messages list' if d.count != 1 else 'message lists'} the joints in another order "
-             f"than the first ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
+             f"than most messages ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
     step = result.meta["time_step_s"]
     if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the time "

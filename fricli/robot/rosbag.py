@@ -9,7 +9,7 @@ are numbered from 1 in the order the bag holds them, and defects are reported by
     a joint of the log missing from a message       -> message dropped (reported)
     arrays of another length than the joint names   -> message dropped (reported)
     a non-finite value                              -> message dropped (reported)
-    joints in another order than the first kept message -> reordered by name (reported)
+    joints in another order than most messages -> reordered by name (reported)
     empty velocity arrays                           -> no qd (derived like a CSV's missing qd)
     then as for a CSV: garbage, duplicate and backward times (``recording.consistent_rows``)
 """
@@ -42,7 +42,7 @@ def is_bag(path: str) -> bool:
 class Bag:
     """What was read: the recording (values keyed by ``"<joint>/<field>"``), its mapping, the
     topic, where ``t`` came from (``header`` stamps or ``receive`` times), the time [ns] that is
-    t = 0, and the messages whose joints came in another order than the first kept one's."""
+    t = 0, and the messages whose joints came in another order than most messages'."""
 
     recording: Recording
     mapping: Mapping
@@ -134,7 +134,8 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     if mapping is None or not mapping.joints:
         sets = collections.Counter(frozenset(m[2]) for m in msgs)
         common = max(sets, key=sets.get)           # the first of the most frequent
-        names = next(m[2] for m in msgs if frozenset(m[2]) == common)
+        by_order = collections.Counter(m[2] for m in msgs if frozenset(m[2]) == common)
+        names = max(by_order, key=by_order.get)        # the order most messages list them in (the first of those)
         if not names:
             raise LogError(f"{path}: the messages on {topic} name no joints")
         base = mapping or Mapping(time=None, joints=[])
@@ -238,7 +239,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
             defects[kind] = found[kind]
     rec = Recording(values={ref: v[keep] for ref, v in cols.items()}, lines=numbers[keep], defects=defects,
                     n_fields=0)
-    turned = keep & (ranks != ranks[keep][0])
+    turned = keep & (ranks != np.bincount(ranks[keep]).argmax())     # another order than most messages
     moved = Defect(int(turned.sum()), int(numbers[turned][0]), ranges(numbers[turned])) if turned.any() else None
     return Bag(recording=rec, mapping=mapping, topic=topic, stamps=source, origin_ns=origin, reordered=moved,
                sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0))
