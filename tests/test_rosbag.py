@@ -217,10 +217,10 @@ def test_a_refusal_names_the_joint_that_is_missing_or_not_finite(tmp_path):
     msgs = states(40)
     for m in msgs:
         m[4] = np.where(np.arange(6) == 5, np.nan, m[4])          # joint_6 publishes no effort
-    with pytest.raises(LogError, match=re.escape("(first: effort of joint_6 is nan)); a joint that never has")):
+    with pytest.raises(LogError, match=re.escape("(first at message 1: effort of joint_6 is nan)); a joint that never has")):
         bag_log(write_bag(tmp_path / "nan", msgs))
     typo = parse_bag_mapping(tomllib.loads("".join(f'[[joints]]\nname = "{n}"\n' for n in NAMES[:5] + ["joint6"])))
-    with pytest.raises(LogError, match=re.escape("joints missing (first: no 'joint6' among joint_1, joint_2")):
+    with pytest.raises(LogError, match=re.escape("joints missing (first at message 1: no 'joint6' among joint_1, joint_2")):
         bag_log(write_bag(tmp_path / "run", states(40)), typo)
 
 

@@ -37,6 +37,7 @@ import tempfile
 import numpy as np
 
 from fricli.core.errors import MissingDependencyError, ModelFileError
+from fricli.core.logs import DEFAULT_GRAVITY
 from fricli.robot.mapping import Payload
 
 INSTALL = "pip install 'fricli[robot]'"
@@ -73,7 +74,7 @@ def _c_stderr():
 class RobotModel:
     """A URDF's rigid-body model with a gravity vector [m/s^2] and an optional point payload."""
 
-    def __init__(self, urdf_text: str, name: str, gravity=(0.0, 0.0, -9.81), payload: Payload | None = None):
+    def __init__(self, urdf_text: str, name: str, gravity=DEFAULT_GRAVITY, payload: Payload | None = None):
         pin = pinocchio()
         self.name = name
         self.sha256 = hashlib.sha256(urdf_text.encode("utf-8")).hexdigest()

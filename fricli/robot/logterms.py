@@ -16,7 +16,7 @@ META_KEY = b"fricli.dynamics"
 
 
 def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[str, str] | None = None,
-              rotor_inertia: dict[str, float] | None = None, gravity=(0.0, 0.0, -9.81), payload=None,
+              rotor_inertia: dict[str, float] | None = None, gravity=logs.DEFAULT_GRAVITY, payload=None,
               cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """``table`` with tau_g and tau_dyn set (replaced if present) for every row, qd/qdd added
     when derived, and the record under the schema metadata key ``fricli.dynamics``.

@@ -26,7 +26,7 @@ import tomllib
 
 from fricli.core import files
 from fricli.core.errors import LogError
-from fricli.core.logs import column_unit
+from fricli.core.logs import DEFAULT_GRAVITY, column_unit
 
 # per-joint signals a mapping may name, with their default unit
 SIGNALS = {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "i_m": "A", "tau_m": "Nm",
@@ -99,7 +99,7 @@ class Mapping:
     header: bool = False
     delimiter: str = ","
     match: str | None = None
-    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    gravity: tuple[float, float, float] = DEFAULT_GRAVITY
     payload: Payload | None = None
     files: tuple[str, ...] = ()       # labels of the input files, in the order they are given
     join: str = "rows"                # how several files' rows pair up: "rows" (row by row) or "time"
@@ -329,7 +329,7 @@ def _robot(doc: dict, name: str) -> dict:
     match = robot.get("match")
     if match is not None and match not in MATCHES:
         _fail(f"{name}: robot.match", f"expected 'name' or 'order', got {match!r}")
-    gravity = _vector3(robot["gravity"], f"{name}: robot.gravity") if "gravity" in robot else (0.0, 0.0, -9.81)
+    gravity = _vector3(robot["gravity"], f"{name}: robot.gravity") if "gravity" in robot else DEFAULT_GRAVITY
     payload = _payload(robot["payload"], f"{name}: robot.payload") if "payload" in robot else None
     return {"match": match, "gravity": gravity, "payload": payload}
 

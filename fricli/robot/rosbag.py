@@ -160,9 +160,10 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
         index, rank = orders[msg_names]
         if index is None or len(set(msg_names)) != len(msg_names):
             kinds[k] = "missing_joints"
-            absent = [m for m in names if m not in msg_names]
-            examples.setdefault("missing_joints", f"no {absent[0]!r} among {', '.join(msg_names[:8]) or 'no names'}"
-                                if absent else "a joint named twice")
+            if "missing_joints" not in examples:
+                absent = [m for m in names if m not in msg_names]
+                examples["missing_joints"] = (f"no {absent[0]!r} among {', '.join(msg_names[:8]) or 'no names'}"
+                                              if absent else "a joint named twice")
             continue
         if any(len(a) not in (0, len(msg_names)) for a in arrays):
             kinds[k] = "malformed"
@@ -173,9 +174,10 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                 values[f][k] = a[index]
             else:
                 empty[f][k] = True
+    numbers = np.arange(1, n + 1)
     ok = kinds == ""
     if not ok.any():
-        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds, examples)})")
+        raise LogError(f"{path}: no usable message on {topic} ({listing(_dropped(kinds, numbers, examples), 'message')})")
     present = {f: not empty[f][ok].any() for f in FIELDS}     # a field empty in any message is not used
     if not present["position"] and not present["velocity"]:
         raise LogError(f"{path}: the messages on {topic} hold neither positions nor velocities")
@@ -195,11 +197,11 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     if not keep.any():
         hint = "; a joint that never has a value can be left out: a mapping lists the joints to import" \
             if "non_numeric" in examples and len(names) > 1 else ""
-        raise LogError(f"{path}: no usable message on {topic} ({_found(kinds, examples)}){hint}")
+        raise LogError(f"{path}: no usable message on {topic} ({listing(_dropped(kinds, numbers, examples), 'message')})"
+                       f"{hint}")
     stamps = np.array([m[1] for m in msgs], dtype=np.int64)
     source = "receive" if np.unique(stamps[keep]).size == 1 else "header"   # unset, or set once
     t_ns = stamps if source == "header" else np.array([m[0] for m in msgs], dtype=np.int64)
-    numbers = np.arange(1, n + 1)
 
     cols: dict[str, np.ndarray] = {}
     joints, signals = [], []
@@ -230,13 +232,8 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
         raise LogError(f"{path}: {usable} on {topic}" + (f" ({listing(found, 'message')})" if found else ""))
     origin = int(t_ns[keep][0])
     cols["t"] = (t_ns - origin) / 1e9
-    defects = {}
-    for kind in KINDS:
-        at = np.flatnonzero(kinds == kind)
-        if len(at):
-            defects[kind] = Defect(len(at), int(numbers[at[0]]), ranges(numbers[at]), example=examples.get(kind))
-        elif kind in found:
-            defects[kind] = found[kind]
+    dropped = _dropped(kinds, numbers, examples)
+    defects = {kind: dropped.get(kind, found.get(kind)) for kind in KINDS if kind in dropped or kind in found}
     rec = Recording(values={ref: v[keep] for ref, v in cols.items()}, lines=numbers[keep], defects=defects,
                     n_fields=0)
     turned = keep & (ranks != np.bincount(ranks[keep]).argmax())     # another order than most messages
@@ -245,7 +242,11 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
                sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0))
 
 
-def _found(kinds: np.ndarray, examples: dict) -> str:
-    counts = collections.Counter(k for k in kinds if k)
-    return "; ".join(f"{c} with {KINDS[k]}" + (f" (first: {examples[k]})" if k in examples else "")
-                     for k, c in counts.items())
+def _dropped(kinds: np.ndarray, numbers: np.ndarray, examples: dict) -> dict[str, Defect]:
+    """The messages dropped, by kind (``kinds`` (n,): the kind of each message, "" when kept)."""
+    out = {}
+    for kind in KINDS:
+        at = np.flatnonzero(kinds == kind)
+        if len(at):
+            out[kind] = Defect(len(at), int(numbers[at[0]]), ranges(numbers[at]), example=examples.get(kind))
+    return out
