@@ -783,7 +783,7 @@ def test_whole_arm_robot_model_errors_point_to_calibration(arm_with_cad_errors):
     out = json.loads(done.stdout)
     robot = out["robot_model"]
     assert len(robot["joints"]) >= 2
-    assert robot["command"] == f"fricli calibrate {log} --urdf {root / 'cad.urdf'} -o CAL.urdf"
+    assert robot["command"] == f"fricli calibrate {log} --urdf {root / 'cad.urdf'} --friction stribeck -o CAL.urdf"
     for j in robot["joints"]:
         assert set(out["joints"][j]["added"] + out["joints"][j]["suspected"]) & {"gravity", "acceleration"}
         assert robot["fit"][j]["rms_after"] < 0.5 * robot["fit"][j]["rms_before"]
@@ -808,12 +808,14 @@ def test_fix_calibrate_writes_the_urdf_and_the_error_falls(arm_with_cad_errors):
 
 
 def test_calibrate_friction_is_the_calibrations(arm_with_cad_errors):
+    """Stribeck by default (the friction models are refitted afterwards), linear when asked."""
     root, log = arm_with_cad_errors
-    cal = root / "cal-stribeck.urdf"
-    done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
-                                    "--calibrate-friction", "stribeck", "-o", str(root / "fixed-s"), "-q"])
-    assert done.exit_code == 0, done.output
-    assert json.loads((root / "cal-stribeck.calibration.json").read_text())["friction"]["kind"] == "stribeck"
+    for given, kind in (([], "stribeck"), (["--calibrate-friction", "linear"], "linear")):
+        cal = root / f"cal-{kind}.urdf"
+        done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
+                                        *given, "-o", str(root / f"fixed-{kind}"), "-q"])
+        assert done.exit_code == 0, done.output
+        assert json.loads((root / f"cal-{kind}.calibration.json").read_text())["friction"]["kind"] == kind
     done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--calibrate-friction", "stribeck"])
     assert done.exit_code == 2 and "--calibrate-friction applies to --calibrate" in done.output
 

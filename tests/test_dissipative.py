@@ -292,18 +292,24 @@ def test_an_ensemble_exports_to_c_as_predict_computes(ensemble, tmp_path):
     assert _compare(ensemble["path"], ensemble["log"], tmp_path) <= 1.0
 
 
-def test_a_load_that_does_not_vary_stays_out_of_the_magnitude(base_log):
-    """|tau_g| of rounding noise (a vertical axis) is no load: scaled by 1 Nm, not by its own mean
-    (which made the noise an input of order 1)."""
+@pytest.mark.parametrize("spread", [1e-14, 0.01])
+def test_a_load_too_constant_to_show_a_slope_stays_out_of_the_magnitude(base_log, spread, tmp_path):
+    """|tau_g| of rounding noise (a vertical axis) or of a few 1e-3 Nm (a wrist whose centre of mass
+    lies on its axis) is no load: a slope learned on it would scale any larger load met later."""
     sig = {k: v.copy() for k, v in base_log.signals.items()}
     rng = np.random.default_rng(3)
     moving = sig["qd"] != 0
-    sig["tau_g"] = rng.uniform(-1e-14, 1e-14, sig["qd"].size)
+    sig["tau_g"] = rng.uniform(-spread, spread, sig["qd"].size)
     model = DissipativeFriction(steps=50).fit({k: v[moving] for k, v in sig.items()},
                                               logs.friction_target(base_log.signals)[moving], rng=rng)
-    assert model.g_scale_ == 1.0
-    zero = dict(sig, tau_g=np.zeros_like(sig["qd"]))
-    np.testing.assert_allclose(model.predict(sig)[0], model.predict(zero)[0], rtol=1e-9, atol=1e-9)
+    assert model.g_scale_ == 1.0 and not model.load_ and model.load_slope() == 0.0
+    path = str(tmp_path / "flat.npz")
+    models.save_for_log(path, model, base_log, rows_used=1)
+    loaded, _ = models.load(path)
+    for m in (model, loaded):
+        payload = dict(sig, tau_g=np.full_like(sig["qd"], 5.0))
+        np.testing.assert_allclose(m.predict(sig)[0], m.predict(payload)[0], rtol=1e-9, atol=1e-9)
+    assert "no load term" in loaded.describe()
     varying = DissipativeFriction()
     varying.set_scales(base_log.signals, logs.friction_target(base_log.signals))
     assert varying.g_scale_ == pytest.approx(np.abs(base_log.signals["tau_g"]).mean())

@@ -35,8 +35,8 @@ def states(n=120, seed=0):
     return [[START_NS + k * STEP_NS, list(NAMES), q[k], qd[k], tau[k]] for k in range(n)]
 
 
-def write_bag(path, msgs, kind="mcap", topic="/joint_states", extra_topics=()):
-    """Write ``msgs`` (see ``states``) as JointState messages, received every 2 ms."""
+def write_bag(path, msgs, kind="mcap", topic="/joint_states", extra_topics=(), first=0):
+    """Write ``msgs`` (see ``states``) as JointState messages, received every 2 ms from message ``first``."""
     ros1 = kind == "ros1"
     store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
     JointState = store.types["sensor_msgs/msg/JointState"]
@@ -57,7 +57,7 @@ def write_bag(path, msgs, kind="mcap", topic="/joint_states", extra_topics=()):
                              velocity=np.ascontiguousarray(qd, dtype=np.float64),
                              effort=np.ascontiguousarray(tau, dtype=np.float64))
             data = store.serialize_ros1(msg, msgtype) if ros1 else store.serialize_cdr(msg, msgtype)
-            received = START_NS + 1_000_000 + k * STEP_NS
+            received = START_NS + 1_000_000 + (first + k) * STEP_NS
             for conn in conns:
                 writer.write(conn, received, data)
     return path
@@ -211,6 +211,42 @@ def test_a_damaged_bag_is_an_input_error(tmp_path):
     data.write_bytes(bytes(raw))
     with pytest.raises(LogError, match="not a readable ROS bag"):
         bag_log(path)
+
+
+@pytest.mark.parametrize("kind", ["mcap", "sqlite3"])
+def test_a_recording_without_metadata_reads_its_storage_files(tmp_path, kind):
+    """A rosbag2 recording that did not end cleanly has no metadata.yaml: its split files are read
+    as they are, in split order, and give the same log as the finished bag."""
+    msgs = states(120)
+    whole = write_bag(tmp_path / "whole", msgs, kind)
+    suffix = ".mcap" if kind == "mcap" else ".db3"
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    for k, first in ((9, 0), (10, 60)):      # run_10 after run_9, not between run_1 and run_2
+        half = write_bag(tmp_path / f"part{k}", msgs[first:first + 60], kind, first=first)
+        next(half.glob("*" + suffix)).rename(cut / f"run_{k}{suffix}")
+    read, log = bag_log(cut)
+    assert read.standalone == [f"run_9{suffix}", f"run_10{suffix}"]
+    assert log.table.equals(bag_log(whole)[1].table)
+    single = next(whole.glob("*" + suffix))
+    (whole / "metadata.yaml").unlink()
+    read, log = bag_log(single)
+    assert read.standalone == [single.name] and log.table.equals(bag_log(whole)[1].table)
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "cut", "-o", "out.parquet"], cwd=tmp_path,
+                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0 and res.stderr.startswith(
+        f"note: cut: no rosbag2 metadata.yaml (a recording that did not end cleanly?): read run_9{suffix}, "
+        f"run_10{suffix} as they are"), res.stderr
+
+
+def test_a_folder_without_storage_files_or_an_mcap_cut_short_is_refused(tmp_path):
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(LogError, match="without a rosbag2 metadata.yaml or .mcap/.db3 storage files"):
+        bag_log(tmp_path / "empty")
+    data = next(write_bag(tmp_path / "run", states(400)).glob("*.mcap"))
+    data.write_bytes(data.read_bytes()[:data.stat().st_size // 2])     # the recorder killed mid-write
+    with pytest.raises(LogError, match=r"cut short .*`mcap recover FILE -o FIXED.mcap`"):
+        bag_log(tmp_path / "run")
 
 
 def test_a_refusal_names_the_joint_that_is_missing_or_not_finite(tmp_path):

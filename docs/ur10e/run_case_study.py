@@ -157,23 +157,30 @@ def linear_fit(path: str, joint: int) -> np.ndarray:
     return np.linalg.lstsq(linear_columns(sig), logs.friction_target(sig), rcond=None)[0]
 
 
-def study(data: str, work: str, joints, runs: int | None, keep: bool = False, adapt: bool = True) -> dict:
+def study(data: str, work: str, joints, runs: int | None, keep: bool = False, adapt: bool = True,
+          calibrate_friction: str | None = None) -> dict:
     cad = os.path.join(data, "ur10e.urdf")
-    cal = os.path.join(work, "ur10e-cal.urdf")
+    cal, idim_urdf = os.path.join(work, "ur10e-cal.urdf"), os.path.join(work, "ur10e-idim.urdf")
     val_names = validation_runs(data)[:runs] if runs else validation_runs(data)
     # the path: import with the CAD URDF, identify, diagnose --fix --calibrate (docs/diagnose.md)
     fit_cad = import_run(data, work, FIT_RUN, cad, "cad", keep=keep)
     lugre_cad, fixed_cad, fixed = (os.path.join(work, d) for d in ("lugre-cad", "fixed-cad", "fixed"))
     fricli("identify", fit_cad, "-o", lugre_cad, "-q")
-    calibrated = fricli("diagnose", lugre_cad, fit_cad, "--fix", "--calibrate", cal, "-o", fixed, "--json",
+    law = ["--calibrate-friction", calibrate_friction] if calibrate_friction else []
+    calibrated = fricli("diagnose", lugre_cad, fit_cad, "--fix", "--calibrate", cal, *law, "-o", fixed, "--json",
                         json_out=True)
     with open(cal[:-5] + ".calibration.json", encoding="utf-8") as fh:
         report = json.load(fh)
+    # IDIM-LS: the rigid body with linear friction in one least-squares fit (fricli calibrate alone)
+    fricli("calibrate", fit_cad, "--urdf", cad, "--friction", "linear", "-o", idim_urdf, "-q")
+    with open(idim_urdf[:-5] + ".calibration.json", encoding="utf-8") as fh:
+        idim_report = json.load(fh)
     # for comparison: the same path without the calibration (the CAD URDF's tau_g, diagnose --fix alone)
     diagnosed_cad = fricli("diagnose", lugre_cad, fit_cad, "--fix", "-o", fixed_cad, "--json", json_out=True)["joints"]
     # runs of other days, imported with each URDF; the fitting run with the calibrated one (LuGre alone)
     val_cad = [import_run(data, work, n, cad, "cad", keep=keep) for n in val_names]
     val_cal = [import_run(data, work, n, cal, "cal") for n in val_names]
+    val_idim = [import_run(data, work, n, idim_urdf, "idim") for n in val_names]
     fit_cal = import_run(data, work, FIT_RUN, cal, "cal")
     lugre_cal = os.path.join(work, "lugre-cal")
     fricli("identify", fit_cal, "-o", lugre_cal, "-q")
@@ -188,6 +195,8 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
     seen = fricli("payload", load_bare, "--frame", PAYLOAD["frame"], "--until", f"{SEEN_SPLIT:.0%}", "--json", "-q",
                   json_out=True)
     load_seen = import_run(data, work, LOAD_RUN, cal, "cal", payload=seen, suffix="seen")
+    load_idim = import_run(data, work, LOAD_RUN, idim_urdf, "idim", payload=PAYLOAD)
+    load_idim_bare = import_run(data, work, LOAD_RUN, idim_urdf, "idim")
 
     aligned = twin_alignment(load_cad, fit_cad, joints)
     result = {"fit_run": FIT_RUN, "validation_runs": val_names, "joints": {}, "twin_alignment": aligned,
@@ -195,7 +204,7 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
                                                      "excitation", "prior", "prior_choice")},
               "robot_model": calibrated.get("robot_model")}
     for j in joints:
-        fr = report["friction"]["joints"][str(j)]
+        fr = idim_report["friction"]["joints"][str(j)]
         idim = np.array([fr["Fv"], fr["Fc"], fr["offset"]])
         coef = linear_fit(fit_cad, j)
         published = np.asarray(PUBLISHED[j])
@@ -210,17 +219,17 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
             "published": torque_errors(lambda p, s: linear_columns(s) @ published, val_cad, j),
             "lugre": torque_errors(model(lugre_cad), val_cad, j),
             "fixed_cad": torque_errors(model(fixed_cad), val_cad, j),
-            "idim": torque_errors(lambda p, s: linear_columns(s) @ idim, val_cal, j),
+            "idim": torque_errors(lambda p, s: linear_columns(s) @ idim, val_idim, j),
             "lugre_cal": torque_errors(model(lugre_cal), val_cal, j),
             "fixed": torque_errors(model(fixed), val_cal, j),
             "diagnose": calibrated["joints"][str(j)], "diagnose_cad": diagnosed_cad[str(j)],
         }
         # external torque of the payload run, models fitted on its unloaded twin (the fitting run)
-        sig, ref_sig, cal_sig = signals(load_cad, j), signals(load_ref, j), signals(load_cal, j)
+        sig, ref_sig, idim_sig = signals(load_cad, j), signals(load_ref, j), signals(load_idim, j)
         reference = -((ref_sig["tau_g"] + ref_sig["tau_dyn"]) - (sig["tau_g"] + sig["tau_dyn"]))
         left = estimated_external(os.path.join(fixed, f"joint_{j}.npz"), load_cal, j, work)
         ext_fixed = left + reference       # what is left beyond the declared payload, plus the payload's torque
-        ext_idim = logs.external_torque(cal_sig, linear_columns(cal_sig) @ idim) + reference
+        ext_idim = logs.external_torque(idim_sig, linear_columns(idim_sig) @ idim) + reference
         ext_linear = logs.external_torque(sig, linear_columns(sig) @ coef)
         twin = logs.external_torque(signals(fit_cal, j), predicted(os.path.join(fixed, f"joint_{j}.npz"), fit_cal, j))
         row["payload"] = {"reference_rms": rms(reference)}
@@ -233,12 +242,12 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
         measured, covered = measured_external(sig, signals(fit_cad, j), aligned["shift"])
         row["payload"]["measured_ratio"] = rms((measured - reference)[covered]) / rms((ext_linear - reference)[covered])
         row["payload"]["measured_gain"] = _gain((measured - reference)[covered], reference[covered])
-        bare, seen_sig = signals(load_bare, j), signals(load_seen, j)
+        bare, seen_sig, idim_bare = signals(load_bare, j), signals(load_seen, j), signals(load_idim_bare, j)
         ref_seen = (bare["tau_g"] + bare["tau_dyn"]) - (seen_sig["tau_g"] + seen_sig["tau_dyn"])
         t = sig["t"]
         held = t >= t[0] + SEEN_SPLIT * (t[-1] - t[0])      # the rows --until left out
         estimates = {"fixed": estimated_external(os.path.join(fixed, f"joint_{j}.npz"), load_seen, j, work) + ref_seen,
-                     "idim": logs.external_torque(bare, linear_columns(bare) @ idim), "linear": ext_linear}
+                     "idim": logs.external_torque(idim_bare, linear_columns(idim_bare) @ idim), "linear": ext_linear}
         row["payload_seen"] = {"reference_rms": rms(ref_seen[held]),
                                **{k: rms(e[held] - ref_seen[held]) for k, e in estimates.items()}}
         both = held & covered
@@ -401,7 +410,8 @@ def tables(res: dict) -> dict[str, str]:
         "| body (link) | mass, CAD [kg] | calibrated | change | centre of mass, CAD [m] | calibrated |",
         "|---|---|---|---|---|---|", *link_rows, "",
         "| joint | armature, prior (mapping's rotor inertia) [kg m²] | calibrated |", "|---|---|---|", *arm_rows, "",
-        "| joint | fitting run: RMS of tau_m − model, CAD + linear friction [Nm] | calibrated + linear friction |",
+        f"| joint | fitting run: RMS of tau_m − model, CAD + {cal['friction']['kind']} friction [Nm] | "
+        f"calibrated + {cal['friction']['kind']} friction |",
         "|---|---|---|", *fit_rows])
 
     ext_rows = []
@@ -535,6 +545,8 @@ def main(argv=None) -> None:
     ap.add_argument("--runs", type=int, default=None, help="use only the first N validation runs")
     ap.add_argument("--keep-imports", action="store_true", help="reuse the logs already imported into --work")
     ap.add_argument("--no-adapt", action="store_true", help="leave out the same-day adaptation")
+    ap.add_argument("--calibrate-friction", choices=("linear", "stribeck"), default=None,
+                    help="diagnose --calibrate-friction for the closed loop (default: diagnose's own)")
     ap.add_argument("--reuse", action="store_true",
                     help="rewrite the document from the figures of the last run in --work (no fricli commands)")
     args = ap.parse_args(argv)
@@ -549,7 +561,8 @@ def main(argv=None) -> None:
             with open(saved) as fh:
                 res, COMMANDS[:] = _from_json(json.load(fh))
         else:
-            res = study(args.data, work, joints, args.runs, keep=args.keep_imports, adapt=not args.no_adapt)
+            res = study(args.data, work, joints, args.runs, keep=args.keep_imports, adapt=not args.no_adapt,
+                        calibrate_friction=args.calibrate_friction)
             atomic_write_bytes(saved, json.dumps({"result": res, "commands": COMMANDS}, default=_to_list).encode())
     pictures = figures(res, img)
     import case_study_text  # docs/ur10e/case_study_text.py: the words around the figures

@@ -88,7 +88,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.options import _json_safe
     from fricli.cli.robot import urdf_joint_names
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, held_of
     from fricli.robot import calibration as cb
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
@@ -100,7 +100,8 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
         match = "name"
     table, _ = read_log(log)
     name = "stdin" if log == "-" else log
-    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity)))
+    robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity),
+                                     held=held_of(table.schema)))
     if cutoff is not None and {"qd", "qdd"} <= set(table.column_names):
         warn(f"note: --cutoff has no effect: {name} holds qd and qdd (derive them again with fricli import "
              "--cutoff, or leave qdd out of the log)")

@@ -12,6 +12,7 @@ from fricli.cli import cli
 from fricli.cli.options import (Number, common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, read_log, reading_kwargs, say, warn)
 from fricli.fitting.diagnosis import driver
+from fricli.robot import calibration as cb
 from fricli.fitting.diagnosis import effects as E
 from fricli.core.errors import FricliError, ModelFileError, OutputError
 
@@ -115,10 +116,10 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
                    "and its report, recompute tau_g and tau_dyn from it, refit each joint's friction model and "
                    "diagnose again.")
 @click.option("--calibrate-friction", "calibrate_friction", type=click.Choice(["linear", "stribeck"]),
-              default="linear", show_default=True,
-              help="The friction fitted with the robot model by --calibrate (as fricli calibrate --friction); "
-                   "stribeck when the joints' friction rises at low speed (harmonic drives), so that the bump is "
-                   "not taken up by the inertial parameters.")
+              default=None,
+              help=f"The friction fitted with the robot model by --calibrate (as fricli calibrate --friction; "
+                   f"default: {cb.LOOP_FRICTION}, so that a rise of the friction at low speed is not taken up by the "
+                   "inertial parameters; each joint's friction model is refitted afterwards).")
 @log_reading
 @if_changed_option
 @json_flag
@@ -167,7 +168,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("--if-changed applies to --fix (the model it writes)")
     if calibrated and not fix:
         raise click.UsageError("--calibrate applies to --fix (it recomputes the log before fixing the friction)")
-    if calibrate_friction != "linear" and not calibrated:
+    if calibrate_friction is not None and not calibrated:
         raise click.UsageError("--calibrate-friction applies to --calibrate")
     if output:
         folder = os.path.dirname(os.path.abspath(output))
@@ -228,7 +229,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     robot = None
     if calibrated:
         before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
-        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet, calibrate_friction)
+        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet,
+                                 calibrate_friction or cb.LOOP_FRICTION)
         results, folder_run = _fix_refitted(table_, digest, name, output, source, report), True
         robot = _calibrated_record(before, results, cal, calibrated)
     elif fix:
@@ -276,22 +278,19 @@ def _fix_refitted(table, digest: str, name: str, output: str, source, report) ->
 
 def _urdf_of(table, urdf: str | None) -> str | None:
     """The URDF given, or the one the log's import recorded when it is still there."""
-    from fricli.robot import calibration as cb
-
     if urdf:
         return urdf
     recorded = cb.recorded_urdf(table)
     return recorded if recorded and os.path.isfile(recorded) else None
 
 
-def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool, friction: str = "linear"):
+def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool, friction: str):
     """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
     import json
 
     from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.calibrate import report_path
     from fricli.cli.options import _json_safe
-    from fricli.robot import calibration as cb
 
     path = _urdf_of(table, urdf)
     if path is None:
@@ -319,8 +318,6 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | No
                        quiet: bool = False) -> dict | None:
     """Once per whole-arm log imported with a URDF: gravity or acceleration errors on several joints are the
     robot model's; the calibration that fixes them and, when the URDF is at hand, what it changes."""
-    from fricli.robot import calibration as cb
-
     if cb.recorded_urdf(table) is None and urdf is None:
         return None
     flagged = driver.robot_model_joints(results)
@@ -328,7 +325,7 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | No
         return None
     path = _urdf_of(table, urdf)
     who = ", ".join(str(j) for j in flagged)
-    command = f"fricli calibrate {log} --urdf {path or 'ROBOT.urdf'} -o CAL.urdf"
+    command = f"fricli calibrate {log} --urdf {path or 'ROBOT.urdf'} --friction {cb.LOOP_FRICTION} -o CAL.urdf"
     out = {"joints": [str(j) for j in flagged], "command": command, "fit": None}
     summary = f"robot-model errors on joints {who}: calibrate the robot model: `{command}`"
     if path is None:
@@ -338,13 +335,15 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | No
     say(f"robot-model errors on joints {who}: calibrating the robot model on {name} to show what it changes ...",
         quiet)
     try:
-        cal, _, _ = cb.recalibrate(table, name, path, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+        cal, _, _ = cb.recalibrate(table, name, path, friction=cb.LOOP_FRICTION,
+                                   cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     except FricliError as exc:       # the check is advice: the diagnosis stands without it
         out["summary"] = f"{summary} (the calibration on this log fails: {exc})"
         return out
     out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
     out["suspicious"] = cal.report["suspicious"]
-    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and linear friction on this log, CAD -> "
+    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and {cb.LOOP_FRICTION} friction on this "
+                      "log, CAD -> "
                       f"calibrated: {_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction "
                       "on it")
     return out
@@ -360,7 +359,8 @@ def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
     change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
     fit = ", ".join(f"joint {j} {f['rms_before']:.3g} -> {f['rms_after']:.3g} Nm" for j, f in cal.report["fit"].items())
     summary = (f"robot-model errors on joints {', '.join(str(j) for j in flagged) or 'none'}: calibrated the robot "
-               f"model -> {output} (RMS in motion of tau_m minus the robot model and linear friction, CAD -> calibrated: {fit})\n"
+               f"model -> {output} (RMS in motion of tau_m minus the robot model and {cal.report['friction']['kind']} "
+               f"friction, CAD -> calibrated: {fit})\n"
                f"held-out MAE, CAD robot model + friction model -> calibrated robot model + refitted and fixed "
                f"friction: {change}")
     return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],

@@ -26,7 +26,7 @@ def _pairs(what: str, nonnegative: bool = False):
 
 
 def urdf_options(f):
-    """--match, --rotor-inertia, --gravity, --payload-*, --cutoff: the robot model's options."""
+    """--match, --rotor-inertia, --gravity, --payload-*, --hold, --cutoff: the robot model's options."""
     for option in reversed([
         click.option("--match", type=click.Choice(["name", "order"]), default=None,
                      help="How log joints match URDF joints (import: overrides the mapping's robot.match)."),
@@ -40,6 +40,10 @@ def urdf_options(f):
         click.option("--payload-com", nargs=3, type=Number(), default=None, metavar="X Y Z",
                      help="Payload centre of mass [m] in the payload frame (default 0 0 0)."),
         click.option("--payload-frame", default=None, help="URDF frame (link) that carries the payload."),
+        click.option("--hold", "held", multiple=True, metavar="JOINT",
+                     help="A URDF joint the log does not record (a gripper's finger), held at its zero position: "
+                          "its links move with their parent (joints that mimic it too). Repeatable; import: adds "
+                          "to the mapping's robot.hold."),
         click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
                      help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model (default: "
                           "the log contract's, 50 Hz)."),
@@ -106,7 +110,7 @@ def urdf_joint_names(pairs) -> dict[str, str]:
 @output_option(help="Output Parquet log (- for stdout).")
 @common
 def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass,
-               payload_com, payload_frame, cutoff, drop_backward, output, quiet):
+               payload_com, payload_frame, held, cutoff, drop_backward, output, quiet):
     """Import a robot's delimited text recording or ROS bag as one long-format log.
 
     RECORDING is a CSV (or other delimited) text file, - for stdin, several text files that the
@@ -160,7 +164,9 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
     mp.apply_overrides(mapping, kt=kt_pairs, rotor_inertia=inertia_pairs,
-                       match=match, gravity=gravity or None, payload=payload)
+                       match=match, gravity=gravity or None, payload=payload, held=held)
+    if mapping.held and urdf is None:
+        raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
     model = None
     if urdf is not None:
         from fricli.robot.dynamics import load_model
@@ -180,6 +186,9 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
         if read.stamps == "receive":
             say(f"note: {name}: the messages on {read.topic} all have the same header stamp (unset or set once): "
                 "t is the time the bag received them", quiet)
+        if read.standalone:
+            say(f"note: {name}: no rosbag2 metadata.yaml (a recording that did not end cleanly?): read "
+                f"{', '.join(read.standalone)} as {'it is' if len(read.standalone) == 1 else 'they are'}", quiet)
         if read.unread:
             warn(f"warning: {name}: {read.unread} of the messages the bag's metadata lists on {read.topic} could not "
                  "be read (a damaged or unfinished file): they are missing from the log")
@@ -226,7 +235,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
 @output_option(help="Output Parquet log (- for stdout).")
 @common
 def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_mass, payload_com, payload_frame,
-                 cutoff, output, quiet):
+                 held, cutoff, output, quiet):
     """Add tau_g and tau_dyn from a URDF to a long-format log of all joints of a robot.
 
     Every moving joint of the URDF must be in the log, all sampled at the same times; qd and
@@ -237,7 +246,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, read_table, write_table
+    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, held_of, read_table, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.dynamics import load_model
     from fricli.robot.logterms import add_terms
@@ -250,7 +259,8 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
         payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
     table, _ = read_table(log)
     name = "stdin" if log == "-" else log
-    robot = mp.Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity), payload=payload)
+    robot = mp.Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity), payload=payload,
+                       held=tuple(held) or held_of(table.schema))
     model = load_model(urdf, robot)
     table, record = add_terms(table, model, name, match=match, urdf_names=names,
                               rotor_inertia=inertia_pairs,

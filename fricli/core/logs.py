@@ -400,12 +400,18 @@ def robot_record(schema: pa.Schema) -> dict:
 
 
 def robot_model(schema: pa.Schema) -> dict | None:
-    """The robot model of a log's tau_g and tau_dyn: its URDF's sha256, gravity, rotor inertias and
-    payload (what changes them); None when the log does not record one."""
+    """The robot model of a log's tau_g and tau_dyn: its URDF's sha256, gravity, rotor inertias,
+    payload and held joints (what changes them); None when the log does not record one."""
     record = robot_record(schema)
     if not record.get("urdf_sha256"):
         return None
-    return {k: record.get(k) for k in ("urdf_sha256", "gravity", "rotor_inertia", "payload")}
+    return {k: record.get(k) for k in ("urdf_sha256", "gravity", "rotor_inertia", "payload")} | (
+        {"held": record["held"]} if record.get("held") else {})
+
+
+def held_of(schema: pa.Schema) -> tuple[str, ...]:
+    """The URDF joints a log's robot model holds at their zero position (``--hold``), as recorded."""
+    return tuple(robot_record(schema).get("held") or ())
 
 
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,

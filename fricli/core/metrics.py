@@ -26,6 +26,27 @@ REST_SHARE = 0.02
 HELD_SPAN = 0.01
 
 
+#: a load slope needs |tau_g| to vary by at least this share of the friction level (docs/lugre.md)
+LOAD_SHARE = 0.05
+
+
+def load_range(tau_g: np.ndarray, friction: np.ndarray) -> tuple[float, float]:
+    """The 5th-to-95th percentile range of |tau_g| (n,) and the median |friction| (n,) [Nm]."""
+    lo, hi = np.percentile(np.abs(tau_g), [5, 95])
+    return float(hi - lo), float(np.median(np.abs(friction)))
+
+
+def load_can_show(tau_g: np.ndarray, friction: np.ndarray) -> bool:
+    """Whether the gravity torque varies enough over these rows for a load slope of the friction
+    to show: its range (``load_range``) at least LOAD_SHARE of the friction level. Below that,
+    even a slope of 1 (friction growing as fast as the load on the gear, more than any gear shows)
+    moves the friction by less than LOAD_SHARE of its level: no slope can be told from noise, and
+    one fitted there would extrapolate to every larger load the joint meets (a payload on a wrist
+    that carried almost none)."""
+    spread, level = load_range(tau_g, friction)
+    return spread >= LOAD_SHARE * level and spread > 0
+
+
 def held_still(q: np.ndarray) -> np.ndarray:
     """Columns of ``q`` (n, joints) [rad or m] whose span is under HELD_SPAN, (joints,) bool."""
     return np.ptp(q, axis=0) < HELD_SPAN if len(q) else np.ones(q.shape[1], dtype=bool)

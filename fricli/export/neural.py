@@ -73,7 +73,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              "    r0 = 0.0;",
              *(f"    r_ = {net_name}(x); r0 += {softplus};" for net_name in names),
              *([] if len(nets) == 1 else [f"    r0 = r0 / {num(float(len(nets)))};"]),
-             f"    r0 = r0 + {num(b1)} * (fabs({tau_g}) / {num(model.g_scale_)});",
+             *([f"    r0 = r0 + {num(b1)} * (fabs({tau_g}) / {num(model.g_scale_)});"] if model.load_ else []),
              *([] if model.v_max_ is None else [   # linear beyond the top training speeds
                  f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
                  f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),

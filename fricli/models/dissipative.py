@@ -58,8 +58,9 @@ factor is not used). The state z runs over the rows in time order with the exact
 work is at least -sigma0 z0^2 / 2. sigma0 is fitted on the training log (``fit_bristles``).
 
 v0 is the VELOCITY_QUANTILE quantile of the training speeds (as for ``mlp``), v_ps =
-PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows (1 when |tau_g| does not
-vary), y_scale the RMS of the training target. Training minimises the mean squared error of
+PRESLIDING_SHARE * v0, g_scale the mean |tau_g| of the training rows (1, and no load term, when
+|tau_g| varies too little to show a load slope: ``metrics.load_can_show``), y_scale the RMS of the
+training target. Training minimises the mean squared error of
 tau_f / y_scale with the trainer of ``fricli.numerics.nn.training`` (the head is part of the
 network, ``fricli.numerics.nn.heads``).
 """
@@ -70,6 +71,7 @@ from typing import Callable
 
 import numpy as np
 
+from fricli.core import metrics
 from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
@@ -115,6 +117,7 @@ class DissipativeFriction(FrictionModel):
         self.sigma0_: float | None = None                 # bristle stiffness [Nm/rad]; None: no pre-sliding state
         self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS, LuGreModel's units)
         self.blend_: float | None = None                  # lambda in [0, 1]: the network's share over the prior
+        self.load_ = True                                 # whether |tau_g| enters (metrics.load_can_show)
 
     @property
     def net_(self) -> HeadedNetwork | None:
@@ -147,7 +150,7 @@ class DissipativeFriction(FrictionModel):
         np.sign(qd, out=out[1])
         np.tanh(qd / self.v_ps_, out=out[2], dtype=dtype)
         np.abs(g, out=out[3])
-        out[3] /= self.g_scale_
+        out[3] *= (1.0 / self.g_scale_) if self.load_ else 0.0
         return out
 
     @staticmethod
@@ -212,10 +215,11 @@ class DissipativeFriction(FrictionModel):
         if not (self.v0_ > 0 and self.v_ps_ > 0):
             raise DataError("no moving training samples to scale the velocity with")
         g = np.abs(np.asarray(sig.get("tau_g", np.zeros_like(speed)), dtype=np.float64))
-        lo, hi = np.percentile(g, [5, 95])
-        # |tau_g| that does not vary (identify's rule: rounding noise on a vertical axis) is no
-        # load: scaled by 1 Nm, not by its own mean, it stays out of the magnitude
-        self.g_scale_ = float(g.mean()) if hi - lo > 1e-6 * (1.0 + hi) else 1.0
+        # a |tau_g| too constant to show a load slope (identify's rule; rounding noise on a vertical
+        # axis, a wrist whose centre of mass lies on its axis) stays out of the magnitude: a slope
+        # learned there would scale every larger load the joint meets later
+        self.load_ = metrics.load_can_show(g, target)
+        self.g_scale_ = float(g.mean()) if self.load_ else 1.0
         u = np.arcsinh(speed / self.v0_)
         self.u_mean_, self.u_scale_ = float(u.mean()), float(u.std()) if u.std() > 1e-12 else 1.0
         rms = float(np.sqrt(np.mean(np.asarray(target, dtype=np.float64) ** 2)))
@@ -245,7 +249,9 @@ class DissipativeFriction(FrictionModel):
         return {"qd", "tau_g"} if self.sigma0_ is None else {"t", "qd", "tau_g"}
 
     def load_slope(self) -> float:
-        """k [Nm/Nm]: the growth of the friction magnitude per |tau_g|."""
+        """k [Nm/Nm]: the growth of the friction magnitude per |tau_g| (0 without a load term)."""
+        if not self.load_:
+            return 0.0
         b1 = np.array([float(net.weights[-1][1, -1]) for net in self.nets_])
         return self.y_scale_ * float(np.mean(acts.softplus(b1))) / self.g_scale_
 
@@ -389,6 +395,8 @@ class DissipativeFriction(FrictionModel):
             if len(self.nets_) > 1:
                 params["members"] = len(self.nets_)
             params["scales"] = {key: getattr(self, f"{key}_") for key in self._SCALARS}
+            if not self.load_:
+                params["load"] = False
             if self.v_max_ is not None:
                 params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
             if self.sigma0_ is not None:
@@ -422,6 +430,9 @@ class DissipativeFriction(FrictionModel):
             if key != "u_mean" and not value > 0:
                 raise ValueError(f"scale {key} must be positive")
             setattr(model, f"{key}_", float(value))
+        model.load_ = params.get("load", True)
+        if not isinstance(model.load_, bool):
+            raise ValueError(f"damaged load flag {model.load_!r}")
         members = params.get("members", 1)
         if not isinstance(members, int) or isinstance(members, bool) or members < 1:
             raise ValueError(f"damaged member count {members!r}")
@@ -478,7 +489,9 @@ class DissipativeFriction(FrictionModel):
         lines += [f"  {sum(net.n_params for net in self.nets_)} parameters",
                   f"  v0 {self.v0_:.4g} {v}, pre-sliding speed v_ps {self.v_ps_:.4g} {v}, "
                   f"g_scale {self.g_scale_:.4g} {tau}, y_scale {self.y_scale_:.4g} {tau}",
-                  f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"]
+                  f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"
+                  if self.load_ else "  no load term: |tau_g| varied too little over the training rows to show a "
+                  "load slope (as identify decides kc = ks = 0)"]
         if self.v_max_ is not None:
             lines.append(f"  beyond the top training speeds (+{self.v_max_[0]:.4g} / -{self.v_max_[1]:.4g} {v}) the "
                          f"magnitude grows by {self.y_scale_ * self.slope_[0]:.4g} / "

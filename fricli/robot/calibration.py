@@ -47,6 +47,10 @@ from fricli.numerics.threads import pinned
 
 PARAMS = ("m", "mx", "my", "mz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz")   # Pinocchio's dynamic parameters
 FRICTION = ("Fv", "Fc", "offset")
+#: the friction fitted with the robot model by diagnose --calibrate, which refits each joint's friction
+#: model afterwards: the calibration's friction only has to keep friction out of the inertial
+#: parameters, and a Stribeck bump left to the linear law is taken up by them (docs/diagnose.md)
+LOOP_FRICTION = "stribeck"
 DEFAULT_PRIOR = "auto"     # prior std of an inertial parameter relative to its scale, or chosen by held-out fit
 PRIOR_GRID = (0.01, 0.03, 0.1, 0.2, 0.5, 1.0, 3.0, 10.0)   # the prior strengths "auto" chooses from
 PRIOR_FOLDS = 10           # contiguous blocks of time of the cross-validation that chooses the prior (as diagnose)
@@ -927,7 +931,7 @@ def recorded_urdf(table) -> str | None:
 def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """(record, robot, motion) of a whole-arm log imported with a URDF: what ``import``/``dynamics``
     recorded, the robot model of ``urdf`` (default: the recorded URDF) with the recorded gravity and
-    no payload, and the log's motion matched to it as recorded."""
+    no payload, the joints it held, and the log's motion matched to it as recorded."""
     from fricli.robot.dynamics import load_model
     from fricli.robot.mapping import Mapping
 
@@ -935,7 +939,8 @@ def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: flo
     if not record.get("joints"):
         raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
     gravity = logs.gravity_of(table.schema)
-    robot = load_model(urdf or record.get("urdf"), Mapping(time=None, joints=[], gravity=gravity))
+    robot = load_model(urdf or record.get("urdf"), Mapping(time=None, joints=[], gravity=gravity,
+                                                           held=logs.held_of(table.schema)))
     return record, robot, read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
 
 
@@ -955,7 +960,7 @@ def recalibrate(table, name: str, urdf: str, *, prior: float | str = DEFAULT_PRI
     refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:
         text = calibrated_urdf(fh.read(), urdf, cal)
-    new, _ = add_terms(table, RobotModel(text, urdf, gravity=gravity), name, match="name",
+    new, _ = add_terms(table, RobotModel(text, urdf, gravity=gravity, held=robot.held), name, match="name",
                        urdf_names={str(k): v for k, v in record["joints"].items()}, gravity=gravity,
                        cutoff_hz=cutoff_hz)
     return cal, text, new

@@ -74,10 +74,14 @@ def _c_stderr():
 class RobotModel:
     """A URDF's rigid-body model with a gravity vector [m/s^2] and an optional point payload."""
 
-    def __init__(self, urdf_text: str, name: str, gravity=DEFAULT_GRAVITY, payload: Payload | None = None):
+    def __init__(self, urdf_text: str, name: str, gravity=DEFAULT_GRAVITY, payload: Payload | None = None,
+                 held: tuple[str, ...] = ()):
         pin = pinocchio()
         self.name = name
         self.sha256 = hashlib.sha256(urdf_text.encode("utf-8")).hexdigest()
+        self.held: tuple[str, ...] = ()
+        if held:
+            urdf_text, self.held = hold_joints(urdf_text, name, held)
         try:
             with _c_stderr() as said:    # the URDF parser prints its complaints itself
                 model = pin.buildModelFromXML(urdf_text)
@@ -142,9 +146,9 @@ class RobotModel:
             kind = self.kinds[self.joints.index(unmatched[0])]
             raise ModelFileError(f"{self.name}: joint {unmatched[0]!r} ({'prismatic' if kind == 'linear' else 'revolute'}"
                                  f"{', and ' + str(len(unmatched) - 1) + ' more' if len(unmatched) > 1 else ''}) is not "
-                                 "in the log: every moving joint needs its position. A joint the controller does not "
-                                 "record (a gripper's fingers) can be made type=\"fixed\" in a copy of the URDF "
-                                 "(docs/robot-import.md)")
+                                 "in the log: every moving joint needs its position. Joints the controller does not "
+                                 "record (a gripper's fingers) can be held at their zero position: --hold JOINT, or "
+                                 "hold = [...] under [robot] in the mapping (docs/robot-import.md)")
         return [self.joints.index(u) for u in urdf_names]
 
     def terms(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
@@ -173,6 +177,32 @@ class RobotModel:
         parts = [np.column_stack([np.cos(q[:, k]), np.sin(q[:, k])]) if unbounded else q[:, k:k + 1]
                  for k, unbounded in enumerate(self._unbounded)]
         return np.hstack(parts)
+
+
+def hold_joints(urdf_text: str, name: str, held) -> tuple[str, tuple[str, ...]]:
+    """``urdf_text`` with the joints ``held`` (and those that mimic them) made ``type="fixed"`` at
+    their zero position: their links then move with their parents (Pinocchio merges them into the
+    parent body). Returns the text and the joints held, in the URDF's order. ModelFileError for a
+    name that is no moving joint of the URDF."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(urdf_text)
+    except ET.ParseError as exc:
+        raise ModelFileError(f"{name}: not a usable URDF ({exc})") from None
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    moving = [n for n, j in joints.items() if j.get("type") in ("revolute", "continuous", "prismatic")]
+    for joint in held:
+        if joint not in moving:
+            raise ModelFileError(f"{name}: no moving joint {joint!r} to hold (its moving joints: {', '.join(moving)})")
+    wanted = set(held)
+    wanted |= {n for n in moving if (m := joints[n].find("mimic")) is not None and m.get("joint") in wanted}
+    for joint in wanted:
+        element = joints[joint]
+        element.set("type", "fixed")
+        for mimic in element.findall("mimic"):
+            element.remove(mimic)
+    return ET.tostring(root, encoding="unicode"), tuple(n for n in moving if n in wanted)
 
 
 def rotor_params(urdf_text: str, name: str, model) -> np.ndarray:
@@ -260,7 +290,7 @@ def _rnea_rows(model, q, qd, qdd) -> np.ndarray:
 
 
 def load_model(path: str, mapping) -> RobotModel:
-    """The URDF at ``path`` with the mapping's gravity and payload."""
+    """The URDF at ``path`` with the mapping's gravity, payload and held joints."""
     pinocchio()  # the install hint comes before any complaint about the file
     try:
         with open(path, encoding="utf-8") as fh:
@@ -269,4 +299,4 @@ def load_model(path: str, mapping) -> RobotModel:
         raise ModelFileError(f"{path}: no such URDF file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ModelFileError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
-    return RobotModel(text, path, gravity=mapping.gravity, payload=mapping.payload)
+    return RobotModel(text, path, gravity=mapping.gravity, payload=mapping.payload, held=mapping.held)

@@ -90,6 +90,7 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
         "gravity": list(mapping.gravity),
         "rotor_inertia": {str(jm.name): jm.rotor_inertia for jm in mapping.joints},
         "payload": dataclasses.asdict(payload) if payload is not None else None,
+        "held": list(model.held),
         "derived": {"columns": derived, "cutoff_hz": cutoff_hz,
                     "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {},
     }

@@ -39,7 +39,7 @@ _TOP_KEYS = {"header", "delimiter", "time", "joints", "robot", "files", "join", 
 _JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS, *MOTOR_SIGNALS}
 _COLUMN_KEYS = {"column", "unit", "file", "scale", "offset"}
 _TRANSMISSION_KEYS = {"gear_ratios", "ratio", "offset", "rotor_inertia"}
-_ROBOT_KEYS = {"match", "gravity", "payload"}
+_ROBOT_KEYS = {"match", "gravity", "payload", "hold"}
 _PAYLOAD_KEYS = {"mass", "com", "frame"}
 # a ROS bag's mapping: what a JointState's effort is, per joint (docs/robot-import.md)
 EFFORTS = {"tau_m": "joint-side torque [Nm]", "i_m": "motor current [A], with kt [Nm/A]",
@@ -104,6 +104,7 @@ class Mapping:
     files: tuple[str, ...] = ()       # labels of the input files, in the order they are given
     join: str = "rows"                # how several files' rows pair up: "rows" (row by row) or "time"
     transmission: object = None       # fricli.core.transmission.Transmission of motor-side signals
+    held: tuple[str, ...] = ()        # URDF joints held at their zero position (not in the log)
 
     def joint(self, name: str) -> JointMap:
         """The joint whose log name reads ``name``."""
@@ -306,7 +307,7 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     kinds = {c.kind for j in joints for c in j.columns.values()} - {None}
     if len(kinds) > 1:
         _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately; with --urdf, "
-                    "map the arm's joints and make the others type=\"fixed\" in a copy of the URDF)")
+                    "map the arm's joints and hold the others: hold = [...] under [robot], or --hold JOINT)")
     transmission = _transmission(doc["transmission"], joints, f"{name}: transmission") if motor_side else None
     if transmission is not None and "rotor_inertia" in doc["transmission"] and any(j.rotor_inertia for j in joints):
         _fail(name, "rotor inertias are given twice: per joint (joint side) and in [transmission] (motor side)")
@@ -321,7 +322,7 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
 
 
 def _robot(doc: dict, name: str) -> dict:
-    """match, gravity and payload from the mapping's [robot] table."""
+    """match, gravity, payload and held joints from the mapping's [robot] table."""
     robot = doc.get("robot", {})
     if not isinstance(robot, dict):
         _fail(f"{name}: robot", "expected a table")
@@ -331,7 +332,10 @@ def _robot(doc: dict, name: str) -> dict:
         _fail(f"{name}: robot.match", f"expected 'name' or 'order', got {match!r}")
     gravity = _vector3(robot["gravity"], f"{name}: robot.gravity") if "gravity" in robot else DEFAULT_GRAVITY
     payload = _payload(robot["payload"], f"{name}: robot.payload") if "payload" in robot else None
-    return {"match": match, "gravity": gravity, "payload": payload}
+    held = robot.get("hold", [])
+    if not (isinstance(held, list) and all(isinstance(h, str) and h for h in held)):
+        _fail(f"{name}: robot.hold", "expected a list of URDF joint names")
+    return {"match": match, "gravity": gravity, "payload": payload, "held": tuple(held)}
 
 
 def effort_column(effort: str, gear_ratio: float = 1.0) -> dict[str, Column]:
@@ -418,7 +422,7 @@ def merge_payload(base: Payload | None, mass=None, com=None, frame=None) -> Payl
 
 
 def apply_overrides(mapping: Mapping, *, kt=None, rotor_inertia=None, match=None, gravity=None,
-                    payload: Payload | None = None) -> Mapping:
+                    payload: Payload | None = None, held=()) -> Mapping:
     """``mapping`` with options from the command line taking precedence (in place; returned)."""
     for joint, value in (kt or {}).items():
         jm = mapping.joint(joint)
@@ -433,4 +437,6 @@ def apply_overrides(mapping: Mapping, *, kt=None, rotor_inertia=None, match=None
         mapping.gravity = tuple(float(g) for g in gravity)
     if payload is not None:
         mapping.payload = payload
+    if held:
+        mapping.held = tuple(dict.fromkeys((*mapping.held, *held)))
     return mapping

@@ -30,6 +30,7 @@ from fricli.robot.recording import KINDS, MIN_ROWS, Defect, Recording, consisten
 JOINT_STATE = "sensor_msgs/msg/JointState"
 INSTALL = "pip install 'fricli[ros]'"
 SUFFIXES = (".bag", ".mcap", ".db3")
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 FIELDS = {"position": "q", "velocity": "qd", "effort": "effort"}
 
 
@@ -54,6 +55,8 @@ class Bag:
     # fields ("velocity", ...) left out because some usable messages had them empty: those messages
     partly_empty: dict[str, Defect] = dataclasses.field(default_factory=dict)
     unread: int = 0     # messages the bag's metadata lists on the topic that could not be read
+    # storage files read without a metadata.yaml (a rosbag2 recording that did not end cleanly)
+    standalone: list[str] = dataclasses.field(default_factory=list)
 
 
 def _rosbags():
@@ -65,26 +68,46 @@ def _rosbags():
     return AnyReader, AnyReaderError, get_typestore(Stores.ROS2_HUMBLE)
 
 
-def _bag_path(path: str) -> Path:
-    """The path rosbags opens: a ROS 1 file, or a rosbag2 folder (a storage file's folder)."""
+def _bag_paths(path: str) -> list[Path]:
+    """What rosbags opens: a ROS 1 file, a rosbag2 folder (a storage file's folder) with its
+    metadata.yaml, or without one (a recording that did not end cleanly) its storage files."""
     p = Path(path)
     if not p.exists():
         raise LogError(f"{path}: no such bag")
-    if p.is_file() and p.suffix in (".mcap", ".db3"):
-        if not (p.parent / "metadata.yaml").exists():
-            raise LogError(f"{path}: a rosbag2 storage file without the bag's metadata.yaml beside it: give the "
-                           "bag's folder")
-        return p.parent
-    return p
+    folder = p.parent if p.is_file() and p.suffix in (".mcap", ".db3") else p
+    if not folder.is_dir() or (folder / "metadata.yaml").exists():
+        return [folder]
+    if p.is_file():
+        return [p]
+    files = sorted((f for f in p.iterdir() if f.suffix in (".mcap", ".db3") and f.is_file()), key=_split_index)
+    if not files:
+        raise LogError(f"{path}: a folder without a rosbag2 metadata.yaml or .mcap/.db3 storage files: not a ROS bag")
+    if len({f.suffix for f in files}) > 1:
+        raise LogError(f"{path}: a folder without metadata.yaml that holds both .mcap and .db3 files: give one file")
+    return files
 
 
-def _sha256(p: Path) -> str:
-    """sha256 of the bag's bytes: the file's, or a folder's files' in name order."""
+def _split_index(f: Path) -> tuple:
+    """Name order with the split number (``run_10.mcap`` after ``run_9.mcap``) read as a number."""
+    stem, _, number = f.stem.rpartition("_")
+    return (stem, int(number)) if number.isdigit() else (f.stem, -1)
+
+
+def _mcap_ends(f: Path) -> bool:
+    """Whether an MCAP file ends with the format's magic bytes, as a finished recording does."""
+    with open(f, "rb") as fh:
+        fh.seek(max(f.stat().st_size - len(MCAP_MAGIC), 0))
+        return fh.read() == MCAP_MAGIC
+
+
+def _sha256(paths: list[Path]) -> str:
+    """sha256 of the bag's bytes: its files' (a folder's in name order), in the order read."""
     h = hashlib.sha256()
-    for f in sorted(x for x in ([p] if p.is_file() else p.rglob("*")) if x.is_file()):
-        with open(f, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                h.update(block)
+    for p in paths:
+        for f in sorted(x for x in ([p] if p.is_file() else p.rglob("*")) if x.is_file()):
+            with open(f, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
     return h.hexdigest()
 
 
@@ -92,9 +115,9 @@ def _messages(path: str, topic: str | None):
     """(topic, [(receive time [ns], stamp [ns], names, position, velocity, effort)]) of the
     JointState topic ``topic`` (or the bag's only one)."""
     AnyReader, AnyReaderError, default = _rosbags()
-    p = _bag_path(path)
+    p = _bag_paths(path)
     try:
-        with AnyReader([p], default_typestore=default) as reader:
+        with AnyReader(p, default_typestore=default) as reader:
             states = sorted({c.topic for c in reader.connections if c.msgtype == JOINT_STATE})
             if topic is None:
                 if not states:
@@ -119,7 +142,11 @@ def _messages(path: str, topic: str | None):
     except LogError:
         raise
     except Exception as exc:   # AnyReaderError, OSError, and what a damaged file makes its decoders raise
-        raise LogError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {exc})") from None
+        files = [g for f in p for g in (sorted(f.glob("*.mcap")) if f.is_dir() else [f])]
+        cut = [f.name for f in files if f.suffix == ".mcap" and not _mcap_ends(f)]
+        hint = (f"; {', '.join(cut)} is cut short (a recording that did not end cleanly?): the mcap tool "
+                "recovers what it holds, `mcap recover FILE -o FIXED.mcap`" if cut else "")
+        raise LogError(f"{path}: not a readable ROS bag ({type(exc).__name__}: {exc}){hint}") from None
     return topic, out, p, listed
 
 
@@ -239,7 +266,8 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
     turned = keep & (ranks != np.bincount(ranks[keep]).argmax())     # another order than most messages
     moved = Defect(int(turned.sum()), int(numbers[turned][0]), ranges(numbers[turned])) if turned.any() else None
     return Bag(recording=rec, mapping=mapping, topic=topic, stamps=source, origin_ns=origin, reordered=moved,
-               sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0))
+               sha256=_sha256(p), partly_empty=partly, unread=max(listed - n, 0),
+               standalone=[f.name for f in p if f.is_file() and f.suffix in (".mcap", ".db3")])
 
 
 def _dropped(kinds: np.ndarray, numbers: np.ndarray, examples: dict) -> dict[str, Defect]:
