@@ -820,6 +820,23 @@ def test_calibrate_friction_is_the_calibrations(arm_with_cad_errors):
     assert done.exit_code == 2 and "--calibrate-friction applies to --calibrate" in done.output
 
 
+def test_a_run_imported_with_the_calibrated_urdf_matches_the_refitted_models(arm_with_cad_errors):
+    """The calibrated URDF carries every joint's armature, which replaces a mapping's rotor inertia:
+    a run imported with both is the robot model the models were refitted on, without a warning."""
+    root, log = arm_with_cad_errors
+    runner = CliRunner()
+    cal, fixed, other = root / "cal-r.urdf", root / "fixed-r", root / "other.parquet"
+    done = runner.invoke(cli, ["diagnose", str(root / "linear"), log, "--fix", "--calibrate", str(cal),
+                               "-o", str(fixed), "-q"])
+    assert done.exit_code == 0, done.output
+    done = runner.invoke(cli, ["dynamics", str(root / "raw.parquet"), "--urdf", str(cal), "--match", "order",
+                               "--rotor-inertia", "2=0.5", "-o", str(other), "-q"])
+    assert done.exit_code == 0, done.output
+    assert logs.robot_record(logs.read_table(str(other))[0].schema)["rotor_inertia"]["2"] is None
+    done = runner.invoke(cli, ["predict", str(fixed), str(other), "-o", str(root / "p.parquet")])
+    assert done.exit_code == 0 and "another robot model" not in done.stderr, done.stderr
+
+
 def test_calibrate_needs_fix_and_a_whole_arm(arm_with_cad_errors):
     root, log = arm_with_cad_errors
     done = CliRunner().invoke(cli, ["diagnose", str(root / "linear"), log, "--calibrate", str(root / "c.urdf")])

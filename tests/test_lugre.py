@@ -1,6 +1,7 @@
 """The LuGre model kind and `fricli identify`."""
 
 import json
+import math
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -604,3 +605,17 @@ def test_a_fit_stopped_at_the_evaluation_limit_keeps_its_best_iterate_with_a_war
     assert ident.warnings_[0].startswith("the static and bristle fit stopped at 3 evaluations before it converged")
     assert not ident.fit_["stages"]["static"]["converged"] and np.isfinite(ident.model_.predict(sig)[0]).all()
     assert LuGreIdentifier().fit(sig).fit_["stages"]["static"]["converged"]
+
+
+def test_a_solver_step_far_up_in_log_space_gives_a_model_it_rejects_not_an_overflow():
+    """trf may try a step to log(vs) of 800 (train-base's prior on a UR10e wrist did): exp(800)
+    overflows Python floats; the step must give non-finite residuals, which trf shrinks from."""
+    from fricli.fitting.identify import _Layout
+
+    layout = _Layout(stribeck=True, load=False)
+    x = layout.encode(dict(TRUE, kc=0.0, ks=0.0))
+    x[layout.names.index("vs")] = 800.0
+    p = layout.decode(x, {"sigma0": 1.0, "sigma1": 0.0})
+    assert p["vs"] == math.exp(700.0)
+    y = LuGreModel(**p).steady_state(np.array([-0.5, 0.5]), None)
+    assert y.shape == (2,)

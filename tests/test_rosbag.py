@@ -352,3 +352,35 @@ def test_urdf_terms_of_a_bag_match_joints_by_their_names(tmp_path):
     expected, _ = analytic(q, np.zeros_like(q), np.zeros_like(q), (0.0, 0.0, -9.81))
     np.testing.assert_allclose(tau_g, expected, atol=1e-9)
     assert np.isfinite(table.column("tau_dyn").to_numpy()).all()
+
+
+def test_a_bag_leaves_the_joints_the_urdf_holds_out(tmp_path):
+    """A gripper's finger (and the finger that mimics it) in every message: --hold leaves them out of
+    a bag's log, which then holds the arm's joints and their URDF terms."""
+    pytest.importorskip("pinocchio")
+    from test_urdf import URDF, analytic
+
+    fingers = ('<joint name="finger" type="prismatic"><parent link="{p}"/><child link="pad"/><axis xyz="0 1 0"/>'
+               '<limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint><link name="pad"/>'
+               '<joint name="finger2" type="prismatic"><parent link="{p}"/><child link="pad2"/><axis xyz="0 -1 0"/>'
+               '<limit lower="0" upper="0.04" effort="20" velocity="0.2"/><mimic joint="finger"/></joint>'
+               '<link name="pad2"/></robot>')
+    last = [line.split('"')[1] for line in URDF.splitlines() if "<link name=" in line][-1]
+    (tmp_path / "grip.urdf").write_text(URDF.replace("</robot>", fingers.format(p=last)))
+    rng = np.random.default_rng(3)
+    n = 60
+    q = rng.uniform(-np.pi, np.pi, (n, 2))
+    msgs = [[START_NS + k * STEP_NS, ["shoulder", "elbow", "finger", "finger2"], np.r_[q[k], 0.02, 0.02], [],
+             rng.normal(size=4)] for k in range(n)]
+    write_bag(tmp_path / "run", msgs)
+    run = lambda *a: subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--urdf", "grip.urdf",  # noqa: E731
+                                     *a, "-o", "out.parquet"], cwd=tmp_path, capture_output=True, text=True,
+                                    env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run()
+    assert res.returncode == errors.MODEL and "--hold finger" in res.stderr, res.stderr
+    res = run("--hold", "finger")
+    assert res.returncode == 0, res.stderr
+    table = pq.read_table(tmp_path / "out.parquet")
+    assert table.column("joint").to_pylist()[::n] == ["shoulder", "elbow"]
+    expected, _ = analytic(q, np.zeros_like(q), np.zeros_like(q), (0.0, 0.0, -9.81))
+    np.testing.assert_allclose(table.column("tau_g").to_numpy().reshape(2, n).T, expected, atol=1e-9)

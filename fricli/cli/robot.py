@@ -159,7 +159,10 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
             raise click.UsageError("the files of a recording in several files cannot be read from stdin")
         name = " + ".join(recordings)
     if bag:
-        read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward)
+        from fricli.robot.dynamics import held_joints
+
+        leave_out = held_joints(urdf, (*mapping.held, *held)) if urdf is not None else ()
+        read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward, leave_out=leave_out)
         mapping = read.mapping
     payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None

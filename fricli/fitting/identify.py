@@ -178,7 +178,9 @@ class _Layout:
     def decode(self, x: np.ndarray, fixed: dict) -> dict:
         p = dict(fixed)
         for k, xi in zip(self.names, x):
-            p[k] = math.exp(xi) if k in self._LOG else float(xi)
+            # a trial step of the solver can go far up in log-space: 1e304 gives residuals it rejects
+            # (non-finite ones shrink its trust region), where exp(710) would raise
+            p[k] = math.exp(min(xi, 700.0)) if k in self._LOG else float(xi)
         if self.stribeck:
             p["fs"] = p["fc"] + p["fs"]
         if not self.stribeck:

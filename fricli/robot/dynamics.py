@@ -289,14 +289,22 @@ def _rnea_rows(model, q, qd, qdd) -> np.ndarray:
     return out
 
 
-def load_model(path: str, mapping) -> RobotModel:
-    """The URDF at ``path`` with the mapping's gravity, payload and held joints."""
-    pinocchio()  # the install hint comes before any complaint about the file
+def _urdf_text(path: str) -> str:
     try:
         with open(path, encoding="utf-8") as fh:
-            text = fh.read()
+            return fh.read()
     except FileNotFoundError:
         raise ModelFileError(f"{path}: no such URDF file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ModelFileError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
-    return RobotModel(text, path, gravity=mapping.gravity, payload=mapping.payload, held=mapping.held)
+
+
+def load_model(path: str, mapping) -> RobotModel:
+    """The URDF at ``path`` with the mapping's gravity, payload and held joints."""
+    pinocchio()  # the install hint comes before any complaint about the file
+    return RobotModel(_urdf_text(path), path, gravity=mapping.gravity, payload=mapping.payload, held=mapping.held)
+
+
+def held_joints(path: str, held) -> tuple[str, ...]:
+    """The joints of the URDF at ``path`` that holding ``held`` holds: those and the ones that mimic them."""
+    return hold_joints(_urdf_text(path), path, held)[1] if held else ()

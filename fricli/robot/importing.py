@@ -71,7 +71,9 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
     for jm, sig, k in zip(mapping.joints, per_joint, order):
         if model.kinds[k] != axis:
             raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
-                                 f"{jm.name} is {axis}")
+                                 f"{jm.name} is {axis}; a joint the robot model need not move (a gripper's) can be "
+                                 f"held at zero with --hold {model.joints[k]} and left out of the mapping (a ROS bag "
+                                 "without a mapping leaves held joints out itself)")
         if "q" not in sig:
             raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
         motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
@@ -88,7 +90,9 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
         "urdf": model.name, "urdf_sha256": model.sha256, "match": mapping.match,
         "joints": {str(jm.name): model.joints[k] for jm, k in zip(mapping.joints, order)},
         "gravity": list(mapping.gravity),
-        "rotor_inertia": {str(jm.name): jm.rotor_inertia for jm in mapping.joints},
+        # where the URDF gives the armature it replaces the mapping's rotor inertia: none is applied (null)
+        "rotor_inertia": {str(jm.name): jm.rotor_inertia if np.isnan(model.armature[k]) else None
+                          for jm, k in zip(mapping.joints, order)},
         "payload": dataclasses.asdict(payload) if payload is not None else None,
         "held": list(model.held),
         "derived": {"columns": derived, "cutoff_hz": cutoff_hz,

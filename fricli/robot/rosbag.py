@@ -151,10 +151,11 @@ def _messages(path: str, topic: str | None):
 
 
 def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None, *,
-             drop_backward: bool = False) -> Bag:
+             drop_backward: bool = False, leave_out=()) -> Bag:
     """Read the JointState topic of the bag at ``path``. ``mapping`` (``parse_bag_mapping``) names
-    the joints to import and what their effort is; without it the joints that the most messages name,
-    effort as joint-side torque [Nm]. LogError (exit 3) when nothing is usable."""
+    the joints to import and what their effort is; without it the joints that the most messages name
+    but those in ``leave_out`` (joints the robot model holds), effort as joint-side torque [Nm].
+    LogError (exit 3) when nothing is usable."""
     topic, msgs, p, listed = _messages(path, topic)
     if not msgs:
         raise LogError(f"{path}: topic {topic} holds no messages")
@@ -163,6 +164,7 @@ def read_bag(path: str, mapping: Mapping | None = None, topic: str | None = None
         common = max(sets, key=sets.get)           # the first of the most frequent
         by_order = collections.Counter(m[2] for m in msgs if frozenset(m[2]) == common)
         names = max(by_order, key=by_order.get)        # the order most messages list them in (the first of those)
+        names = tuple(n for n in names if n not in leave_out)
         if not names:
             raise LogError(f"{path}: the messages on {topic} name no joints")
         base = mapping or Mapping(time=None, joints=[])
