@@ -33,7 +33,7 @@ import tempfile
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FS, DURATION, JOINTS = 500.0, 60.0, 7
+FS, DURATION, JOINTS = 500.0, 60.0, 7     # [Hz], [s] (--duration), joints
 # link: mass [kg], centre of mass [m], principal inertia [kg m^2], its frame's rpy
 LINKS = {
     "link1": (4.0, (0.0, -0.03, -0.07), (0.030, 0.028, 0.010), (0.2, 0.0, 0.1)),
@@ -97,11 +97,11 @@ def friction(qd: np.ndarray) -> np.ndarray:
     return (FC + (FSTAT - FC) * np.exp(-(qd / VS) ** 2)) * np.tanh(qd / 1e-3) + FV * qd + OFFSET
 
 
-def trajectory(seed: int, f0: float, harmonics: int = 5):
+def trajectory(seed: int, f0: float, duration: float = DURATION, harmonics: int = 5):
     """t (n,), q, qd, qdd (n, 7): sums of harmonics of f0, at most 1.6 rad/s; the continuous joint
     also swings +-3.2 rad, past +-pi."""
     rng = np.random.default_rng(seed)
-    t = np.arange(int(DURATION * FS)) / FS
+    t = np.arange(int(duration * FS)) / FS
     w = 2 * np.pi * f0 * np.arange(1, harmonics + 1)
     q, qd, qdd = (np.zeros((t.size, JOINTS)) for _ in range(3))
     for j in range(JOINTS):
@@ -111,20 +111,20 @@ def trajectory(seed: int, f0: float, harmonics: int = 5):
         xdd = -(s @ (a * w ** 2) + c @ (b * w ** 2))
         scale = min(SPAN[j] / np.abs(x).max(), 1.6 / np.abs(xd).max())
         q[:, j], qd[:, j], qdd[:, j] = Q0[j] + scale * x, scale * xd, scale * xdd
-    ws = 2 * np.pi / DURATION
+    ws = 2 * np.pi / duration
     q[:, 6] += 3.2 * np.sin(ws * t)
     qd[:, 6] += 3.2 * ws * np.cos(ws * t)
     qdd[:, 6] -= 3.2 * ws ** 2 * np.sin(ws * t)
     return t, q, qd, qdd
 
 
-def simulate(path: str, true_urdf: str, seed: int, f0: float) -> dict:
+def simulate(path: str, true_urdf: str, seed: int, f0: float, duration: float = DURATION) -> dict:
     """Write a controller's CSV dump (ms, degrees, amperes) of one run; the truth."""
     import pinocchio as pin
 
     model = pin.buildModelFromXML(true_urdf)
     data = model.createData()
-    t, q, qd, qdd = trajectory(seed, f0)
+    t, q, qd, qdd = trajectory(seed, f0, duration)
     config = np.zeros((t.size, model.nq))
     for j in range(JOINTS):
         joint = model.joints[model.getJointId(f"joint{j + 1}")]
@@ -166,11 +166,9 @@ def by_joint(path: str, column: str) -> np.ndarray:
     return np.column_stack([values[joint == f"joint{j}"] for j in range(1, 8)])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--work", default=None, help="folder for the recordings, logs and models (default: temporary)")
-    args = ap.parse_args()
-    work = args.work or tempfile.mkdtemp(prefix="fricli-arm7-")
+def study(work: str, duration: float = DURATION) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per friction law of the calibration: RMS [Nm] per joint (7,) of the predicted minus the true
+    friction and of the calibrated rigid body minus the true one, on the scoring run."""
     os.makedirs(work, exist_ok=True)
     p = lambda name: os.path.join(work, name)          # noqa: E731
     for name, cad in (("true.urdf", False), ("cad.urdf", True)):
@@ -179,8 +177,8 @@ def main() -> None:
     with open(p("arm7.toml"), "w", encoding="utf-8") as fh:
         fh.write(MAPPING)
     true = urdf(False)
-    simulate(p("fit.csv"), true, seed=1, f0=0.1)
-    truth = simulate(p("score.csv"), true, seed=2, f0=0.125)
+    simulate(p("fit.csv"), true, seed=1, f0=0.1, duration=duration)
+    truth = simulate(p("score.csv"), true, seed=2, f0=0.125, duration=duration)
     fricli("import", p("fit.csv"), "--mapping", p("arm7.toml"), "--urdf", p("cad.urdf"), "--cutoff", 10,
            "-o", p("fit.parquet"), "-q")
     fricli("identify", p("fit.parquet"), "-o", p("lugre"), "-q")
@@ -196,6 +194,16 @@ def main() -> None:
         rigid = by_joint(p(f"score-{law}.parquet"), "tau_g") + by_joint(p(f"score-{law}.parquet"), "tau_dyn")
         results[law] = (rms(by_joint(p(f"pred-{law}.parquet"), "tau_f_pred") - truth["tau_f"]),
                         rms(rigid - truth["rigid"]))
+    return results
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--work", default=None, help="folder for the recordings, logs and models (default: temporary)")
+    ap.add_argument("--duration", type=float, default=DURATION, help="seconds of each run")
+    args = ap.parse_args()
+    work = args.work or tempfile.mkdtemp(prefix="fricli-arm7-")
+    results = study(work, args.duration)
     print(f"scoring run, RMS [Nm] per joint 1..7 (work folder {work})")
     print("| calibration's friction | predicted minus true friction | calibrated rigid body minus the true one |")
     print("|---|---|---|")
