@@ -149,6 +149,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     if topic is not None and not bag:
         raise click.UsageError("--topic applies to a ROS bag")
     mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
+    if (held or mapping.held) and urdf is None:
+        raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
     cutoff_hz = DEFAULT_CUTOFF_HZ if cutoff is None else cutoff
     name = "stdin" if recording == "-" else recording
     if len(recordings) > 1 or mapping.files:
@@ -168,8 +170,6 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
     mp.apply_overrides(mapping, kt=kt_pairs, rotor_inertia=inertia_pairs,
                        match=match, gravity=gravity or None, payload=payload, held=held)
-    if mapping.held and urdf is None:
-        raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
     model = None
     if urdf is not None:
         from fricli.robot.dynamics import load_model
