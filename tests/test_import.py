@@ -349,7 +349,7 @@ def test_the_command_reports_garbage_rows_with_their_lines(tmp_path, dump):
     assert meta["dropped"]["zero_row"] == {"count": 2, "first_line": 1, "what": "all values zero", "lines": [[1, 2]]}
 
 
-@pytest.mark.parametrize("mark, spelled", [(";", ";"), ("\t", "\\t")])
+@pytest.mark.parametrize("mark, spelled", [(";", ";"), ("\t", "\\t"), (" ", " ")])   # " ": UR's RTDE recorder
 def test_another_delimiter_than_the_mappings_is_named(mark, spelled):
     data = ("\n".join(ln.replace(",", mark) for ln in rows()) + "\n").encode()
     with pytest.raises(errors.LogError, match=re.escape(f'they hold {mark!r}: set delimiter = "{spelled}" in the '
@@ -417,7 +417,7 @@ def test_what_is_wrong_with_the_first_bad_row_is_shown():
     semicolon = head.replace(",", ";") + "\n".join(r.replace(",", ";").replace(".", ",") for r in rows()) + "\n"
     dates = head + "\n".join(f"2026-11-25T10:00:{k:02d}," + r.split(",", 1)[1] for k, r in enumerate(rows())) + "\n"
     trailing = head + "\n".join(r + "," for r in rows()) + "\n"
-    for data, text, says in ((semicolon, 'delimiter = ";"\n' + header, "'100,00' in column 't': a decimal comma"),
+    for data, text, says in ((semicolon, 'delimiter = ";"\n' + header, "'100,00' in column 't': a decimal comma (set decimal = \",\" in the mapping)"),
                              (dates, header, "'2026-11-25T10:00:00' in column 't': a date and time"),
                              (trailing, header, "first at line 2: 9 fields, 8 expected (a delimiter ends the line)")):
         with pytest.raises(recording.LogError, match=re.escape(says)):
@@ -427,6 +427,25 @@ def test_what_is_wrong_with_the_first_bad_row_is_shown():
                .recording.lines) == 40                                       # "t" as R writes a header
     with pytest.raises(recording.LogError, match=re.escape("no column 't' in the header line (it has 'time', 'q1'")):
         import_recording((head.replace("t,", "time,") + "\n".join(rows()) + "\n").encode(), mapping(header), "x")
+
+
+def test_a_decimal_comma_is_read_when_the_mapping_says_so():
+    """European controllers and spreadsheets write 0,5 and separate fields by ';': decimal = ","."""
+    header = MAPPING.replace("column = 1", 'column = "t"').replace("time = ", "header = true\ntime = ")
+    head = "t,q1,q2,qd1,qd2,i1,i2,status\n"
+    plain = import_recording((head + "\n".join(rows()) + "\n").encode(), mapping(header), "rec.csv")
+    lines = [r.replace(",", ";").replace(".", ",") for r in rows()]
+    lines[5] = lines[5].replace(";", ";x", 1)                  # a bad field among them: still found and reported
+    data = (head.replace(",", ";") + "\n".join(lines) + "\n").encode()
+    result = import_recording(data, mapping('delimiter = ";"\ndecimal = ","\n' + header), "rec.csv")
+    assert result.recording.defects["non_numeric"].first_line == 7
+    keep = plain.recording.lines != 7
+    for key, values in plain.recording.values.items():
+        np.testing.assert_array_equal(result.recording.values[key], values[keep])
+    for bad, says in (('decimal = ","\n', "the decimal mark ',' is also the delimiter"),
+                      ('delimiter = ";"\ndecimal = "comma"\n', 'decimal: expected "." or ","')):
+        with pytest.raises(recording.LogError, match=re.escape(says)):
+            mapping(bad + header)
 
 
 def test_a_single_glitch_of_absurd_current_is_dropped():

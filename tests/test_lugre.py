@@ -311,6 +311,23 @@ def test_warning_vanishing_coulomb_level():
     assert warnings_of(sweep_signals(seed=3, amp=0.0, p=no_load)) == []
 
 
+def test_a_vanishing_coulomb_level_under_a_spanning_stribeck_curve_is_no_sign_error():
+    """Where vs spans the log's speeds, Fc is the friction beyond the fastest rows (a UR10e wrist under
+    continuous excitation: Fc = 5e-5 Nm, 3.0 Nm at its slowest speeds): the warning says so, not that tau_m is wrong."""
+    sig = sweep_signals(seed=3)
+    ident = LuGreIdentifier().fit(sig)
+    p = ident.model_.parameters()
+    units = {"tau": "Nm", "qd": "rad/s"}
+    spanning = LuGreModel(**dict(p, fc=1e-3, kc=0.0, vs=2.0))
+    flagged = ident._plausibility(sig, ident.steady_, spanning, ident.fit_, units)
+    assert [w.split(":")[0] for w in flagged] == ["the Stribeck velocity vs = 2 rad/s spans the speeds of the log (top "
+                                                  "steady speed 0.7 rad/s)", "the Coulomb level vanishes"]
+    assert "beyond its fastest rows" in flagged[1] and "--kt" not in flagged[1]
+    breakaway = LuGreModel(**dict(p, fc=1e-3, kc=0.0))        # vs = 0.04 rad/s, below the speeds: Fc is determined
+    flagged = ident._plausibility(sig, ident.steady_, breakaway, ident.fit_, units)
+    assert len(flagged) == 1 and "--kt" in flagged[0] and "beyond its fastest rows" not in flagged[0]
+
+
 def test_no_load_slope_without_a_gravity_torque_that_could_show_one():
     """|tau_g| within 0.1 Nm, under 5 % of the friction: even a slope of 1 would not show, so kc = ks = 0
     with a note (a slope fitted there extrapolates to any larger load the joint meets later)."""

@@ -455,7 +455,8 @@ class LuGreIdentifier:
         fc, fs = p["fc"] + p["kc"] * load, p["fs"] + p["ks"] * load   # the levels at that load
         top = float(speed.max())
         left = math.exp(-(0.5 * top / p["vs"]) ** p["delta"])       # share of Fs - Fc still to come at top/2
-        if stages["static"]["stribeck"] and fs - fc > MINOR * fs and left > MINOR:
+        spans = stages["static"]["stribeck"] and fs - fc > MINOR * fs and left > MINOR
+        if spans:
             out.append(f"the Stribeck velocity vs = {p['vs']:.3g} {vu} spans the speeds of the log (top steady "
                        f"speed {top:.3g} {vu}): at half that speed {100 * left:.0f} % of the Stribeck drop Fs - Fc "
                        "is still to come, so the curve shapes the velocity dependence instead of the breakaway "
@@ -472,10 +473,14 @@ class LuGreIdentifier:
         if fc < MINOR * scale:
             level = (f"Fc + kc |tau_g| at the median |tau_g| ({load:.3g} {tau})" if stages["static"]["load"]
                      else "Fc")
-            out.append(f"the Coulomb level vanishes: {level} = {fc:.3g} {tau} is {100 * fc / scale:.1f} % of "
-                       f"{'Fs' if scale == fs else 'the friction at the slowest steady speeds'} ({scale:.3g} {tau}). "
-                       "Check the sign and scale of tau_m (--kt) and that tau_g and tau_dyn are not counted "
-                       "twice; log slow constant-velocity motion in both directions")
+            what = (f"the Coulomb level vanishes: {level} = {fc:.3g} {tau} is {100 * fc / scale:.1f} % of "
+                    f"{'Fs' if scale == fs else 'the friction at the slowest steady speeds'} ({scale:.3g} {tau})")
+            if spans:   # the friction is there; the curve has not decayed to Fc within the log's speeds
+                out.append(f"{what}: with vs spanning the log's speeds, Fc is the friction beyond its fastest rows, "
+                           "which the log does not determine; do not use the model beyond them")
+            else:
+                out.append(f"{what}. Check the sign and scale of tau_m (--kt) and that tau_g and tau_dyn are not "
+                           "counted twice; log slow constant-velocity motion in both directions")
         steep = [k for k in ("kc", "ks") if abs(p[k]) > 1.0]
         if steep:
             which = " and ".join(f"{k} = {p[k]:.3g} {tau}/{tau}" for k in steep)

@@ -35,7 +35,7 @@ SIGNALS = {"q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "i_m": "A", "tau_m": "Nm
 MOTOR_SIGNALS = {"theta": ("q", "rad"), "theta_d": ("qd", "rad/s"), "tau_motor": ("tau_m", "Nm")}
 MATCHES = ("name", "order")
 JOINS = ("rows", "time")
-_TOP_KEYS = {"header", "delimiter", "time", "joints", "robot", "files", "join", "transmission"}
+_TOP_KEYS = {"header", "delimiter", "decimal", "time", "joints", "robot", "files", "join", "transmission"}
 _JOINT_KEYS = {"name", "urdf", "kt", "rotor_inertia", *SIGNALS, *MOTOR_SIGNALS}
 _COLUMN_KEYS = {"column", "unit", "file", "scale", "offset"}
 _TRANSMISSION_KEYS = {"gear_ratios", "ratio", "offset", "rotor_inertia"}
@@ -98,6 +98,7 @@ class Mapping:
     joints: list[JointMap]
     header: bool = False
     delimiter: str = ","
+    decimal: str = "."                # the decimal mark: "." or "," (then the delimiter is another)
     match: str | None = None
     gravity: tuple[float, float, float] = DEFAULT_GRAVITY
     payload: Payload | None = None
@@ -247,6 +248,12 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     delimiter = doc.get("delimiter", ",")
     if not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in "\r\n\"":
         _fail(f"{name}: delimiter", f"expected one character, got {delimiter!r}")
+    decimal = doc.get("decimal", ".")
+    if decimal not in (".", ","):
+        _fail(f"{name}: decimal", f'expected "." or ",", got {decimal!r}')
+    if decimal == delimiter:
+        _fail(f"{name}: decimal", f"the decimal mark {decimal!r} is also the delimiter: set the delimiter the file "
+              'uses between fields (delimiter = ";" or "\\t")')
     if "time" not in doc:
         _fail(name, "missing key 'time' (the time column, or {rate = HZ})")
     files, join = _files(doc, name)
@@ -317,7 +324,7 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     unused = [f for i, f in enumerate(files) if i not in used]
     if unused:
         _fail(f"{name}: files", f"no column is read from file {unused[0]!r}")
-    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, files=files, join=join,
+    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, decimal=decimal, files=files, join=join,
                    transmission=transmission, **_robot(doc, name))
 
 

@@ -189,7 +189,7 @@ def _fields(line: bytes, delimiter: str) -> list[bytes]:
     return line.split(delimiter.encode())
 
 
-_DELIMITERS = {",": ",", ";": ";", "\t": "\\t", "|": "|"}
+_DELIMITERS = {",": ",", ";": ";", "\t": "\\t", "|": "|", " ": " "}   # a space last: other marks win
 
 
 def _delimiter_hint(sample: bytes, delimiter: str, name: str) -> None:
@@ -262,7 +262,7 @@ def _not_a_number(text: str, column: str) -> str:
     """The first non-number of a column, and what it looks like when that is telling."""
     hint = ""
     if re.fullmatch(r"[-+]?[0-9]*,[0-9]+", text):
-        hint = ": a decimal comma (fricli reads decimal points; convert the file)"
+        hint = ': a decimal comma (set decimal = "," in the mapping)'
     elif re.search(r"[0-9]-[0-9]", text) and ":" in text:
         hint = ": a date and time (map a time in seconds, or give the sample rate: docs/robot-import.md)"
     return f"{text[:40]!r} in column {column}{hint}"
@@ -324,6 +324,7 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
 
 
 _ASCII = bytes(range(128)) + b"?" * 128
+_ASCII_COMMA = _ASCII.replace(b",", b".")     # a decimal comma read as a decimal point
 
 
 def listing(defects: dict[str, Defect], unit: str = "line") -> str:
@@ -378,7 +379,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     wanted = sorted(set(index.values()))
     # numbers are ASCII: any other byte (a text column in another encoding, a damaged line) becomes
     # "?", so such a field is not a number and nothing reads it as text; offsets do not change
-    data = data.translate(_ASCII)
+    data = data.translate(_ASCII_COMMA if mapping.decimal == "," else _ASCII)
 
     defects: dict[str, Defect] = {}
 
