@@ -105,6 +105,27 @@ temp = {column = "temp", unit = "C"}
     assert table.schema.field("temp").metadata[b"unit"] == b"degC"
 
 
+def test_nanosecond_timestamps_and_milliamperes_are_converted():
+    """A controller's clock in ns since 1970 (1.76e18: float64 keeps it to 256 ns) and a current in mA."""
+    text = """
+header = true
+time = {column = "stamp", unit = "ns"}
+[[joints]]
+name = 1
+q = "pos"
+i_m = {column = "cur", unit = "mA"}
+kt = 10.0
+"""
+    start = 1_764_000_000_000_000_000
+    data = "stamp,pos,cur\n" + "".join(f"{start + k * 2_000_000},{0.01 * k},{1500 + k}\n" for k in range(50))
+    table = import_recording(data.encode(), mapping(text), "rec.csv").table
+    t = table.column("t").to_numpy()
+    np.testing.assert_allclose(np.diff(t), 0.002, rtol=0, atol=5e-7)   # float64: 256 ns read, 2.4e-7 s stored
+    np.testing.assert_allclose(table.column("i_m").to_numpy(), 1.5 + 0.001 * np.arange(50), rtol=1e-12)
+    np.testing.assert_allclose(table.column("tau_m").to_numpy(), 15.0 + 0.01 * np.arange(50), rtol=1e-12)
+    assert table.schema.field("i_m").metadata[b"unit"] == b"A"
+
+
 @pytest.mark.parametrize("path", ["fast", "slow"])
 def test_each_defect_is_dropped_and_reported_with_its_first_line(path):
     lines = rows()

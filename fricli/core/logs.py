@@ -56,20 +56,20 @@ DEFAULT_CUTOFF_HZ = 50.0
 
 # unit spelling -> (dimension, factor to canonical)
 _UNITS = {
-    "s": ("time", 1.0), "ms": ("time", 1e-3),
+    "s": ("time", 1.0), "ms": ("time", 1e-3), "us": ("time", 1e-6), "ns": ("time", 1e-9),
     "rad": ("angle", 1.0), "deg": ("angle", np.pi / 180), "m": ("length", 1.0), "mm": ("length", 1e-3),
     "rad/s": ("angle/s", 1.0), "deg/s": ("angle/s", np.pi / 180),
     "m/s": ("length/s", 1.0), "mm/s": ("length/s", 1e-3),
     "rad/s^2": ("angle/s2", 1.0), "deg/s^2": ("angle/s2", np.pi / 180),
     "m/s^2": ("length/s2", 1.0), "mm/s^2": ("length/s2", 1e-3),
     "Nm": ("torque", 1.0), "N": ("force", 1.0),
-    "A": ("current", 1.0), "degC": ("temperature", 1.0),
+    "A": ("current", 1.0), "mA": ("current", 1e-3), "degC": ("temperature", 1.0),
 }
 _ALIASES = {"sec": "s", "radian": "rad", "rad/s2": "rad/s^2", "rad/s²": "rad/s^2",
             "deg/s2": "deg/s^2", "deg/s²": "deg/s^2", "m/s2": "m/s^2", "m/s²": "m/s^2",
             "mm/s2": "mm/s^2", "mm/s²": "mm/s^2", "N·m": "Nm", "N*m": "Nm", "N m": "Nm",
             "N.m": "Nm", "°": "deg", "°/s": "deg/s", "°/s²": "deg/s^2", "°C": "degC",
-            "C": "degC", "celsius": "degC", "amp": "A"}
+            "C": "degC", "celsius": "degC", "amp": "A", "µs": "us", "μs": "us"}
 # column -> dimensions it may have, by axis kind
 _EXPECTED = {
     "t": {"rotary": "time", "linear": "time"},

@@ -20,9 +20,10 @@ the same columns, the armature.
 The estimate is the least-squares fit of all parameters with a Gaussian prior centred on the URDF's
 CAD values (maximum a posteriori, a ridge on the deviation from CAD): each parameter's prior
 standard deviation is ``prior`` times its scale (mass: the CAD mass; first moment: mass x length;
-inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: ``prior`` x the larger
-of its prior value and the joint's CAD mass-matrix diagonal at q = 0 (over R_mj^2 for a motor);
-friction: loose).
+inertia: mass x length^2, length = max(|CAD centre of mass|, 0.1 m); armature: the largest of its
+prior value, the joint's CAD mass-matrix diagonal at q = 0 (over R_mj^2 for a motor) and the inertia
+that would carry the motor's RMS torque at its RMS acceleration (a geared rotor reflects far more
+inertia than a wrist's own link: no CAD value bounds it); friction: loose).
 ``prior`` "auto" chooses the strength, for all parameters and then per body and armature, by cross-validation
 over blocks of time of the log (``choose_prior``).
 Each joint's rows are those where it is in motion (``fricli.core.metrics.in_motion``; with a
@@ -260,10 +261,12 @@ def cad_parameters(robot) -> np.ndarray:
 
 
 def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.ndarray,
-                 tau_rms: np.ndarray, prior: float, ratio: np.ndarray | None = None) -> np.ndarray:
+                 tau_rms: np.ndarray, prior: float, ratio: np.ndarray | None = None,
+                 qdd_rms: np.ndarray | None = None) -> np.ndarray:
     """Prior standard deviation of every parameter, (14 * joints,) (see the module docstring);
-    ``armature0``: each motor's prior rotor inertia, ``qd_rms`` and ``tau_rms``: each motor's RMS
-    velocity and torque, (joints,), for motors of ``ratio`` (default: one per joint)."""
+    ``armature0``: each motor's prior rotor inertia, ``qd_rms``, ``tau_rms`` and ``qdd_rms``: each
+    motor's RMS velocity, torque and acceleration, (joints,), for motors of ``ratio`` (default: one
+    per joint)."""
     pin = _pin()
     nj = len(robot.joints)
     masses = pi_cad[0::10]
@@ -280,6 +283,8 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
     ratio = np.eye(nj) if ratio is None else ratio
     with np.errstate(divide="ignore"):        # each motor: the loosest of its joints' diagonals / R_mj^2
         arm = np.maximum(armature0, np.where(ratio != 0, diag / np.square(ratio), -np.inf).max(axis=1))
+    if qdd_rms is not None:     # a rotor may carry the motor's whole torque: no CAD value bounds it
+        arm = np.maximum(arm, tau_rms / np.maximum(qdd_rms, 1e-300))
     fric = []
     for j in range(nj):
         loose = 10.0 * max(tau_rms[j], 1e-6)
@@ -363,7 +368,8 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
 
     motor_rms = np.sqrt(np.mean(to_motors(tau) ** 2, axis=0))
-    s1 = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, 1.0, norm)
+    s1 = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, 1.0, norm,
+                      np.sqrt(np.mean(np.square(qdd @ norm.T), axis=0)))
 
     # before: the CAD model (with the prior armature) and each motor's friction fitted alone to its torque
     r0 = to_motors((y - Phi @ x0).reshape(n, nj))
@@ -494,21 +500,26 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
     Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
     from fricli.fitting.diagnosis.selection import fold_bounds
 
+    from scipy.linalg import solve_triangular
+
     nj = len(sigma)
     _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms, counts)
-    W = Phi / w[rows_of, None]
-    r = (y - Phi @ x0) / w[rows_of]
+    Wr = np.column_stack([Phi, y - Phi @ x0]) / w[rows_of, None]       # weighted regressor | residual at x0
     edges = fold_bounds(len(y) // nj, folds) * nj
-    parts = [(W[a:b].T @ W[a:b], W[a:b].T @ r[a:b], float(r[a:b] @ r[a:b])) for a, b in zip(edges[:-1], edges[1:])]
-    G, B = sum(p[0] for p in parts), sum(p[1] for p in parts)
-    tie = 1e-9 * sum(p[2] for p in parts)     # round-off of the quadratic forms below
+    # each block as the R factor of its [W r]: |W_k d - r_k| = |R_k [d; -1]| without forming W^T W,
+    # whose round-off swamps the held-out error of a fit near the noise floor
+    blocks = [np.linalg.qr(Wr[a:b], mode="r") for a, b in zip(edges[:-1], edges[1:])]
+    others = [np.linalg.qr(np.vstack(blocks[:k] + blocks[k + 1:]), mode="r") for k in range(len(blocks))]
+    p = Phi.shape[1]
+    tie = 1e-9 * float(np.sum(np.square(Wr[:, -1])))     # round-off of the scores below
 
     def score(strengths):
         s = _with_prior(s1, nj, strengths)
         total = 0.0
-        for Gk, Bk, Ck in parts:    # the fit without block k, scored on block k
-            d = s * np.linalg.solve((G - Gk) * np.outer(s, s) + np.eye(len(s)), (B - Bk) * s)
-            total += Ck - 2 * d @ Bk + d @ Gk @ d
+        for Rk, Ro in zip(blocks, others):    # the fit without block k (ridge in z = d / s), scored on block k
+            q, r = np.linalg.qr(np.vstack([Ro[:, :p] * s, np.eye(p)]))
+            d = s * solve_triangular(r, q[:len(Ro)].T @ Ro[:, p])
+            total += float(np.sum(np.square(Rk[:, :p] @ d - Rk[:, p])))
         return total
 
     held = lambda v: float(np.sqrt(max(v, 0.0) / counts.sum()))  # noqa: E731
