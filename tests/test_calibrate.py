@@ -263,6 +263,12 @@ def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     terms = logs.read_table(str(tmp_path / "terms.parquet"))[0]
     got = (logs.float64_values(terms.column("tau_g")) + logs.float64_values(terms.column("tau_dyn"))).reshape(4, -1).T
     assert np.linalg.norm(got - truth) < 1e-6 * np.linalg.norm(truth)
+    # the log names its URDF as given (cal.urdf) and by absolute path: usable from another folder
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    res = fricli("payload", str(tmp_path / "terms.parquet"), "--frame", "flange", "--json", cwd=elsewhere)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["verdict"] == "none"
 
 
 def test_inconsistent_estimate_is_refused_or_enforced(tmp_path):

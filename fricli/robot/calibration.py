@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -935,8 +936,15 @@ def refuse_inconsistent(cal: Calibration) -> None:
 
 
 def recorded_urdf(table) -> str | None:
-    """The URDF the log's tau_g and tau_dyn came from, as ``import``/``dynamics`` recorded it (None: none)."""
-    return logs.robot_record(table.schema).get("urdf") or None
+    """The URDF the log's tau_g and tau_dyn came from, as ``import``/``dynamics`` recorded it: the
+    path as given when it is a file from here, else its absolute path when that is (a log used from
+    another folder), else the path as given (None: none recorded)."""
+    record = logs.robot_record(table.schema)
+    given = record.get("urdf") or None
+    for path in (given, record.get("urdf_path")):
+        if path and os.path.isfile(path):
+            return path
+    return given
 
 
 def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
@@ -950,7 +958,7 @@ def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: flo
     if not record.get("joints"):
         raise LogError(f"{name}: the log records no robot model (import it with --urdf)")
     gravity = logs.gravity_of(table.schema)
-    robot = load_model(urdf or record.get("urdf"), Mapping(time=None, joints=[], gravity=gravity,
+    robot = load_model(urdf or recorded_urdf(table), Mapping(time=None, joints=[], gravity=gravity,
                                                            held=logs.held_of(table.schema)))
     return record, robot, read_motion(table, name, robot, match=None, cutoff_hz=cutoff_hz)
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 
 import numpy as np
 
@@ -87,7 +88,8 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
         sig["tau_g"], sig["tau_dyn"] = tau_g[:, k], tau_dyn[:, k]
     payload = mapping.payload
     return {
-        "urdf": model.name, "urdf_sha256": model.sha256, "match": mapping.match,
+        "urdf": model.name, "urdf_path": os.path.abspath(model.name), "urdf_sha256": model.sha256,
+        "match": mapping.match,
         "joints": {str(jm.name): model.joints[k] for jm, k in zip(mapping.joints, order)},
         "gravity": list(mapping.gravity),
         # where the URDF gives the armature it replaces the mapping's rotor inertia: none is applied (null)
