@@ -2,6 +2,7 @@
 gravity, mass matrix and Coriolis terms."""
 
 import json
+import re
 import subprocess
 import sys
 
@@ -147,6 +148,18 @@ def test_not_a_urdf_is_a_model_error():
 
     with pytest.raises(errors.ModelFileError, match="not a usable URDF"):
         RobotModel("<robot name='x'><link", "bad.urdf")
+
+
+def test_a_xacro_file_is_named_as_one():
+    """ROS descriptions ship as .urdf.xacro macros; the URDF parser would only say it found no links."""
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    xacro = ('<robot xmlns:xacro="http://www.ros.org/wiki/xacro" name="ur">'
+             '<xacro:include filename="$(find ur_description)/urdf/ur_macro.xacro"/><xacro:ur_robot name="ur"/></robot>')
+    with pytest.raises(errors.ModelFileError, match=re.escape("arm.urdf.xacro: a xacro file, not a URDF: expand it "
+                                                              "first (xacro arm.urdf.xacro > robot.urdf")):
+        RobotModel(xacro, "arm.urdf.xacro")
 
 
 @pytest.mark.parametrize("text, why", [

@@ -80,6 +80,9 @@ class RobotModel:
         self.name = name
         self.sha256 = hashlib.sha256(urdf_text.encode("utf-8")).hexdigest()
         self.held: tuple[str, ...] = ()
+        if "<xacro:" in urdf_text:
+            raise ModelFileError(f"{name}: a xacro file, not a URDF: expand it first (xacro {name} > robot.urdf, "
+                                 "or save the robot_description a running robot publishes)")
         if held:
             urdf_text, self.held = hold_joints(urdf_text, name, held)
         try:
