@@ -499,16 +499,16 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
     ``y`` (n * joints,), zero in the rows not used, ``counts`` (joints,) each joint's rows used,
     ``s1``: prior std at strength 1.
     Returns (strength of every inertial parameter and armature (11 * joints,), report)."""
-    from fricli.fitting.diagnosis.selection import fold_bounds
-
     from scipy.linalg import solve_triangular
+
+    from fricli.fitting.diagnosis.selection import fold_bounds
 
     nj = len(sigma)
     _, w, _, _ = _map_fit(Phi, y, x0, _with_prior(s1, nj, PRIOR_START), sigma, rows_of, tau_rms, counts)
     Wr = np.column_stack([Phi, y - Phi @ x0]) / w[rows_of, None]       # weighted regressor | residual at x0
     edges = fold_bounds(len(y) // nj, folds) * nj
     # each block as the R factor of its [W r]: |W_k d - r_k| = |R_k [d; -1]| without forming W^T W,
-    # whose round-off swamps the held-out error of a fit near the noise floor
+    # whose round-off swamps a held-out error far below the CAD model's (noise-free data)
     blocks = [np.linalg.qr(Wr[a:b], mode="r") for a, b in zip(edges[:-1], edges[1:])]
     others = [np.linalg.qr(np.vstack(blocks[:k] + blocks[k + 1:]), mode="r") for k in range(len(blocks))]
     p = Phi.shape[1]
