@@ -261,12 +261,11 @@ def cad_parameters(robot) -> np.ndarray:
     return np.concatenate([model.inertias[i].toDynamicParameters() for i in range(1, model.njoints)])
 
 
-def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.ndarray,
-                 tau_rms: np.ndarray, prior: float, ratio: np.ndarray | None = None,
-                 qdd_rms: np.ndarray | None = None) -> np.ndarray:
+def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.ndarray, qdd_rms: np.ndarray,
+                 tau_rms: np.ndarray, prior: float, ratio: np.ndarray | None = None) -> np.ndarray:
     """Prior standard deviation of every parameter, (14 * joints,) (see the module docstring);
-    ``armature0``: each motor's prior rotor inertia, ``qd_rms``, ``tau_rms`` and ``qdd_rms``: each
-    motor's RMS velocity, torque and acceleration, (joints,), for motors of ``ratio`` (default: one
+    ``armature0``: each motor's prior rotor inertia, ``qd_rms``, ``qdd_rms`` and ``tau_rms``: each
+    motor's RMS velocity, acceleration and torque, (joints,), for motors of ``ratio`` (default: one
     per joint)."""
     pin = _pin()
     nj = len(robot.joints)
@@ -284,8 +283,7 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
     ratio = np.eye(nj) if ratio is None else ratio
     with np.errstate(divide="ignore"):        # each motor: the loosest of its joints' diagonals / R_mj^2
         arm = np.maximum(armature0, np.where(ratio != 0, diag / np.square(ratio), -np.inf).max(axis=1))
-    if qdd_rms is not None:     # a rotor may carry the motor's whole torque: no CAD value bounds it
-        arm = np.maximum(arm, tau_rms / np.maximum(qdd_rms, 1e-300))
+    arm = np.maximum(arm, tau_rms / np.maximum(qdd_rms, 1e-300))   # a rotor may carry its motor's whole torque
     fric = []
     for j in range(nj):
         loose = 10.0 * max(tau_rms[j], 1e-6)
@@ -369,8 +367,8 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         return np.ascontiguousarray(np.linalg.solve(norm.T, joint_side.T).T)
 
     motor_rms = np.sqrt(np.mean(to_motors(tau) ** 2, axis=0))
-    s1 = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)), motor_rms, 1.0, norm,
-                      np.sqrt(np.mean(np.square(qdd @ norm.T), axis=0)))
+    s1 = prior_scales(robot, pi_cad, rotor0, np.sqrt(np.mean(w ** 2, axis=0)),
+                      np.sqrt(np.mean(np.square(qdd @ norm.T), axis=0)), motor_rms, 1.0, norm)
 
     # before: the CAD model (with the prior armature) and each motor's friction fitted alone to its torque
     r0 = to_motors((y - Phi @ x0).reshape(n, nj))

@@ -324,8 +324,8 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     unused = [f for i, f in enumerate(files) if i not in used]
     if unused:
         _fail(f"{name}: files", f"no column is read from file {unused[0]!r}")
-    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, decimal=decimal, files=files, join=join,
-                   transmission=transmission, **_robot(doc, name))
+    return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, decimal=decimal, files=files,
+                   join=join,                    transmission=transmission, **_robot(doc, name))
 
 
 def _robot(doc: dict, name: str) -> dict:
