@@ -15,7 +15,7 @@ from fricli.core.errors import DataError
 pin = pytest.importorskip("pinocchio")
 
 from fricli.robot import calibration as cb  # noqa: E402
-from fricli.robot.dynamics import RobotModel  # noqa: E402
+from fricli.robot.dynamics import RobotModel, link_inertials  # noqa: E402
 
 # a four-joint serial arm: a vertical base axis, two pitch joints, a wrist roll; one link with a
 # rotated inertial frame, a massive fixed flange merged into the last body
@@ -271,6 +271,45 @@ def test_cli_writes_urdf_and_report_that_dynamics_uses(arm, tmp_path):
     assert json.loads(res.stdout)["verdict"] == "none"
 
 
+TOOL = URDF.replace("</robot>", """  <joint name="tool_joint" type="fixed"><parent link="flange"/><child link="tool"/>
+    <origin xyz="0.1 0 0"/></joint>
+  <link name="tool"><inertial><origin xyz="0.02 0.12 0"/><mass value="2.0"/>
+    <inertia ixx="0.004" ixy="0" ixz="0" iyy="0.006" iyz="0" izz="0.006"/></inertial></link>
+</robot>""")
+
+
+def test_a_tool_the_arm_does_not_carry_is_not_written_as_a_negative_link(arm, tmp_path):
+    """The URDF holds a 2 kg tool off the wrist's axis that the arm does not carry (the log comes from
+    the URDF without it): no link l4 with the flange and the tool at CAD gives the wrist what its
+    torques show. The calibrated URDF holds that whole body in l4 and no inertia in the flange and the
+    tool, every link a real body, says so, and predicts a held-out trajectory as the arm moves it."""
+    model, x_true, fit, held = arm
+    (tmp_path / "tool.urdf").write_text(TOOL)
+    log = write_log(tmp_path / "fit.parquet", *fit, simulate(model, *fit))
+    res = fricli("calibrate", log, "--urdf", "tool.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert ("warning: link l4: with flange, tool fixed to it (2.3 kg at CAD), its body comes out at" in res.stderr
+            and "the calibrated URDF holds the whole body in l4 and no inertia in flange, tool. Check that they are "
+                "mounted as the URDF says" in res.stderr)
+    text = (tmp_path / "cal.urdf").read_text()
+    links = link_inertials(text, "cal.urdf")
+    assert not links["tool"].any() and not links["flange"].any()
+    assert all(cb._physical(p) is None for name, p in links.items() if name.startswith("l"))
+    calibrated = RobotModel(text, "cal.urdf")
+    t, q, qd, qdd = held
+    tau_g, tau_dyn = calibrated.terms(q, qd, qdd)
+    truth = simulate(model, *held) - (FRICTION[:, 0] * qd + FRICTION[:, 1] * np.sign(qd) + FRICTION[:, 2])
+    assert np.linalg.norm(tau_g + tau_dyn - truth) < 1e-6 * np.linalg.norm(truth)
+
+
+def test_a_urdf_link_of_negative_mass_is_refused(tmp_path):
+    """Pinocchio merges a link of negative mass into its body without a word, into nonsense."""
+    with pytest.raises(errors.ModelFileError, match="link 'flange': mass -0.3 kg"):
+        RobotModel(URDF.replace('<mass value="0.3"/>', '<mass value="-0.3"/>'), "neg.urdf")
+    with pytest.raises(errors.ModelFileError, match="link 'flange': its <inertial> holds a value that is no number"):
+        RobotModel(URDF.replace('<mass value="0.3"/>', '<mass value="heavy"/>'), "bad.urdf")
+
+
 def test_inconsistent_estimate_is_refused_or_enforced(tmp_path):
     rng = np.random.default_rng(3)
     model, _ = true_model(rng, scale=0.0)
@@ -373,6 +412,14 @@ def test_poor_excitation_and_an_unexplained_offset_are_flagged(arm):
     tau[:, 1] += 10.0                       # joint 2: Fc 7 Nm
     flagged = offsets(tau)
     assert len(flagged) == 1 and flagged[0].startswith("joint j2: friction offset 9.5 exceeds its Coulomb level 7")
+    # a negative Coulomb level is no level an offset could exceed: the consistency warning says what is wrong
+    cal = cb.calibrate(robot, motion(*fit, tau))
+    x = cal.x.copy()
+    x[44 + 3 * 2 + 1] = -0.5                 # joint 3's Fc
+    flipped = cb.Calibration(x=x, x0=cal.x0, names=cal.names, bodies=cal.bodies, joints=cal.joints, report={})
+    assert not any(w.startswith("joint j3: friction offset") for w in cb.suspicious(flipped))
+    assert any(w.startswith("joint j3: friction Fv 5, Fc -0.5: a negative coefficient") for w in
+               cb.consistency(flipped)["warnings"])
 
 
 def test_a_log_too_large_for_memory_is_refused_before_the_regressor(arm, monkeypatch):

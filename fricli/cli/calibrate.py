@@ -116,7 +116,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     if enforced:
         warn(f"warning: the linear estimate was physically inconsistent ({'; '.join(enforced['inconsistent_before'])}): "
              "fitted again over consistent parameters only")
-    for line in report["consistency"]["warnings"] + report["suspicious"]:
+    for line in cb.warnings(report):
         warn(f"warning: {line}")
     cb.refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:

@@ -302,7 +302,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
                                           + "\n").encode())
     atomic_write_bytes(output, text.encode())
-    for line in cal.report["suspicious"]:
+    for line in cb.warnings(cal.report):
         warn(f"warning: {line}")
     say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)
     return cal, new

@@ -207,6 +207,28 @@ def bodies(robot) -> list[str]:
     return out
 
 
+def attached(robot) -> tuple[list[list[str]], np.ndarray]:
+    """Per body, the URDF links with an inertia fixed to its moving link (a gripper's), and their CAD
+    parameters summed in the joint frame (10 * joints,)."""
+    pin = _pin()
+    model = robot.pin_model
+    names, total = [], np.zeros(10 * len(robot.joints))
+    for i, link in enumerate(bodies(robot), start=1):
+        names.append([])
+        for f in model.frames:
+            if (f.parentJoint == i and f.type == pin.FrameType.BODY and f.name != link
+                    and robot.links.get(f.name, np.zeros(10)).any()):
+                names[-1].append(f.name)
+                total[10 * i - 10:10 * i] += moved(robot.links[f.name], f.placement.homogeneous)
+    return names, total
+
+
+def moved(pi: np.ndarray, placement: np.ndarray) -> np.ndarray:
+    """Inertial parameters (10,) of a link given in its own frame, expressed in the frame where that one
+    sits at ``placement`` (4, 4): the pseudo-inertia's congruence T J T^T, linear (any 10-vector)."""
+    return _from_pseudo(placement @ pseudo_inertia(pi) @ placement.T)
+
+
 def parameter_names(robot, stribeck: bool = False, motors: list[int] | None = None) -> list[str]:
     """Every parameter's name: BODY.m ..., JOINT.armature, JOINT.Fv/Fc/offset (and JOINT.Fs-Fc); for
     the joints ``motors`` (URDF indices) whose motors a transmission gives, motor@JOINT.rotor_inertia,
@@ -306,6 +328,14 @@ class Calibration:
     report: dict
     ratio: np.ndarray | None = None   # R (joints, joints) of ``motor_layout``; None: one rotor per joint
     motors: list[int] | None = None   # URDF indices of the joints whose motors a transmission gives
+    payload: np.ndarray | None = None   # (10 * joints,) a declared payload in each body: not the URDF's
+    attached: list | None = None        # per body, the links with an inertia fixed to its moving link
+    attached_cad: np.ndarray | None = None   # (10 * joints,) their CAD parameters, summed in the joint frame
+
+    def links(self, x: np.ndarray | None = None) -> np.ndarray:
+        """What the URDF's links of each body hold (10 * joints,): the body less a declared payload."""
+        pi = (self.x if x is None else x)[:10 * len(self.joints)]
+        return pi if self.payload is None else pi - self.payload
 
     def armature(self, x: np.ndarray | None = None) -> np.ndarray:
         """Each joint's reflected rotor inertia (joints,) [kg m^2]: the diagonal of R^T diag(J_m) R."""
@@ -360,6 +390,8 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     stribeck = friction == "stribeck"
     names = parameter_names(robot, stribeck, motors)
     pi_cad = cad_parameters(robot)
+    fixed_links, fixed_cad = attached(robot)
+    payload = robot.payload_parameters.reshape(-1)
     x0 = np.concatenate([pi_cad, rotor0, np.zeros(3 * nj)])
     tau_rms = np.sqrt(np.mean(tau ** 2, axis=0))
 
@@ -417,12 +449,13 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     excitation = _excitation(robot, A, Phi, s, names, seed, vs, norm)
     unit = motor_units(gain, stribeck)      # x / unit: in motor units
     layout = {"x0": x0 / unit, "names": names, "bodies": bodies(robot), "joints": list(robot.joints),
-              "ratio": None if motors is None else ratio, "motors": motors}
+              "ratio": None if motors is None else ratio, "motors": motors, "payload": payload,
+              "attached": fixed_links, "attached_cad": fixed_cad}
     linear = Calibration(x=x / unit, report={}, **layout)
     broken = consistency(linear)["problems"]
     enforced = None
     if broken and enforce:
-        x = consistent_fit(Phi / sigma[rows_of, None], y / sigma[rows_of], x, x0, s, nj)
+        x = consistent_fit(Phi / sigma[rows_of, None], y / sigma[rows_of], x, x0, s, nj, payload)
         resid = (y - Phi @ x).reshape(n, nj)
         enforced = {"inconsistent_before": broken, "rms_linear": {str(motion.names[j]): float(sigma[j])
                                                                   for j in range(nj)}}
@@ -631,21 +664,23 @@ _TRIL = np.tril_indices(4)
 
 
 def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.ndarray, s: np.ndarray,
-                   nj: int) -> np.ndarray:
+                   nj: int, fixed: np.ndarray | None = None) -> np.ndarray:
     """The same weighted least squares with the same prior (``A`` (rows, 14 nj) and ``b`` weighted),
-    over physically consistent parameters only: each body's pseudo-inertia as L L^T (L lower
-    triangular), each armature as u^2. Starts from ``x_start`` with eigenvalues clipped; returns x."""
+    over physically consistent parameters only: each body (less ``fixed`` (10 nj,), a declared
+    payload) as a pseudo-inertia L L^T (L lower triangular), each armature as u^2. Starts from ``x_start`` with eigenvalues clipped; returns x."""
     from scipy import linalg, optimize
 
+    fixed = np.zeros(10 * nj) if fixed is None else fixed
     q, r = linalg.qr(A, mode="economic")
     c = q.T @ b            # |A x - b|^2 = |r x - c|^2 + a constant
-    theta = []
-    for k in range(nj):
-        w, v = np.linalg.eigh(pseudo_inertia(x_start[10 * k:10 * k + 10]))
-        w = np.maximum(w, 1e-6 * max(w.max(), 1e-12))
-        theta.append(np.linalg.cholesky((v * w) @ v.T)[_TRIL])
-    arm = x_start[10 * nj:11 * nj]
-    theta = np.concatenate(theta + [np.sqrt(np.maximum(arm, 1e-6 * s[10 * nj:11 * nj])), x_start[11 * nj:]])
+    def start(x):        # theta of x, each pseudo-inertia's eigenvalues clipped to be positive
+        theta = []
+        for k in range(nj):
+            w, v = np.linalg.eigh(pseudo_inertia(x[10 * k:10 * k + 10] - fixed[10 * k:10 * k + 10]))
+            w = np.maximum(w, 1e-6 * max(w.max(), 1e-12))
+            theta.append(np.linalg.cholesky((v * w) @ v.T)[_TRIL])
+        arm = x[10 * nj:11 * nj]
+        return np.concatenate(theta + [np.sqrt(np.maximum(arm, 1e-6 * s[10 * nj:11 * nj])), x[11 * nj:]])
 
     def params(th):
         pis = []
@@ -653,7 +688,7 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
             low = np.zeros((4, 4))
             low[_TRIL] = th[10 * k:10 * k + 10]
             pis.append(_from_pseudo(low @ low.T))
-        return np.concatenate(pis + [th[10 * nj:11 * nj] ** 2, th[11 * nj:]])
+        return np.concatenate([np.concatenate(pis) + fixed, th[10 * nj:11 * nj] ** 2, th[11 * nj:]])
 
     def dparams(th):   # d x / d theta: block diagonal
         out = np.zeros((len(th), len(th)))
@@ -672,7 +707,7 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
         return out
 
     stacked = np.vstack([r, np.diag(1.0 / s)])
-    fit = optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), theta,
+    fit = optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), start(x_start),
                                  jac=lambda th: stacked @ dparams(th), x_scale="jac", method="lm",
                                  xtol=1e-8, ftol=1e-6, max_nfev=2000)
     if not np.all(np.isfinite(fit.x)):
@@ -776,26 +811,49 @@ def link_table(cal: Calibration) -> dict:
     return out
 
 
+def _physical(pi: np.ndarray) -> str | None:
+    """Why the 10 parameters ``pi`` are no real body, or None: the mass positive, the inertia at the
+    centre of mass positive definite, its principal moments satisfying the triangle inequality."""
+    m = float(pi[0])
+    if not m > 0:
+        return f"mass {m:.4g} kg is not positive"
+    inertia = _pin().Inertia.FromDynamicParameters(np.asarray(pi, dtype=float))
+    moments = np.sort(np.linalg.eigvalsh(inertia.inertia))
+    text = ", ".join(f"{v:.4g}" for v in moments)
+    pseudo = np.linalg.eigvalsh(pseudo_inertia(pi))
+    if moments[0] <= -TOLERANCE * abs(moments[-1]):
+        return f"inertia at the centre of mass is not positive definite (principal moments {text} kg m^2)"
+    if pseudo[0] < -TOLERANCE * pseudo[-1]:   # with the above: the triangle inequality
+        return f"principal moments {text} kg m^2 break the triangle inequality (no real body has them)"
+    return None
+
+
+def whole_bodies(cal: Calibration) -> list[bool]:
+    """Per body, whether the calibrated URDF writes all of it into its moving link (and gives the links
+    fixed to it no inertia): when with those links at CAD the moving link could be no real body."""
+    links = cal.links()
+    return [bool(cal.attached and cal.attached[b]) and _physical(links[10 * b:10 * b + 10]) is None
+            and _physical(links[10 * b:10 * b + 10] - cal.attached_cad[10 * b:10 * b + 10]) is not None
+            for b in range(len(cal.bodies))]
+
+
 def consistency(cal: Calibration) -> dict:
-    """Physical consistency: ``problems`` (each body's mass positive, its inertia at the centre of mass
-    positive definite with principal moments satisfying the triangle inequality; each armature not
-    (a motor's rotor inertia) not negative) and ``warnings`` (negative friction coefficients)."""
+    """Physical consistency: ``problems`` (each body, less a declared payload, a real body (``_physical``);
+    each armature (a motor's rotor inertia) not negative) and ``warnings`` (negative friction
+    coefficients; a body whose fixed links' CAD its moving link cannot complete, ``whole_bodies``)."""
     problems, warnings = [], []
     nj = len(cal.joints)
-    for body, inertia in zip(cal.bodies, body_inertias(cal)):
-        m = float(inertia.mass)
-        if not m > 0:
-            problems.append(f"link {body}: mass {m:.4g} kg is not positive")
-            continue
-        moments = np.sort(np.linalg.eigvalsh(inertia.inertia))
-        text = ", ".join(f"{v:.4g}" for v in moments)
-        pseudo = np.linalg.eigvalsh(pseudo_inertia(inertia.toDynamicParameters()))
-        if moments[0] <= -TOLERANCE * abs(moments[-1]):
-            problems.append(f"link {body}: inertia at the centre of mass is not positive definite "
-                            f"(principal moments {text} kg m^2)")
-        elif pseudo[0] < -TOLERANCE * pseudo[-1]:   # with the above: the triangle inequality
-            problems.append(f"link {body}: principal moments {text} kg m^2 break the triangle inequality "
-                            "(no real body has them)")
+    links = cal.links()
+    for b, body in enumerate(cal.bodies):
+        why = _physical(links[10 * b:10 * b + 10])
+        if why:
+            problems.append(f"link {body}: {why}")
+    for b in np.flatnonzero(whole_bodies(cal)):
+        names = ", ".join(cal.attached[b])
+        warnings.append(f"link {cal.bodies[b]}: with {names} fixed to it ({cal.attached_cad[10 * b]:.4g} kg at CAD), "
+                        f"its body comes out at {links[10 * b]:.4g} kg, which {cal.bodies[b]} cannot complete into a "
+                        f"real body: the calibrated URDF holds the whole body in {cal.bodies[b]} and no inertia in "
+                        f"{names}. Check that they are mounted as the URDF says")
     for j in range(nj):
         who, a = cal.motor_of(j), float(cal.x[10 * nj + j])
         if a < 0:
@@ -839,7 +897,7 @@ def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
                        "also consistent with: a drive gain off on that joint; inertia of the link's own axis "
                        "that the data cannot tell from the armature")
         fc, offset = cal.x[11 * nj + 3 * j + 1], cal.x[11 * nj + 3 * j + 2]
-        if abs(offset) > max(fc, 0.0):
+        if fc >= 0 and abs(offset) > fc:     # a negative Fc: the warning of ``consistency``
             out.append(f"{cal.motor_of(j)}: friction offset {offset:.4g} exceeds its Coulomb level {fc:.4g}: a "
                        "torque the rigid-body model does not explain is taken for friction; also consistent with: "
                        f"{causes}")
@@ -851,23 +909,29 @@ def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
 
 def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
     """``urdf_text`` with the identified inertial parameters of every moving link (its own inertia
-    plus the identified change of its body: fixed children keep theirs) and the armature as
+    plus the identified change of its body: links fixed to it keep theirs, unless ``whole_bodies``
+    says the moving link takes all of the body) and the armature as
     Pinocchio's ``<rotor_params>`` (gear_ratio 1, mass = armature); with a transmission also each
     motor's rotor inertia and row of R as ``<fricli_transmission>`` (``fricli.robot.dynamics``)."""
-    from fricli.robot.dynamics import TRANSMISSION
+    from fricli.robot.dynamics import TRANSMISSION, link_inertials
 
     pin = _pin()
+    own_links = link_inertials(urdf_text, name)
     root = ET.fromstring(urdf_text, parser=ET.XMLParser(target=ET.TreeBuilder(insert_comments=True)))
     links = {link.get("name"): link for link in root.findall("link")}
     nj = len(cal.joints)
-    for b, body in enumerate(cal.bodies):
+    for b, (body, whole) in enumerate(zip(cal.bodies, whole_bodies(cal))):
         link = links.get(body)
         if link is None:
             raise ModelFileError(f"{name}: no link {body!r} for joint {cal.joints[b]}")
-        own = _link_parameters(pin, link)
-        delta = cal.x[10 * b:10 * b + 10] - cal.x0[10 * b:10 * b + 10]
-        inertia = pin.Inertia.FromDynamicParameters(own + delta)
-        _set_inertial(link, inertia)
+        if whole:
+            _set_inertial(link, pin.Inertia.FromDynamicParameters(cal.links()[10 * b:10 * b + 10]))
+            for other in cal.attached[b]:
+                for inertial in links[other].findall("inertial"):
+                    links[other].remove(inertial)
+        else:
+            delta = cal.x[10 * b:10 * b + 10] - cal.x0[10 * b:10 * b + 10]
+            _set_inertial(link, pin.Inertia.FromDynamicParameters(own_links[body] + delta))
     for old in root.findall("rotor_params") + root.findall(TRANSMISSION):
         root.remove(old)
     if len(root):
@@ -890,23 +954,6 @@ def calibrated_urdf(urdf_text: str, name: str, cal: Calibration) -> str:
     return '<?xml version="1.0"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def _link_parameters(pin, link) -> np.ndarray:
-    """A URDF link's own inertial parameters in its frame, (10,)."""
-    inertial = link.find("inertial")
-    if inertial is None:
-        return np.zeros(10)
-    mass = float(inertial.find("mass").get("value")) if inertial.find("mass") is not None else 0.0
-    origin = inertial.find("origin")
-    xyz = np.array([float(v) for v in (origin.get("xyz", "0 0 0") if origin is not None else "0 0 0").split()])
-    rpy = np.array([float(v) for v in (origin.get("rpy", "0 0 0") if origin is not None else "0 0 0").split()])
-    el = inertial.find("inertia")
-    get = (lambda k: float(el.get(k, 0.0))) if el is not None else (lambda k: 0.0)
-    tensor = np.array([[get("ixx"), get("ixy"), get("ixz")], [get("ixy"), get("iyy"), get("iyz")],
-                       [get("ixz"), get("iyz"), get("izz")]])
-    rot = pin.rpy.rpyToMatrix(rpy)
-    return pin.Inertia(mass, xyz, rot @ tensor @ rot.T).toDynamicParameters()
-
-
 def _set_inertial(link, inertia) -> None:
     """Write ``inertia`` (a pin.Inertia in the link frame) as the link's <inertial>, rpy = 0."""
     inertial = link.find("inertial")
@@ -920,6 +967,11 @@ def _set_inertial(link, inertia) -> None:
     ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"}).tail = "\n      "
     ET.SubElement(inertial, "inertia", {k: repr(float(tensor[a, b])) for k, (a, b) in (
         ("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2)))}).tail = "\n    "
+
+
+def warnings(report: dict) -> list[str]:
+    """The lines a calibration's report warns of: consistency warnings, then suspicious parameters."""
+    return report["consistency"]["warnings"] + report["suspicious"]
 
 
 def refuse_inconsistent(cal: Calibration) -> None:

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import math
 import os
 import sys
 import tempfile
@@ -94,6 +95,7 @@ class RobotModel:
             raise ModelFileError(f"{name}: not a usable URDF ({why})") from None
         if model.nv == 0:
             raise ModelFileError(f"{name}: the URDF has no moving joints")
+        self.links = link_inertials(urdf_text, name)   # each link's own (10,), before Pinocchio merges fixed links
         self.joints = list(model.names)[1:]
         self.kinds = []
         self._unbounded = []  # continuous joints: pinocchio's configuration is (cos q, sin q)
@@ -104,13 +106,16 @@ class RobotModel:
                                      "(revolute, continuous and prismatic only)")
             self.kinds.append("rotary" if short[0] == "R" else "linear")
             self._unbounded.append(joint.nq == 2)
+        self.payload_parameters = np.zeros((model.nv, 10))   # a declared payload in each body's parameters
         if payload is not None and payload.mass > 0:
             if not model.existFrame(payload.frame):
                 frames = ", ".join(dict.fromkeys(f.name for f in model.frames if f.name != "universe"))
                 raise ModelFileError(f"{name}: no frame {payload.frame!r} for the payload; the frames are: {frames}")
             frame = model.frames[model.getFrameId(payload.frame)]
-            point = pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3)))
-            model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + frame.placement.act(point)
+            point = frame.placement.act(pin.Inertia(payload.mass, np.asarray(payload.com, dtype=float), np.zeros((3, 3))))
+            model.inertias[frame.parentJoint] = model.inertias[frame.parentJoint] + point
+            if frame.parentJoint > 0:
+                self.payload_parameters[frame.parentJoint - 1] = point.toDynamicParameters()
         self.armature = rotor_params(urdf_text, name, model)  # (joints,), NaN where the URDF gives none
         # per-motor rotor inertias (URDF joint names), or None; their cross-term (joints, joints) [kg m^2]
         self.transmission = urdf_transmission(urdf_text, name, model)
@@ -206,6 +211,45 @@ def hold_joints(urdf_text: str, name: str, held) -> tuple[str, tuple[str, ...]]:
         for mimic in element.findall("mimic"):
             element.remove(mimic)
     return ET.tostring(root, encoding="unicode"), tuple(n for n in moving if n in wanted)
+
+
+def link_inertials(urdf_text: str, name: str) -> dict[str, np.ndarray]:
+    """Each URDF link's own inertial parameters (10,) in its frame (Pinocchio's dynamic parameters:
+    m, m c, inertia at the frame's origin). ModelFileError for a mass that is negative or no finite
+    number: Pinocchio would merge such a link into its parent body without complaint, into nonsense."""
+    import xml.etree.ElementTree as ET
+
+    pin = pinocchio()
+    try:
+        links = ET.fromstring(urdf_text).findall("link")
+    except ET.ParseError as exc:
+        raise ModelFileError(f"{name}: not a usable URDF ({exc})") from None
+
+    def numbers(element, key, default):
+        return [float(v) for v in (element.get(key, default) if element is not None else default).split()]
+
+    out = {}
+    for link in links:
+        inertial, who = link.find("inertial"), f"{name}: link {link.get('name')!r}"
+        if inertial is None:
+            out[link.get("name")] = np.zeros(10)
+            continue
+        try:
+            mass = numbers(inertial.find("mass"), "value", "0")[0]
+            xyz, rpy = (numbers(inertial.find("origin"), key, "0 0 0") for key in ("xyz", "rpy"))
+            moments = inertial.find("inertia")
+            get = {k: numbers(moments, k, "0")[0] for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+            rot = pin.rpy.rpyToMatrix(np.array(rpy, dtype=float))
+        except (ValueError, IndexError, TypeError):
+            raise ModelFileError(f"{who}: its <inertial> holds a value that is no number") from None
+        if len(xyz) != 3 or len(rpy) != 3:
+            raise ModelFileError(f"{who}: its <inertial> origin needs three numbers in xyz and in rpy")
+        if not (math.isfinite(mass) and mass >= 0):
+            raise ModelFileError(f"{who}: mass {mass:g} kg: a link's mass is a finite number, not negative")
+        tensor = np.array([[get["ixx"], get["ixy"], get["ixz"]], [get["ixy"], get["iyy"], get["iyz"]],
+                           [get["ixz"], get["iyz"], get["izz"]]])
+        out[link.get("name")] = pin.Inertia(mass, np.array(xyz, dtype=float), rot @ tensor @ rot.T).toDynamicParameters()
+    return out
 
 
 def rotor_params(urdf_text: str, name: str, model) -> np.ndarray:
