@@ -354,3 +354,68 @@ def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
               cwd=tmp_path)
     assert res.returncode == errors.INPUT and "not sampled at the same times" in res.stderr
     assert not (tmp_path / "x.parquet").exists()
+
+
+def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path):
+    """A four-joint arm at 1 kHz whose recording gives positions in encoder steps (2^16 per turn) and
+    motor torques, no velocity: differentiating the steps twice swamps tau_dyn unless the low-pass
+    cuts them. By default the cut-off is chosen from how well the robot model explains tau_m, with
+    no knowledge of the true acceleration; its tau_dyn must be within 10 % of the best the grid's
+    cut-offs give against the true one, and the log contract's 50 Hz at least twice as far off."""
+    pytest.importorskip("pinocchio")
+    import test_calibrate as arm
+    from fricli.robot.dynamics import RobotModel
+    from fricli.robot.importing import CUTOFF_GRID
+
+    rng = np.random.default_rng(11)
+    model, _ = arm.true_model(rng)
+    n, rate = 20_000, 1000.0
+    t = np.arange(n) / rate
+    q, qd, qdd = (np.zeros((n, 4)) for _ in range(3))
+    for j in range(4):
+        for f in (0.2, 0.45, 0.7, 1.1):
+            w, a, ph = 2 * np.pi * f * rng.uniform(0.8, 1.2), 0.25 * rng.uniform(0.3, 1.0) / f, rng.uniform(0, 6.3)
+            q[:, j] += a * np.sin(w * t + ph)
+            qd[:, j] += a * w * np.cos(w * t + ph)
+            qdd[:, j] -= a * w * w * np.sin(w * t + ph)
+    tau = arm.simulate(model, t, q, qd, qdd, rng=rng, noise=0.05)
+    step = 2 * np.pi / 2 ** 16
+    np.savetxt(tmp_path / "rec.csv", np.column_stack([t, np.round(q / step) * step, tau]), delimiter=",", fmt="%.17g")
+    (tmp_path / "arm.urdf").write_text(arm.URDF)
+    (tmp_path / "map.toml").write_text('time = 1\n[robot]\nmatch = "order"\n' + "".join(
+        f"[[joints]]\nname = {k}\nq = {k + 1}\ntau_m = {k + 5}\n" for k in range(1, 5)))
+    cad = RobotModel(arm.URDF, "cad")
+    true_dyn = cad.terms(q, qd, qdd)[1]
+
+    def error(path):
+        table = pq.read_table(path)
+        return np.linalg.norm(table.column("tau_dyn").to_numpy().reshape(4, n).T - true_dyn)
+
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "arm.urdf", "-o", "auto.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    derived = json.loads(pq.read_table(tmp_path / "auto.parquet").schema.metadata[b"fricli.import"])["robot"]["derived"]
+    chosen = derived["cutoff_hz"]
+    grid = derived["cutoff_choice"]["candidates_hz"]    # below the Nyquist frequency, then none (at it)
+    assert grid[:-1] == [c for c in CUTOFF_GRID if c < 499] and grid[-1] == pytest.approx(500.0)
+    assert f"cut-off of the derived columns: {chosen:g} Hz, chosen of 2 Hz to no low-pass" in res.stderr
+    assert f"derived qd and qdd (low-pass {chosen:g} Hz chosen from the data" in res.stderr
+    errors_by_cutoff = {}
+    for c in grid[:-1]:                       # what import derives with each cut-off (the log contract's way)
+        motions = [{"t": t, "q": np.round(q[:, k] / step) * step} for k in range(4)]
+        for m in motions:
+            logs.derive_motion(m, c)
+        derived_dyn = cad.terms(*(np.column_stack([m[x] for m in motions]) for x in ("q", "qd", "qdd")))[1]
+        errors_by_cutoff[c] = np.linalg.norm(derived_dyn - true_dyn)
+    assert error(tmp_path / "auto.parquet") == pytest.approx(errors_by_cutoff[chosen], rel=1e-12)
+    assert errors_by_cutoff[chosen] <= 1.1 * min(errors_by_cutoff.values())
+    assert errors_by_cutoff[50.0] >= 2 * errors_by_cutoff[chosen]
+    # without torques (a library call: the log contract requires tau_m) auto cannot choose; the default
+    # then keeps the contract's 50 Hz
+    from fricli.robot.importing import robot_terms
+    from fricli.robot.mapping import JointMap, Mapping
+
+    mapping = Mapping(time=None, joints=[JointMap(name=k, columns={}) for k in range(1, 5)], match="order")
+    positions = [{"q": np.round(q[:, k] / step) * step} for k in range(4)]
+    with pytest.raises(errors.LogError, match="--cutoff auto chooses the cut-off"):
+        robot_terms(cad, mapping, t, [dict(p) for p in positions], "rotary", "auto")
+    assert robot_terms(cad, mapping, t, [dict(p) for p in positions], "rotary")["derived"]["cutoff_hz"] == 50.0

@@ -32,6 +32,22 @@ class Number(click.FloatRange):
         return number
 
 
+class Cutoff(Number):
+    """A low-pass cut-off [Hz] above 0, or ``auto`` (``fricli.core.logs.AUTO_CUTOFF``)."""
+
+    name = "cutoff"
+
+    def __init__(self):
+        super().__init__(min=0, min_open=True)
+
+    def convert(self, value, param, ctx):
+        from fricli.core.logs import AUTO_CUTOFF
+
+        if isinstance(value, str) and value.strip().lower() == AUTO_CUTOFF:
+            return AUTO_CUTOFF
+        return super().convert(value, param, ctx)
+
+
 class Folder(click.Path):
     """An output folder: "-" (stdout) is refused, not taken as a folder's name."""
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import Number, common, output_option, say, warn
+from fricli.cli.options import Cutoff, Number, common, output_option, say, warn
 from fricli.core.errors import LogError
 
 
@@ -44,9 +44,10 @@ def urdf_options(f):
                      help="A URDF joint the log does not record (a gripper's finger), held at its zero position: "
                           "its links move with their parent (joints that mimic it too). Repeatable; import: adds "
                           "to the mapping's robot.hold."),
-        click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
-                     help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model (default: "
-                          "the log contract's, 50 Hz)."),
+        click.option("--cutoff", type=Cutoff(), default=None, metavar="HZ|auto",
+                     help="Low-pass cut-off [Hz] used when qd/qdd are derived for the robot model, or auto: the "
+                          "one of 2 Hz to the Nyquist frequency with which the robot model explains tau_m best "
+                          "(default: auto when every joint has tau_m or i_m, else the log contract's 50 Hz)."),
     ]):
         f = option(f)
     return f
@@ -63,7 +64,27 @@ def _derived_text(record: dict) -> str:
     if not derived:
         return ""
     lowpass = f"low-pass {derived['cutoff_hz']:g} Hz" if derived["filtered"] else "no low-pass"
-    return f", derived {' and '.join(derived['columns'])} ({lowpass}, central differences)"
+    chosen = " chosen from the data" if "cutoff_choice" in derived else ""
+    return f", derived {' and '.join(derived['columns'])} ({lowpass}{chosen}, central differences)"
+
+
+def _choice_line(record: dict) -> str | None:
+    """What the cut-off was chosen from (``choose_cutoff``), for stderr; None when none was chosen."""
+    choice = (record.get("derived") or {}).get("cutoff_choice")
+    if not choice:
+        return None
+    grid, score = choice["candidates_hz"], choice["score"]
+    best = grid.index(choice["cutoff_hz"])
+
+    def named(k):
+        return "no low-pass" if k == len(grid) - 1 else f"{grid[k]:g} Hz"
+
+    default = min(range(len(grid)), key=lambda k: abs(grid[k] - min(choice["default_hz"], grid[-1])))
+    others = ", ".join(f"{named(k)} x{score[k] / score[best]:.2f}" for k in sorted({0, default, len(grid) - 1} - {best}))
+    return (f"cut-off of the derived columns: {named(best)}, chosen of {grid[0]:g} Hz to no low-pass (--cutoff HZ sets "
+            f"one): the robot model's tau_dyn with a gain per joint and each joint's linear friction leave the least "
+            f"of tau_m - tau_g in motion, {score[best]:.4g} RMS (geometric mean over the joints, {choice['rows']:,} "
+            f"rows); {others}")
 
 
 PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
@@ -132,7 +153,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
       fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
       fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, read_bytes, write_table
+    from fricli.core.logs import read_bytes, write_table
     from fricli.robot import mapping as mp
     from fricli.robot import rosbag
     from fricli.robot.importing import build_log, import_files, import_recording
@@ -151,7 +172,6 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
     if (held or mapping.held) and urdf is None:
         raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
-    cutoff_hz = DEFAULT_CUTOFF_HZ if cutoff is None else cutoff
     name = "stdin" if recording == "-" else recording
     if len(recordings) > 1 or mapping.files:
         if len(recordings) != len(mapping.files):
@@ -179,7 +199,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
         extra = {"topic": read.topic, "stamps": read.stamps, "time_origin_ns": read.origin_ns,
                  "reordered": None if read.reordered is None else
                  {"count": read.reordered.count, "messages": read.reordered.ranges}}
-        result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff_hz,
+        result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff,
                            unit="message", extra=extra)
         for field, d in read.partly_empty.items():
             warn(f"warning: {name}: {d.count} {'messages' if d.count != 1 else 'message'} on {read.topic} "
@@ -197,9 +217,9 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
                  "be read (a damaged or unfinished file): they are missing from the log")
     elif mapping.files:
         result = import_files([read_bytes(r) for r in recordings], mapping, list(recordings), model=model,
-                              cutoff_hz=cutoff_hz, drop_backward=drop_backward)
+                              cutoff_hz=cutoff, drop_backward=drop_backward)
     else:
-        result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff_hz,
+        result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff,
                                   drop_backward=drop_backward)
     unit = result.meta["counted_in"]
     for kind, d in result.meta["dropped"].items():
@@ -225,6 +245,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     where = "stdout" if output == "-" else output
     rows = f"{result.meta['rows']:,} {'messages' if bag else 'rows'}"
     source = f"{read.topic} in {name}" if bag else name
+    if robot and _choice_line(robot):
+        say(_choice_line(robot), quiet)
     say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
 
 
@@ -249,7 +271,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, held_of, read_table, write_table
+    from fricli.core.logs import gravity_of, held_of, read_table, write_table
     from fricli.robot import mapping as mp
     from fricli.robot.dynamics import load_model
     from fricli.robot.logterms import add_terms
@@ -268,8 +290,10 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     table, record = add_terms(table, model, name, match=match, urdf_names=names,
                               rotor_inertia=inertia_pairs,
                               gravity=robot.gravity, payload=payload,
-                              cutoff_hz=DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
+                              cutoff_hz=cutoff)
     write_table(table, output)
     where = "stdout" if output == "-" else output
+    if _choice_line(record):
+        say(_choice_line(record), quiet)
     say(f"added tau_g and tau_dyn from {urdf} to {len(record['joints'])} joints of {name} "
         f"(matched by {match}{_derived_text(record)}) -> {where}", quiet)

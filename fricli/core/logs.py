@@ -53,6 +53,7 @@ ROBOT_MODEL = {"tau_g": ("--no-gravity", "the robot model's gravity torque",
                            "as 'acceleration')")}
 ZERO_KEY = b"fricli.zero_columns"   # schema metadata: JSON list of robot-model columns declared zero
 DEFAULT_CUTOFF_HZ = 50.0
+AUTO_CUTOFF = "auto"   # import/dynamics --cutoff auto: chosen from the data (fricli.robot.importing.choose_cutoff)
 
 # unit spelling -> (dimension, factor to canonical)
 _UNITS = {

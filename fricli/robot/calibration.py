@@ -667,7 +667,8 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
                    nj: int, fixed: np.ndarray | None = None) -> np.ndarray:
     """The same weighted least squares with the same prior (``A`` (rows, 14 nj) and ``b`` weighted),
     over physically consistent parameters only: each body (less ``fixed`` (10 nj,), a declared
-    payload) as a pseudo-inertia L L^T (L lower triangular), each armature as u^2. Starts from ``x_start`` with eigenvalues clipped; returns x."""
+    payload) as a pseudo-inertia L L^T (L lower triangular), each armature as u^2. From ``x_start``
+    with eigenvalues clipped and from ``x0``: the better; returns x."""
     from scipy import linalg, optimize
 
     fixed = np.zeros(10 * nj) if fixed is None else fixed
@@ -707,12 +708,15 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
         return out
 
     stacked = np.vstack([r, np.diag(1.0 / s)])
-    fit = optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), start(x_start),
-                                 jac=lambda th: stacked @ dparams(th), x_scale="jac", method="lm",
-                                 xtol=1e-8, ftol=1e-6, max_nfev=2000)
-    if not np.all(np.isfinite(fit.x)):
+    # convex in x, not in the factors: from a clipped estimate a body can sit where L is nearly singular
+    # and the steps vanish, so the fit also starts from the prior's centre (CAD), and the lower cost wins
+    fits = [optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), start(x),
+                                   jac=lambda th: stacked @ dparams(th), x_scale="jac", method="lm",
+                                   xtol=1e-8, ftol=1e-6, max_nfev=2000) for x in (x_start, x0)]
+    fits = [f for f in fits if np.all(np.isfinite(f.x))]
+    if not fits:
         raise FitError("the physically consistent fit did not converge")
-    return params(fit.x)
+    return params(min(fits, key=lambda f: f.cost).x)
 
 
 def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int,
@@ -811,9 +815,11 @@ def link_table(cal: Calibration) -> dict:
     return out
 
 
-def _physical(pi: np.ndarray) -> str | None:
+def _physical(pi: np.ndarray, scale: float = 0.0) -> str | None:
     """Why the 10 parameters ``pi`` are no real body, or None: the mass positive, the inertia at the
-    centre of mass positive definite, its principal moments satisfying the triangle inequality."""
+    centre of mass positive definite, its principal moments satisfying the triangle inequality, each to
+    ``TOLERANCE`` of the body's largest moment or of ``scale`` [kg m^2] (the arm's: a body the fit
+    shrank to nothing must not fail on round-off)."""
     m = float(pi[0])
     if not m > 0:
         return f"mass {m:.4g} kg is not positive"
@@ -821,19 +827,24 @@ def _physical(pi: np.ndarray) -> str | None:
     moments = np.sort(np.linalg.eigvalsh(inertia.inertia))
     text = ", ".join(f"{v:.4g}" for v in moments)
     pseudo = np.linalg.eigvalsh(pseudo_inertia(pi))
-    if moments[0] <= -TOLERANCE * abs(moments[-1]):
+    if moments[0] <= -TOLERANCE * max(abs(moments[-1]), scale):
         return f"inertia at the centre of mass is not positive definite (principal moments {text} kg m^2)"
-    if pseudo[0] < -TOLERANCE * pseudo[-1]:   # with the above: the triangle inequality
+    if pseudo[0] < -TOLERANCE * max(pseudo[-1], scale):   # with the above: the triangle inequality
         return f"principal moments {text} kg m^2 break the triangle inequality (no real body has them)"
     return None
+
+
+def _scale(cal: Calibration) -> float:
+    """The largest principal moment at the centre of mass of the CAD bodies [kg m^2]."""
+    return max((float(np.abs(np.linalg.eigvalsh(b.inertia)).max()) for b in body_inertias(cal, cal.x0)), default=0.0)
 
 
 def whole_bodies(cal: Calibration) -> list[bool]:
     """Per body, whether the calibrated URDF writes all of it into its moving link (and gives the links
     fixed to it no inertia): when with those links at CAD the moving link could be no real body."""
-    links = cal.links()
-    return [bool(cal.attached and cal.attached[b]) and _physical(links[10 * b:10 * b + 10]) is None
-            and _physical(links[10 * b:10 * b + 10] - cal.attached_cad[10 * b:10 * b + 10]) is not None
+    links, scale = cal.links(), _scale(cal)
+    return [bool(cal.attached and cal.attached[b]) and _physical(links[10 * b:10 * b + 10], scale) is None
+            and _physical(links[10 * b:10 * b + 10] - cal.attached_cad[10 * b:10 * b + 10], scale) is not None
             for b in range(len(cal.bodies))]
 
 
@@ -843,9 +854,9 @@ def consistency(cal: Calibration) -> dict:
     coefficients; a body whose fixed links' CAD its moving link cannot complete, ``whole_bodies``)."""
     problems, warnings = [], []
     nj = len(cal.joints)
-    links = cal.links()
+    links, scale = cal.links(), _scale(cal)
     for b, body in enumerate(cal.bodies):
-        why = _physical(links[10 * b:10 * b + 10])
+        why = _physical(links[10 * b:10 * b + 10], scale)
         if why:
             problems.append(f"link {body}: {why}")
     for b in np.flatnonzero(whole_bodies(cal)):
@@ -962,6 +973,9 @@ def _set_inertial(link, inertia) -> None:
     for child in list(inertial):
         inertial.remove(child)
     c, tensor = inertia.lever, inertia.inertia
+    w, v = np.linalg.eigh(tensor)
+    if w.min() < 0:            # a body the fit shrank to a point: the round-off of its moments is no inertia
+        tensor = (v * np.maximum(w, 0.0)) @ v.T
     inertial.text = "\n      "
     ET.SubElement(inertial, "mass", {"value": repr(float(inertia.mass))}).tail = "\n      "
     ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"}).tail = "\n      "

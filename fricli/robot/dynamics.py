@@ -248,7 +248,10 @@ def link_inertials(urdf_text: str, name: str) -> dict[str, np.ndarray]:
             raise ModelFileError(f"{who}: mass {mass:g} kg: a link's mass is a finite number, not negative")
         tensor = np.array([[get["ixx"], get["ixy"], get["ixz"]], [get["ixy"], get["iyy"], get["iyz"]],
                            [get["ixz"], get["iyz"], get["izz"]]])
-        out[link.get("name")] = pin.Inertia(mass, np.array(xyz, dtype=float), rot @ tensor @ rot.T).toDynamicParameters()
+        c = np.array(xyz, dtype=float)   # the inertia at the frame's origin by the parallel-axis theorem
+        i_o = rot @ tensor @ rot.T + mass * (c @ c * np.eye(3) - np.outer(c, c))
+        out[link.get("name")] = np.array([mass, *(mass * c), i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2],
+                                          i_o[2, 2]])
     return out
 
 

@@ -61,14 +61,15 @@ def to_joints(tr, per_joint: list[dict]) -> None:
 
 
 def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], axis: str,
-                 cutoff_hz: float) -> dict:
+                 cutoff_hz: float | str | None = None) -> dict:
     """Add tau_g and tau_dyn (and derived qd/qdd) to ``per_joint`` (one dict of signals of shape
-    (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it."""
+    (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it. ``cutoff_hz``: of
+    the low-pass for derived qd/qdd [Hz]; ``logs.AUTO_CUTOFF``: chosen (``choose_cutoff``); None: chosen
+    when every joint has tau_m, else the log contract's ``logs.DEFAULT_CUTOFF_HZ``."""
     if mapping.match is None:
         raise LogError("choose how the log's joints match the URDF's: match = \"name\" or \"order\" under "
                        "[robot] in the mapping, or --match name|order")
     order = model.match([jm.urdf or str(jm.name) for jm in mapping.joints], mapping.match)
-    derived: dict[str, list] = {}
     for jm, sig, k in zip(mapping.joints, per_joint, order):
         if model.kinds[k] != axis:
             raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
@@ -77,6 +78,13 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
                                  "without a mapping leaves held joints out itself)")
         if "q" not in sig:
             raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
+    choice = None
+    if cutoff_hz == logs.AUTO_CUTOFF or (cutoff_hz is None and all("tau_m" in sig for sig in per_joint)):
+        choice = choose_cutoff(model, mapping, order, t, per_joint)
+    if cutoff_hz is None or cutoff_hz == logs.AUTO_CUTOFF:
+        cutoff_hz = logs.DEFAULT_CUTOFF_HZ if choice is None else choice["cutoff_hz"]
+    derived: dict[str, list] = {}
+    for jm, sig in zip(mapping.joints, per_joint):
         motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
         for column in logs.derive_motion(motion, cutoff_hz).get("columns", []):
             derived.setdefault(column, []).append(jm.name)
@@ -97,16 +105,63 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
                           for jm, k in zip(mapping.joints, order)},
         "payload": dataclasses.asdict(payload) if payload is not None else None,
         "held": list(model.held),
-        "derived": {"columns": derived, "cutoff_hz": cutoff_hz,
-                    "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {},
+        "derived": {"columns": derived, "cutoff_hz": cutoff_hz, "filtered": logs.lowpass_applies(t, cutoff_hz),
+                    **({"cutoff_choice": choice} if choice else {})} if derived else {},
     }
+
+
+CUTOFF_GRID = (2.0, 3.0, 5.0, 7.0, 10.0, 15.0, 20.0, 30.0, 50.0, 70.0, 100.0, 150.0, 200.0, 300.0, 500.0)  # Hz
+CHOICE_ROWS = 20_000   # rows the robot model is evaluated on per cut-off, evenly spaced
+
+
+def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_joint: list[dict]) -> dict | None:
+    """The low-pass cut-off [Hz] for the qd/qdd a log lacks (``logs.derive_motion``) with which the robot
+    model explains tau_m best: for each cut-off of ``CUTOFF_GRID`` below the Nyquist frequency and for
+    none (the Nyquist frequency itself), the RMS over each joint's rows in motion of tau_m - tau_g left
+    by least squares on the joint's linear friction (qd, sign(qd), 1) and its tau_dyn with a gain of its
+    own (a CAD inertia off by a factor must not make a lower cut-off look better), on at most
+    ``CHOICE_ROWS`` rows; the geometric mean over the joints decides. Too low a cut-off takes
+    acceleration the arm has out of tau_dyn, too high a one puts in what differentiation makes of
+    encoder steps and of vibration the torque does not carry. None when nothing is derived."""
+    from fricli.core import metrics
+
+    if all("qd" in sig and "qdd" in sig for sig in per_joint):
+        return None
+    if not all("tau_m" in sig for sig in per_joint):
+        raise LogError("--cutoff auto chooses the cut-off by how well the robot model explains the joint torque: "
+                       "map tau_m (or i_m with its kt) for every joint, or give the cut-off in Hz")
+    nyquist = 0.5 / float(np.median(np.diff(t)))
+    grid = [c for c in CUTOFF_GRID if c < nyquist * (1 - 1e-6)] + [nyquist]
+    rows = np.unique(np.linspace(0, len(t) - 1, min(len(t), CHOICE_ROWS)).astype(np.int64))
+    joints = [per_joint[order.index(k)] for k in range(len(order))]          # URDF order
+    tau = np.column_stack([sig["tau_m"][rows] for sig in joints])
+    inertia = np.array([mapping.joints[order.index(k)].rotor_inertia for k in range(len(order))])
+    scores = []
+    for cutoff in grid:
+        motions = [{"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}} for sig in joints]
+        for motion in motions:
+            logs.derive_motion(motion, cutoff)
+        q, qd, qdd = (np.column_stack([m[c][rows] for m in motions]) for c in ("q", "qd", "qdd"))
+        tau_g, tau_dyn = model.terms(q, qd, qdd, inertia)
+        rms = []
+        for k in range(len(joints)):
+            moving = metrics.in_motion(qd[:, k])
+            cols = np.column_stack([qd[moving, k], np.sign(qd[moving, k]), np.ones(int(moving.sum())),
+                                    tau_dyn[moving, k]])
+            left = (tau - tau_g)[moving, k]
+            if len(left) > cols.shape[1]:
+                rms.append(float(np.sqrt(np.mean(np.square(left - cols @ np.linalg.lstsq(cols, left, rcond=None)[0])))))
+        scores.append(float(np.exp(np.mean(np.log(np.maximum(rms, 1e-300))))) if rms else np.inf)
+    best = int(np.argmin(scores))
+    return {"cutoff_hz": grid[best], "candidates_hz": grid, "score": scores, "rows": int(len(rows)),
+            "default_hz": logs.DEFAULT_CUTOFF_HZ}
 
 
 _ORDER = ("t", "joint", "q", "qd", "qdd", "i_m", "tau_m", "tau_g", "tau_dyn", "tau_ext", "temp")
 
 
 def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
-                     cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_backward: bool = False) -> Imported:
+                     cutoff_hz: float | str | None = None, drop_backward: bool = False) -> Imported:
     """Parse ``data`` with ``mapping`` into a long-format table; with ``model`` (a
     ``fricli.robot.dynamics.RobotModel``) add tau_g and tau_dyn."""
     rec = read_recording(data, mapping, name, drop_backward=drop_backward)
@@ -114,7 +169,7 @@ def import_recording(data: bytes, mapping: Mapping, name: str, *, model=None,
 
 
 def import_files(datas: list[bytes], mapping: Mapping, names: list[str], *, model=None,
-                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, drop_backward: bool = False) -> Imported:
+                 cutoff_hz: float | str | None = None, drop_backward: bool = False) -> Imported:
     """``import_recording`` of a recording in several files (``mapping.files``, fricli.robot.joined)."""
     from fricli.robot.joined import read_joined
 
@@ -142,7 +197,7 @@ def dropped_record(defects: dict, unit: str = "line") -> dict:
 
 
 def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *, model=None,
-              cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ, unit: str = "line", extra: dict | None = None) -> Imported:
+              cutoff_hz: float | str | None = None, unit: str = "line", extra: dict | None = None) -> Imported:
     """The long-format table of ``rec`` (read with ``mapping``), its metadata recording the source
     (``extra`` added), the dropped rows (numbered by ``unit``) and, with ``model``, the robot terms."""
     t, per_joint, axis = _signals(mapping, rec, name)

@@ -17,9 +17,10 @@ META_KEY = b"fricli.dynamics"
 
 def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[str, str] | None = None,
               rotor_inertia: dict[str, float] | None = None, gravity=logs.DEFAULT_GRAVITY, payload=None,
-              cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
+              cutoff_hz: float | str | None = None):
     """``table`` with tau_g and tau_dyn set (replaced if present) for every row, qd/qdd added
-    when derived, and the record under the schema metadata key ``fricli.dynamics``.
+    when derived (``cutoff_hz`` as ``robot_terms``), and the record under the schema metadata key
+    ``fricli.dynamics``.
     ``urdf_names`` and ``rotor_inertia`` are keyed by the joint's name as text."""
     import pyarrow as pa
     import pyarrow.compute as pc
@@ -31,7 +32,7 @@ def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[st
     unknown = sorted((set(urdf_names) | set(rotor_inertia)) - {str(j) for j in names})
     if unknown:
         raise LogError(f"{name}: no joint {unknown[0]} in the log (it holds {', '.join(str(j) for j in names)})")
-    logs_per_joint = [logs.from_table(table, name=name, joint=j, cutoff_hz=cutoff_hz) for j in names]
+    logs_per_joint = [logs.from_table(table, name=name, joint=j) for j in names]
     axes = {log.axis for log in logs_per_joint}
     if len(axes) > 1:
         raise LogError(f"{name}: mixes rotary and linear joints")
@@ -42,12 +43,11 @@ def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[st
     mapping = Mapping(time=None, joints=[JointMap(name=j, columns={}, rotor_inertia=rotor_inertia.get(str(j), 0.0),
                                                   urdf=urdf_names.get(str(j))) for j in names],
                       match=match, gravity=tuple(gravity), payload=payload)
-    per_joint = [dict(log.signals) for log in logs_per_joint]
+    # what the log lacks is derived where the robot terms are (with --cutoff auto, at the cut-off chosen there)
+    per_joint = [{c: v for c, v in log.signals.items() if c not in log.derived.get("columns", [])}
+                 for log in logs_per_joint]
     record = robot_terms(model, mapping, t, per_joint, axes.pop(), cutoff_hz)
-    derived = {c: [log.joint for log in logs_per_joint if c in log.derived.get("columns", [])] for c in ("qd", "qdd")}
-    derived = {c: js for c, js in derived.items() if js}
-    record["derived"] = {"columns": derived, "cutoff_hz": cutoff_hz,
-                         "filtered": logs.lowpass_applies(t, cutoff_hz)} if derived else {}
+    derived = record["derived"].get("columns", {})
     joint_col = table.column("joint")
     units = logs.CANONICAL[logs_per_joint[0].axis]
     for column, unit in (("qd", units["qd"]), ("qdd", units["qdd"]), ("tau_g", units["tau"]), ("tau_dyn", units["tau"])):
