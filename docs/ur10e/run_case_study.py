@@ -537,6 +537,7 @@ def _from_json(saved: dict) -> tuple[dict, list[str]]:
 
 
 def main(argv=None) -> None:
+    global CUTOFF_HZ
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA, help="folder of the UR10e recordings")
     ap.add_argument("--work", default=None, help="folder for the imported logs and models (default: temporary)")
@@ -547,9 +548,14 @@ def main(argv=None) -> None:
     ap.add_argument("--no-adapt", action="store_true", help="leave out the same-day adaptation")
     ap.add_argument("--calibrate-friction", choices=("linear", "stribeck"), default=None,
                     help="diagnose --calibrate-friction for the closed loop (default: diagnose's own)")
+    ap.add_argument("--cutoff", default=None,
+                    help=f"import --cutoff for every run, e.g. auto (default {CUTOFF_HZ:g}; for comparison: the "
+                         "document's text names the default)")
     ap.add_argument("--reuse", action="store_true",
                     help="rewrite the document from the figures of the last run in --work (no fricli commands)")
     args = ap.parse_args(argv)
+    if args.cutoff is not None:
+        CUTOFF_HZ = args.cutoff
     joints = [int(j) for j in args.joints.split(",")]
     docs, img = os.path.join(args.out, "docs"), os.path.join(args.out, "docs", "img")
     os.makedirs(img, exist_ok=True)
