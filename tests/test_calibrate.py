@@ -289,8 +289,8 @@ def test_a_tool_the_arm_does_not_carry_is_not_written_as_a_negative_link(arm, tm
     res = fricli("calibrate", log, "--urdf", "tool.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == 0, res.stderr
     assert ("warning: link l4: with flange, tool fixed to it (2.3 kg at CAD), its body comes out at" in res.stderr
-            and "the calibrated URDF holds the whole body in l4 and no inertia in flange, tool. Check that they are "
-                "mounted as the URDF says" in res.stderr)
+            and "the calibrated URDF holds the whole body in l4 and no inertia in flange, tool. The joint torques see "
+                "only the body they form; a large gap means they are not mounted as the URDF says" in res.stderr)
     text = (tmp_path / "cal.urdf").read_text()
     links = link_inertials(text, "cal.urdf")
     assert not links["tool"].any() and not links["flange"].any()

@@ -860,11 +860,14 @@ def consistency(cal: Calibration) -> dict:
         if why:
             problems.append(f"link {body}: {why}")
     for b in np.flatnonzero(whole_bodies(cal)):
-        names = ", ".join(cal.attached[b])
-        warnings.append(f"link {cal.bodies[b]}: with {names} fixed to it ({cal.attached_cad[10 * b]:.4g} kg at CAD), "
-                        f"its body comes out at {links[10 * b]:.4g} kg, which {cal.bodies[b]} cannot complete into a "
-                        f"real body: the calibrated URDF holds the whole body in {cal.bodies[b]} and no inertia in "
-                        f"{names}. Check that they are mounted as the URDF says")
+        names, body, fixed = ", ".join(cal.attached[b]), cal.bodies[b], cal.attached_cad[10 * b:10 * b + 10]
+        own = links[10 * b:10 * b + 10] - fixed
+        why = ("lighter than they are" if own[0] <= 0 else
+               f"and {body} would be no real body with them at CAD ({_physical(own, scale)})")
+        warnings.append(f"link {body}: with {names} fixed to it ({fixed[0]:.4g} kg at CAD), its body comes out at "
+                        f"{links[10 * b]:.4g} kg, {why}: the calibrated URDF holds the whole body in {body} and no "
+                        f"inertia in {names}. The joint torques see only the body they form; a large gap means they "
+                        "are not mounted as the URDF says")
     for j in range(nj):
         who, a = cal.motor_of(j), float(cal.x[10 * nj + j])
         if a < 0:
