@@ -419,3 +419,7 @@ def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path)
     with pytest.raises(errors.LogError, match="--cutoff auto chooses the cut-off"):
         robot_terms(cad, mapping, t, [dict(p) for p in positions], "rotary", "auto")
     assert robot_terms(cad, mapping, t, [dict(p) for p in positions], "rotary")["derived"]["cutoff_hz"] == 50.0
+    # an arm held still gives nothing to choose by: the contract's 50 Hz, no choice recorded
+    still = [{"q": np.full(n, 0.3), "tau_m": tau[:, k]} for k in range(4)]
+    assert robot_terms(cad, mapping, t, still, "rotary")["derived"] == {
+        "columns": {"qd": [1, 2, 3, 4], "qdd": [1, 2, 3, 4]}, "cutoff_hz": 50.0, "filtered": True}

@@ -122,7 +122,8 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
     own (a CAD inertia off by a factor must not make a lower cut-off look better), on at most
     ``CHOICE_ROWS`` rows; the geometric mean over the joints decides. Too low a cut-off takes
     acceleration the arm has out of tau_dyn, too high a one puts in what differentiation makes of
-    encoder steps and of vibration the torque does not carry. None when nothing is derived."""
+    encoder steps and of vibration the torque does not carry. None when nothing is derived or no joint
+    moves."""
     from fricli.core import metrics
 
     if all("qd" in sig and "qdd" in sig for sig in per_joint):
@@ -136,6 +137,7 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
     joints = [per_joint[order.index(k)] for k in range(len(order))]          # URDF order
     tau = np.column_stack([sig["tau_m"][rows] for sig in joints])
     inertia = np.array([mapping.joints[order.index(k)].rotor_inertia for k in range(len(order))])
+    still = metrics.held_still(np.column_stack([sig["q"] for sig in joints]))    # nothing to choose by
     scores = []
     for cutoff in grid:
         motions = [{"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}} for sig in joints]
@@ -144,7 +146,7 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
         q, qd, qdd = (np.column_stack([m[c][rows] for m in motions]) for c in ("q", "qd", "qdd"))
         tau_g, tau_dyn = model.terms(q, qd, qdd, inertia)
         rms = []
-        for k in range(len(joints)):
+        for k in np.flatnonzero(~still):
             moving = metrics.in_motion(qd[:, k])
             cols = np.column_stack([qd[moving, k], np.sign(qd[moving, k]), np.ones(int(moving.sum())),
                                     tau_dyn[moving, k]])
@@ -152,6 +154,8 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
             if len(left) > cols.shape[1]:
                 rms.append(float(np.sqrt(np.mean(np.square(left - cols @ np.linalg.lstsq(cols, left, rcond=None)[0])))))
         scores.append(float(np.exp(np.mean(np.log(np.maximum(rms, 1e-300))))) if rms else np.inf)
+    if not np.isfinite(scores).any():        # no joint in motion: nothing to choose by
+        return None
     best = int(np.argmin(scores))
     return {"cutoff_hz": grid[best], "candidates_hz": grid, "score": scores, "rows": int(len(rows)),
             "default_hz": logs.DEFAULT_CUTOFF_HZ}
