@@ -136,6 +136,12 @@ def test_evaluate_reports_the_share(files):
     fast = found["fast"]
     assert (f"nn on fast: {100 * fast['share']:.1f} % of the rows ({fast['rows']:,} of {fast['of']:,}) lie outside"
             in result.stderr)
+    # the evaluations with no row outside are one line, not one each (a six-joint arm and three models: 18)
+    assert "nn on in:" not in result.stderr
+    assert "no row lies outside the model's training envelope in the other 1 of the 2 evaluations" in result.stderr
+    result = run("evaluate", "--model", f"nn={files['model']}", "--log", f"in={files['inside']}")
+    assert result.stderr.strip().splitlines()[-1] == \
+        "no row lies outside the model's training envelope"
 
 
 def test_adapt_reports_the_share_outside_the_base(files, tmp_path):

@@ -63,9 +63,14 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     else:
         click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
     several = len({str(r.joint) for r in results}) > 1
-    for r in results:
-        if r.extrapolation is not None and not quiet:
-            say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation, r.joint if several else None)}")
+    checked = [r for r in results if r.extrapolation is not None]
+    outside = [r for r in checked if r.extrapolation["rows"]]
+    for r in outside:
+        say(f"{r.model} on {r.log}: {extrapolation_line(r.extrapolation, r.joint if several else None)}", quiet)
+    if len(outside) < len(checked):
+        where = "" if len(checked) == 1 else (f" in {'the other ' if outside else ''}{len(checked) - len(outside)} "
+                                              f"of the {len(checked)} evaluations")
+        say(f"no row lies outside the model's training envelope{where}", quiet)
     for note in dict.fromkeys(r.robot_model for r in results if r.robot_model):
         warn(note)
 
