@@ -32,6 +32,8 @@ def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):
         assert math.isfinite(row[key]["moving"]) and row[key]["moving"] > 0
     # each run's own friction level, fitted on that run, can only lower the error it is added to
     assert 0 < row["fixed"]["own_friction_moving"] <= row["fixed"]["moving"]
+    (level,) = row["fixed"]["run_levels"]       # one validation run: its level and its clock
+    assert set(level) == {"start", "Fv", "Fc", "offset"} and all(math.isfinite(v) for v in level.values())
     fv, fc, _offset = row["linear_coef"]
     assert fv > 0 and fc > 0, "friction must oppose the motion: a sign or gain error in the import"
     # the payload's torque on the elbow is tens of Nm; the linear model's estimate must see most of it
@@ -43,3 +45,23 @@ def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):
     assert row["payload"]["fixed"] > 0 and row["payload"]["idim"] > 0
     assert "fricli import" in text and "--calibrate" in text and "ur10e-cal.urdf" in text
     assert (tmp_path / "docs" / "img" / "ur10e-friction-ratio.png").stat().st_size > 0
+
+
+def test_level_table_orders_a_days_runs_by_the_controller_clock():
+    sys.path.insert(0, str(ROOT / "docs" / "ur10e"))
+    import case_study_text
+
+    def level(start, fv):
+        return {"start": start, "Fv": fv, "Fc": 0.0, "offset": 0.0}
+
+    # three runs of one day listed out of clock order, one run of another day
+    runs = ["ur-20_02_05-b", "ur-20_02_05-a", "ur-20_02_05-c", "ur-20_02_06-a"]
+    levels = [level(500.0, 0.1), level(100.0, 0.3), level(900.0, 0.2), level(50.0, -0.1)]
+    res = {"validation_runs": runs,
+           "joints": {6: {"fixed": {"run_levels": levels}, "linear_coef": [2.0, 1.0, 0.0]}}}
+    text = "\n".join(case_study_text._level_lines(res, [6]))
+    # by the clock the day runs 0.3 -> 0.1 -> 0.2: one of its two consecutive pairs is lower
+    assert "lower in 1 of 2 pairs" in text
+    assert "above zero on 3 of 4 runs" in text
+    assert "+8 % of the fitting run's linear Fv" in text      # median 0.15 of Fv 2.0
+    assert case_study_text._level_lines(res, []) == []

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 # what an added effect means physically on a robot arm
 MEANING = {
     "gravity": "the URDF's gravity torque is off by a factor: CAD link masses or centres of mass that differ "
@@ -33,6 +35,48 @@ def _verb(js: list[str], one: str, many: str) -> str:
     return one if len(js) == 1 else many
 
 
+def _level_lines(res: dict, missed: list[int]) -> list[str]:
+    """Per validation run, the friction level fricli's model is off by on the joints that miss their
+    target (the residual's own Fv, Fc fitted on that run), with the controller's clock at the run's start."""
+    if not missed:
+        return []
+    runs = res["validation_runs"]
+    levels = {j: res["joints"][j]["fixed"]["run_levels"] for j in missed}
+    head = " | ".join(f"joint {j}: ΔFv [Nm s/rad] | joint {j}: ΔFc [Nm]" for j in missed)
+    rows = [f"| {name[3:]} | {levels[missed[0]][i]['start']:.0f} | "
+            + " | ".join(f"{levels[j][i]['Fv']:+.3f} | {levels[j][i]['Fc']:+.3f}" for j in missed) + " |"
+            for i, name in enumerate(runs)]
+    said = []
+    for j in missed:
+        fv = np.array([lv["Fv"] for lv in levels[j]])
+        scale = res["joints"][j]["linear_coef"][0]
+        later = lower = 0
+        for i, a in enumerate(runs):            # consecutive runs of one day, by the controller's clock
+            same = sorted((levels[j][k]["start"], k) for k, b in enumerate(runs) if b[3:11] == a[3:11])
+            if same and same[0][1] == i:
+                for (_, k0), (_, k1) in zip(same, same[1:]):
+                    later += 1
+                    lower += bool(fv[k1] < fv[k0])
+        said.append(f"- joint {j}: ΔFv above zero on {int(np.sum(fv > 0))} of {fv.size} runs, median "
+                    f"{np.median(fv):+.3f} Nm s/rad ({100 * np.median(fv) / scale:+.0f} % of the fitting run's "
+                    f"linear Fv, {scale:.3f}); of two runs of a day, the later one's lower in {lower} of {later} pairs.")
+    return [
+        "The level each validation run's friction differs by from fricli's model, in motion (ΔFv, ΔFc: the",
+        "residual's own `Fv·qd + Fc·sign(qd) + offset` on that run), for the joints that miss their target;",
+        "clock: the controller's time at the run's start [s] as the recording holds it.",
+        "",
+        f"| run | clock [s] | {head} |",
+        "|---|---|" + "---|---|" * len(missed),
+        *rows,
+        "",
+        *said,
+        "",
+        "The fitting day's friction is not the other days', and it moves within a day as well. Nothing in these",
+        "recordings (they hold no joint temperature) tells a model fitted on one day the level of another.",
+        "",
+    ]
+
+
 def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     joints = res["joints"]
     means = tab["means"]
@@ -62,6 +106,8 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         f"{_joints(beyond)} {_verb(beyond, 'stays', 'stay')} above {_verb(beyond, 'its', 'their')} target even with "
         "each day's friction level known." if beyond else "",
         "Every joint meets its target." if not day and not beyond else ""]))
+
+    level_lines = _level_lines(res, [int(j) for j in day + beyond])
 
     meaning_rows = []
     for j, r in joints.items():
@@ -278,6 +324,7 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "",
         own_text,
         "",
+        *level_lines,
         "## What diagnose finds, per joint",
         "",
         tab["diagnose"],

@@ -105,16 +105,20 @@ def torque_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
     follows: the excitation lies below 1 Hz. With the same robot model for two friction models this
     is the RMS of their friction errors; it also compares logs of different robot models. And the
     RMS in motion once each run's own Fv, Fc, offset are added, fitted on that run: what the error
-    would be if the model knew each day's friction level, which no model fitted on another day does."""
+    would be if the model knew each day's friction level, which no model fitted on another day does;
+    that level per run (``run_levels``: Fv, Fc, offset, and the controller's clock at the run's start)."""
     from scipy import signal
 
-    every, moving, fast, fast_moving, own = [], [], [], [], []
+    every, moving, fast, fast_moving, own, levels = [], [], [], [], [], []
     for path in val_logs:
         sig = signals(path, joint)
         e = logs.friction_target(sig) - pred_of(path, sig)
         mv = metrics.in_motion(sig["qd"])
         cols = linear_columns(sig)[mv]          # the run's own friction level, fitted on itself
-        own.append(e[mv] - cols @ np.linalg.lstsq(cols, e[mv], rcond=None)[0])
+        level = np.linalg.lstsq(cols, e[mv], rcond=None)[0]
+        own.append(e[mv] - cols @ level)
+        levels.append({"start": float(sig["t"][0]), "Fv": float(level[0]), "Fc": float(level[1]),
+                       "offset": float(level[2])})
         sos = signal.butter(4, FLOOR_HZ, btype="high", fs=1.0 / np.median(np.diff(sig["t"])), output="sos")
         hf = signal.sosfiltfilt(sos, e)
         every.append(e)
@@ -124,7 +128,7 @@ def torque_errors(pred_of, val_logs: list[str], joint: int) -> dict[str, float]:
     every, moving = np.concatenate(every), np.concatenate(moving)
     return {"all": rms(every), "moving": rms(moving), "rest_share": 1.0 - moving.size / every.size,
             "above_floor": rms(np.concatenate(fast)), "above_floor_moving": rms(np.concatenate(fast_moving)),
-            "own_friction_moving": rms(np.concatenate(own))}
+            "own_friction_moving": rms(np.concatenate(own)), "run_levels": levels}
 
 
 def predicted(model: str, path: str, joint: int) -> np.ndarray:
@@ -583,7 +587,9 @@ def main(argv=None) -> None:
     text = case_study_text.render(res, tables(res), shown, full=(len(res["joints"]) == 6 and res["validation_runs"] == validation_runs(args.data)))
     atomic_write_bytes(os.path.join(docs, "case-study-ur10e.md"), text.encode())
     digest = ("added", "suspected", "model_errors", "mae_before", "mae_after")
-    summary = {j: {k: ({d: v.get(d) for d in digest} if k.startswith("diagnose") else v) for k, v in r.items()
+    summary = {j: {k: ({d: v.get(d) for d in digest} if k.startswith("diagnose")
+                       else {e: x for e, x in v.items() if e != "run_levels" or k == "fixed"} if isinstance(v, dict)
+                       else v) for k, v in r.items()
                    if k != "payload_series"} for j, r in res["joints"].items()}
     calibration = {k: v for k, v in res["calibration"].items() if k != "excitation"}
     calibration["excitation"] = {k: res["calibration"]["excitation"][k] for k in ("parameters", "base_parameters")}
