@@ -352,6 +352,11 @@ def test_a_model_of_another_robot_models_torques_is_named(tmp_path, model_file):
     meta = {"provenance": {"robot_model": robot}}
     assert models.robot_model_note(meta, same) is None and models.robot_model_note({}, other) is None
     assert "(differing in rotor inertias)" in models.robot_model_note(meta, other, "m.npz")
+    # a declared payload is a load, not another robot model: the model's load terms are there to see it
+    loaded = log_with({**robot, "payload": {"mass": 2.8, "com": [0.0, 0.0, 0.0], "frame": "tool0"}}, "load.parquet")
+    assert models.robot_model_note(meta, loaded) is None
+    held = log_with({**robot, "held": ["finger"]}, "held.parquet")
+    assert "(differing in held joints)" in models.robot_model_note(meta, held)
     models.save(model_file, LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"],
                 provenance={"robot_model": robot})
     for name, warned in (("same.parquet", False), ("other.parquet", True)):

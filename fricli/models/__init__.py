@@ -114,16 +114,20 @@ def check_log(meta: dict, log, model_name: str = "model") -> None:
 
 def robot_model_note(meta: dict, log, model_name: str | None = None) -> str | None:
     """A warning when the model was fitted on a log whose tau_g and tau_dyn came from another robot
-    model (URDF, gravity, rotor inertias, payload) than ``log``'s: its friction target differs, so
-    its friction does too. None when they agree or either is unrecorded. Without ``model_name`` the
-    line is the same for every joint's model of a folder (one line for all)."""
+    model (URDF, gravity, rotor inertias, held joints) than ``log``'s: its friction target differs, so
+    its friction does too. None when they agree or either is unrecorded. A payload is no part of the
+    robot model: the load a joint carries changes from log to log, and a model's load terms are
+    there to see it. Without ``model_name`` the line is the same for every joint's model of a folder
+    (one line for all)."""
     from fricli.core import logs
 
     fitted, here = (meta.get("provenance") or {}).get("robot_model"), logs.robot_model(log.table.schema)
-    if not fitted or not here or fitted == here:
+    if not fitted or not here:
         return None
-    what = {"urdf_sha256": "URDF", "gravity": "gravity", "rotor_inertia": "rotor inertias", "payload": "payload"}
+    what = {"urdf_sha256": "URDF", "gravity": "gravity", "rotor_inertia": "rotor inertias", "held": "held joints"}
     differ = [name for key, name in what.items() if fitted.get(key) != here.get(key)]
+    if not differ:
+        return None
     who = f"{model_name}: fitted" if model_name else "the model was fitted"
     return (f"warning: {who} on tau_g and tau_dyn of another robot model than {log.name}'s (differing in "
             f"{', '.join(differ)}): the friction it learned holds what that model got wrong; import the log with the "
