@@ -844,3 +844,19 @@ def test_calibrate_needs_fix_and_a_whole_arm(arm_with_cad_errors):
     done = CliRunner().invoke(cli, ["diagnose", str(root / "linear" / "joint_2.npz"), log, "--joint", "2", "--fix",
                                     "--calibrate", str(root / "c.urdf"), "-o", str(root / "j2.npz")])
     assert done.exit_code == 2 and "whole-arm log" in done.output
+
+
+def test_a_joint_held_still_is_refused_not_diagnosed(lugre_base):
+    """A held joint's torque is whatever holds it (stiction, a push on the arm): no friction effect
+    or robot-model error can be read from it, so diagnose refuses it as identify does."""
+    from fricli.core.errors import DataError
+
+    from fricli import sim
+
+    table = sim.simulate("base", joint=2, seed=3)
+    n = table.num_rows
+    held = table.set_column(table.schema.get_field_index("q"), table.schema.field("q"),
+                            [np.full(n, 0.3) + 1e-4 * np.sin(np.arange(n))])
+    with pytest.raises(DataError, match="held still"):
+        diagnose(lugre_base, logs.from_table(held, name="held"))
+    diagnose(lugre_base, logs.from_table(table, name="moving"))     # the same log in motion is diagnosed

@@ -7,7 +7,7 @@ import dataclasses
 
 import numpy as np
 
-from fricli.core import logs
+from fricli.core import logs, metrics
 from fricli.fitting.diagnosis import effects as E
 from fricli.fitting.diagnosis import selection, structure
 from fricli.models import terms as T
@@ -128,6 +128,11 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
         raise DataError(f"too few rows to diagnose ({n}; need at least {folds * MIN_ROWS_PER_FOLD} "
                         f"for {folds} folds)")
     sig = log.signals
+    if "q" in sig and metrics.held_still(sig["q"][:, None])[0]:
+        raise DataError(f"the joint's position spans less than {metrics.HELD_SPAN:g} "
+                        f"{column_units(log.table).get('q', '')} over the whole log: it is held still, and the torque "
+                        "that holds it (stiction, a push on the arm) is no friction to diagnose; diagnose a log in "
+                        "which it moves")
     p, r = residual(model, log)
     ctx = E.Context(sig, p, log.axis, column_units(log.table), residual_ms=float(np.mean(r * r)),
                     min_gain=min_gain)
