@@ -111,6 +111,29 @@ def test_a_residual_that_holds_along_the_log_is_kept():
     assert held["adapted_rmse"] < 0.5 * held["base_rmse"]
 
 
+def test_a_robot_model_error_of_the_base_is_not_held_against_the_motion():
+    """A base fixed by diagnose with a missing inertia (a robot-model error term, which need not
+    oppose the motion) plus a steady shift of the friction level: NN_add learns the shift, and the
+    inertia term passes by the dissipative combination, which holds friction alone against the motion."""
+    from fricli.models import terms as T
+    from fricli.models.augmented import AugmentedModel
+    from fricli.models.base import predict_parts
+
+    sig = dict(drifting_log(40.0, 0.0, 1.0, np.random.default_rng(3)).signals)
+    inertia = 5.0                                   # kg m^2: up to 5 Nm along or against qd, friction 2-4 Nm
+    sig["tau_m"] = sig["tau_m"] + inertia * sig["qdd"] + 0.8 * np.sign(sig["qd"])
+    log = as_log(sig)
+    base = AugmentedModel(LinearFriction(2.0, 1.5), [], [], error_terms=[T.term("qdd", T.sig_("qdd"))],
+                          error_coef=[inertia], effects=["acceleration"], errors=["acceleration"])
+    adapted, summary = learning.adapt(base, log, epochs=30, seed=0)
+    assert summary["adapted"] is True and adapted.kind == "residual"
+    assert summary["moving"]["mae"] < 0.1 * summary["base_moving"]["mae"]       # down to the 0.05 Nm noise
+    friction, error, _ = predict_parts(adapted, sig)
+    np.testing.assert_array_equal(error, inertia * sig["qdd"])
+    moving = np.abs(sig["qd"]) >= summary["min_speed"]
+    assert np.all(friction[moving] * sig["qd"][moving] > 0)      # friction alone opposes the motion
+
+
 def speed_dependent_log(seed: int, scale: float) -> logs.Log:
     """The harmonic motion of ``drifting_log`` with its velocity times ``scale``, whose friction is
     the base's plus (qd - 0.3 sign(qd)) [Nm]: a base with too little viscous friction and too much

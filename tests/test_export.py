@@ -64,6 +64,8 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
                                              errors=["gravity", "offset", "acceleration"])
     out["augmented-gravity"] = AugmentedModel(lugre, [T.term("sign", T.SIGN)], [0.5], error_terms=ERROR_TERMS[:1],
                                               error_coef=[0.03], effects=["quadrant", "gravity"], errors=["gravity"])
+    # NN_add over a model with robot-model errors: the errors pass by the dissipative combination
+    out["residual-errors"] = fit_residual(out["augmented-errors"])
     out["augmented-dissipative"] = AugmentedModel(out["dissipative"], terms[-4:], rng.normal(size=4),
                                                   error_terms=ERROR_TERMS[:1], error_coef=[0.03], errors=["gravity"])
     return out
@@ -151,7 +153,7 @@ def _compare(model_path: str, log_path: str, tmp_path, *, cutoff: float = 50.0, 
 
 KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "dissipative", "residual",
          "residual-mlp", "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
-         "augmented-errors", "augmented-dissipative"]
+         "augmented-errors", "augmented-dissipative", "residual-errors"]
 
 
 @needs_cc
@@ -171,25 +173,25 @@ def test_export_matches_predict_on_emps(kind, emps_models, tmp_path):
 
 
 @needs_cc
-@pytest.mark.parametrize("kind", ["augmented-errors", "augmented-dissipative", "residual"])
+@pytest.mark.parametrize("kind", ["augmented-errors", "augmented-dissipative", "residual", "residual-errors"])
 def test_step_parts_gives_friction_and_model_error_apart(kind, sim_models, tmp_path):
     """PREFIX_step_parts: friction and robot-model error as ``predict_parts`` (friction alone and
     error 0 for a model without error terms); their sum is what PREFIX_step returns."""
+    from fricli.models.base import predict_parts
+
     model, _ = models.load(sim_models[kind])
     models.set_precision(model, "double")
     sig = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet"), cutoff_hz=50.0).signals
-    if hasattr(model, "predict_parts"):
-        friction, error, _ = model.predict_parts(sig)
-        assert np.max(np.abs(error)) > 0.01
-    else:
-        friction, error = model.predict(sig)[0], np.zeros(len(sig["t"]))
+    friction, error, _ = predict_parts(model, sig)
+    has_error = kind.endswith("errors") or kind.startswith("augmented")
+    assert (np.max(np.abs(error)) > 0.01) == has_error
     exe, names = _compiled(sim_models[kind], tmp_path)
     x = check.signal_matrix(sig, names)
     got_f, got_e = check.run_parts(exe, x)
     for got, ref in ((got_f, friction), (got_e, error), (got_f + got_e, check.run(exe, x))):
         assert np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))) <= 1.0
     text = c.export(sim_models[kind], "fr")
-    assert f"fr_HAS_MODEL_ERROR = {int(kind.startswith('augmented'))} }}" in text
+    assert f"fr_HAS_MODEL_ERROR = {int(has_error)} }}" in text
 
 
 @needs_cc

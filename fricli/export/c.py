@@ -206,7 +206,7 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
         raise ModelFileError("cannot export a model that reads no signal")
     units = meta.get("units", {})
     tau = units.get("tau", "Nm")
-    has_error = bool(root.parts and getattr(model, "error_terms", None))
+    has_error = bool(root.parts and _has_model_error(model))
     args = ", ".join(f"double {ctx.fields[s]}" for s in signals)
     out = [f"/* Signals of {prefix}_step, in this order (what the controller has):"]
     out += [f" *   {i}. {comment(_signal_doc(s, units))}" for i, s in enumerate(signals)]
@@ -249,6 +249,11 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
             f"    return {prefix}_step_parts(s, {', '.join(f'x[{i}]' for i in range(len(signals)))}, model_error);",
             "}"]
     return "\n".join(out) + "\n"
+
+
+def _has_model_error(model: FrictionModel) -> bool:
+    """Whether the model or a model it is made of corrects robot-model errors (error terms)."""
+    return bool(getattr(model, "error_terms", None)) or any(_has_model_error(c) for c in model.children().values())
 
 
 def _meta_block(meta: dict, model: FrictionModel, prefix: str, source: str, sha256: str) -> list[str]:

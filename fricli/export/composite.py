@@ -24,28 +24,38 @@ def _signature(name: str, fn: str, ctx: Context, stateful: bool, extra: str = ""
 @emitter("residual")
 def residual(model, name: str, ctx: Context) -> Part:
     """p = base + NN_add; ``dissipative``: tau_f = w p + (1 - w) s T softplus(s p / T),
-    s = sign(qd), w = (1 - min(|qd| / v_ps, 1)^2)^2, as ``ResidualFriction.on_base``."""
+    s = sign(qd), w = (1 - min(|qd| / v_ps, 1)^2)^2, as ``ResidualFriction.on_base``; over a base
+    with robot-model errors apart, p is the base's friction plus NN_add and the error is added after."""
     base = emit(model.base, f"{name}_base", ctx)
     add = emit(model.add, f"{name}_add", ctx)
     code = [base.code, add.code]
     if base.stateful:
         code += _state(name, [f"{base.name}_state base"])
         code += [f"static inline void {name}_init({name}_state *s) {{ {base.init('&s->base')} }}", ""]
-    code.append(_signature(name, "step", ctx, base.stateful))
+    # a base with robot-model errors apart (augmented): NN_add and the combination act on its friction
+    friction = base.step_parts("&s->base", "error") if base.parts else base.step("&s->base")
     if model.combine == "additive":
-        code += [f"    return {base.step('&s->base')} + {add.step()};", "}", ""]
+        body = [f"    return {friction} + {add.step()};"]
     else:
         qd, width = ctx.signal("qd"), num(model.width_)
-        code += [f"    const double p = {base.step('&s->base')} + {add.step()};",
-                 f"    const double sg = {ctx.sgn}({qd});",
-                 f"    double w = fabs({qd}) / {num(model.v_ps_)}, x, m;",
-                 "    w = w < 1.0 ? w : 1.0;",
-                 "    w = 1.0 - w * w;",
-                 "    w = w * w;",
-                 f"    x = sg * p / {width};",
-                 f"    m = {width} * ((x > 0.0 ? x : 0.0) + log1p(exp(-fabs(x))));   /* T softplus(s p / T) */",
-                 "    return w * p + (1.0 - w) * sg * m;", "}", ""]
-    return Part(name, "\n".join(code), stateful=base.stateful)
+        body = [f"    const double p = {friction} + {add.step()};",
+                f"    const double sg = {ctx.sgn}({qd});",
+                f"    double w = fabs({qd}) / {num(model.v_ps_)}, x, m;",
+                "    w = w < 1.0 ? w : 1.0;",
+                "    w = 1.0 - w * w;",
+                "    w = w * w;",
+                f"    x = sg * p / {width};",
+                f"    m = {width} * ((x > 0.0 ? x : 0.0) + log1p(exp(-fabs(x))));   /* T softplus(s p / T) */",
+                "    return w * p + (1.0 - w) * sg * m;"]
+    part = Part(name, "", stateful=base.stateful, parts=base.parts)
+    if base.parts:
+        code += [_signature(name, "step_parts", ctx, base.stateful, ", double *error"), *body, "}", "",
+                 _signature(name, "step", ctx, base.stateful), "    double err;",
+                 f"    const double f = {part.step_parts('s', '&err')};", "    return f + err;", "}", ""]
+    else:
+        code += [_signature(name, "step", ctx, base.stateful), *body, "}", ""]
+    part.code = "\n".join(code)
+    return part
 
 
 @emitter("augmented")
@@ -61,7 +71,12 @@ def augmented(model, name: str, ctx: Context) -> Part:
     fields += ["double gear  /* tau_g at the last moving sample [Nm] */"] if held_gear else []
     stateful = bool(fields)
     code = [base.code]
-    body = [f"    const double p = {base.step('&s->base')};", "    double v, acc = 0.0, err = 0.0;"]
+    if base.parts:   # the base's own robot-model error stays apart from its friction
+        body = ["    double base_err;", f"    const double pf = {base.step_parts('&s->base', '&base_err')};",
+                "    const double p = pf + base_err;", "    double v, acc = 0.0, err = base_err;"]
+    else:
+        body = [f"    const double p = {base.step('&s->base')};", "    const double pf = p;",
+                "    double v, acc = 0.0, err = 0.0;"]
     if held_dir or held_gear:
         qd = ctx.signal("qd")
         updates = ([f"s->dir = {ctx.sgn}({qd});"] if held_dir else []) + (
@@ -72,7 +87,7 @@ def augmented(model, name: str, ctx: Context) -> Part:
     for terms, coef, sum_ in ((model.terms, model.coef, "acc"), (model.error_terms, model.error_coef, "err")):
         for spec, c in zip(terms, coef):
             body += [f"    /* {comment(spec['name'])} */", f"    {T.term(spec, ctx)}", f"    {sum_} += {num(c)} * v;"]
-    body += ["    (void)v;", "    *error = err;", "    return p + acc;"]
+    body += ["    (void)v;", "    *error = err;", "    return pf + acc;"]
     if stateful:
         inits = ([base.init("&s->base")] if base.stateful else []) + (["s->dir = 0.0;"] if held_dir else []) + (
             ["s->gear = 0.0;"] if held_gear else [])

@@ -13,7 +13,7 @@ from fricli.fitting import training_data
 from fricli.fitting.identify import steady_state_mask
 from fricli.core.envelope import share_outside
 from fricli.core.errors import DataError, FitError
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, predict_parts
 from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
@@ -457,9 +457,10 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     hidden = (hidden,) if isinstance(hidden, int) else tuple(hidden)   # NN_add's layer widths
     model = ResidualFriction(base, hidden_sizes=hidden, epochs=epochs, batch_size=batch_size, lr=lr,
                              min_speed=float(min_speed), units=log.units)
-    base_pred = base.predict(sig)[0]
+    base_friction, base_error, _ = predict_parts(base, sig)   # robot-model errors are not held against the motion
+    base_pred = base_friction + base_error
     model.fit(sig, target, sel.train, sel.val, rng=rng, on_eval=on_eval, base_pred=base_pred)
-    pred = model.on_base(sig, base_pred)
+    pred = model.on_base(sig, base_friction) + base_error
     moving_rows = np.flatnonzero(moving)
     summary = {**sel.summary(), "rows_used": int(len(qd)), "seconds_used": float(sig["t"][-1] - sig["t"][0]),
                "min_speed": float(min_speed), "epochs": epochs, "batch_size": batch_size,
@@ -475,7 +476,7 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
             fold = ResidualFriction(base, hidden_sizes=hidden, epochs=epochs, batch_size=batch_size, lr=lr,
                                     min_speed=float(min_speed), units=log.units)
             fold.fit(sig, target, train, train[:0], rng=rng, base_pred=base_pred)
-            return fold.on_base(sig, base_pred)
+            return fold.on_base(sig, base_friction) + base_error
 
         held = cross_validate(fit_predict, sel.blocks, target, base_pred, speed=np.abs(qd))
         summary["held_out"] = held

@@ -24,7 +24,7 @@ import numpy as np
 
 from fricli.models import register
 from fricli.models import terms as T
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, predict_parts
 
 
 @register
@@ -51,13 +51,12 @@ class AugmentedModel(FrictionModel):
     def predict_parts(self, signals: dict[str, np.ndarray], state: Any = None):
         """(friction (n,), robot-model error (n,), state) [Nm]; their sum is ``predict``."""
         base_state, direction = (None, None) if state is None else state
-        p, base_state = self.base.predict(signals, base_state)
-        p = np.asarray(p, dtype=np.float64)
+        base_friction, base_error, base_state = predict_parts(self.base, signals, base_state)
         if not self.terms and not self.error_terms:
-            return p, np.zeros_like(p), (base_state, direction)
-        cols = T.Columns(signals, p, direction)
-        friction = p + cols.combination(self.terms, self.coef)
-        error = cols.combination(self.error_terms, self.error_coef)
+            return base_friction, base_error, (base_state, direction)
+        cols = T.Columns(signals, base_friction + base_error, direction)
+        friction = base_friction + cols.combination(self.terms, self.coef)
+        error = base_error + cols.combination(self.error_terms, self.error_coef)
         return friction, error, (base_state, cols.state)
 
     def predict(self, signals: dict[str, np.ndarray], state: Any = None) -> tuple[np.ndarray, Any]:

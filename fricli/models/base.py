@@ -45,3 +45,15 @@ class FrictionModel:
 
     def __call__(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         return self.predict(signals)[0]
+
+
+def predict_parts(model: FrictionModel, signals: dict[str, np.ndarray], state: Any = None):
+    """(friction (n,), robot-model error (n,), state) [Nm] of any model: its own ``predict_parts``
+    where it keeps robot-model errors apart (``AugmentedModel``, and a model over one), else its
+    prediction as friction and no error."""
+    own = getattr(model, "predict_parts", None)
+    if own is not None:
+        return own(signals, state)
+    tau, state = model.predict(signals, state)
+    tau = np.asarray(tau, dtype=np.float64)
+    return tau, np.zeros_like(tau), state

@@ -23,6 +23,10 @@ velocity covers. Two ways to combine them (``combine``):
                  joint whose motor turns with another joint has friction along its own motion
                  whenever that motor turns against it.
 
+A base that keeps robot-model errors apart from its friction (``fricli.models.augmented``: a
+missing inertia, an offset) has them added after the combination, as they are: only friction
+is held against the motion.
+
 Both parts are children in the model file ("base/...", "add/..."); the base may be of any kind,
 with its own state (e.g. the LuGre bristles), which ``predict`` carries across batches.
 """
@@ -34,7 +38,7 @@ from typing import Callable
 import numpy as np
 
 from fricli.models import register
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, predict_parts
 from fricli.models.neural import MLPFriction
 from fricli.numerics.nn.activations import softplus
 
@@ -98,11 +102,18 @@ class ResidualFriction(FrictionModel):
 
     def predict(self, signals: dict[str, np.ndarray], state=None):
         """tau_f (n,) [Nm] (see the module's formulas); the state is the base's."""
-        tau, state = self.base.predict(signals, state)
-        return self.on_base(signals, tau), state
+        friction, error, state = self.predict_parts(signals, state)
+        return friction + error, state
+
+    def predict_parts(self, signals: dict[str, np.ndarray], state=None):
+        """(friction (n,), robot-model error (n,), state) [Nm]. NN_add and the dissipative form act on
+        the base's friction; the robot-model error terms a base keeps apart (a missing inertia, an
+        offset, ``fricli.models.augmented``) pass through as they are: they need not oppose the motion."""
+        friction, error, state = predict_parts(self.base, signals, state)
+        return self.on_base(signals, friction), error, state
 
     def on_base(self, signals: dict[str, np.ndarray], tau: np.ndarray) -> np.ndarray:
-        """tau_f (n,) [Nm] given the base's prediction ``tau`` (n,) over the same rows."""
+        """The friction (n,) [Nm] given the base's friction ``tau`` (n,) over the same rows."""
         p = tau + self.add.predict(signals)[0]
         if self.combine == "additive":
             return p
