@@ -75,6 +75,26 @@ def test_a_negative_mass_is_a_robot_model_error_and_a_loose_one_is_not_declared(
     assert lines[1].startswith("not determined:") and not any(line.startswith("declare it") for line in lines)
 
 
+def test_a_negative_mass_whose_centre_of_mass_is_loose_is_undetermined_not_a_robot_model_error():
+    """One joint moving, the others held (a UR10e jointwise run): a mass far below zero, many standard
+    errors, traded against a centre of mass the log leaves loose. No robot-model error of that size
+    is shown; the verdict is undetermined, and nothing is declared or blamed on the robot model."""
+    from fricli.cli.payload import summary
+
+    def found(mass, stderr):
+        return payload.IdentifiedPayload(frame="tool0", mass=mass, com=np.array([0.0, 1.30, 0.16]),
+                                         stderr=np.array(stderr), rows=5934, joints=[1, 2], rms_without=np.ones(2),
+                                         rms_with=np.ones(2), friction=np.zeros((2, 3)), held=[1])
+
+    loose = found(-4935.0, [120.0, 5e-6, 7e-6, 0.26])
+    assert loose.verdict == "undetermined"
+    lines = summary(loose)
+    assert lines[1].startswith("not determined:") and not any("robot-model error" in line for line in lines)
+    assert found(-0.7, [0.05, 0.01, 0.01, 0.01]).verdict == "negative"
+    assert found(-0.1, [0.05, 0.01, 0.01, 0.01]).verdict == "none"
+    assert found(2.5, [0.05, 0.01, 0.01, 0.01]).verdict == "payload"
+
+
 def test_the_printed_declaration_reproduces_the_torques(tmp_path):
     """fricli dynamics -> fricli payload (the URDF recorded in the log) -> the printed import options:
     the log's robot model with that payload gives the true torques."""

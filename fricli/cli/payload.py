@@ -49,7 +49,7 @@ def summary(found) -> list[str]:
 
     m, (sm, *sc) = found.mass, found.stderr
     verdict = found.verdict
-    if found.detected:
+    if verdict in ("payload", "undetermined"):
         com = ", ".join(f"{c:.4f}" for c in found.com)
         err = ", ".join(f"{s:.2g}" for s in sc)
         lines = [f"payload at {found.frame} on {found.rows:,} rows: mass {m:.4g} kg (standard error {sm:.2g}), "

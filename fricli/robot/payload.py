@@ -53,16 +53,16 @@ class IdentifiedPayload:
 
     @property
     def verdict(self) -> str:
-        """"payload" (detected and determined: declare it), "undetermined" (detected, but its mass
-        or centre of mass is not pinned down), "none" (within SIGNIFICANCE standard errors of
-        zero) or "negative" (below: no payload does that; the robot model is off)."""
-        if self.mass < -SIGNIFICANCE * self.stderr[0]:
-            return "negative"
-        if not self.detected:
+        """"payload" (detected and determined: declare it), "undetermined" (a mass beyond
+        SIGNIFICANCE standard errors of zero, either sign, whose mass or centre of mass is not
+        pinned down: the two trade against each other), "none" (within SIGNIFICANCE standard
+        errors of zero) or "negative" (determined and below zero: no payload does that; the robot
+        model is off)."""
+        if abs(self.mass) <= SIGNIFICANCE * self.stderr[0]:
             return "none"
-        if self.stderr[0] > DETERMINED_MASS * self.mass or (self.stderr[1:] > DETERMINED_COM).any():
+        if self.stderr[0] > DETERMINED_MASS * abs(self.mass) or (self.stderr[1:] > DETERMINED_COM).any():
             return "undetermined"
-        return "payload"
+        return "negative" if self.mass < 0 else "payload"
 
     def report(self) -> dict:
         return {"frame": self.frame, "detected": self.detected, "verdict": self.verdict, "mass": self.mass, "com": [float(v) for v in self.com],
