@@ -58,13 +58,36 @@ def test_seconds_bound_and_an_empty_window(tmp_path):
     t = logs.load_log(BASE).signals["t"]
     assert json.loads(res.stdout)["results"][0]["friction"]["n"] == ((t >= 100) & (t < 150.5)).sum()
     res = invoke("identify", BASE, "-o", tmp_path / "x.npz", "--from", 1e6)
-    assert res.exit_code == errors.DATA and "no rows from 1e+06 s until the end" in res.stderr
+    assert res.exit_code == errors.DATA and "no rows from 1000000 s until the end" in res.stderr
     assert not (tmp_path / "x.npz").exists()
     res = invoke("predict", _lugre(tmp_path), BASE, "-o", tmp_path / "p.parquet", "--until", "-5")
     assert res.exit_code == errors.DATA and not (tmp_path / "p.parquet").exists()
     for bad in ("abc", "101%", "-3%", "nan"):
         res = invoke("identify", BASE, "-o", tmp_path / "x.npz", "--from", bad)
         assert res.exit_code == errors.USAGE and "--from" in res.stderr, bad
+
+
+def test_a_bound_outside_an_epoch_clock_is_named_and_times_keep_their_seconds(tmp_path):
+    """A controller's clock counts from 1970 (t = 1.714e9 s): --from 10, meant from the start, lies
+    before the log and cuts nothing, which the command says; an empty window names the log's span
+    to the millisecond, not as 1.714e+09 to 1.714e+09."""
+    table = make_table(3000)
+    t = table.column("t").to_numpy() + 1714000000.0
+    table = table.set_column(table.schema.get_field_index("t"), table.schema.field("t"), [t])
+    log = write(table, tmp_path / "epoch.parquet")
+    model = tmp_path / "m.npz"
+    res = invoke("identify", log, "-o", model, "--kind", "linear", "--from", 10, "-q")
+    assert res.exit_code == 0, res.output
+    assert "note: --from 10 s lies before the log's first time, t = 1714000000 s, and cuts nothing" in res.stderr
+    res = invoke("predict", model, log, "-o", tmp_path / "p.parquet", "--until", "60%", "-q")
+    assert res.exit_code == 0 and "cuts nothing" not in res.stderr, res.output
+    res = invoke("predict", model, log, "-o", tmp_path / "p.parquet", "--until", 1e10, "-q")
+    assert res.exit_code == 0 and "--until 10000000000 s lies after the log's last time" in res.stderr, res.output
+    res = invoke("identify", log, "-o", model, "--until", 30)
+    last = timewindow.seconds_text(float(t[-1]))
+    assert res.exit_code == errors.DATA and f"(the log's t runs 1714000000 to {last} s)" in res.stderr, res.stderr
+    assert "." in last and "e+" not in last
+    assert timewindow.seconds_text(59.9) == "59.9" and timewindow.seconds_text(1714000059.9) == "1714000059.9"
 
 
 def _lugre(tmp_path) -> str:

@@ -273,7 +273,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
     joint, window, batch_rows = reading.joint, reading.window, reading.batch_rows
     pf, name = open_log(log_path)
     logs.require_robot_model(pf.schema_arrow, name, reading.zero)
-    limits = timewindow.limits_of_file(pf, window, name) if window else None
+    limits = timewindow.limits_of_file(pf, window, name, warn=warn) if window else None
     found = file_joints(pf, name)
     streams = {}
     for j, path in joints.pair(source, found, joint, name):

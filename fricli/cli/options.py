@@ -238,7 +238,7 @@ def read_log(log: str):
     from fricli.core import logs
 
     table, digest = logs.read_table(log)
-    return timewindow.slice_table(table, time_window(), "stdin" if log == "-" else log), digest
+    return timewindow.slice_table(table, time_window(), "stdin" if log == "-" else log, warn=warn), digest
 
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:

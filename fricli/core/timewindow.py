@@ -20,6 +20,14 @@ from fricli.core.errors import DataError
 pa = lazy.module("pyarrow")
 
 
+def seconds_text(x: float) -> str:
+    """A time [s] with its milliseconds however large it is (a Unix-epoch clock, 1.7e9 s, reads
+    1714000059.9, not 1.714e+09), and as short as ``:g`` otherwise."""
+    if not np.isfinite(x) or x == 0:
+        return f"{x:g}"
+    return f"{x:.{max(6, int(np.floor(np.log10(abs(x)))) + 4)}g}"
+
+
 @dataclasses.dataclass(frozen=True)
 class Bound:
     """One end of a window: ``value`` seconds of ``t``, or ``value`` percent of the time span."""
@@ -45,7 +53,7 @@ class Bound:
         return first + self.value / 100.0 * (last - first) if self.percent else self.value
 
     def __str__(self) -> str:
-        return f"{self.value:g}%" if self.percent else f"{self.value:g} s"
+        return f"{self.value:g}%" if self.percent else f"{seconds_text(self.value)} s"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -62,6 +70,23 @@ class Window:
         """As recorded in a model's provenance: the bounds as given ("60%", "12.5 s") or None."""
         return {"from": None if self.start is None else str(self.start),
                 "until": None if self.stop is None else str(self.stop)}
+
+    def cutting_nothing(self, t: np.ndarray) -> list[str]:
+        """Notes on the bounds given in seconds that lie outside the span of ``t`` (n,) [s], so cut
+        nothing: seconds counted from the log's start, on a log whose clock does not start at 0."""
+        finite = t[np.isfinite(t)]
+        if not finite.size:
+            return []
+        first, last = float(finite.min()), float(finite.max())
+        notes = []
+        for option, bound, outside, end, edge in (("--from", self.start, "before", "first", first),
+                                                  ("--until", self.stop, "after", "last", last)):
+            if bound is not None and not bound.percent and (bound.value < first if end == "first" else bound.value > last):
+                notes.append(f"note: {option} {bound} lies {outside} the log's {end} time, t = {seconds_text(edge)} s, "
+                             "and cuts nothing: bounds are seconds of the log's own t (from "
+                             f"{seconds_text(first)} to {seconds_text(last)} s here) or a share of its span "
+                             f"({option} 60%)")
+        return notes
 
     def limits(self, t: np.ndarray) -> tuple[float, float]:
         """(lo, hi) [s] for a log whose times are ``t`` (n,) [s]: the rows lo <= t < hi."""
@@ -95,9 +120,9 @@ def rows(t: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return ~((t < lo) | (t >= hi))
 
 
-def slice_table(table: pa.Table, window: Window | None, name: str = "log") -> pa.Table:
+def slice_table(table: pa.Table, window: Window | None, name: str = "log", warn=None) -> pa.Table:
     """The rows of a log table in ``window`` (the whole table for None or an open window).
-    DataError when the window holds no row."""
+    DataError when the window holds no row; ``warn(line)`` is told of a bound that cuts nothing."""
     if not window:
         return table
     t = times(table)
@@ -106,21 +131,27 @@ def slice_table(table: pa.Table, window: Window | None, name: str = "log") -> pa
     lo, hi = window.limits(t)
     keep = rows(t, lo, hi)
     if not (keep & np.isfinite(t)).any():
-        span = f"{np.nanmin(t):g} to {np.nanmax(t):g} s" if np.isfinite(t).any() else "no times"
+        span = (f"{seconds_text(np.nanmin(t))} to {seconds_text(np.nanmax(t))} s" if np.isfinite(t).any()
+                else "no times")
         raise DataError(f"{name}: no rows from {window.start or 'the start'} until {window.stop or 'the end'} "
                         f"(the log's t runs {span})")
+    for note in window.cutting_nothing(t) if warn else ():
+        warn(note)
     return table if keep.all() else logs.take_rows(table, keep)
 
 
-def limits_of_file(pf, window: Window, name: str = "log") -> tuple[float, float]:
+def limits_of_file(pf, window: Window, name: str = "log", warn=None) -> tuple[float, float]:
     """(lo, hi) [s] of ``window`` over a Parquet file read in batches (``pq.ParquetFile``): its
-    ``t`` column alone is read for the time span. DataError when the window holds no row."""
+    ``t`` column alone is read for the time span. DataError when the window holds no row;
+    ``warn(line)`` is told of a bound that cuts nothing."""
     t = times(pf.read(columns=["t"], use_threads=False)) if "t" in pf.schema_arrow.names else None
     if t is None:
         return -np.inf, np.inf
     lo, hi = window.limits(t)
     if not (rows(t, lo, hi) & np.isfinite(t)).any():
         slice_table(pa.table({"t": t}), window, name)   # raises the same DataError
+    for note in window.cutting_nothing(t) if warn else ():
+        warn(note)
     return lo, hi
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from fricli.core import logs
 from fricli.core.errors import LogError
+from fricli.core.timewindow import seconds_text
 from fricli.robot.mapping import Mapping
 
 KINDS = {
@@ -162,8 +163,8 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     if back and not drop_backward:
         at = int(np.flatnonzero(kinds == "backward_time")[0])
         latest = t[:at][kinds[:at] == ""].max()
-        raise LogError(f"{name}: time goes back at {unit} {numbers[at]} (t = {t[at] - shown_from:g} after "
-                       f"{latest - shown_from:g}; "
+        raise LogError(f"{name}: time goes back at {unit} {numbers[at]} (t = {seconds_text(t[at] - shown_from)} after "
+                       f"{seconds_text(latest - shown_from)}; "
                        f"{back.count} {unit}{'s' if back.count != 1 else ''} before the latest time): use "
                        "--drop-backward to drop them")
     return kinds == "", defects
