@@ -423,3 +423,8 @@ def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path)
     still = [{"q": np.full(n, 0.3), "tau_m": tau[:, k]} for k in range(4)]
     assert robot_terms(cad, mapping, t, still, "rotary")["derived"] == {
         "columns": {"qd": [1, 2, 3, 4], "qdd": [1, 2, 3, 4]}, "cutoff_hz": 50.0, "filtered": True}
+    # a recording too short for any low-pass (fewer than 16 rows): every cut-off derives the same,
+    # so none is chosen, and the log says no low-pass applied
+    short = [{"q": q[:5, k], "tau_m": tau[:5, k]} for k in range(4)]
+    assert robot_terms(cad, mapping, t[:5], short, "rotary")["derived"] == {
+        "columns": {"qd": [1, 2, 3, 4], "qdd": [1, 2, 3, 4]}, "cutoff_hz": 50.0, "filtered": False}

@@ -123,7 +123,7 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
     ``CHOICE_ROWS`` rows; the geometric mean over the joints decides. Too low a cut-off takes
     acceleration the arm has out of tau_dyn, too high a one puts in what differentiation makes of
     encoder steps and of vibration the torque does not carry. None when nothing is derived or no joint
-    moves."""
+    moves, or when the log is too short for any low-pass to apply (``logs.lowpass_applies``)."""
     from fricli.core import metrics
 
     if all("qd" in sig and "qdd" in sig for sig in per_joint):
@@ -131,6 +131,8 @@ def choose_cutoff(model, mapping: Mapping, order: list[int], t: np.ndarray, per_
     if not all("tau_m" in sig for sig in per_joint):
         raise LogError("--cutoff auto chooses the cut-off by how well the robot model explains the joint torque: "
                        "map tau_m (or i_m with its kt) for every joint, or give the cut-off in Hz")
+    if not logs.lowpass_applies(t, CUTOFF_GRID[0]):    # too few rows to filter: every cut-off is the same
+        return None
     nyquist = 0.5 / float(np.median(np.diff(t)))
     grid = [c for c in CUTOFF_GRID if c < nyquist * (1 - 1e-6)] + [nyquist]
     rows = np.unique(np.linspace(0, len(t) - 1, min(len(t), CHOICE_ROWS)).astype(np.int64))
