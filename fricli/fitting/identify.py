@@ -443,11 +443,13 @@ class LuGreIdentifier:
         stages = fit["stages"]
         joint = stages.get("joint", {})
         bounds = joint["at_bounds"] if "at_bounds" in joint else stages["static"]["at_bounds"]
-        tail = TAIL * math.sqrt(2 * math.log(max(fit["n"], 2))) * fit["rmse"]
-        if bounds and fit["max"] > tail:
+        # on the static-curve rows: at reversals the jump of the friction sign leaves errors of 2 Fc in any fit
+        curve = fit["steady"]
+        tail = TAIL * math.sqrt(2 * math.log(max(curve["n"], 2))) * curve["rmse"]
+        if bounds and curve["max"] > tail:
             which = " and ".join(_BOUND_TEXT[name][side] for name, side in bounds.items())
-            out.append(f"{which} (at the bound of the fit) with a max error of {fit['max']:.3g} {tau}, "
-                       f"{fit['max'] / fit['rmse']:.0f} times the RMS error: the static curve cannot follow some "
+            out.append(f"{which} (at the bound of the fit) with a max error of {curve['max']:.3g} {tau} on the "
+                       f"static-curve rows, {curve['max'] / curve['rmse']:.0f} times their RMS error: the static curve cannot follow some "
                        "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
                        "settled, --drop-invalid for bad rows, or a model kind with the missing effect")
         speed = np.abs(signals["qd"][steady])
