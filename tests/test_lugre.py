@@ -655,3 +655,17 @@ def test_a_solver_step_far_up_in_log_space_gives_a_model_it_rejects_not_an_overf
     assert p["vs"] == math.exp(700.0)
     y = LuGreModel(**p).steady_state(np.array([-0.5, 0.5]), None)
     assert y.shape == (2,)
+
+
+def test_a_solver_step_far_down_in_log_space_keeps_a_positive_parameter():
+    """trf may also try log(vs) of -800 (identify on a simulated 7-joint arm's wrist did): exp(-800)
+    is 0, which no LuGre model takes, and the fit failed ("vs, delta and sigma0 must be positive")."""
+    from fricli.fitting.identify import _Layout
+
+    layout = _Layout(stribeck=True, load=False)
+    x = layout.encode(dict(TRUE, kc=0.0, ks=0.0))
+    for name in ("vs", "delta", "fc"):
+        x[layout.names.index(name)] = -800.0
+    p = layout.decode(x, {"sigma0": 1.0, "sigma1": 0.0})
+    assert p["vs"] == p["delta"] == p["fc"] == math.exp(-700.0) > 0
+    assert np.isfinite(LuGreModel(**p).steady_state(np.array([-0.5, 0.5]), None)).all()

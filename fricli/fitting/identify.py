@@ -178,9 +178,10 @@ class _Layout:
     def decode(self, x: np.ndarray, fixed: dict) -> dict:
         p = dict(fixed)
         for k, xi in zip(self.names, x):
-            # a trial step of the solver can go far up in log-space: 1e304 gives residuals it rejects
-            # (non-finite ones shrink its trust region), where exp(710) would raise
-            p[k] = math.exp(min(xi, 700.0)) if k in self._LOG else float(xi)
+            # a trial step of the solver can go far up or down in log-space: 1e304 gives residuals it
+            # rejects (non-finite ones shrink its trust region), where exp(710) would raise, and 1e-304
+            # keeps the parameter positive, where exp(-750) would be 0, which no LuGre model takes
+            p[k] = math.exp(min(max(xi, -700.0), 700.0)) if k in self._LOG else float(xi)
         if self.stribeck:
             p["fs"] = p["fc"] + p["fs"]
         if not self.stribeck:
