@@ -110,6 +110,15 @@ def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
     assert [(r["robot"], r["joint"]) for r in history_rows(folder)] == [
         ("robot001", "1"), ("robot001", "2"), ("robot002", "1"), ("robot002", "2")]
 
+    # a history part damaged (a disk full, a copy cut short): the run says so, once
+    part = sorted((folder / "history" / "robot=robot002").glob("*.parquet"))[0]
+    kept = part.read_bytes()
+    part.write_bytes(kept[: len(kept) // 2])
+    fifth = fricli("fleet", "fleet.toml", cwd=folder)
+    assert fifth.returncode == errors.OK, fifth.stderr
+    assert f"warning: {part}: cannot read this part of the history" in fifth.stderr, fifth.stderr
+    part.write_bytes(kept)
+
     bad = folder / "robot002/joint2/2026-01-01.parquet"
     bad.write_bytes(b"PAR1 this is not a parquet file")
     third = fricli("fleet", "fleet.toml", cwd=folder)
@@ -237,6 +246,12 @@ def test_trend_flags_the_wearing_joint_only(tmp_path, rng):
     worn = next(t for t in result if t.flagged)
     assert worn.level["fc"] == pytest.approx(0.02 * 18, abs=0.05)   # 19 days of 2 %/day from day 10, median of 3
     assert worn.growth["fc"] == pytest.approx(0.02, abs=0.004)
+    growing = next(r for r in worn.reasons if "growing" in r)   # the days measured, its figure not rounded to the limit
+    assert growing == f"fc growing {100 * worn.growth['fc']:.3g} %/day over the last 14 days (limit 1 %/day)"
+    # a history of 12 days: the growth is measured over those, not over the 14 days of the window
+    synthetic_history(tmp_path / "short", rng, days=12, onset=0)
+    short = next(t for t in trend.trends(history.read(str(tmp_path / "short"))) if t.flagged)
+    assert [r for r in short.reasons if "growing" in r][0].endswith(" %/day over the last 12 days (limit 1 %/day)")
 
 
 def test_trend_history_keeps_units_and_reads_as_a_plain_parquet_dataset(tmp_path, rng):
@@ -333,6 +348,40 @@ def test_a_wrong_manifest_option_is_one_line_naming_robot_key_and_expectation(tm
     assert str(info.value).startswith(f"{tmp_path / 'm.toml'}: robot r7: ") and needle in str(info.value)
     res = invoke("fleet", "m.toml", cwd=tmp_path)
     assert res.returncode == errors.NOTHING_RAN and len(res.stderr.splitlines()) == 1 and needle in res.stderr
+
+
+@pytest.mark.parametrize("text, needle", [
+    ('[fleet]\nhistroy = "h"\n', "[fleet]: unknown key 'histroy' (use diagnose, history, models, pipeline)"),
+    ("[options.identfy]\nhold = 0.5\n", "[options]: unknown pipeline 'identfy' (use identify, train-base, adapt)"),
+    ('[default]\nlogs = "logs/*.parquet"\n', "unknown table 'default' (use [fleet], [defaults]"),
+    ("", "robot r7: joint 2 is listed twice in joints"),
+])
+def test_a_misspelt_manifest_name_or_a_joint_twice_stops_the_run(tmp_path, text, needle):
+    """Names outside [[robot]] are checked as a robot's keys are: a misspelt one would be ignored
+    (the history written elsewhere, an option not applied) and the run would say ok."""
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "2026-05-04.parquet").write_bytes(b"")
+    joints = "[1, 2, 2]" if not text else "[1]"
+    (tmp_path / "m.toml").write_text(f'{text}\n[[robot]]\nname = "r7"\nlogs = "logs/*.parquet"\njoints = {joints}\n')
+    with pytest.raises(manifest.ManifestError) as info:
+        manifest.load(str(tmp_path / "m.toml"))
+    assert needle in str(info.value)
+    res = invoke("fleet", "m.toml", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and len(res.stderr.splitlines()) == 1 and needle in res.stderr
+
+
+def test_a_robot_joint_without_logs_is_named(tmp_path):
+    (tmp_path / "r1").mkdir()
+    (tmp_path / "r1" / "2026-05-04-j1.parquet").write_bytes(b"")
+    (tmp_path / "m.toml").write_text('[defaults]\nlogs = "{robot}/*-j{joint}.parquet"\njoints = [1, 2]\n\n'
+                                     '[[robot]]\nname = "r1"\n\n[[robot]]\nname = "r2"\n')
+    m = manifest.load(str(tmp_path / "m.toml"))
+    assert [(j.robot, j.joint) for j in m.jobs] == [("r1", "1")]
+    assert m.unmatched == ("robot r1 joint 2: no log matches r1/*-j2.parquet",
+                           "robot r2 joint 1: no log matches r2/*-j1.parquet",
+                           "robot r2 joint 2: no log matches r2/*-j2.parquet")
+    res = invoke("fleet", "m.toml", "--list", cwd=tmp_path)
+    assert res.returncode == 0 and "warning: robot r2 joint 1: no log matches r2/*-j1.parquet" in res.stderr
 
 
 # A fleet job and the command make the same model from the same log and options: every pipeline,

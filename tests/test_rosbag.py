@@ -316,6 +316,18 @@ kt = 8.0
     _, log = bag_log(path, parse_bag_mapping(tomllib.loads(motor)))
     assert log.table.column_names == ["t", "joint", "q", "qd", "tau_m"]
     np.testing.assert_array_equal(log.table.column("tau_m").to_numpy(), 100.0 * effort[:, 2])
+    # a current on one joint, a motor torque on the other (docs/robot-import.md's example): tau_m
+    # holds both; the current is no column of one joint only
+    mixed = currents.split("[[joints]]\nname = \"joint_5\"")[0] + motor
+    _, log = bag_log(path, parse_bag_mapping(tomllib.loads(mixed)))
+    assert log.table.column_names == ["t", "joint", "q", "qd", "tau_m"] and log.meta["i_m_left_out"] == ["joint_2"]
+    np.testing.assert_array_equal(log.table.column("tau_m").to_numpy(),
+                                  np.concatenate([4.0 * effort[:, 1], 100.0 * effort[:, 2]]))
+    (tmp_path / "mixed.toml").write_text(mixed)
+    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--mapping", "mixed.toml", "-o", "m.parquet"],
+                         cwd=tmp_path, capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 0 and res.stderr.startswith("note: run: the effort of joint joint_2 is a current and of "
+                                                         "the others not"), res.stderr
     with pytest.raises(errors.LogError, match="kt applies to effort"):
         parse_bag_mapping(tomllib.loads('[[joints]]\nname = "a"\nkt = 2.0\n'))
     with pytest.raises(errors.LogError, match="needs gear_ratio"):

@@ -40,6 +40,8 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
     from fricli.fleet import run
 
     m = mf.load(manifest)
+    for line in m.unmatched:     # a robot dropping out of a nightly run must not go unnoticed
+        warn(f"warning: {line}")
     if list_only:
         for job in m.jobs:
             click.echo(f"{job.robot}\t{job.joint}\t{job.date}\t{job.pipeline}\t{job.log}\t{job.model}")
@@ -69,6 +71,8 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
                             for j, r in zip(outcome.jobs, outcome.results)]})
     else:
         click.echo(run.table(outcome))
+    for line in outcome.warnings:
+        warn(line)
     for job, res in zip(outcome.jobs, outcome.results):
         for line in res.get("warnings", []):
             warn(f"warning: {job.robot} joint {job.joint or '-'} {job.date}: {line}")

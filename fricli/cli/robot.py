@@ -234,6 +234,10 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the time "
              "column's unit in the mapping (s or ms; a scale for other units, e.g. 1e-9 for ns)")
+    if result.meta["i_m_left_out"]:
+        left = result.meta['i_m_left_out']
+        say(f"note: {name}: the effort of joint{'s' if len(left) > 1 else ''} {', '.join(left)} is a current and of the "
+            "others not: tau_m holds each joint's torque, and the log has no i_m column", quiet)
     if result.meta["unterminated_last_line"]:
         say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
             "complete and kept", quiet)

@@ -35,6 +35,8 @@ from fricli.fitting import optionspec
 from fricli.core.errors import FricliError, NOTHING_RAN
 
 PIPELINES = ("identify", "train-base", "adapt")
+_TABLES = {"fleet", "defaults", "options", "robot"}
+_FLEET_KEYS = {"history", "models", "pipeline", "diagnose"}
 _ROBOT_KEYS = {"name", "logs", "joints", "pipeline", "base", "options", "diagnose"}
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
 _DATE = re.compile(r"(\d{4})-(\d{2})-(\d{2})")
@@ -70,6 +72,7 @@ class Manifest:
     path: str
     history: str
     jobs: tuple[Job, ...]
+    unmatched: tuple[str, ...] = ()   # "robot R joint J: no log matches GLOB", one per robot joint without logs
 
 
 def data_date(path: str) -> str:
@@ -106,6 +109,7 @@ def load(path: str) -> Manifest:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ManifestError(f"{path}: not valid TOML ({exc})") from None
     root = os.path.dirname(os.path.abspath(path))
+    _known(path, "table", set(raw), _TABLES, "[fleet], [defaults], [options.PIPELINE], [[robot]]")
     fleet = raw.get("fleet", {})
     defaults = raw.get("defaults", {})
     all_options = raw.get("options", {})
@@ -114,9 +118,11 @@ def load(path: str) -> Manifest:
         raise ManifestError(f"{path}: [fleet], [defaults] and [options] must be tables")
     if not isinstance(robots, list) or not robots:
         raise ManifestError(f"{path}: no [[robot]] entries")
+    _known(f"{path}: [fleet]", "key", set(fleet), _FLEET_KEYS, ", ".join(sorted(_FLEET_KEYS)))
+    _known(f"{path}: [options]", "pipeline", set(all_options), set(PIPELINES), ", ".join(PIPELINES))
     history = os.path.join(root, str(fleet.get("history", "history")))
     models_dir = os.path.join(root, str(fleet.get("models", "models")))
-    jobs, seen = [], set()
+    jobs, seen, unmatched = [], set(), []
     for index, entry in enumerate(robots):
         if not isinstance(entry, dict):
             raise ManifestError(f"{path}: robot {index + 1} is not a table")
@@ -139,6 +145,9 @@ def load(path: str) -> Manifest:
         joint_list = robot.get("joints", [None])
         if not isinstance(joint_list, list) or not joint_list:
             raise ManifestError(f"{where}: joints must be a non-empty list")
+        twice = sorted({str(j) for j in joint_list if [str(k) for k in joint_list].count(str(j)) > 1})
+        if twice:
+            raise ManifestError(f"{where}: joint {twice[0]} is listed twice in joints")
         patterns = robot.get("logs")
         patterns = [patterns] if isinstance(patterns, str) else patterns
         if not isinstance(patterns, list) or not patterns or not all(isinstance(p, str) for p in patterns):
@@ -163,6 +172,9 @@ def load(path: str) -> Manifest:
             jname = "" if joint is None else str(joint)
             files = sorted({os.path.abspath(f) for p in patterns
                             for f in glob.glob(os.path.join(root, _fill(p, name, jname)))})
+            if not files:
+                unmatched.append(f"robot {name}{f' joint {jname}' if jname else ''}: no log matches "
+                                 + " or ".join(_fill(p, name, jname) for p in patterns))
             for log in files:
                 stem = os.path.splitext(os.path.basename(log))[0]
                 model = os.path.join(models_dir, name, f"joint{jname}" if jname else "joint", f"{stem}.npz")
@@ -171,4 +183,11 @@ def load(path: str) -> Manifest:
                                 model=model, options=tuple(sorted(options.items())),
                                 base=os.path.join(root, _fill(base, name, jname)) if base else None,
                                 diagnose=diagnose))
-    return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs))
+    return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs), unmatched=tuple(unmatched))
+
+
+def _known(where: str, what: str, found: set, allowed: set, listed: str) -> None:
+    """ManifestError naming the first of ``found`` not in ``allowed`` (a misspelt key would be ignored)."""
+    unknown = sorted(found - allowed)
+    if unknown:
+        raise ManifestError(f"{where}: unknown {what} {unknown[0]!r} (use {listed})")

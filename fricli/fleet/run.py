@@ -17,7 +17,7 @@ from fricli.fleet.manifest import Manifest
 
 INSTALL_HINT = "fricli fleet needs Dask: pip install 'fricli[fleet]'"
 # One BLAS thread per worker process: the processes are the parallelism.
-_SINGLE_THREADED = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+_WORKER_ENV = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 class ClusterError(errors.FricliError):
@@ -34,6 +34,7 @@ class Outcome:
     jobs: list
     results: list
     written: list
+    warnings: list = dataclasses.field(default_factory=list)   # lines for stderr
 
     def count(self, status: str) -> int:
         return sum(r["status"] == status for r in self.results)
@@ -76,7 +77,8 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
     with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
         warnings.simplefilter("ignore", UserWarning)
         cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED)
+                                           dashboard_address=None, host="127.0.0.1", env=_WORKER_ENV,
+                                           preload=["fricli.fleet.worker"])   # Ctrl-C, logging
     with cluster, distributed.Client(cluster) as c:
         yield c
 
@@ -96,17 +98,23 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
     run = run_id(now)
     jobs = list(manifest.jobs)
     results: list = [None] * len(jobs)
+    warnings = []
     if jobs:
         with client(scheduler, workers) as c:
             _run_jobs(c, jobs, range(len(jobs)), results, if_changed, on_done)
-            recorded = _recorded(manifest.history)
+            try:
+                recorded = _recorded(manifest.history)
+            except errors.FricliError as exc:    # the run goes on; what reads the history will fail
+                recorded = None
+                warnings.append(f"warning: {exc}: the history cannot be read, so the jobs whose rows it lacks "
+                                "do not run again, and fricli trend fails on it; move that file away")
             again = [i for i, res in enumerate(results) if res["status"] == "unchanged" and recorded is not None
                      and (jobs[i].robot, str(jobs[i].joint), res["sha256"]) not in recorded]
             if again:
                 _run_jobs(c, jobs, again, results, False, on_done)
     rows = [history.row(job, res, run, now) for job, res in zip(jobs, results) if res["status"] != "unchanged"]
     written = history.append(manifest.history, rows, run) if rows else []
-    return Outcome(run=run, jobs=jobs, results=results, written=written)
+    return Outcome(run=run, jobs=jobs, results=results, written=written, warnings=warnings)
 
 
 def _run_jobs(c, jobs: list, which, results: list, if_changed: bool, on_done) -> None:
@@ -125,15 +133,12 @@ def _run_jobs(c, jobs: list, which, results: list, if_changed: bool, on_done) ->
             on_done(done, len(futures))
 
 
-def _recorded(path: str) -> set | None:
-    """(robot, joint, log sha256) of the history's ok rows: empty without a history yet, None when
-    it cannot be read (then nothing runs again for it)."""
+def _recorded(path: str) -> set:
+    """(robot, joint, log sha256) of the history's ok rows: empty without a history yet; the
+    history's error when it cannot be read."""
     if not os.path.isdir(path):
         return set()
-    try:
-        table = history.read(path)
-    except errors.FricliError:
-        return None
+    table = history.read(path)
     cols = [table.column(c).to_pylist() for c in ("robot", "joint", "log_sha256", "status")]
     return {(r, str(j), h) for r, j, h, status in zip(*cols) if status == "ok"}
 

@@ -102,7 +102,8 @@ def joint_trend(robot: str, joint: str, rows: list[dict], rule: WearRule) -> Joi
             out.reasons.append(f"{p} {100 * level:+.0f} % over its first {rule.baseline_days} days "
                                f"(limit {100 * rule.max_level:g} %)")
         if growth > rule.max_growth:
-            out.reasons.append(f"{p} growing {100 * growth:.1f} %/day over the last {rule.window_days} days "
+            span = int(day[w][-1] - day[w][0]) + 1        # the days the slope was measured over
+            out.reasons.append(f"{p} growing {100 * growth:.3g} %/day over the last {span} days "
                                f"(limit {100 * rule.max_growth:g} %/day)")
     out.flagged = bool(out.reasons)
     return out

@@ -225,6 +225,10 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
     units = dict(logs.CANONICAL[axis])
     units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
              **{c: units["tau"] for c in logs.TORQUES}}
+    currents = [str(jm.name) for jm, sig in zip(mapping.joints, per_joint) if "i_m" in sig]
+    if currents and len(currents) < len(per_joint):     # tau_m holds them: a current is no column of its own
+        for sig in per_joint:
+            sig.pop("i_m", None)
     present = [c for c in _ORDER if c == "t" or c == "joint" or all(c in sig for sig in per_joint)]
     partial = sorted({c for sig in per_joint for c in sig} - set(present))
     if partial:
@@ -245,6 +249,7 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "dropped": dropped_record(rec.defects, unit),
         "unterminated_last_line": int(rec.unterminated) if rec.unterminated else None,
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
+        "i_m_left_out": currents if "i_m" not in present else [],
         "robot": robot, "time_step_s": float(np.median(np.diff(t))) if n > 1 else None,
     }
     schema_meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()}
