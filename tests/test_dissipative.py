@@ -240,6 +240,35 @@ def test_beyond_the_training_speeds_the_magnitude_grows_linearly(tmp_path):
     assert older.v_max_ is None and "beyond" not in older.describe() and "beyond" in model.describe()
 
 
+def test_below_the_slowest_training_speed_the_magnitude_holds_its_level(tmp_path):
+    """A log out and back at one speed (the paper's adaptation run): the spread of the network's
+    speed input is near 0, so a slower row, unlimited, reached it hundreds of spreads away and the
+    model predicted up to 40 times the friction (570 Nm at 0.001 rad/s). Below the slowest training
+    speed the network now sees that speed, in Python and in the exported C alike."""
+    from fricli import sim
+
+    log = logs.from_table(sim.simulate("adapt", joint=2, seed=3), name="one speed")
+    model, summary = learning.train_base(log, steps=400, seed=1, bristles="off", prior=False)
+    assert summary["velocity_groups"] == "levels" and summary["groups"] == 2
+    assert model.v_min_ == (pytest.approx(0.2, rel=0.1), pytest.approx(0.2, rel=0.1))
+    for direction in (1.0, -1.0):
+        slow = direction * np.array([1e-3, 0.01, 0.05, 0.1, model.v_min_[0 if direction > 0 else 1]])
+        m = model.magnitude({"qd": slow, "tau_g": np.zeros(5)})
+        np.testing.assert_allclose(m, m[-1], rtol=1e-12)       # the level at the slowest training speed
+    target = np.abs(logs.friction_target(log.signals)[np.abs(log.signals["qd"]) > 0.15])
+    sig = grid(log.signals, scale=1.0)
+    assert np.max(np.abs(model.predict(sig)[0])) < 2.0 * np.max(target)
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, log, rows_used=1)
+    loaded, meta = models.load(path)
+    assert meta["model"]["params"]["extrapolation"]["v_min"] == list(model.v_min_)
+    np.testing.assert_array_equal(loaded.predict(sig)[0], model.predict(sig)[0])
+    assert "below the slowest training speeds" in loaded.describe()
+    res = CliRunner().invoke(cli, ["train-base", str(write(sim.simulate("adapt", joint=2, seed=3), tmp_path / "a.parquet")),
+                                   "--steps", "200", "-o", str(tmp_path / "a.npz"), "-q"])
+    assert res.exit_code == 0 and "the training rows hold 2 velocity levels (both directions counted)" in res.stderr
+
+
 # ---------------------------------------------------------------------------- an ensemble of folds
 
 

@@ -142,6 +142,12 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
             f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+        if summary["velocity_groups"] == "levels" and summary["groups"] < learning.MIN_VELOCITY_LEVELS:
+            warn(f"warning: {the_log.name}{where}: the training rows hold {summary['groups']} velocity "
+                 f"level{'s' if summary['groups'] != 1 else ''} (both directions counted): the model knows the "
+                 "friction at those speeds only (below the slowest a dissipative network holds its level, above the "
+                 "fastest it grows by its slope: fricli inspect); log constant-velocity motion at "
+                 f"{learning.MIN_VELOCITY_LEVELS // 2} speeds or more each way for its velocity dependence")
         if summary["steps"] >= 100 and summary["best_step"] <= summary["steps"] // 100:
             warn(f"warning: {the_log.name}{where}: the validation error was least at step {summary['best_step']} "
                  f"of {summary['steps']}: training learned nothing the held-out rows confirm; the target may hold "

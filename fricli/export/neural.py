@@ -66,6 +66,8 @@ def dissipative(model, name: str, ctx: Context) -> Part:
              "    double x[2], r0, r_, s_;",
              (f"    s_ = fabs(qd) / {num(model.v0_)};" if model.v_max_ is None else
               f"    s_ = fmin(fabs(qd), qd > 0.0 ? {num(model.v_max_[0])} : {num(model.v_max_[1])}) / {num(model.v0_)};"),
+             *([] if model.v_min_ is None else [   # held at the slowest training speeds below them
+                 f"    s_ = fmax(s_, (qd > 0.0 ? {num(model.v_min_[0])} : {num(model.v_min_[1])}) / {num(model.v0_)});"]),
              "    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
              "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
              f"    x[0] = (s_ - {num(model.u_mean_)}) / {num(model.u_scale_)};",

@@ -25,6 +25,9 @@ ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
 DEFAULT_ARCH = "dissipative"
 DEFAULT_HIDDEN = {"dissipative": (30, 30), "mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
 DEFAULT_MAX_SAMPLES = 2500
+#: fewer velocity levels than this (both directions counted: three speeds each way) leave a network
+#: no velocity dependence to learn (train-base warns)
+MIN_VELOCITY_LEVELS = 6
 # train-base: how the optimiser runs. "cosine" lowers Adam's learning rate from lr to 0 along a
 # cosine over its steps, which reaches the paper's error in fewer steps; "paper" is the
 # paper's constant learning rate for 50,000 steps. Both keep the weights of the best

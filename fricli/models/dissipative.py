@@ -30,7 +30,12 @@ magnitude grows linearly with the speed instead, by the mean slope of the learne
 
     m(|qd| > v_top) = m(v_top) + slope * (|qd| - v_top)
 
-Models written without these records extrapolate as the network does.
+Below the slowest training speed v_low of its direction (v_min) the network sees v_low: the
+magnitude holds its level there, and tanh(qd / v_ps) takes it to zero at rest. Its input stays in
+the range it was trained on; a log of one speed (u_scale, the spread of u, near 0) would
+otherwise put a slower row hundreds of u_scale away, where the network's value means nothing.
+
+Models written without these records extrapolate as the network does (without v_min: below).
 
 Over a physical prior, optional (``set_prior``; train-base by default). The magnitude is then
 the blend of the network's and the static curve p of the LuGre model (Stribeck, viscous and
@@ -113,6 +118,7 @@ class DissipativeFriction(FrictionModel):
         self.velocity_scale, self.presliding_speed = velocity_scale, presliding_speed
         self.nets_: list[HeadedNetwork] | None = None   # one network, or the members of an ensemble
         self.v_max_: tuple[float, float] | None = None    # top training speed (positive, negative direction)
+        self.v_min_: tuple[float, float] | None = None    # slowest training speed (positive, negative direction)
         self.slope_: tuple[float, float] | None = None    # magnitude per speed beyond it, / y_scale [1 / (rad/s)]
         self.sigma0_: float | None = None                 # bristle stiffness [Nm/rad]; None: no pre-sliding state
         self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS, LuGreModel's units)
@@ -144,6 +150,8 @@ class DissipativeFriction(FrictionModel):
         g = np.zeros_like(qd) if g is None else np.asarray(g, dtype=np.float64)
         out = np.empty((4, qd.size))
         speed = np.abs(qd) if self.v_max_ is None else np.minimum(np.abs(qd), self._by_direction(qd, self.v_max_))
+        if self.v_min_ is not None:
+            np.maximum(speed, self._by_direction(qd, self.v_min_), out=speed)
         np.arcsinh(speed / self.v0_, out=out[0])
         out[0] -= self.u_mean_
         out[0] /= self.u_scale_
@@ -179,7 +187,7 @@ class DissipativeFriction(FrictionModel):
             for key in self._SCALARS:
                 setattr(self, f"{key}_", getattr(scales_from, f"{key}_"))
         net = self.new_network().init(rng)
-        self.sigma0_ = self.prior_ = self.blend_ = None
+        self.sigma0_ = self.prior_ = self.blend_ = self.v_max_ = self.v_min_ = None   # a refit's inputs unlimited
         x = self._rows(sig)
         y = (target / self.y_scale_)[None, :]
         xv = tv = None
@@ -228,14 +236,17 @@ class DissipativeFriction(FrictionModel):
     def set_members(self, nets: list[HeadedNetwork], qd: np.ndarray) -> None:
         """Make the model the mean of ``nets`` (networks of ``new_network`` trained on this model's
         scales); the extrapolation from the training velocities qd (n,)."""
-        self.nets_, self.v_max_, self.slope_ = list(nets), None, None
+        self.nets_, self.v_max_, self.v_min_, self.slope_ = list(nets), None, None, None
         self.prior_ = self.blend_ = None
         self._fit_extrapolation(np.asarray(qd, dtype=np.float64))
 
     def _fit_extrapolation(self, qd: np.ndarray) -> None:
-        """v_max_ and slope_ from the training velocities qd (n,) (see the module doc)."""
+        """v_max_, v_min_ and slope_ from the training velocities qd (n,) (see the module doc)."""
         top = [float(np.max(np.abs(qd[side]), initial=0.0)) for side in (qd > 0, qd < 0)]
+        low = [float(np.min(np.abs(qd[side]), initial=np.inf)) for side in (qd > 0, qd < 0)]
         self.v_max_ = (top[0] or top[1], top[1] or top[0])
+        low = (low[0] if np.isfinite(low[0]) else low[1], low[1] if np.isfinite(low[1]) else low[0])
+        self.v_min_ = low if np.isfinite(low).all() else None   # the slope below is taken with it in place
         self.slope_ = (0.0, 0.0)
         slopes = []
         for direction, v in zip((1.0, -1.0), self.v_max_):
@@ -399,6 +410,8 @@ class DissipativeFriction(FrictionModel):
                 params["load"] = False
             if self.v_max_ is not None:
                 params["extrapolation"] = {"v_max": list(self.v_max_), "slope": list(self.slope_)}
+                if self.v_min_ is not None:
+                    params["extrapolation"]["v_min"] = list(self.v_min_)
             if self.sigma0_ is not None:
                 params["bristles"] = {"sigma0": self.sigma0_}
             if self.prior_ is not None:
@@ -452,6 +465,11 @@ class DissipativeFriction(FrictionModel):
             if not (_pair(v_max) and _pair(slope) and min(v_max) > 0 and min(slope) >= 0):
                 raise ValueError(f"damaged extrapolation {extra!r}")
             model.v_max_, model.slope_ = (float(v_max[0]), float(v_max[1])), (float(slope[0]), float(slope[1]))
+            v_min = extra.get("v_min")      # absent in models written before it: no limit below
+            if v_min is not None:
+                if not (_pair(v_min) and 0 < min(v_min) and v_min[0] <= v_max[0] and v_min[1] <= v_max[1]):
+                    raise ValueError(f"damaged extrapolation {extra!r}")
+                model.v_min_ = (float(v_min[0]), float(v_min[1]))
         bristles = params.get("bristles")
         if bristles is not None:
             sigma0 = bristles.get("sigma0") if isinstance(bristles, dict) else None
@@ -492,6 +510,9 @@ class DissipativeFriction(FrictionModel):
                   f"  load slope k = y_scale softplus(b1) / g_scale = {self.load_slope():.4g} {tau}/{tau}"
                   if self.load_ else "  no load term: |tau_g| varied too little over the training rows to show a "
                   "load slope (as identify decides kc = ks = 0)"]
+        if self.v_min_ is not None:
+            lines.append(f"  below the slowest training speeds (+{self.v_min_[0]:.4g} / -{self.v_min_[1]:.4g} {v}) the "
+                         "magnitude holds its level there")
         if self.v_max_ is not None:
             lines.append(f"  beyond the top training speeds (+{self.v_max_[0]:.4g} / -{self.v_max_[1]:.4g} {v}) the "
                          f"magnitude grows by {self.y_scale_ * self.slope_[0]:.4g} / "
