@@ -49,6 +49,19 @@ def test_evaluate_markdown_table(fitted):
     assert "asym ext. torque MAE" in res.stdout
 
 
+def test_a_log_without_joints_and_a_log_without_motion_read_as_such():
+    """Rows of a log without a joint column next to a joint's: named as such, not "(joint None)";
+    no row in motion: a dash in brackets, as the JSON's null, not "(nan)"."""
+    from fricli.applying.evaluation import Result, markdown_table
+
+    err = {"mae": 0.5, "rmse": 0.6}
+    rows = [Result("a", "d", err, None, err, None, joint=None),
+            Result("a", "e", err, None, {"mae": None, "rmse": float("nan")}, None, joint=2)]
+    text = markdown_table(rows, ["a"], ["d", "e"])
+    assert "| a (log without joints) | 0.500 (0.500) | 0.600 (0.600) | – | – |" in text
+    assert "| a (joint 2) | – | – | 0.500 (–) | 0.600 (–) |" in text and "None" not in text and "nan" not in text
+
+
 def test_evaluate_refuses_a_name_used_twice(fitted):
     res = CliRunner().invoke(cli, ["evaluate", "--model", f"a={fitted['lugre']}", "--model", f"a={fitted['nn']}",
                                    "--log", ASYM])

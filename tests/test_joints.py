@@ -342,3 +342,13 @@ def test_missing_joint_values(files, tmp_path):
                  ["identify", tmp_path / "some.parquet", "-o", tmp_path / "m.npz"]):
         line = one_error_line(run(*args), errors.INPUT)
         assert "the 'joint' column has missing values" in line
+
+
+def test_a_joint_column_written_as_floats_names_the_same_joints():
+    """A joint column of 2.0 (floats, as a spreadsheet or pandas writes whole numbers) is joint 2:
+    a model fitted on joint 2 applies to it, and its model file is joint_2.npz."""
+    from fricli.core import joints, modelset
+
+    assert joints.same(2, 2.0) and joints.same("2", 2.0) and not joints.same(2, 2.5)
+    assert modelset.file_name(2.0) == modelset.file_name(2) == "joint_2.npz" and joints.listed([1.0, 2.5]) == "1, 2.5"
+    joints.check(2, 2.0, "m.npz", "log")        # no JointMismatch

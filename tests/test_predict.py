@@ -365,3 +365,19 @@ def test_a_model_of_another_robot_models_torques_is_named(tmp_path, model_file):
         assert ("another robot model" in res.stderr) == warned, res.stderr
         res = invoke("evaluate", "--model", model_file, "--log", tmp_path / name, "-q")
         assert ("another robot model" in res.stderr) == warned, res.stderr
+
+
+def test_a_column_the_model_reads_and_the_log_lacks_names_log_and_model(tmp_path):
+    """A temperature-dependent model on a log without `temp`: one line naming the log and the model
+    (predict and evaluate alike), not the model's bare complaint."""
+    path = str(tmp_path / "thermal.npz")
+    models.save(path, LuGreModel(**PARAMS, t_ref=30.0, alpha_c=0.004, alpha_v=0.01), joint=None, axis="rotary",
+                units=logs.CANONICAL["rotary"], provenance={})
+    log = tmp_path / "cold.parquet"
+    pq.write_table(make_table(500), log)
+    res = invoke("predict", path, log, "-o", tmp_path / "p.parquet")
+    assert res.exit_code == errors.DATA
+    assert res.stderr.strip() == (f"fricli: error: {log}: the model depends on temperature but the log has no 'temp' "
+                                  f"column ({path})")
+    res = invoke("evaluate", "--model", f"warm={path}", "--log", log)
+    assert res.exit_code == errors.DATA and res.stderr.strip().endswith("has no 'temp' column (warm)"), res.stderr

@@ -339,6 +339,8 @@ def test_cli_writes_parquet_to_stdout():
 @pytest.mark.parametrize("args,message", [
     (["--effect", "sparkle"], "unknown effect"),
     (["--effect", "inertia=1.5"], "inertia must be below 1"),
+    (["--effect", "temperature=-500"], "the joint would end at -480 degC; a gear runs between -40 and 120 degC"),
+    (["--effect", "column=5"], "|k| must be below 0.0833 1/%"),
     (["--duration", "30"], "--duration applies to --scenario extended only"),
     (["--joint", "3"], "'3' is not one of"),
 ])

@@ -9,6 +9,7 @@ import numpy as np
 from fricli import models
 from fricli.core import logs, metrics
 from fricli.core.envelope import share_outside
+from fricli.core.errors import DataError
 from fricli.models import coupled
 from fricli.applying.predicting import external_estimate
 
@@ -31,7 +32,10 @@ def evaluate_one(model, meta: dict, log: logs.Log, *, lowpass_hz: float | None =
                  model_name: str = "model", log_name: str = "log") -> Result:
     models.check_log(meta, log, model_name)
     sig = log.signals
-    pred = model.predict(sig)[0]
+    try:
+        pred = model.predict(sig)[0]
+    except DataError as exc:          # a column the model reads is missing: name the files
+        raise DataError(f"{log.name}: {exc} ({model_name})") from None
     target = logs.friction_target(sig)
     moving = metrics.in_motion(sig["qd"])
     external = external_moving = None
@@ -103,14 +107,16 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
     motion = f"rows in motion, |qd| > {100 * metrics.REST_SHARE:g} % of the top speed"
     lines = [f"Error over all rows (in brackets: {motion}); RMS: root mean square", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    def cell(value, moving) -> str:   # no row in motion: a dash in brackets, as the JSON's null
+        return f"{value:.3f} ({'–' if moving is None or not np.isfinite(moving) else f'{moving:.3f}'})"
+
     for mn, joint in rows:
-        row = [f"{mn} (joint {joint})" if labelled else mn]
+        row = [(f"{mn} (joint {joint})" if joint is not None else f"{mn} (log without joints)") if labelled else mn]
         for ln in log_names:
             r = by.get((mn, str(joint), ln))
-            row += [f"{r.friction[k]:.3f} ({r.friction_moving[k]:.3f})" if r else "–" for k, _ in figures]
+            row += [cell(r.friction[k], r.friction_moving[k]) if r else "–" for k, _ in figures]
             if has_ext[ln]:
-                row += [f"{r.external[k]:.3f} ({r.external_moving[k]:.3f})" if r and r.external else "–"
-                        for k, _ in figures]
+                row += [cell(r.external[k], r.external_moving[k]) if r and r.external else "–" for k, _ in figures]
         lines.append("| " + " | ".join(row) + " |")
     return "\n".join(lines)
 

@@ -29,7 +29,7 @@ import numpy as np
 from fricli import models
 from fricli.core import joints, lazy, logs, timewindow
 from fricli.core.atomic import atomic_open
-from fricli.core.errors import LogError, ModelFileError
+from fricli.core.errors import DataError, LogError, ModelFileError
 from fricli.models import coupled
 from fricli.models.base import FrictionModel
 from fricli.numerics.nn.network import prediction_threads
@@ -401,7 +401,10 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
     st.t_last = float(t[-1])
     with prediction_threads(1):   # the reader and writer threads keep the other core busy
-        tau_f, st.state = st.model.predict(sig, st.state)
+        try:
+            tau_f, st.state = st.model.predict(sig, st.state)
+        except DataError as exc:      # a column the model reads is missing: name the files
+            raise DataError(f"{name}: {exc} ({st.model_name})") from None
     unit = log.units["tau"]
     out = log.table
     if jfield is not None:

@@ -14,7 +14,8 @@ Every command decides through this module (docs/joints.md):
 - A model may cover a group of joints (joints that share motors, ``fricli.models.coupled``): its
   file records them as ``joints``, and it applies to each of their rows (``covers``).
 
-Joints are compared by their text (``2`` in a model file matches joint ``"2"`` of a log).
+Joints are compared by their text (``2`` in a model file matches joint ``"2"`` of a log, and
+joint ``2.0`` of a joint column written as floats).
 """
 
 from __future__ import annotations
@@ -28,12 +29,19 @@ class JointMismatch(ModelFileError):
     """A model fitted on one joint applied to rows of another (exit code 4, MODEL)."""
 
 
+def text(joint) -> str:
+    """A joint as text: ``2`` for 2, "2" and 2.0 alike (a joint column written as floats)."""
+    if isinstance(joint, float) and joint.is_integer():
+        return str(int(joint))
+    return str(joint)
+
+
 def same(a, b) -> bool:
-    return str(a) == str(b)
+    return text(a) == text(b)
 
 
 def listed(joints) -> str:
-    return ", ".join(str(j) for j in joints)
+    return ", ".join(text(j) for j in joints)
 
 
 def mismatch(model_name: str, model_joint, log_name: str, log_joint) -> JointMismatch:

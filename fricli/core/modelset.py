@@ -16,11 +16,11 @@ from typing import Callable
 
 from fricli.core import modelfile
 from fricli.core.errors import FricliError, LogError, ModelFileError, OutputError
-from fricli.core.joints import Source, covers, listed, pair, same, select, several
+from fricli.core.joints import Source, covers, listed, pair, same, select, several, text
 
 
 def file_name(joint) -> str:
-    return "joint_" + re.sub(r"[^A-Za-z0-9._-]", "_", str(joint)) + ".npz"
+    return "joint_" + re.sub(r"[^A-Za-z0-9._-]", "_", text(joint)) + ".npz"
 
 
 def path_for(folder: str, joint) -> str:
@@ -29,7 +29,7 @@ def path_for(folder: str, joint) -> str:
 
 def group_file_name(joints) -> str:
     """The file of a model that covers several joints (a coupled group): joints_<a>_<b>.npz."""
-    return "joints_" + "_".join(re.sub(r"[^A-Za-z0-9.-]", "_", str(j)) for j in joints) + ".npz"
+    return "joints_" + "_".join(re.sub(r"[^A-Za-z0-9.-]", "_", text(j)) for j in joints) + ".npz"
 
 
 def listing(folder: str) -> dict:

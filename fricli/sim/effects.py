@@ -31,6 +31,7 @@ HUMIDITY_REF = 45.0        # [%]
 HUMIDITY_SWING = 12.0      # [%]
 DISTURBANCE_HZ = 2.5       # frequency of the disturbance torque [Hz]
 WARM_START = 20.0          # temperature at the start of a log with the temperature effect [degC]
+GEAR_TEMPERATURES = (-40.0, 120.0)   # a gear's lubricant works between these [degC]
 
 
 @dataclasses.dataclass
@@ -156,6 +157,13 @@ class Temperature(Effect):
 
     def default(self, j):
         return 25.0
+
+    def check(self, strength):
+        end = WARM_START + strength
+        if not GEAR_TEMPERATURES[0] <= end <= GEAR_TEMPERATURES[1]:
+            raise ValueError(f"the joint would end at {end:g} degC; a gear runs between "
+                             f"{GEAR_TEMPERATURES[0]:g} and {GEAR_TEMPERATURES[1]:g} degC (the rise is from "
+                             f"{WARM_START:g} degC)")
 
     def apply(self, scene, strength, rng):
         tau = max(scene.duration, 1e-9) / 2.0
@@ -290,6 +298,11 @@ class Column(Effect):
 
     def default(self, j):
         return 0.015
+
+    def check(self, strength):
+        if abs(strength) * HUMIDITY_SWING >= 1:
+            raise ValueError(f"|k| must be below {1 / HUMIDITY_SWING:.3g} 1/% (the humidity swings by "
+                             f"{HUMIDITY_SWING:g} %; the Coulomb level must stay positive)")
 
     def apply(self, scene, strength, rng):
         ph = rng.uniform(0, 2 * np.pi)
