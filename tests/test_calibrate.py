@@ -160,6 +160,27 @@ def test_calibration_recovers_the_true_model(arm, tmp_path):
     np.testing.assert_allclose(loaded.armature, calibrated.armature)
 
 
+def test_a_urdf_link_without_mass_is_calibrated(arm):
+    """A moving link whose CAD has no <inertial> (mass 0, as URDFs leave frame links): its body has
+    no centre of mass, which the consistency check divided by (LinAlgError, an internal error)."""
+    import re
+
+    model, x_true, fit, held = arm
+    massless = re.sub(r'(<link name="l3">)<inertial>.*?</inertial>', r"\1", URDF, flags=re.S)
+    assert "<mass value=\"2.5\"/>" not in massless
+    robot = RobotModel(massless, "cad without l3's mass")
+    cal = cb.calibrate(robot, motion(*fit, simulate(model, *fit)))
+    assert cal.report["consistency"]["ok"]
+    calibrated = RobotModel(cb.calibrated_urdf(massless, "cad", cal), "cal")
+    t, q, qd, qdd = held
+    tau_g, tau_dyn = calibrated.terms(q, qd, qdd)
+    fr = cal.report["friction"]["joints"]
+    friction = np.column_stack([fr[j]["Fv"] * qd[:, k] + fr[j]["Fc"] * np.sign(qd[:, k]) + fr[j]["offset"]
+                                for k, j in enumerate(["1", "2", "3", "4"])])
+    truth = simulate(model, *held)
+    assert np.linalg.norm(tau_g + tau_dyn + friction - truth) < 1e-6 * np.linalg.norm(truth)
+
+
 def test_an_unknown_rotor_inertia_behind_a_light_link_is_found():
     """A geared wrist: the rotor reflects 0.4 kg m^2 behind a 0.2 kg link of 1e-4 kg m^2 (a UR10e's
     last joint: 0.44 behind 2e-4), no rotor inertia given. The prior's scale of an armature must not

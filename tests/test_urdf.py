@@ -95,6 +95,28 @@ def test_gravity_and_dynamics_match_the_analytic_two_link_arm(rng):
     close(tau_dyn, dyn_ref)
 
 
+def test_a_robot_of_one_moving_joint(rng):
+    """The elbow held: a model of one joint, for which pinocchio returns vectors, not (1, n)
+    matrices; the terms are the two-link arm's with the elbow at 0, shape (n, 1), and the payload's
+    regressor reads too."""
+    pytest.importorskip("pinocchio")
+    from fricli.robot import payload
+    from fricli.robot.dynamics import RobotModel
+
+    model = RobotModel(URDF, "two_link.urdf", gravity=(0.0, -9.81, 0.0), held=("elbow",))
+    assert model.joints == ["shoulder"]
+    q, qd, qdd = motion(rng)
+    still = np.zeros_like(q[:, 1])
+    tau_g, tau_dyn = model.terms(q[:, :1], qd[:, :1], qdd[:, :1])
+    assert tau_g.shape == tau_dyn.shape == (len(q), 1)
+    g_ref, dyn_ref = analytic(np.column_stack([q[:, 0], still]), np.column_stack([qd[:, 0], still]),
+                              np.column_stack([qdd[:, 0], still]), (0.0, -9.81, 0.0))
+    close(tau_g, g_ref[:, :1])
+    close(tau_dyn, dyn_ref[:, :1])
+    y, _ = payload.body_regressor(model, "flange", q[:, :1], qd[:, :1], qdd[:, :1])
+    assert y.shape == (len(q), 1, 10)
+
+
 def test_rotor_inertia_and_payload_in_a_rotated_frame(rng):
     pytest.importorskip("pinocchio")
     from fricli.robot.dynamics import RobotModel
@@ -428,3 +450,36 @@ def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path)
     short = [{"q": q[:5, k], "tau_m": tau[:5, k]} for k in range(4)]
     assert robot_terms(cad, mapping, t[:5], short, "rotary")["derived"] == {
         "columns": {"qd": [1, 2, 3, 4], "qdd": [1, 2, 3, 4]}, "cutoff_hz": 50.0, "filtered": False}
+
+
+def test_a_continuous_joint_recorded_wrapped_is_derived_unwrapped(rng):
+    """A continuous joint recorded within one turn (as controllers and ROS report it) jumps by 2 pi
+    where it wraps: differentiated as it is, qd peaks at 2 pi / dt there and tau_dyn with it. The
+    import derives from the unwrapped position, keeps q as recorded and says so."""
+    pytest.importorskip("pinocchio")
+    import test_calibrate as arm
+    from fricli.robot.dynamics import RobotModel
+    from fricli.robot.importing import robot_terms
+    from fricli.robot.mapping import JointMap, Mapping
+
+    t = np.arange(3000) / 100.0
+    q = np.column_stack([0.3 * np.sin(0.5 * t), 0.4 * np.sin(0.7 * t), 0.3 * np.sin(0.9 * t), 2.0 * t])  # j4 turns
+    wrapped = q.copy()
+    wrapped[:, 3] = np.angle(np.exp(1j * q[:, 3]))                  # in (-pi, pi]
+    model = RobotModel(arm.URDF, "four")
+    assert model.continuous == [False, False, False, True]
+    mapping = Mapping(time=None, joints=[JointMap(name=k, columns={}) for k in range(1, 5)], match="order")
+
+    def imported(positions):
+        sigs = [{"q": positions[:, k].copy()} for k in range(4)]
+        return sigs, robot_terms(model, mapping, t, sigs, "rotary", 20.0)
+
+    sigs, record = imported(wrapped)
+    truth, clean = imported(q)
+    assert record["unwrapped"] == ["4"] and clean["unwrapped"] == []
+    np.testing.assert_array_equal(sigs[3]["q"], wrapped[:, 3])        # the log keeps q as recorded
+    inner = slice(100, -100)
+    for k in range(4):
+        np.testing.assert_allclose(sigs[k]["qd"][inner], truth[k]["qd"][inner], atol=1e-9)
+        np.testing.assert_allclose(sigs[k]["tau_dyn"][inner], truth[k]["tau_dyn"][inner], atol=1e-9)
+    assert np.abs(sigs[3]["qd"]).max() < 2.5

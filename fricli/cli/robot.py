@@ -87,6 +87,20 @@ def _choice_line(record: dict) -> str | None:
             f"rows); {others}")
 
 
+def _robot_notes(record: dict | None, name: str) -> list[str]:
+    """The stderr lines on how the robot terms were computed: continuous joints unwrapped, the cut-off chosen."""
+    if not record:
+        return []
+    out = []
+    if record.get("unwrapped"):
+        joints = record["unwrapped"]
+        out.append(f"note: {name}: the position of continuous joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} "
+                   "jumps by a turn where it wraps: qd and qdd are derived from it unwrapped (q is kept as recorded)")
+    if _choice_line(record):
+        out.append(_choice_line(record))
+    return out
+
+
 PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
 
 
@@ -249,8 +263,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     where = "stdout" if output == "-" else output
     rows = f"{result.meta['rows']:,} {'messages' if bag else 'rows'}"
     source = f"{read.topic} in {name}" if bag else name
-    if robot and _choice_line(robot):
-        say(_choice_line(robot), quiet)
+    for line in _robot_notes(robot, name):
+        say(line, quiet)
     say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
 
 
@@ -297,7 +311,7 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
                               cutoff_hz=cutoff)
     write_table(table, output)
     where = "stdout" if output == "-" else output
-    if _choice_line(record):
-        say(_choice_line(record), quiet)
+    for line in _robot_notes(record, name):
+        say(line, quiet)
     say(f"added tau_g and tau_dyn from {urdf} to {len(record['joints'])} joints of {name} "
         f"(matched by {match}{_derived_text(record)}) -> {where}", quiet)

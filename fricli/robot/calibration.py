@@ -801,8 +801,9 @@ def body_inertias(cal: Calibration, x: np.ndarray | None = None) -> list:
     """pin.Inertia of every body for parameters ``x`` (default the identified ones)."""
     pin = _pin()
     x = cal.x if x is None else x
-    return [pin.Inertia.FromDynamicParameters(np.asarray(x[10 * b:10 * b + 10], dtype=float))
-            for b in range(len(cal.bodies))]
+    # a massless body (a URDF link with no <inertial>, or mass 0) has no centre of mass to divide by
+    return [pin.Inertia.FromDynamicParameters(pi) if pi[0] != 0 else pin.Inertia.Zero()
+            for pi in (np.asarray(x[10 * b:10 * b + 10], dtype=float) for b in range(len(cal.bodies)))]
 
 
 def link_table(cal: Calibration) -> dict:

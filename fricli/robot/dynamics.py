@@ -98,14 +98,14 @@ class RobotModel:
         self.links = link_inertials(urdf_text, name)   # each link's own (10,), before Pinocchio merges fixed links
         self.joints = list(model.names)[1:]
         self.kinds = []
-        self._unbounded = []  # continuous joints: pinocchio's configuration is (cos q, sin q)
+        self.continuous = []  # continuous joints: pinocchio's configuration is (cos q, sin q)
         for joint in model.joints[1:]:
             short = joint.shortname().removeprefix("JointModel")
             if joint.nv != 1 or short[:1] not in ("R", "P") or short.startswith("Planar"):
                 raise ModelFileError(f"{name}: joint type {joint.shortname()} is not supported "
                                      "(revolute, continuous and prismatic only)")
             self.kinds.append("rotary" if short[0] == "R" else "linear")
-            self._unbounded.append(joint.nq == 2)
+            self.continuous.append(joint.nq == 2)
         self.payload_parameters = np.zeros((model.nv, 10))   # a declared payload in each body's parameters
         if payload is not None and payload.mass > 0:
             if not model.existFrame(payload.frame):
@@ -180,10 +180,10 @@ class RobotModel:
 
     def configuration(self, q: np.ndarray) -> np.ndarray:
         """Pinocchio's configurations (n, nq) for joint positions q (n, joints)."""
-        if not any(self._unbounded):
+        if not any(self.continuous):
             return q
         parts = [np.column_stack([np.cos(q[:, k]), np.sin(q[:, k])]) if unbounded else q[:, k:k + 1]
-                 for k, unbounded in enumerate(self._unbounded)]
+                 for k, unbounded in enumerate(self.continuous)]
         return np.hstack(parts)
 
 
@@ -326,7 +326,8 @@ def _rnea(model, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
     if len(q) and hasattr(pin, "rneaInParallel"):  # one call for all samples (pinocchio >= 3)
         pool = pin.ModelPool(model, 1)
         out = pin.rneaInParallel(1, pool, np.asfortranarray(q.T), np.asfortranarray(qd.T), np.asfortranarray(qdd.T))
-        return np.ascontiguousarray(np.asarray(out).T)
+        # (nv, n), or (n,) for a model of one joint: pinocchio returns a vector then
+        return np.ascontiguousarray(np.asarray(out).reshape(model.nv, len(q)).T)
     return _rnea_rows(model, q, qd, qdd)
 
 

@@ -78,14 +78,20 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
                                  "without a mapping leaves held joints out itself)")
         if "q" not in sig:
             raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
+    # a continuous joint recorded wrapped to one turn jumps by 2 pi: velocity and acceleration are
+    # derived from its unwrapped position (the log keeps q as recorded; the terms read cos q, sin q)
+    unwrapped = [str(jm.name) for jm, sig, k in zip(mapping.joints, per_joint, order)
+                 if model.continuous[k] and len(sig["q"]) > 1 and np.abs(np.diff(sig["q"])).max() > np.pi]
+    moving = [dict(sig, q=np.unwrap(sig["q"])) if str(jm.name) in unwrapped else sig
+              for jm, sig in zip(mapping.joints, per_joint)]
     choice = None
     if cutoff_hz == logs.AUTO_CUTOFF or (cutoff_hz is None and all("tau_m" in sig for sig in per_joint)):
-        choice = choose_cutoff(model, mapping, order, t, per_joint)
+        choice = choose_cutoff(model, mapping, order, t, moving)
     if cutoff_hz is None or cutoff_hz == logs.AUTO_CUTOFF:
         cutoff_hz = logs.DEFAULT_CUTOFF_HZ if choice is None else choice["cutoff_hz"]
     derived: dict[str, list] = {}
-    for jm, sig in zip(mapping.joints, per_joint):
-        motion = {"t": t, **{c: sig[c] for c in ("q", "qd", "qdd") if c in sig}}
+    for jm, sig, unwrapped_sig in zip(mapping.joints, per_joint, moving):
+        motion = {"t": t, **{c: unwrapped_sig[c] for c in ("q", "qd", "qdd") if c in unwrapped_sig}}
         for column in logs.derive_motion(motion, cutoff_hz).get("columns", []):
             derived.setdefault(column, []).append(jm.name)
             sig[column] = motion[column]
@@ -99,6 +105,7 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
         "urdf": model.name, "urdf_path": os.path.abspath(model.name), "urdf_sha256": model.sha256,
         "match": mapping.match,
         "joints": {str(jm.name): model.joints[k] for jm, k in zip(mapping.joints, order)},
+        "unwrapped": unwrapped,
         "gravity": list(mapping.gravity),
         # where the URDF gives the armature it replaces the mapping's rotor inertia: none is applied (null)
         "rotor_inertia": {str(jm.name): jm.rotor_inertia if np.isnan(model.armature[k]) else None

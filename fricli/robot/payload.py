@@ -87,7 +87,8 @@ def body_regressor(robot, frame: str, q: np.ndarray, qd: np.ndarray, qdd: np.nda
     config = robot.configuration(q)
     y = np.empty((len(q), model.nv, 10))
     for k in range(len(q)):
-        y[k] = pin.computeJointTorqueRegressor(model, data, config[k], qd[k], qdd[k])[:, cols]
+        # (nv, 10 bodies), or a vector for a model of one joint
+        y[k] = np.reshape(pin.computeJointTorqueRegressor(model, data, config[k], qd[k], qdd[k]), (model.nv, -1))[:, cols]
     return y, f.placement
 
 
