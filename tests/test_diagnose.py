@@ -527,10 +527,12 @@ def test_cli_fix_on_clean_log_writes_an_equivalent_model(files):
     out = str(files["dir"] / "same.npz")
     res = CliRunner().invoke(cli, ["diagnose", files["model"], files["clean"], "--fix", "-o", out, "-q"])
     assert res.exit_code == 0 and res.stderr == ""
-    fixed, _ = models.load(out)
-    base, _ = models.load(files["model"])
+    fixed, fixed_meta = models.load(out)
+    base, base_meta = models.load(files["model"])
     _, log = _sim(2)
     np.testing.assert_array_equal(fixed.predict(log.signals)[0], base.predict(log.signals)[0])
+    # the same model, known where the base was fitted: its extrapolation warnings do not change
+    assert fixed_meta["envelope"] == base_meta["envelope"]
 
 
 @pytest.mark.parametrize("args, code, message", [
@@ -666,6 +668,10 @@ def test_an_implausible_gravity_scale_is_flagged_and_not_applied(tmp_path):
         assert cause in g.implausible
     text = table(d)
     assert "suspicious, not added: gravity" in text and "--accept-implausible" in text
+    # its twin, quadrant friction, takes the torque up: said so, not "the log does not tell them apart"
+    assert d.added == ["quadrant"]
+    assert "note: quadrant added where the suspicious gravity explains this log as well or better" in text
+    assert "does not tell them apart" not in text
     fixed = augment(CoulombViscous(), d, log)
     assert fixed.errors == [] and "gravity" not in fixed.effects
     # asked explicitly: added, and still named implausible

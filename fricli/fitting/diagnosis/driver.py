@@ -203,7 +203,7 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
     left = r - design.heldout_prediction(sel.terms) if sel.terms else r
     mae_before = float(np.mean(np.abs(r)))
     mae_after = float(np.mean(np.abs(left))) if sel.terms else mae_before
-    notes = _twin_notes(design, sel, cache, alpha, min_gain)
+    notes = _twin_notes(design, sel, cache, alpha, min_gain, set(suspects))
     added, terms, declined = list(sel.added), list(sel.terms), {}
     if added and mae_after >= mae_before:
         # less squared error but a larger typical error: a few large residuals (an edge, a
@@ -221,8 +221,11 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
                      notes=notes, suspected=list(suspects), declined=declined)
 
 
-def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float) -> list[str]:
-    """A note for each added effect whose twin (``TWINS``) would explain the log nearly as well."""
+def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain: float,
+                suspected: set[str] = frozenset()) -> list[str]:
+    """A note for each added effect whose twin (``TWINS``) would explain the log nearly as well, or
+    better where the twin was ``suspected`` (declined as implausible): the added one may then carry
+    the declined correction under its own name."""
     notes = []
     for pair, evidence in TWINS.items():
         for a, b in (pair, pair[::-1]):
@@ -231,7 +234,12 @@ def _twin_notes(design, sel, cache: dict[str, list[str]], alpha: float, min_gain
             others = [t for t in sel.terms if t not in cache[a]]
             swapped = others + [t for t in cache[b] if t not in others]
             cmp = selection.compare(design.sse(sel.terms), design.sse(swapped), alpha)
-            if not cmp.clear(min_gain):
+            if b in suspected:
+                worse = f"{abs(100 * cmp.gain):.0f} % more" if cmp.gain < 0 else "no less"
+                notes.append(f"{a} added where the suspicious {b} explains this log as well or better ({a} leaves "
+                             f"{worse} held-out squared error): {a} may carry that error of the robot model as "
+                             f"friction; check the robot model first ({evidence} would tell them apart)")
+            elif not cmp.clear(min_gain):
                 gain = 100 * cmp.gain
                 than = (f"{a} leaves {abs(gain):.0f} % {'less' if gain > 0 else 'more'} held-out squared error"
                         if abs(gain) >= 0.5 else "both leave the same held-out squared error to within 0.5 %")
