@@ -260,8 +260,10 @@ def fix_model(base_model, data, output: str, opts: dict, job: dict, base: str, b
     fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
     fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
                carried=fixed.carried, refitted=fixed.refitted)
-    # nothing added or refitted: the model is the base, known where the base was fitted
-    same = not (result.added or fixed.carried or fixed.refitted) and base_meta.get("envelope") is not None
+    # nothing added or refitted: the model is the base, known where the base was fitted (not a base
+    # refitted here on a recomputed log: that log is where it is known)
+    same = (not (result.added or fixed.carried or fixed.refitted) and not base_record.get("refitted_on_calibrated_log")
+            and base_meta.get("envelope") is not None)
     models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
                         envelope=base_meta["envelope"] if same else None,
                         base={"name": os.path.basename(base), "kind": base_model.kind, **base_record})
