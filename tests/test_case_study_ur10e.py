@@ -56,12 +56,12 @@ def test_level_table_orders_a_days_runs_by_the_controller_clock():
 
     # three runs of one day listed out of clock order, one run of another day
     runs = ["ur-20_02_05-b", "ur-20_02_05-a", "ur-20_02_05-c", "ur-20_02_06-a"]
-    levels = [level(500.0, 0.1), level(100.0, 0.3), level(900.0, 0.2), level(50.0, -0.1)]
+    levels = [level(500.0, 0.1), level(100.0, 0.3), level(900.0, 0.22), level(50.0, -0.1)]
     res = {"validation_runs": runs,
            "joints": {6: {"fixed": {"run_levels": levels}, "linear_coef": [2.0, 1.0, 0.0]}}}
     text = "\n".join(case_study_text._level_lines(res, [6]))
-    # by the clock the day runs 0.3 -> 0.1 -> 0.2: one of its two consecutive pairs is lower
+    # by the clock the day runs 0.3 -> 0.1 -> 0.22: one of its two consecutive pairs is lower
     assert "lower in 1 of 2 pairs" in text
     assert "above zero on 3 of 4 runs" in text
-    assert "+8 % of the fitting run's linear Fv" in text      # median 0.15 of Fv 2.0
+    assert "+8 % of the fitting run's linear Fv" in text      # median 0.16 of Fv 2.0
     assert case_study_text._level_lines(res, []) == []

@@ -107,6 +107,7 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
     motion = f"rows in motion, |qd| > {100 * metrics.REST_SHARE:g} % of the top speed"
     lines = [f"Error over all rows (in brackets: {motion}); RMS: root mean square", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+
     def cell(value, moving) -> str:   # no row in motion: a dash in brackets, as the JSON's null
         return f"{value:.3f} ({'–' if moving is None or not np.isfinite(moving) else f'{moving:.3f}'})"
 

@@ -21,6 +21,14 @@ def _signature(name: str, fn: str, ctx: Context, stateful: bool, extra: str = ""
     return f"static inline double {name}_{fn}({state}const {ctx.in_type} *in{extra}) {{"
 
 
+def _with_parts(part: Part, ctx: Context, body: list[str]) -> list[str]:
+    """``_step_parts`` with ``body`` (friction returned, the robot-model error in ``*error``) and
+    ``_step``, their sum."""
+    return [_signature(part.name, "step_parts", ctx, part.stateful, ", double *error"), *body, "}", "",
+            _signature(part.name, "step", ctx, part.stateful), "    double err;",
+            f"    const double f = {part.step_parts('s', '&err')};", "    return f + err;", "}", ""]
+
+
 @emitter("residual")
 def residual(model, name: str, ctx: Context) -> Part:
     """p = base + NN_add; ``dissipative``: tau_f = w p + (1 - w) s T softplus(s p / T),
@@ -49,9 +57,7 @@ def residual(model, name: str, ctx: Context) -> Part:
                 "    return w * p + (1.0 - w) * sg * m;"]
     part = Part(name, "", stateful=base.stateful, parts=base.parts)
     if base.parts:
-        code += [_signature(name, "step_parts", ctx, base.stateful, ", double *error"), *body, "}", "",
-                 _signature(name, "step", ctx, base.stateful), "    double err;",
-                 f"    const double f = {part.step_parts('s', '&err')};", "    return f + err;", "}", ""]
+        code += _with_parts(part, ctx, body)
     else:
         code += [_signature(name, "step", ctx, base.stateful), *body, "}", ""]
     part.code = "\n".join(code)
@@ -94,8 +100,6 @@ def augmented(model, name: str, ctx: Context) -> Part:
         code += _state(name, fields)
         code += [f"static inline void {name}_init({name}_state *s) {{ {' '.join(inits)} }}", ""]
     part = Part(name, "", stateful=stateful, parts=True)
-    code += [_signature(name, "step_parts", ctx, stateful, ", double *error"), *body, "}", "",
-             _signature(name, "step", ctx, stateful), "    double err;", f"    const double f = {part.step_parts('s', '&err')};",
-             "    return f + err;", "}", ""]
+    code += _with_parts(part, ctx, body)
     part.code = "\n".join(code)
     return part

@@ -145,7 +145,8 @@ def load(path: str) -> Manifest:
         joint_list = robot.get("joints", [None])
         if not isinstance(joint_list, list) or not joint_list:
             raise ManifestError(f"{where}: joints must be a non-empty list")
-        twice = sorted({str(j) for j in joint_list if [str(k) for k in joint_list].count(str(j)) > 1})
+        listed = [str(j) for j in joint_list]
+        twice = sorted({j for j in listed if listed.count(j) > 1})
         if twice:
             raise ManifestError(f"{where}: joint {twice[0]} is listed twice in joints")
         patterns = robot.get("logs")

@@ -17,7 +17,7 @@ from fricli.fleet.manifest import Manifest
 
 INSTALL_HINT = "fricli fleet needs Dask: pip install 'fricli[fleet]'"
 # One BLAS thread per worker process: the processes are the parallelism.
-_WORKER_ENV = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+_SINGLE_THREADED = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 class ClusterError(errors.FricliError):
@@ -77,7 +77,7 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
     with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
         warnings.simplefilter("ignore", UserWarning)
         cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, host="127.0.0.1", env=_WORKER_ENV,
+                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
                                            preload=["fricli.fleet.worker"])   # Ctrl-C, logging
     with cluster, distributed.Client(cluster) as c:
         yield c

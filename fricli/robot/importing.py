@@ -82,16 +82,16 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
     # derived from its unwrapped position (the log keeps q as recorded; the terms read cos q, sin q)
     unwrapped = [str(jm.name) for jm, sig, k in zip(mapping.joints, per_joint, order)
                  if model.continuous[k] and len(sig["q"]) > 1 and np.abs(np.diff(sig["q"])).max() > np.pi]
-    moving = [dict(sig, q=np.unwrap(sig["q"])) if str(jm.name) in unwrapped else sig
-              for jm, sig in zip(mapping.joints, per_joint)]
+    derivable = [dict(sig, q=np.unwrap(sig["q"])) if str(jm.name) in unwrapped else sig
+                 for jm, sig in zip(mapping.joints, per_joint)]
     choice = None
     if cutoff_hz == logs.AUTO_CUTOFF or (cutoff_hz is None and all("tau_m" in sig for sig in per_joint)):
-        choice = choose_cutoff(model, mapping, order, t, moving)
+        choice = choose_cutoff(model, mapping, order, t, derivable)
     if cutoff_hz is None or cutoff_hz == logs.AUTO_CUTOFF:
         cutoff_hz = logs.DEFAULT_CUTOFF_HZ if choice is None else choice["cutoff_hz"]
     derived: dict[str, list] = {}
-    for jm, sig, unwrapped_sig in zip(mapping.joints, per_joint, moving):
-        motion = {"t": t, **{c: unwrapped_sig[c] for c in ("q", "qd", "qdd") if c in unwrapped_sig}}
+    for jm, sig, source in zip(mapping.joints, per_joint, derivable):
+        motion = {"t": t, **{c: source[c] for c in ("q", "qd", "qdd") if c in source}}
         for column in logs.derive_motion(motion, cutoff_hz).get("columns", []):
             derived.setdefault(column, []).append(jm.name)
             sig[column] = motion[column]
