@@ -277,7 +277,7 @@ def warnings_of(sig):
 def test_warning_parameters_at_bounds_with_a_large_max_error():
     # a Stribeck drop steeper than delta = 5 puts delta at its bound; spikes make the max error large
     flagged = warnings_of(with_spikes(sweep_signals(seed=3, p=dict(TRUE, delta=10.0))))
-    assert len(flagged) == 1 and flagged[0].startswith("delta = 5 (at the bound of the fit)")
+    assert len(flagged) == 1 and flagged[0].startswith("delta = 5 (at the bound of the fit, held at its default)")
     assert "fricli diagnose" in flagged[0]
     # the same spikes with every parameter inside its bounds: no warning
     assert warnings_of(with_spikes(sweep_signals(seed=3))) == []
@@ -302,11 +302,26 @@ def test_the_jump_at_reversals_is_no_reason_to_warn_of_a_bound():
     assert not any("at the bound of the fit" in w for w in fitted.warnings_), fitted.warnings_
 
 
+def test_a_stribeck_velocity_spanning_the_speeds_is_held():
+    """A Stribeck decay across all the log's speeds (vs = 0.5 rad/s, speeds to 0.7) shows no breakaway:
+    the fit keeps vs within 1/6 of the top speed, and a fit that runs to that bound holds Fs = Fc
+    with a note, instead of a Coulomb level traded away for the decay."""
+    fitted = LuGreIdentifier().fit(sweep_signals(seed=3, p=dict(TRUE, vs=0.5, fs=14.0, delta=1.0)))
+    p = fitted.model_.parameters()
+    assert p["fs"] == p["fc"] and p["fc"] > 7.0                        # between the true Fc and Fs
+    assert any(n.startswith("Stribeck velocity vs (no breakaway") for n in fitted.notes_)
+    assert fitted.warnings_ == []
+    fitted = LuGreIdentifier().fit(sweep_signals(seed=3))                # vs = 0.04 rad/s, speeds to 0.7
+    assert fitted.warnings_ == [] and fitted.model_.parameters()["fs"] > fitted.model_.parameters()["fc"]
+
+
 def test_warning_stribeck_velocity_spanning_the_speeds():
-    flagged = warnings_of(sweep_signals(seed=3, p=dict(TRUE, vs=0.5, fs=14.0, delta=1.0)))
+    sig = sweep_signals(seed=3)
+    ident = LuGreIdentifier().fit(sig)
+    spanning = LuGreModel(**dict(ident.model_.parameters(), vs=0.5, fs=14.0, delta=1.0))
+    flagged = ident._plausibility(sig, ident.steady_, spanning, ident.fit_, {"tau": "Nm", "qd": "rad/s"})
     assert len(flagged) == 1 and flagged[0].startswith("the Stribeck velocity vs = ")
     assert "well below vs" in flagged[0]
-    assert warnings_of(sweep_signals(seed=3)) == []                      # vs = 0.04 rad/s, speeds to 0.7
 
 
 def test_warning_a_breakaway_no_row_determines():
@@ -669,3 +684,45 @@ def test_a_solver_step_far_down_in_log_space_keeps_a_positive_parameter():
     p = layout.decode(x, {"sigma0": 1.0, "sigma1": 0.0})
     assert p["vs"] == p["delta"] == p["fc"] == math.exp(-700.0) > 0
     assert np.isfinite(LuGreModel(**p).steady_state(np.array([-0.5, 0.5]), None)).all()
+
+
+def continuous_signals(seed=0, seconds=60.0, rate=500.0, sub=4, noise=0.02, p=None):
+    """A joint on continuous motion (a sum of sines: no constant-velocity holds, no rests at
+    reversals), no gravity, its inertia already out of tau_m (as in logs of extracted friction),
+    tau_dyn declared 0."""
+    p = p or dict(fc=0.3, fs=0.45, vs=0.02, delta=1.0, fv=0.4, kc=0.0, ks=0.0, sigma0=3e3, sigma1=1.0)
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 1.0 / (rate * sub))
+    v = 0.25 * np.sin(2 * np.pi * 0.6 * t) + 0.12 * np.sin(2 * np.pi * 1.37 * t + 0.7)
+    q = np.cumsum(v) / (rate * sub)
+    sig = _friction_log(t, q, v, p, 0.0, sub, noise, rng)
+    sig["tau_m"] = sig["tau_m"] - sig["tau_dyn"]
+    sig["tau_dyn"] = np.zeros_like(sig["tau_m"])          # declared zero, as a log with --no-dynamics reads
+    return sig, p
+
+
+def test_identify_on_continuous_motion_without_holds():
+    """No holds and tau_dyn all zero: the continuous-motion fit (settled rows, then every parameter on the
+    simulated model over the whole log) recovers the static curve; no parameter is left at a bound
+    without a note that holds it."""
+    sig, p = continuous_signals()
+    with pytest.raises(DataError, match="too few steady-state samples"):
+        LuGreIdentifier(samples="steady").fit(sig)
+    fitted = LuGreIdentifier().fit(sig)
+    assert fitted.samples_ == "settled" and any(n.startswith("no constant-velocity holds") for n in fitted.notes_)
+    got = fitted.model_.parameters()
+    assert got["fc"] == pytest.approx(p["fc"], rel=0.1)
+    assert got["fv"] == pytest.approx(p["fv"], rel=0.1)
+    true = fitted.model_.predict(sig)[0] - sig["tau_f_true"]
+    assert float(np.sqrt(np.mean(true ** 2))) < 0.02                    # to the noise level of tau_m
+    assert "joint" in fitted.fit_["stages"]
+
+
+def test_parameters_at_a_bound_are_held_with_a_note():
+    """A joint without viscous friction: the fit runs Fv to its bound 0; it is held at exactly 0,
+    and a note says so (never a value such as 1e-16)."""
+    sig, p = continuous_signals(p=dict(fc=0.3, fs=0.3, vs=0.02, delta=1.0, fv=0.0, kc=0.0, ks=0.0,
+                                       sigma0=3e3, sigma1=1.0))
+    fitted = LuGreIdentifier().fit(sig)
+    assert fitted.model_.parameters()["fv"] == 0.0
+    assert any(n.startswith("viscous friction Fv: the log does not determine it") for n in fitted.notes_)

@@ -50,6 +50,14 @@ _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cach
 NOISE_FLOOR = 1e-3        # velocity tolerance of the static-curve selection: at least this share of the top speed
 MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
+VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the top speed: exp(-3) < MINOR at half of it
+FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
+# the default a bounded static parameter is held at when the fit runs it to a bound (the log does not
+# determine it): no viscous or load term, Fs = Fc (the excess Fs - Fc is 0), an exponential Stribeck decay
+HELD = {"fv": 0.0, "kc": 0.0, "ks": 0.0, "fs": 0.0, "delta": 1.0, "vs": math.nan}
+HELD_TEXT = {"fc": "Coulomb friction Fc", "fv": "viscous friction Fv", "kc": "load slope kc", "ks": "load slope ks",
+             "fs": "Stribeck rise Fs - Fc", "delta": "Stribeck exponent delta",
+             "vs": "Stribeck velocity vs (no breakaway the log's speeds show)"}
 
 
 def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, travel: float = 0.002,
@@ -155,6 +163,10 @@ class _Layout:
 
     stribeck: bool          # Fs, vs, delta identifiable (slow steady samples exist)
     load: bool              # kc, ks identifiable (tau_g present and varying)
+    held: tuple = ()        # parameters held at their defaults (``HELD``): the log does not determine them
+    vs_max: float = math.inf  # bounds of the Stribeck velocity from the speeds of the static-curve rows
+    vs_min: float = 0.0
+    fc_min: float = 0.0       # lower bound of the Coulomb level
 
     @property
     def names(self) -> list[str]:
@@ -166,7 +178,7 @@ class _Layout:
             out.append("kc")
             if self.stribeck:
                 out.append("ks")
-        return out
+        return [k for k in out if k not in self.held]
 
     _LOG = ("fc", "vs", "delta")
 
@@ -182,6 +194,9 @@ class _Layout:
             # rejects (non-finite ones shrink its trust region), where exp(710) would raise, and 1e-304
             # keeps the parameter positive, where exp(-750) would be 0, which no LuGre model takes
             p[k] = math.exp(min(max(xi, -700.0), 700.0)) if k in self._LOG else float(xi)
+        for k in self.held:
+            if k in HELD and k != "vs":   # vs held: no Stribeck effect; fc held: at its bound, in fixed
+                p[k] = HELD[k]   # fs: the excess Fs - Fc
         if self.stribeck:
             p["fs"] = p["fc"] + p["fs"]
         if not self.stribeck:
@@ -192,8 +207,8 @@ class _Layout:
         return p
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = {"delta": math.log(0.2), "fs": 0.0, "fv": 0.0, "kc": 0.0, "ks": 0.0}
-        hi = {"delta": math.log(5.0)}
+        lo = {"fc": math.log(self.fc_min) if self.fc_min > 0 else -np.inf, "delta": math.log(0.2), "vs": math.log(self.vs_min) if self.vs_min > 0 else -np.inf, "fs": 0.0, "fv": 0.0, "kc": 0.0, "ks": 0.0}
+        hi = {"delta": math.log(5.0), "vs": math.log(self.vs_max)}
         return (np.array([lo.get(k, -np.inf) for k in self.names]),
                 np.array([hi.get(k, np.inf) for k in self.names]))
 
@@ -264,6 +279,18 @@ class LuGreIdentifier:
                                 "over the whole log: it moves too little to sample the static curve (a joint held "
                                 "still while others move?)")
             steady = settled_mask(sig["t"], v, settle=self.settle)
+        if self.samples == "auto" and self.samples_ == "steady" and not self._both_ways(steady, v):
+            # no constant-velocity holds to speak of: the continuous-motion fit (settled rows for the
+            # static curve, then every parameter on the simulated model output over the whole log)
+            settled = settled_mask(sig["t"], v, settle=self.settle)
+            if self._both_ways(settled, v):
+                self.samples_ = "settled"
+                self.continuous_ = True
+                steady = settled
+                self.notes_.append(f"no constant-velocity holds (fewer than {MIN_STEADY_PER_DIRECTION} steady-state "
+                                   "rows in a direction): continuous-motion fit, the static curve on every row "
+                                   f"{self.settle:g} {units.get('q', '')} past a reversal, then all parameters on "
+                                   "the simulated model output over the whole log")
         for name, side in (("positive", v > 0), ("negative", v < 0)):
             count = int((steady & side).sum())
             if count < MIN_STEADY_PER_DIRECTION:
@@ -277,6 +304,10 @@ class LuGreIdentifier:
             raise DataError(f"the steady-state samples cover only one speed (about {np.median(speeds):.3g} {vu}): "
                             "several velocity levels are needed to separate Coulomb and viscous friction")
         return steady
+
+    @staticmethod
+    def _both_ways(rows: np.ndarray, v: np.ndarray) -> bool:
+        return all(int((rows & side).sum()) >= MIN_STEADY_PER_DIRECTION for side in (v > 0, v < 0))
 
     # ----------------------------------------------------------------- stage 1
 
@@ -353,7 +384,14 @@ class LuGreIdentifier:
             self.notes_.append(f"Stribeck effect not identifiable ({why}): Fs = Fc")
             start["fs"], start["ks"] = start["fc"], start["kc"]
             start["vs"], start["delta"] = float(np.abs(v).min()), 1.0
-        layout = _Layout(stribeck=stribeck, load=load is not None)
+        # a Stribeck velocity near the fastest rows would make the curve a decay across all of them (with a
+        # vanishing Coulomb level, a viscous slope traded against it): no breakaway the log shows. Bounds:
+        # at half the top speed 95 % of the drop Fs - Fc is done (delta = 1; more with a larger delta),
+        # and vs not far below the slowest row
+        layout = _Layout(stribeck=stribeck, load=load is not None, vs_max=VS_MAX_SHARE * float(np.abs(v).max()),
+                         vs_min=MINOR * float(np.abs(v).min()))
+        if stribeck:
+            start["vs"] = min(max(start["vs"], 2 * layout.vs_min), 0.5 * layout.vs_max)
         fixed = {k: start[k] for k in ("fc", "fs", "vs", "delta", "fv", "kc", "ks")}
         fixed.update(sigma0=1.0, sigma1=0.0)
         tg = None if load is None else tau_g
@@ -362,11 +400,41 @@ class LuGreIdentifier:
             m = LuGreModel(**layout.decode(x, fixed))
             return m.steady_state(v, tg) - y
 
-        res = _least_squares(residual, layout.encode(start), layout.bounds(), self.max_nfev, "static parameters")
-        params = layout.decode(res.x, fixed)
-        return params, {"nfev": int(res.nfev), "cost": float(res.cost), "stribeck": stribeck,
-                        "load": layout.load, "at_bounds": _at_bounds(layout.names, res),
+        nfev = 0
+        level = float(np.median(np.abs(y)))
+        layout = dataclasses.replace(layout, fc_min=FC_MIN_SHARE * level)
+        start["fc"] = max(start["fc"], 2 * layout.fc_min)
+        hit: dict[str, str] = {}   # every bound the fits reached
+        for _ in range(len(HELD) + 1):
+            res = _least_squares(residual, layout.encode(start), layout.bounds(), self.max_nfev, "static parameters")
+            nfev += int(res.nfev)
+            params = layout.decode(res.x, fixed)
+            bound = _at_bounds(layout.names, res, *layout.bounds())
+            bound.update(_coulomb_in_load(layout, params, _typical({"l": load}, "l", slice(None))))
+            if layout.stribeck and math.exp(-(layout.vs_min / MINOR / params["vs"]) ** params["delta"]) < MINOR:
+                bound["vs"] = "lower"   # the rise Fs - Fc is gone by the slowest row: no row shows Fs
+
+            hit.update(bound)
+            if not bound:
+                break
+            # a parameter the fit runs to its bound is not determined by the log: held at its default, refit
+            layout = _hold(layout, bound)
+            start = _held_values(layout, params, bound)
+            fixed.update(start)
+        self._note_held(layout.held)
+        return params, {"nfev": nfev, "cost": float(res.cost), "stribeck": stribeck,
+                        "load": layout.load, "held": list(layout.held), "vs_max": layout.vs_max, "vs_min": layout.vs_min,
+                        "fc_min": layout.fc_min, "at_bounds": hit,
                         "converged": bool(res.status != 0)}
+
+    def _note_held(self, held) -> None:
+        for k in held:
+            if f"{HELD_TEXT[k]}:" not in " ".join(self.notes_):
+                value = ("Fs = Fc" if k in ("fs", "vs") else "its lower bound, 0.1 % of the median friction"
+                         if k == "fc" else f"{k} = {HELD[k]:g}")
+                self.notes_.append(f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, "
+                                   f"or traded it against another term), "
+                                   f"held at its default {value}")
 
     # ----------------------------------------------------------------- stage 2
 
@@ -396,42 +464,56 @@ class LuGreIdentifier:
         for i, what in enumerate(names):
             for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
                 if abs(res.x[i] - bound) < 1e-3:
-                    self.notes_.append(f"{what} at its {side} bound: the log does not determine it")
+                    self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
+                                       "(its default)")
         return dict(static, sigma0=sigma0, sigma1=sigma1), {"nfev": int(res.nfev) + len(grid),
                                                                 "cost": float(res.cost),
                                                                 "converged": bool(res.status != 0)}
 
     def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout) -> tuple[dict, dict]:
-        fixed = dict(params)
-        n_static = len(layout.names)
+        nfev, start_cost, p, res, hit = 0, None, dict(params), None, {}
+        for _ in range(len(HELD) + 1):
+            fixed = dict(p)
+            n_static = len(layout.names)
 
-        def decode(x):
-            p = layout.decode(x[:n_static], fixed)
-            p["sigma0"], p["sigma1"] = _bristles(x[n_static:])
-            return p
+            def decode(x, layout=layout, fixed=fixed, n_static=n_static):
+                q = layout.decode(x[:n_static], fixed)
+                q["sigma0"], q["sigma1"] = _bristles(x[n_static:])
+                return q
 
-        def residual(x):
-            return LuGreModel(**decode(x)).predict(sig)[0] - y
+            def residual(x, decode=decode):
+                return LuGreModel(**decode(x)).predict(sig)[0] - y
 
-        lb, ub = layout.bounds()
-        s0 = math.log(params["sigma0"])
-        tau1 = math.log(max(params["sigma1"] / params["sigma0"], 1e-7))
-        x0 = np.concatenate([layout.encode(params), [s0, tau1]])
-        lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
-        ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
-        start_cost = 0.5 * _sumsq(residual(_inside(x0, lb, ub)))
-        try:
-            res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement")
-        except FitError as exc:
-            self.notes_.append(f"{exc}: kept the two-stage estimate")
-            return params, {"nfev": self.max_nfev, "cost": start_cost, "kept": "two-stage"}
-        p = decode(res.x)
+            lb, ub = layout.bounds()
+            s0 = math.log(p["sigma0"])
+            tau1 = math.log(max(p["sigma1"] / p["sigma0"], 1e-7))
+            x0 = np.concatenate([layout.encode(p), [s0, tau1]])
+            lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
+            ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
+            if start_cost is None:
+                start_cost = 0.5 * _sumsq(residual(_inside(x0, lb, ub)))
+            try:
+                res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "joint refinement")
+            except FitError as exc:
+                self.notes_.append(f"{exc}: kept the two-stage estimate")
+                return params, {"nfev": self.max_nfev, "cost": start_cost, "kept": "two-stage"}
+            nfev += int(res.nfev)
+            p = decode(res.x)
+            bound = _at_bounds(layout.names, res, lb, ub)
+            bound.update(_coulomb_in_load(layout, p, _typical(sig, "tau_g", slice(None))))
+            hit.update(bound)
+            if not bound:
+                break
+            # a parameter run to its bound: held at its default, the others fitted again
+            layout = _hold(layout, bound)
+            p = _held_values(layout, p, bound)
         if res.status == 0:
             self.notes_.append(f"joint refinement stopped at {self.max_nfev} evaluations: kept its best iterate")
         if not res.cost < start_cost:
             self.notes_.append("joint refinement did not lower the error: kept the two-stage estimate")
-            return params, {"nfev": int(res.nfev), "cost": start_cost, "kept": "two-stage"}
-        return p, {"nfev": int(res.nfev), "cost": float(res.cost), "at_bounds": _at_bounds(layout.names, res)}
+            return params, {"nfev": nfev, "cost": start_cost, "kept": "two-stage"}
+        self._note_held(layout.held)
+        return p, {"nfev": nfev, "cost": float(res.cost), "held": list(layout.held), "at_bounds": hit}
 
     # ----------------------------------------------------------- plausibility
 
@@ -449,7 +531,7 @@ class LuGreIdentifier:
         tail = TAIL * math.sqrt(2 * math.log(max(curve["n"], 2))) * curve["rmse"]
         if bounds and curve["max"] > tail:
             which = " and ".join(_BOUND_TEXT[name][side] for name, side in bounds.items())
-            out.append(f"{which} (at the bound of the fit) with a max error of {curve['max']:.3g} {tau} on the "
+            out.append(f"{which} (at the bound of the fit, held at its default) with a max error of {curve['max']:.3g} {tau} on the "
                        f"static-curve rows, {curve['max'] / curve['rmse']:.0f} times their RMS error: the static curve cannot follow some "
                        "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
                        "settled, --drop-invalid for bad rows, or a model kind with the missing effect")
@@ -508,6 +590,7 @@ class LuGreIdentifier:
     def _fit(self, signals: dict[str, np.ndarray], units: dict | None, axis: str) -> "LuGreIdentifier":
         units = units or logs.CANONICAL[axis]
         self.notes_: list[str] = []
+        self.continuous_ = False
         sig = {k: signals[k] for k in ("t", "qd", "tau_g") if k in signals}
         y = logs.friction_target(signals)
         steady = self._static_rows(signals, units, self._require_motion(signals["qd"]))
@@ -516,8 +599,9 @@ class LuGreIdentifier:
         static, info1 = self._fit_static(v[steady], y[steady], None if tau_g is None else tau_g[steady], units)
         params, info2 = self._fit_dynamic(sig, y, static)
         stages = {"static": info1, "dynamic": info2}
-        if self.refine:
-            layout = _Layout(stribeck=info1["stribeck"], load=info1["load"])
+        if self.refine or self.continuous_:
+            layout = _Layout(stribeck=info1["stribeck"], load=info1["load"], held=tuple(info1["held"]),
+                             vs_max=info1["vs_max"], vs_min=info1["vs_min"], fc_min=info1["fc_min"])
             params, stages["joint"] = self._fit_joint(sig, y, params, layout)
         try:
             model = LuGreModel(**params, axis=axis)
@@ -571,16 +655,53 @@ def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
     return coef, max(sse, 0.0)
 
 
-_BOUND_TEXT = {"fs": {"lower": "Fs = Fc"}, "delta": {"lower": "delta = 0.2", "upper": "delta = 5"},
+_BOUND_TEXT = {"fc": {"lower": "Fc = 0.1 % of the median friction"}, "fs": {"lower": "Fs = Fc"}, "vs": {"upper": "vs = 1/6 of the top speed", "lower": "vs = 5 % of the slowest speed"}, "delta": {"lower": "delta = 0.2", "upper": "delta = 5"},
                "fv": {"lower": "Fv = 0"}, "kc": {"lower": "kc = 0"}, "ks": {"lower": "ks = 0"}}
 
 
-def _at_bounds(names: list[str], res) -> dict[str, str]:
+def _at_bounds(names: list[str], res, lb=None, ub=None) -> dict[str, str]:
     """{name: "lower" or "upper"} of the bounded static parameters ``names`` that a fit ``res``
-    (scipy's result) left at a bound, from its active_mask (the bristle parameters, listed after
-    them, have notes of their own)."""
-    return {name: "lower" if a < 0 else "upper" for name, a in zip(names, res.active_mask)
-            if a and name in _BOUND_TEXT}
+    (scipy's result) left at a bound, from its active_mask or, given the bounds (lb, ub), a value
+    within 1e-6 (relative to the bound, absolute at 0) of one (the bristle parameters, listed
+    after them, have notes of their own)."""
+    out = {}
+    for i, (name, a) in enumerate(zip(names, res.active_mask)):
+        if name not in _BOUND_TEXT:
+            continue
+        if a:
+            out[name] = "lower" if a < 0 else "upper"
+        elif lb is not None:
+            x = float(res.x[i])
+            for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
+                if np.isfinite(bound) and abs(x - bound) <= 1e-6 * max(abs(bound), 1.0):
+                    out[name] = side
+    return out
+
+
+def _hold(layout: _Layout, bound: dict) -> _Layout:
+    """The layout with the parameters ``bound`` held (no Stribeck effect once Fs - Fc or vs is)."""
+    return dataclasses.replace(layout, held=layout.held + tuple(k for k in bound if k not in layout.held),
+                               stribeck=layout.stribeck and not {"fs", "vs"} & set(bound))
+
+
+def _held_values(layout: _Layout, p: dict, bound: dict) -> dict:
+    """Parameters ``p`` with those in ``bound`` set to the value they are held at."""
+    q = dict(p)
+    q.update({k: HELD[k] for k in bound if k not in ("fs", "vs", "fc")})
+    if "fc" in bound:
+        q["fc"] = layout.fc_min
+    if not layout.stribeck:   # no Stribeck effect: Fs = Fc, ks = kc
+        q["fs"], q["ks"] = q["fc"], q["kc"]
+    return q
+
+
+def _coulomb_in_load(layout: _Layout, p: dict, load: float) -> dict[str, str]:
+    """{"kc": "lower"(, "ks": "lower")} when the fit put the whole Coulomb level into the load slope
+    (Fc under 1e-6 of Fc + kc |tau_g| at the typical load ``load`` [Nm]): the log does not separate
+    the two, and the load slopes are held at 0; else {}."""
+    if not layout.load or "kc" not in layout.names or not p["fc"] < 1e-6 * (p["fc"] + p["kc"] * load):
+        return {}
+    return {k: "lower" for k in ("kc", "ks") if k in layout.names}
 
 
 def _typical(signals: dict, name: str, rows: np.ndarray) -> float:
