@@ -26,6 +26,12 @@ def _linear(log):
     return linear.fit(log.signals, axis=log.axis)[0]
 
 
+def _gms(log):
+    from fricli.fitting import hysteresis
+
+    return hysteresis.fit(log.signals, axis=log.axis, elements=(3,), coulomb_k=(2,), error_k=(1,))[0]
+
+
 def _network(arch):
     hidden = {"selmic": (12,)}.get(arch, (4,))
     return lambda log: learning.train_base(log, arch=arch, hidden=hidden, steps=5, max_samples=200, seed=1)[0]
@@ -67,7 +73,7 @@ def _coupled(path: str):
     return log, lambda m: m.member(group.joints[0]), log_file
 
 
-BUILDERS = {"lugre": _lugre, "linear": _linear, "residual": _residual, "augmented": _augmented,
+BUILDERS = {"lugre": _lugre, "linear": _linear, "gms": _gms, "residual": _residual, "augmented": _augmented,
             **{arch: _network(arch) for arch in learning.ARCHS}}
 def _coupled_member(path: str):
     """The member of the coupled wrist's first joint, saved as a model of that joint."""

@@ -66,6 +66,14 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
                                               error_coef=[0.03], effects=["quadrant", "gravity"], errors=["gravity"])
     # NN_add over a model with robot-model errors: the errors pass by the dissipative combination
     out["residual-errors"] = fit_residual(out["augmented-errors"])
+    # the Maxwell-slip model with every part: elements, a Coulomb level along the travel, a load slope
+    # (set by hand where the fit finds none) and a robot-model error of the position
+    from fricli.fitting import hysteresis
+    from fricli.models.gms import GMSModel
+
+    gms = hysteresis.fit(sig, elements=(4,), coulomb_k=(3,), error_k=(2,))[0]
+    out["gms"] = GMSModel(gms.deflection, gms.force, **dict(gms.parameters(), kc=max(gms.kc, 0.02)),
+                          coulomb_pos=gms.coulomb_pos, error=gms.error)
     out["augmented-dissipative"] = AugmentedModel(out["dissipative"], terms[-4:], rng.normal(size=4),
                                                   error_terms=ERROR_TERMS[:1], error_coef=[0.03], errors=["gravity"])
     return out
@@ -153,7 +161,7 @@ def _compare(model_path: str, log_path: str, tmp_path, *, cutoff: float = 50.0, 
 
 KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "dissipative", "residual",
          "residual-mlp", "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
-         "augmented-errors", "augmented-dissipative", "residual-errors"]
+         "augmented-errors", "augmented-dissipative", "residual-errors", "gms"]
 
 
 @needs_cc
@@ -173,7 +181,7 @@ def test_export_matches_predict_on_emps(kind, emps_models, tmp_path):
 
 
 @needs_cc
-@pytest.mark.parametrize("kind", ["augmented-errors", "augmented-dissipative", "residual", "residual-errors"])
+@pytest.mark.parametrize("kind", ["augmented-errors", "augmented-dissipative", "residual", "residual-errors", "gms"])
 def test_step_parts_gives_friction_and_model_error_apart(kind, sim_models, tmp_path):
     """PREFIX_step_parts: friction and robot-model error as ``predict_parts`` (friction alone and
     error 0 for a model without error terms); their sum is what PREFIX_step returns."""
@@ -183,7 +191,7 @@ def test_step_parts_gives_friction_and_model_error_apart(kind, sim_models, tmp_p
     models.set_precision(model, "double")
     sig = logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet"), cutoff_hz=50.0).signals
     friction, error, _ = predict_parts(model, sig)
-    has_error = kind.endswith("errors") or kind.startswith("augmented")
+    has_error = kind.endswith("errors") or kind.startswith("augmented") or kind == "gms"
     assert (np.max(np.abs(error)) > 0.01) == has_error
     exe, names = _compiled(sim_models[kind], tmp_path)
     x = check.signal_matrix(sig, names)

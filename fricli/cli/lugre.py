@@ -85,7 +85,12 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
 
 
 def _report_linear(data, model, fit, out, quiet: bool) -> dict:
-    from fricli.models import linear
+    from fricli.models import gms, linear
+
+    if model.kind == "gms":
+        linear = gms
+        for note in fit.get("notes", []):
+            say(f"note: {note}", quiet)
 
     unit, params = data.units["tau"], model.parameters()
     say(f"{model.describe()}\nfit error, all rows: {_figures(fit, unit)}\n"

@@ -171,7 +171,7 @@ def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     return fn(model, name, ctx)
 
 
-EMITTER_MODULES = ("lugre", "linear", "neural", "composite", "coupled")   # modules under fricli.export that register emitters
+EMITTER_MODULES = ("lugre", "linear", "gms", "neural", "composite", "coupled")   # modules under fricli.export that register emitters
 
 
 def _load_emitters() -> None:
@@ -253,7 +253,8 @@ def model_code(model: FrictionModel, meta: dict, prefix: str, sgn: str) -> str:
 
 def _has_model_error(model: FrictionModel) -> bool:
     """Whether the model or a model it is made of corrects robot-model errors (error terms)."""
-    return bool(getattr(model, "error_terms", None)) or any(_has_model_error(c) for c in model.children().values())
+    return (bool(getattr(model, "error_terms", None)) or bool(getattr(model, "has_model_error", False))
+            or any(_has_model_error(c) for c in model.children().values()))
 
 
 def _meta_block(meta: dict, model: FrictionModel, prefix: str, source: str, sha256: str) -> list[str]:

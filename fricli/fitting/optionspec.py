@@ -139,8 +139,9 @@ IDENTIFY = (
     Option("refine", "flag", False, "Finally fit all parameters jointly on the whole log."),
     Option("kind", "choice", "lugre",
            "lugre, or the linear model Fv*qd + Fc*sign(qd) + offset (linear-asymmetric: Fv, Fc per direction) "
-           "fitted by least squares on the rows in motion (docs/tutorial.md).",
-           choices=("lugre", "linear", "linear-asymmetric")),
+           "fitted by least squares on the rows in motion (docs/tutorial.md), or gms: the Generalized "
+           "Maxwell-slip model, hysteresis with memory (docs/gms.md).",
+           choices=("lugre", "linear", "linear-asymmetric", "gms")),
     Option("coupling", "flag", False,
            "Fit each group of joints that share motors (the log's transmission, docs/drives.md) as one model of "
            "friction per motor (kind coupled); the other joints as before."),

@@ -183,6 +183,12 @@ def moving_errors(made: Made) -> dict:
 
 
 def _identify(data, output, opts, job, _base, _on_eval) -> Made:
+    if opts["kind"] == "gms":
+        from fricli.fitting import hysteresis
+
+        model, fit = hysteresis.fit(data.signals, axis=data.axis)
+        models.save_for_log(output, model, data, rows_used=len(data), fit=fit, job=job)
+        return Made("identify", output, data, model, fit)
     if opts["kind"] != "lugre":
         from fricli.models import linear
 

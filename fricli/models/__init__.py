@@ -15,7 +15,7 @@ from fricli.core import modelfile
 from fricli.core.errors import ModelFileError
 from fricli.models.base import FrictionModel
 
-_KIND_MODULES = ("lugre", "linear", "neural", "dissipative", "residual", "augmented", "coupled")
+_KIND_MODULES = ("lugre", "linear", "gms", "neural", "dissipative", "residual", "augmented", "coupled")
 KINDS: dict[str, type[FrictionModel]] = {}
 
 

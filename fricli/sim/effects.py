@@ -328,10 +328,36 @@ class Payload(Effect):
         return {"amplitude": strength, "phase": float(ph)}
 
 
+HYSTERESIS_DEFLECTIONS = (0.002, 0.006, 0.02)   # deflection limits of the Maxwell-slip elements [rad]
+HYSTERESIS_SHARES = (0.5, 0.3, 0.2)              # their shares of the total break-away force
+
+
+class Hysteresis(Effect):
+    name, unit = "hysteresis", "Nm"
+    help = ("friction with memory: Maxwell-slip elements (springs that slip at 0.002, 0.006, 0.02 rad) of "
+            "this total break-away force")
+
+    def default(self, j):
+        return 0.3 * j.fc
+
+    def check(self, strength):
+        if strength < 0:
+            raise ValueError("the elements' break-away force must be >= 0")
+
+    def apply(self, scene, strength, rng):
+        from fricli.models.gms import element_states
+
+        d = np.array(HYSTERESIS_DEFLECTIONS)
+        force = strength * np.array(HYSTERESIS_SHARES)
+        z, _ = element_states(scene.q, scene.v, d)
+        scene.extra += (z / d) @ force
+        return {"deflections": list(HYSTERESIS_DEFLECTIONS), "forces": [float(f) for f in force]}
+
+
 # Registry order is the order effects are applied in (and their random streams).
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
     Payload(), Temperature(), Column(), Ripple(), Asymmetry(), Drift(), Inertia(), Offset(), Level(),
-    Load(), Velocity(), Quadrant(), Gravity(), Disturbance())}
+    Load(), Velocity(), Quadrant(), Gravity(), Disturbance(), Hysteresis())}
 # The effects are named as ``fricli diagnose`` names what it finds (fricli.fitting.diagnosis.effects);
 # the simulator's earlier names stay accepted.
 ALIASES = {"ripple": "position", "asymmetry": "direction"}
