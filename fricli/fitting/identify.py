@@ -54,7 +54,9 @@ VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the t
 FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
 # the default a bounded static parameter is held at when the fit runs it to a bound (the log does not
 # determine it): no viscous or load term, Fs = Fc (the excess Fs - Fc is 0), an exponential Stribeck decay
-HELD = {"fv": 0.0, "kc": 0.0, "ks": 0.0, "fs": 0.0, "delta": 1.0, "vs": math.nan}
+# (delta: held at the bound it reached, the steepest or flattest Stribeck drop the model has; vs: no
+# Stribeck effect, Fs = Fc; fc: held at its lower bound)
+HELD = {"fv": 0.0, "kc": 0.0, "ks": 0.0, "fs": 0.0}
 HELD_TEXT = {"fc": "Coulomb friction Fc", "fv": "viscous friction Fv", "kc": "load slope kc", "ks": "load slope ks",
              "fs": "Stribeck rise Fs - Fc", "delta": "Stribeck exponent delta",
              "vs": "Stribeck velocity vs (no breakaway the log's speeds show)"}
@@ -195,7 +197,7 @@ class _Layout:
             # keeps the parameter positive, where exp(-750) would be 0, which no LuGre model takes
             p[k] = math.exp(min(max(xi, -700.0), 700.0)) if k in self._LOG else float(xi)
         for k in self.held:
-            if k in HELD and k != "vs":   # vs held: no Stribeck effect; fc held: at its bound, in fixed
+            if k in HELD:        # the others (delta, vs, fc) are held at their values in ``fixed``
                 p[k] = HELD[k]   # fs: the excess Fs - Fc
         if self.stribeck:
             p["fs"] = p["fc"] + p["fs"]
@@ -431,7 +433,8 @@ class LuGreIdentifier:
         for k in held:
             if f"{HELD_TEXT[k]}:" not in " ".join(self.notes_):
                 value = ("Fs = Fc" if k in ("fs", "vs") else "its lower bound, 0.1 % of the median friction"
-                         if k == "fc" else f"{k} = {HELD[k]:g}")
+                         if k == "fc" else "the bound it reached (the steepest or flattest drop the model has)"
+                         if k == "delta" else f"{k} = {HELD[k]:g}")
                 self.notes_.append(f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, "
                                    f"or traded it against another term), "
                                    f"held at its default {value}")
@@ -687,7 +690,9 @@ def _hold(layout: _Layout, bound: dict) -> _Layout:
 def _held_values(layout: _Layout, p: dict, bound: dict) -> dict:
     """Parameters ``p`` with those in ``bound`` set to the value they are held at."""
     q = dict(p)
-    q.update({k: HELD[k] for k in bound if k not in ("fs", "vs", "fc")})
+    q.update({k: HELD[k] for k in bound if k in HELD and k != "fs"})
+    if "delta" in bound:
+        q["delta"] = 5.0 if bound["delta"] == "upper" else 0.2
     if "fc" in bound:
         q["fc"] = layout.fc_min
     if not layout.stribeck:   # no Stribeck effect: Fs = Fc, ks = kc
