@@ -1,0 +1,174 @@
+"""Rerun the Franka case study: friction of joint 2 of a Franka Emika arm on continuous motion at
+three speeds (../shared/data/franka, see ../shared/data/README.md), fricli's model kinds beside
+the models published with the data; writes docs/case-study-franka.md.
+
+    python docs/franka/run_case_study.py                 # about 30 s on 2 cores
+    python docs/franka/run_case_study.py --out /tmp/x.md --data DIR
+
+Protocol: per file, every model is fitted on the first 60 % of the file's time span and scored
+(RMS error against the friction target) on the last 40 %, its state carried over from the fitted
+part (the model runs over the whole file, as in use). Across speeds: fitted on the slow and middle
+files together, scored on the whole high-speed file. The published models' columns in the files
+are read only to score them on the same rows; they are never inputs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+sys.path.insert(0, ROOT)
+
+from fricli.core.atomic import atomic_write_bytes  # noqa: E402
+from fricli.fitting import hysteresis  # noqa: E402
+from fricli.fitting.identify import LuGreIdentifier  # noqa: E402
+from fricli.models import linear  # noqa: E402
+
+DEFAULT_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "franka")
+FILES = ("slow", "middle", "high")
+CLASSICAL = ("CV", "Dahl", "Stribeck", "LuGre")
+LEARNED = ("SVM", "Light_Transformer", "PINN")
+FIT_SHARE = 0.6
+
+
+def read(data: str, speed: str) -> tuple[dict, dict]:
+    """(signals in fricli's log contract, published predictions) of one file. The target is the
+    authors' friction torque, given as tau_m with tau_g = tau_dyn = 0 (nothing left to remove);
+    the file's acceleration column is all zeros (not measured) and is not read."""
+    d = np.genfromtxt(os.path.join(data, f"joint2_{speed}.csv"), delimiter=",", names=True)
+    n = len(d)
+    sig = {"t": d["time"], "q": d["q2"], "qd": d["dq2"], "tau_m": d["q2_tau_J_compensate"],
+           "tau_g": np.zeros(n), "tau_dyn": np.zeros(n)}
+    return sig, {c: d[c] for c in CLASSICAL + LEARNED + ("NNFM",)}
+
+
+def rows(sig: dict, mask: np.ndarray) -> dict:
+    return {k: v[mask] for k, v in sig.items()}
+
+
+def rms(e: np.ndarray) -> float:
+    with np.errstate(over="ignore"):
+        return float(np.sqrt(np.mean(e * e))) if np.isfinite(e).all() else float("inf")
+
+
+def fit_kinds(train: dict) -> dict:
+    """Each fricli kind fitted on ``train`` (the library calls `fricli identify` makes)."""
+    out = {}
+    t0 = time.perf_counter()
+    out["lugre"] = (LuGreIdentifier().fit(train).model_, time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    out["linear"] = (linear.fit(train)[0], time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    out["gms"] = (hysteresis.fit(train)[0], time.perf_counter() - t0)
+    return out
+
+
+def score(model, before: dict, after: dict) -> float:
+    """RMS error on ``after``, the model's state carried from running over ``before``."""
+    _, state = model.predict(before)
+    pred, _ = model.predict(after, state)
+    return rms(pred - after["tau_m"])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=DEFAULT_DATA)
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "case-study-franka.md"))
+    args = ap.parse_args(argv)
+    per_file, models = [], {}
+    for speed in FILES:
+        sig, pub = read(args.data, speed)
+        t = sig["t"]
+        fit_rows = t < t[0] + FIT_SHARE * (t[-1] - t[0])
+        train, test = rows(sig, fit_rows), rows(sig, ~fit_rows)
+        kinds = fit_kinds(train)
+        models[speed] = kinds
+        y = test["tau_m"]
+        published = {c: rms(pub[c][~fit_rows] - y) for c in pub}
+        per_file.append({"file": speed, "n_fit": int(fit_rows.sum()), "n_test": int((~fit_rows).sum()),
+                         "fricli": {k: score(m, train, test) for k, (m, _) in kinds.items()},
+                         "seconds": {k: s for k, (_, s) in kinds.items()},
+                         "classical": min(published[c] for c in CLASSICAL),
+                         "learned": min(published[c] for c in LEARNED), "nnfm": published["NNFM"],
+                         "published": published})
+        print(speed, {k: round(v, 3) for k, v in per_file[-1]["fricli"].items()}, file=sys.stderr)
+    # across speeds: fit on slow + middle (one log, the middle run after the slow one), score high
+    both = [read(args.data, s)[0] for s in ("slow", "middle")]
+    train = {k: np.concatenate([b[k] for b in both]) for k in both[0]}
+    train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + 0.002])
+    high, pub_high = read(args.data, "high")
+    kinds = fit_kinds(train)
+    across = {k: rms(m.predict(high)[0] - high["tau_m"]) for k, (m, _) in kinds.items()}
+    across_pub = {c: rms(pub_high[c] - high["tau_m"]) for c in pub_high}
+    print("across", {k: round(v, 3) for k, v in across.items()}, file=sys.stderr)
+    atomic_write_bytes(args.out, render(per_file, across, across_pub, models, kinds).encode())
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+def render(per_file, across, across_pub, models, across_models) -> str:
+    f3 = lambda x: "—" if not np.isfinite(x) else f"{x:.3f}"  # noqa: E731
+    lines = ["# Case study: friction with memory on a Franka Emika joint", "",
+             "Written by `python docs/franka/run_case_study.py` (data: `../shared/data/franka`, joint 2 of a",
+             "Franka Emika arm on one continuous Cartesian trajectory at three speeds, 60 s each at about",
+             "500 Hz, no constant-velocity holds; the friction target is the authors' extracted joint",
+             "friction). Do not edit by hand.", "",
+             "## Per file: fit on the first 60 % of the time, score the last 40 %", "",
+             "Every fricli model is fitted by the library call `fricli identify` makes (`--until 60%`;",
+             "`--kind lugre` (the default), `--kind linear`, `--kind gms`) and scored over the last 40 %",
+             "with its state carried over from the first 60 %. The published columns are the models",
+             "published with the data (their training protocol is not stated; they may have seen the whole",
+             "file), scored on the same rows. RMS error [Nm]:", "",
+             "| file | fricli lugre | fricli linear | fricli gms | best classical (CV, Dahl, Stribeck, LuGre) "
+             "| best of SVM, Transformer, PINN | NNFM | gms / best classical | gms / NNFM |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in per_file:
+        g = r["fricli"]["gms"]
+        lines.append(f"| {r['file']} | {f3(r['fricli']['lugre'])} | {f3(r['fricli']['linear'])} | **{f3(g)}** | "
+                     f"{f3(r['classical'])} | {f3(r['learned'])} | {f3(r['nnfm'])} | "
+                     f"{g / r['classical']:.2f} | {g / r['nnfm']:.2f} |")
+    lines += ["", "Fit times [s] (this machine, 2 cores shared): " + "; ".join(
+        f"{r['file']}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["seconds"].items()) for r in per_file) + ".",
+        "", "Each published column on the last 40 % [Nm] (a non-finite prediction shows as —):", "",
+        "| file | " + " | ".join(per_file[0]["published"]) + " |",
+        "|---|" + "---|" * len(per_file[0]["published"])]
+    for r in per_file:
+        lines.append(f"| {r['file']} | " + " | ".join(f3(v) for v in r["published"].values()) + " |")
+    lines += ["", "## Across speeds: fit on the slow and middle files, score the high-speed file", "",
+              "| fricli lugre | fricli linear | fricli gms | best classical | best of SVM, Transformer, PINN | NNFM |",
+              "|---|---|---|---|---|---|",
+              f"| {f3(across['lugre'])} | {f3(across['linear'])} | **{f3(across['gms'])}** | "
+              f"{f3(min(across_pub[c] for c in CLASSICAL))} | {f3(min(across_pub[c] for c in LEARNED))} | "
+              f"{f3(across_pub['NNFM'])} |", "",
+              "(The published columns here are the published models' predictions of the high-speed file, which",
+              "they were fitted on; fricli's models never saw it.)", "",
+              "## The models fitted", ""]
+    for r in per_file:
+        m = models[r["file"]]["gms"][0]
+        lines += [f"{r['file']}, gms:", "", "```", m.describe(), "```", ""]
+    lines += ["slow + middle, gms:", "", "```", across_models["gms"][0].describe(), "```", "",
+              "slow + middle, lugre (the default kind, fitted on continuous motion):", "", "```",
+              across_models["lugre"][0].describe(), "```", "",
+              "## What limits the figure", "",
+              "- The friction of this joint has memory: near each reversal it builds up over a travel of",
+              "  milliradians, and how it builds depends on the path since earlier reversals. The LuGre model",
+              "  has one bristle state and a velocity-only static curve; the Maxwell-slip elements of the",
+              "  gms kind carry that memory, and most of the gain over the classical models comes from them.",
+              "- The target is a torque extracted by the authors (measured joint torque minus their rigid-body",
+              "  model): part of what is left is the rigid-body model's error, a torque of the position; the gms",
+              "  kind keeps a few position terms apart for it (its robot-model error), chosen on held-out blocks.",
+              "- 36 s of one trajectory per file: the position terms and the Coulomb level along the travel are",
+              "  learned on the part of the travel the first 60 % covers; beyond it they keep their end values.",
+              "- The sliding curve is one Stribeck term of fixed shape (vs the 10th percentile of the speeds) and",
+              "  a viscous slope: at high speed the remaining error is mostly in the fast sweeps, where the",
+              "  paper's network, fitted on the whole file, does better.", ""]
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
