@@ -240,3 +240,38 @@ def test_derived_acceleration_has_no_filter_transient_at_the_ends(phase):
     error = np.abs(sig["qdd"] + w ** 2 * np.sin(w * t + phase))
     assert max(error[:50].max(), error[-50:].max()) < w ** 2
     assert error[100:-100].max() < 0.05
+
+
+def test_constant_acceleration_column_is_not_a_measurement():
+    """A qdd column of zeros while the velocity varies is dropped with a note and derived."""
+    n = 2000
+    notes = []
+    log = logs.from_table(make_table(n=n, qdd=np.zeros(n), units={"qdd": "rad/s^2"}), name="x", warn=notes.append)
+    assert log.derived["columns"] == ["qdd"]
+    assert any("qdd is constant" in m for m in notes)
+    t = np.arange(n) / 100.0
+    inner = slice(200, n - 200)
+    np.testing.assert_allclose(log.signals["qdd"][inner], -0.125 * np.sin(0.5 * t[inner]), atol=2e-3)
+    # a measured acceleration is kept, and so is a constant one while the velocity is constant too
+    qdd = -0.125 * np.sin(0.5 * t)
+    assert logs.from_table(make_table(n=n, qdd=qdd, units={"qdd": "rad/s^2"}), name="x").derived == {}
+
+
+def test_constant_velocity_column_while_the_position_moves_is_derived():
+    n = 2000
+    notes = []
+    log = logs.from_table(make_table(n=n, qd=np.zeros(n)), name="x", warn=notes.append)
+    assert log.derived["columns"] == ["qd", "qdd"]
+    assert any("qd is constant" in m for m in notes)
+    t = np.arange(n) / 100.0
+    np.testing.assert_allclose(log.signals["qd"][200:-200], 0.25 * np.cos(0.5 * t[200:-200]), atol=2e-3)
+
+
+def test_constant_velocity_sweep_keeps_its_velocity():
+    """A constant-velocity sweep agrees with its constant qd (and qdd = 0): both kept."""
+    n = 500
+    t = np.arange(n) / 100.0
+    table = logs.table_from_arrays({"t": t, "q": 0.2 * t, "qd": np.full(n, 0.2), "qdd": np.zeros(n),
+                                    "tau_m": np.full(n, 3.0), "tau_g": np.zeros(n)}, {})
+    log = logs.from_table(table, name="x", zero=("tau_dyn",))
+    assert log.derived == {}

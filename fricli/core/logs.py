@@ -482,6 +482,32 @@ def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> n
     return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
 
 
+def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:
+    """Whether a rate column constant over the rows (``rate``) contradicts the signal ``x`` it is
+    the derivative of: x departs from x[0] + rate (t - t[0]) by more than a tenth of its range (a
+    constant-velocity sweep, or a constant-acceleration ramp, agrees with it)."""
+    if len(x) < 3 or np.ptp(rate) != 0 or not np.ptp(x) > 0:
+        return False
+    return bool(np.max(np.abs(x - x[0] - rate[0] * (t - t[0]))) > 0.1 * np.ptp(x))
+
+
+def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
+    """Motion columns that cannot be measurements, as (column, note): an acceleration ``qdd``
+    constant over a log whose velocity varies otherwise (a column of zeros a recorder filled in),
+    a velocity ``qd`` constant while the position moves otherwise. Such a column is unknown, not a
+    value: the caller drops it and it is derived like a missing one."""
+    out, t = [], sig["t"]
+    if "q" in sig and "qd" in sig and _contradicts(sig["q"], sig["qd"], t):
+        out.append(("qd", f"the velocity column qd is constant ({sig['qd'][0]:g}) while the position moves "
+                          "otherwise: not a measurement, derived from q instead"))
+    if "qdd" in sig and "qd" in sig and not out and _contradicts(sig["qd"], sig["qdd"], t):
+        out.append(("qdd", f"the acceleration column qdd is constant ({sig['qdd'][0]:g}) while the velocity "
+                           "varies otherwise: not a measurement, derived from the velocity instead"))
+    elif "qdd" in sig and out and np.ptp(sig["qdd"]) == 0:
+        out.append(("qdd", "the acceleration column qdd is constant too: derived with the velocity"))
+    return out
+
+
 def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
     derived = []
@@ -550,6 +576,10 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
     if mask is not None:
         table = take_rows(table, mask)
+    for column, note in not_measured(sig):
+        del sig[column]
+        if warn:
+            warn(f"note: {name}: {note}")
     derived = derive_motion(sig, cutoff_hz)
     zero = tuple(c for c in declared_zero(table.schema, name, zero) if c not in sig)
     for column in zero:
