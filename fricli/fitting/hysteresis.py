@@ -16,8 +16,9 @@ chosen on held-out time blocks: the log is cut into ``BLOCKS`` contiguous blocks
 is fitted on all blocks but one and scored on that one, and the candidate of least held-out
 error wins; a candidate with fewer coefficients within ``TOLERANCE`` of it is preferred. The
 element states run over the whole log (they are causal and read only the position), so a block
-is scored with the memory its past gives it, as in use. The Stribeck velocity is the
-``VS_QUANTILE``-th percentile of the speeds in motion.
+is scored with the memory its past gives it, as in use. The Stribeck velocity is
+chosen first the same way, among the ``VS_QUANTILES`` percentiles of the speeds in motion, on the
+largest candidate with one Coulomb level.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ optimize = lazy.module("scipy.optimize")
 ELEMENTS = (0, 4, 8)
 COULOMB_K = (0, 2, 4, 8, 16)
 ERROR_K = (-1, 0, 1, 2, 3)
-VS_QUANTILE = 10
+VS_QUANTILES = (2, 5, 10, 25, 50)
 BLOCKS = 5
 TOLERANCE = 0.01       # a smaller model within 1 % of the best held-out error is preferred
 D_LO = 1e-3            # the smallest element deflection, share of the mean travel between reversals
@@ -114,7 +115,6 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     tau_g = signals.get("tau_g")
     load = tau_g is not None and bool(metrics.load_can_show(np.abs(tau_g[moving]), y[moving]))
     notes = [] if load else ["no load slope can show in the log (|tau_g| absent or nearly constant): kc = 0"]
-    vs = float(np.percentile(np.abs(qd[moving]), VS_QUANTILE))
     q_range = (float(q.min()), float(q.max()))
     if not q_range[1] > q_range[0]:
         raise DataError("the joint's position does not change over the log")
@@ -123,24 +123,37 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     edges = np.linspace(0, n, blocks + 1).astype(int)
     ks = tuple(k for k in coulomb_k if k)
     ke_max = max(error_k)
+
+    def normal(n_el, vs_):
+        d = grid(n_el, q, qd)
+        x, _ = columns(signals, d, vs_, load, q_range, ks, ke_max)
+        parts = [(x[a:b].T @ x[a:b], x[a:b].T @ y[a:b], float(y[a:b] @ y[a:b])) for a, b in zip(edges[:-1], edges[1:])]
+        return d, parts, sum(p[0] for p in parts), sum(p[1] for p in parts)
+
+    def heldout(parts, gram, xy, idx, lower):
+        sse = 0.0
+        for gb, xb, yb in parts:
+            coef = _solve((gram - gb)[np.ix_(idx, idx)], (xy - xb)[idx], lower)
+            sse += max(float(coef @ gb[np.ix_(idx, idx)] @ coef - 2 * coef @ xb[idx] + yb), 0.0)
+        return math.sqrt(sse / n)
+
+    # the Stribeck velocity first, on the largest candidate with one Coulomb level
+    speeds = np.abs(qd[moving])
+    vs_scores = []
+    for quantile in VS_QUANTILES:
+        vs_ = max(float(np.percentile(speeds, quantile)), 1e-9)
+        _, parts, gram, xy = normal(max(elements), vs_)
+        vs_scores.append((heldout(parts, gram, xy, *_layout(max(elements), load, 0, ke_max, ks, ke_max)), vs_))
+    vs = min(vs_scores)[1]
     candidates = []
     for n_el in elements:
-        d = grid(n_el, q, qd)
-        x, _ = columns(signals, d, vs, load, q_range, ks, ke_max)
-        parts = [(x[a:b].T @ x[a:b], x[a:b].T @ y[a:b], float(y[a:b] @ y[a:b])) for a, b in zip(edges[:-1], edges[1:])]
-        gram = sum(p[0] for p in parts)
-        xy = sum(p[1] for p in parts)
+        d, parts, gram, xy = normal(n_el, vs)
         for kc_ in coulomb_k:
             for ke in error_k:
                 idx, lower = _layout(n_el, load, kc_, ke, ks, ke_max)
-                sse = 0.0
-                for gb, xb, yb in parts:
-                    coef = _solve((gram - gb)[np.ix_(idx, idx)], (xy - xb)[idx], lower)
-                    gsub = gb[np.ix_(idx, idx)]
-                    sse += max(float(coef @ gsub @ coef - 2 * coef @ xb[idx] + yb), 0.0)
                 candidates.append({"elements": int(n_el), "coulomb_k": kc_, "error_k": ke, "size": len(idx),
-                                   "heldout_rmse": math.sqrt(sse / n), "_d": d, "_x": x, "_idx": idx, "_lower": lower,
-                                   "_g": gram, "_xy": xy})
+                                   "heldout_rmse": heldout(parts, gram, xy, idx, lower), "_d": d, "_idx": idx,
+                                   "_lower": lower, "_g": gram, "_xy": xy})
     best = min(c["heldout_rmse"] for c in candidates)
     chosen = min((c for c in candidates if c["heldout_rmse"] <= (1 + TOLERANCE) * best),
                  key=lambda c: (c["size"], c["heldout_rmse"]))
@@ -165,6 +178,7 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
         raise FitError("the GMS fit gave a model with non-finite predictions")
     record = metrics.errors(y, pred)
     record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
-                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, notes=notes,
+                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks,
+                  vs_candidates=[{"vs": v, "heldout_rmse": e} for e, v in vs_scores], notes=notes,
                   candidates=[{k: v for k, v in c.items() if not k.startswith("_")} for c in candidates])
     return model, record
