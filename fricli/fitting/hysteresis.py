@@ -178,7 +178,7 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
         raise FitError("the GMS fit gave a model with non-finite predictions")
     record = metrics.errors(y, pred)
     record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
-                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks,
+                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, heldout_best=best,
                   vs_candidates=[{"vs": v, "heldout_rmse": e} for e, v in vs_scores], notes=notes,
                   candidates=[{k: v for k, v in c.items() if not k.startswith("_")} for c in candidates])
     return model, record
