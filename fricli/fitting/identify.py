@@ -54,7 +54,8 @@ VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the t
 FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
 # the default a bounded static parameter is held at when the fit runs it to a bound (the log does not
 # determine it): no viscous or load term, Fs = Fc (the excess Fs - Fc is 0), an exponential Stribeck decay
-# (delta: held at the bound it reached, the steepest or flattest Stribeck drop the model has; vs: no
+# (delta: held at the bound it reached, the steepest or flattest Stribeck drop the model has, or at 1
+# where Fs = Fc and ks = kc leave it no effect; vs: no
 # Stribeck effect, Fs = Fc; fc: held at its lower bound)
 HELD = {"fv": 0.0, "kc": 0.0, "ks": 0.0, "fs": 0.0}
 HELD_TEXT = {"fc": "Coulomb friction Fc", "fv": "viscous friction Fv", "kc": "load slope kc", "ks": "load slope ks",
@@ -423,17 +424,21 @@ class LuGreIdentifier:
             layout = _hold(layout, bound)
             start = _held_values(layout, params, bound)
             fixed.update(start)
-        self._note_held(layout.held)
+        idle = "delta" in layout.held and params["fs"] == params["fc"] and params["ks"] == params["kc"]
+        if idle:   # no Stribeck rise at any load: the exponent has no effect, shown at its neutral 1
+            params["delta"] = 1.0
+        self._note_held(layout.held, delta_idle=idle)
         return params, {"nfev": nfev, "cost": float(res.cost), "stribeck": stribeck,
                         "load": layout.load, "held": list(layout.held), "vs_max": layout.vs_max, "vs_min": layout.vs_min,
                         "fc_min": layout.fc_min, "at_bounds": hit,
                         "converged": bool(res.status != 0)}
 
-    def _note_held(self, held) -> None:
+    def _note_held(self, held, delta_idle: bool = False) -> None:
         for k in held:
             if f"{HELD_TEXT[k]}:" not in " ".join(self.notes_):
                 value = ("Fs = Fc" if k in ("fs", "vs") else "its lower bound, 0.1 % of the median friction"
-                         if k == "fc" else "the bound it reached (the steepest or flattest drop the model has)"
+                         if k == "fc" else "delta = 1 (with Fs = Fc it has no effect)" if k == "delta" and delta_idle
+                         else "the bound it reached (the steepest or flattest drop the model has)"
                          if k == "delta" else f"{k} = {HELD[k]:g}")
                 self.notes_.append(f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, "
                                    f"or traded it against another term), "
