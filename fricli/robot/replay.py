@@ -22,7 +22,7 @@ from fricli import models
 from fricli.applying import observer
 from fricli.core import joints as joint_rule
 from fricli.core import lazy, logs, metrics, modelset
-from fricli.core.atomic import atomic_open
+from fricli.core.atomic import atomic_open, atomic_write_bytes
 from fricli.core.errors import DataError, LogError, ModelFileError
 from fricli.models import coupled
 
@@ -50,6 +50,7 @@ class Arm:
     rows: list                      # per joint: the row indices in ``table``
     form: str
     unit: str
+    signals: list = dataclasses.field(default_factory=list)   # per joint: the signals its model read
 
 
 def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -> Arm:
@@ -100,7 +101,8 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     else:
         p, wr = momentum_terms(urdf, table.schema, jnames, {j: tables[j] for j in jnames}, name)
         form = "urdf"
-    return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit)
+    return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit,
+               [tables[j] for j in jnames])
 
 
 def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -205,8 +207,7 @@ def write_thresholds(thresholds: observer.Thresholds, path: str) -> None:
     import json
 
     data = thresholds.as_json()
-    with atomic_open(path) as fh:
-        fh.write(json.dumps(data, indent=1) + "\n")
+    atomic_write_bytes(path, (json.dumps(data, indent=1) + "\n").encode("utf-8"))
 
 
 def summary(arm: Arm, out: observer.Replayed) -> dict:

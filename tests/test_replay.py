@@ -1,0 +1,104 @@
+"""fricli thresholds, fricli replay and the arm header of fricli export --observer: the replay is
+causal, its C code gives the same numbers, and the URDF form's rigid-body terms are the log's."""
+
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from conftest import ROOT, shared_data
+from fricli import models
+from fricli.applying import observer
+from fricli.cli import cli
+from fricli.core import logs
+from fricli.models.lugre import LuGreModel
+from fricli.robot import replay
+
+sys.path.insert(0, str(ROOT / "tests"))
+import observer_check  # noqa: E402
+
+SAMPLE = "sample_data/joint2_base.parquet"
+HELD_OUT = "sample_data/joint2_extended_asym.parquet"
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """A model folder with the LuGre model of joint 2 (fitted values of the sample's simulator)."""
+    out = tmp_path_factory.mktemp("models")
+    log = logs.load_log(f"{ROOT}/{SAMPLE}")
+    model = LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, sigma0=1.7e4, sigma1=0.5)
+    models.save_for_log(str(out / "joint_2.npz"), model, log, rows_used=len(log), seed=1)
+    return out
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
+    thr = tmp_path / "t.json"
+    done = invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr, "--quantile", "0.999", "--margin", "1.5")
+    assert done.exit_code == 0, done.output
+    out = tmp_path / "out.parquet"
+    done = invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "--thresholds", thr, "-o", out, "--json", "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(out)
+    for name in ("tau_f_pred", "tau_ext_pred", "contact"):
+        assert name in table.column_names
+    arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
+    again = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    assert np.array_equal(table.column("tau_ext_pred").to_numpy(), again.tau_ext[:, 0])
+    # the per-joint form: r is the low-pass of tau_g + tau_dyn + tau_f_pred - tau_m
+    static = replay.run(arm, observer.DEFAULT_GAIN, None, None)
+    direct = logs.external_torque(arm.signals[0], arm.f0[:, 0])
+    assert np.corrcoef(static.tau_ext[100:, 0], direct[100:])[0, 1] > 0.9
+    # bad input: one line and the exit code
+    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
+    thr.write_text("[1]")
+    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out).exit_code == 6
+
+
+@pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
+def test_the_exported_arm_header_equals_replay(folder, tmp_path):
+    thr = tmp_path / "t.json"
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr).exit_code == 0
+    header = tmp_path / "arm.h"
+    done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header)
+    assert done.exit_code == 0, done.output
+    arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
+    want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
+    paths = [str(folder / "joint_2.npz")]
+    data = observer_check.rows(arm, paths)
+    for cxx in (False, True):
+        exe = observer_check.build(str(header), "arm", paths, str(tmp_path), cxx=cxx)
+        got = observer_check.run(exe, data, 1, str(tmp_path))
+        assert np.max(np.abs(got[:, 0] - want.tau_f[:, 0])) < 1e-9
+        assert np.max(np.abs(got[:, 1] - want.tau_ext[:, 0])) < 1e-9
+        assert np.array_equal(got[:, 2].astype(bool), want.contact[:, 0])
+
+
+def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
+    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
+    urdf = shared_data("ur10e/ur10e.urdf")
+    log = tmp_path / "j2.parquet"
+    subprocess.run([sys.executable, "-m", "fricli", "import", str(data), "--mapping", f"{ROOT}/docs/ur10e-mapping.toml",
+                    "--urdf", str(urdf), "--cutoff", "10", "-o", str(log), "-q"], check=True)
+    table = pq.read_table(log)
+    sig = {j: logs.from_table(table, name="x", joint=j).signals for j in range(1, 7)}
+    p, w = replay.momentum_terms(str(urdf), table.schema, list(range(1, 7)), sig, "x")
+    t = sig[1]["t"]
+    pdot = np.gradient(p, t, axis=0)
+    rigid = np.column_stack([sig[j]["tau_g"] + sig[j]["tau_dyn"] for j in range(1, 7)])
+    # dp/dt + g - C^T qd = M qdd + C qd + g: the log's tau_g + tau_dyn; both low-passed alike (the
+    # log's qdd is the measured velocity filtered at 10 Hz and differentiated, pdot is not filtered)
+    smooth = lambda x: np.column_stack([logs.lowpass(x[:, k], t, 5.0) for k in range(6)])   # noqa: E731
+    scale = np.sqrt(np.mean(rigid ** 2, axis=0))
+    err = np.sqrt(np.mean((smooth(pdot + w) - smooth(rigid))[50:-50] ** 2, axis=0))
+    assert np.all(err < 0.02 * scale + 0.05), (err, scale)
+    # a wrong sign of the Coriolis term or the momentum would not agree
+    assert np.sqrt(np.mean((smooth(-pdot + w) - smooth(rigid))[50:-50, 1] ** 2)) > 10 * err[1]
