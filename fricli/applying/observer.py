@@ -35,10 +35,13 @@ their bounds after every update and the covariance's trace is capped at its init
 (no wind-up while a direction is not excited). The friction of row k uses the level of rows < k.
 
 Contact: a joint is flagged when |r| exceeds its threshold and released when |r| falls below
-``release`` times it (hysteresis). Each joint has two thresholds: one while it moves and one at rest
-(|qd| at most ``moving_speed``), where the friction is statically indeterminate: a held joint keeps
-whatever friction torque it came to rest with, up to its breakaway level, which no model of the
-state predicts.
+``release`` times it (hysteresis). At rest (|qd| at most ``moving_speed``) the friction is statically
+indeterminate: a held joint keeps whatever friction torque it came to rest with, anywhere within
+its static band [-F_s, F_s], which no model of the state predicts, and an external torque within
+that band does not reach the motor. With thresholds, the estimate at rest is therefore the part of
+the measured torque outside the band: tau_ext_pred = clip(y, -F_s, F_s) - y (``static_friction``:
+F_s per joint, the largest friction the model gives just above ``moving_speed`` on the calibration
+logs); in motion it is r.
 """
 
 from __future__ import annotations
@@ -75,8 +78,8 @@ class Thresholds:
     """Per-joint contact thresholds [Nm] and friction scales S [Nm], how they were calibrated."""
 
     joints: list                          # joint names, in the order of the arrays
-    threshold: np.ndarray                 # (J,) while the joint moves
-    threshold_rest: np.ndarray            # (J,) at rest
+    threshold: np.ndarray                 # (J,) of |tau_ext_pred|
+    static_friction: np.ndarray           # (J,) F_s: the band of friction at rest
     friction_scale: np.ndarray            # (J,)
     gain: float = DEFAULT_GAIN
     quantile: float = DEFAULT_QUANTILE
@@ -91,7 +94,7 @@ class Thresholds:
                 "margin": self.margin, "release": self.release, "moving_speed": self.moving_speed,
                 "form": self.form, "logs": self.logs,
                 "joints": {str(j): {"threshold": float(self.threshold[i]),
-                                    "threshold_rest": float(self.threshold_rest[i]),
+                                    "static_friction": float(self.static_friction[i]),
                                     "friction_scale": float(self.friction_scale[i])}
                            for i, j in enumerate(self.joints)}}
 
@@ -102,7 +105,7 @@ class Thresholds:
                 raise KeyError("format")
             joints = list(data["joints"])
             thr = np.array([float(data["joints"][j]["threshold"]) for j in joints])
-            rest = np.array([float(data["joints"][j]["threshold_rest"]) for j in joints])
+            rest = np.array([float(data["joints"][j]["static_friction"]) for j in joints])
             scale = np.array([float(data["joints"][j]["friction_scale"]) for j in joints])
             out = cls(joints, thr, rest, scale, gain=float(data["gain"]), quantile=float(data["quantile"]),
                       margin=float(data["margin"]), release=float(data["release"]),
@@ -136,7 +139,7 @@ class Thresholds:
             raise DataError(f"{name}: no threshold for joint {missing[0]} (it has joints {', '.join(names)})")
         idx = [names.index(str(j)) for j in joints]
         return dataclasses.replace(self, joints=list(joints), threshold=self.threshold[idx],
-                                   threshold_rest=self.threshold_rest[idx], friction_scale=self.friction_scale[idx])
+                                   static_friction=self.static_friction[idx], friction_scale=self.friction_scale[idx])
 
 
 class Observer:
@@ -162,11 +165,11 @@ class Observer:
         self.p_max = 2.0 * p0
         self.contact = np.zeros(joints, dtype=bool)
         if thresholds is not None:
-            self.thr_move, self.thr_rest = thresholds.threshold, thresholds.threshold_rest
+            self.threshold, self.band = thresholds.threshold, thresholds.static_friction
             self.scale, self.release, self.moving_speed = (thresholds.friction_scale, thresholds.release,
                                                            thresholds.moving_speed)
         else:
-            self.thr_move = self.thr_rest = np.full(joints, np.inf)
+            self.threshold, self.band = np.full(joints, np.inf), None
             self.scale, self.release, self.moving_speed = np.ones(joints), DEFAULT_RELEASE, DEFAULT_MOVING_SPEED
         if adaptation is not None:
             self.lo, self.hi = float(adaptation.scale_bounds[0]), float(adaptation.scale_bounds[1])
@@ -194,22 +197,23 @@ class Observer:
         self.t = t
         self.p = p.copy()
         r = self.a * self.f + offset - self.y
-        mag = np.abs(r)
         moves = np.abs(qd) > self.moving_speed
-        thr = np.where(moves, self.thr_move, self.thr_rest)
-        self.contact = np.where(self.contact, mag >= self.release * thr, mag > thr)
+        if self.band is not None:
+            r = np.where(moves, r, np.clip(self.y, -self.band, self.band) - self.y)
+        mag = np.abs(r)
+        self.contact = np.where(self.contact, mag >= self.release * self.threshold, mag > self.threshold)
         if self.adaptation is not None:
-            self._adapt(t, r, mag, moves, thr)
+            self._adapt(t, r, mag, moves)
         return tau_f, r, self.contact.copy()
 
-    def _adapt(self, t: float, r: np.ndarray, mag: np.ndarray, moves: np.ndarray, thr: np.ndarray) -> None:
+    def _adapt(self, t: float, r: np.ndarray, mag: np.ndarray, moves: np.ndarray) -> None:
         ad = self.adaptation
         if self.t_adapt is None:      # the first sample: no interval to forget over yet
             self.t_adapt = t
             return
         lam = math.exp(-(t - self.t_adapt) / ad.time_constant)
         self.t_adapt = t
-        go = moves & ~self.contact & (mag <= ad.freeze * thr)
+        go = moves & ~self.contact & (mag <= ad.freeze * self.threshold)
         x1 = self.f / self.scale                       # regressor (f / S, 1), target y / S
         e = -r / self.scale                            # a-priori error y/S - (a f/S + b)
         P11, P12, P22 = self.P
@@ -259,32 +263,48 @@ def replay(t: np.ndarray, f0: np.ndarray, tau_m: np.ndarray, p: np.ndarray, w: n
     return out
 
 
+def static_band(friction: list[np.ndarray], speeds: list[np.ndarray], moving_speed: float,
+                joints: list) -> np.ndarray:
+    """F_s per joint: the largest |friction| (n, J) the model gives on the rows where the joint moves
+    just above ``moving_speed`` (up to 5 times it): the friction a joint breaks away from rest with."""
+    f = np.abs(np.concatenate(friction))
+    v = np.abs(np.concatenate(speeds))
+    out = np.zeros(f.shape[1])
+    for j in range(f.shape[1]):
+        slow = (v[:, j] > moving_speed) & (v[:, j] <= 5 * moving_speed)
+        if not slow.any():
+            raise DataError(f"joint {joints[j]}: the calibration logs have no rows moving between {moving_speed:g} "
+                            f"and {5 * moving_speed:g} (the static friction band is calibrated there)")
+        out[j] = float(np.max(f[slow, j]))
+    return out
+
+
 def calibrate(residuals: list[np.ndarray], friction: list[np.ndarray], speeds: list[np.ndarray], joints: list,
-              gain: float, form: str, quantile: float = DEFAULT_QUANTILE, margin: float = DEFAULT_MARGIN,
-              release: float = DEFAULT_RELEASE, moving_speed: float = DEFAULT_MOVING_SPEED,
-              logs: list | None = None) -> Thresholds:
-    """Thresholds from the static observer's residuals (n, J) of collision-free logs: per joint,
-    ``margin`` x the ``quantile`` of |r| over the rows where the joint moves (|qd| (n, J) in
-    ``speeds`` above ``moving_speed``), and the same over the rows at rest; the friction scale S:
-    the RMS of the model's friction (n, J) over the rows in motion."""
-    if not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed >= 0:
-        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1) and a moving speed of at least 0 "
-                        "are needed")
+              gain: float, form: str, band: np.ndarray, quantile: float = DEFAULT_QUANTILE,
+              margin: float = DEFAULT_MARGIN, release: float = DEFAULT_RELEASE,
+              moving_speed: float = DEFAULT_MOVING_SPEED, logs: list | None = None) -> Thresholds:
+    """Thresholds from the residuals (n, J) of the static observer with the static band ``band``
+    (``static_band``) on collision-free logs: per joint ``margin`` x the ``quantile`` of
+    |tau_ext_pred| over every row; the friction scale S: the RMS of the model's friction (n, J) over
+    the rows where |qd| (``speeds``) is above ``moving_speed``."""
+    check_settings(quantile, margin, release, moving_speed)
     r = np.abs(np.concatenate(residuals))
     f = np.concatenate(friction)
     mv = np.abs(np.concatenate(speeds)) > moving_speed
-    move, rest, scale = (np.zeros(r.shape[1]) for _ in range(3))
+    thr, scale = np.zeros(r.shape[1]), np.zeros(r.shape[1])
     for j in range(r.shape[1]):
-        if not mv[:, j].any() or not (~mv[:, j]).any():
-            raise DataError(f"joint {joints[j]}: the calibration logs need rows in motion and rows at rest of every "
-                            "joint")
-        move[j] = margin * np.quantile(r[mv[:, j], j], quantile)
-        rest[j] = margin * np.quantile(r[~mv[:, j], j], quantile)
-        scale[j] = math.sqrt(float(np.mean(np.square(f[mv[:, j], j]))))
-        if not (move[j] > 0 and rest[j] > 0 and scale[j] > 0):
-            raise DataError(f"joint {joints[j]}: the calibration logs give no residual or no friction to calibrate on")
-    return Thresholds(list(joints), move, rest, scale, gain=gain, quantile=quantile, margin=margin,
-                      release=release, moving_speed=moving_speed, form=form, logs=logs or [])
+        thr[j] = margin * np.quantile(r[:, j], quantile)
+        scale[j] = math.sqrt(float(np.mean(np.square(f[mv[:, j], j])))) if mv[:, j].any() else 0.0
+        if not (thr[j] > 0 and scale[j] > 0):
+            raise DataError(f"joint {joints[j]}: the calibration logs give no residual or no friction in motion to "
+                            "calibrate on")
+    return Thresholds(list(joints), thr, np.asarray(band, dtype=float), scale, gain=gain, quantile=quantile,
+                      margin=margin, release=release, moving_speed=moving_speed, form=form, logs=logs or [])
+
+
+def check_settings(quantile: float, margin: float, release: float, moving_speed: float) -> None:
+    if not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0:
+        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1) and a moving speed above 0 are needed")
 
 
 @dataclasses.dataclass

@@ -85,13 +85,12 @@ def replay_cmd(model, log, output, urdf, adapt, thresholds_path, time_constant, 
 @urdf_option
 @gain_option
 @click.option("--quantile", type=Number(min=0, max=1, min_open=True), default=observer.DEFAULT_QUANTILE,
-              show_default=True, help="Quantile of |tau_ext_pred| over the logs' rows, per joint, in motion and "
-                                      "at rest apart.")
+              show_default=True, help="Quantile of |tau_ext_pred| over the logs' rows, per joint.")
 @click.option("--margin", type=Number(min=0, min_open=True), default=observer.DEFAULT_MARGIN, show_default=True,
               help="Threshold = margin x that quantile.")
 @click.option("--release", type=Number(min=0, max=1, min_open=True, max_open=True), default=observer.DEFAULT_RELEASE,
               show_default=True, help="A contact flag is released below this share of the threshold (hysteresis).")
-@click.option("--moving-speed", type=Number(min=0), default=observer.DEFAULT_MOVING_SPEED, show_default=True,
+@click.option("--moving-speed", type=Number(min=0, min_open=True), default=observer.DEFAULT_MOVING_SPEED, show_default=True,
               help="|qd| above which a joint moves [rad/s or m/s]: its threshold in motion applies, and the "
                    "adaptation may update.")
 @json_flag
@@ -99,8 +98,9 @@ def replay_cmd(model, log, output, urdf, adapt, thresholds_path, time_constant, 
 def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, moving_speed, as_json, quiet):
     """Calibrate per-joint contact thresholds from collision-free LOGS replayed with MODEL (the
     static observer, as fricli replay without --adapt): margin x quantile of |tau_ext_pred| per
-    joint, in motion and at rest apart, and each joint's friction scale (the RMS of the model's
-    friction in motion; the adaptation's offset is bounded by half of it).
+    joint; the static friction band (the largest friction the model gives moving just above
+    --moving-speed, up to 5 times it: at rest the estimate is the torque outside that band); and
+    each joint's friction scale (the RMS of the model's friction in motion).
 
     \b
     Example:
@@ -112,8 +112,8 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
                            margin, release, moving_speed)
     replay.write_thresholds(thr, output)
     if not quiet:
-        for j, move, rest in zip(thr.joints, thr.threshold, thr.threshold_rest):
-            say(f"  joint {j}: threshold {move:.4g} in motion, {rest:.4g} at rest")
+        for j, value, band in zip(thr.joints, thr.threshold, thr.static_friction):
+            say(f"  joint {j}: threshold {value:.4g}, static friction band {band:.4g}")
         say(f"wrote {output}")
     if as_json:
         emit_json(thr.as_json())

@@ -26,10 +26,10 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
     names = [str(_joint_of(e)) for e in entries]
     if thresholds is not None:
         thr = thresholds.for_joints(names, "the thresholds file")
-        move, rest, scale = thr.threshold, thr.threshold_rest, thr.friction_scale
+        move, band, scale = thr.threshold, thr.static_friction, thr.friction_scale
         release, speed = thr.release, thr.moving_speed
     else:
-        move = rest = None
+        move = band = None
         scale, release, speed = [1.0] * n, observer.DEFAULT_RELEASE, observer.DEFAULT_MOVING_SPEED
     if adaptation is not None and thresholds is None:
         raise ModelFileError("adaptation needs the contact thresholds of fricli thresholds")
@@ -59,11 +59,11 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             " * friction tau_f (compensation), the external torque tau_ext and the contact flag (0/1). */",
             f"static inline void {a}_step({a}_state *s, double t, const double *const *x, const double *tau_m,",
             "        const double *qd, const double *p, const double *w, double *tau_f, double *tau_ext, int *contact) {",
-            f"    static const double thr_move[{n}] = {table(move) if move is not None else huge};",
-            f"    static const double thr_rest[{n}] = {table(rest) if rest is not None else huge};",
+            f"    static const double thr[{n}] = {table(move) if move is not None else huge};",
+            *([f"    static const double band[{n}] = {table(band)};"] if band is not None else []),
             f"    static const double scale[{n}] = {table(scale)};",
             f"    const double k = {c.num(gain)}, release = {c.num(release)}, speed = {c.num(speed)};",
-            f"    double f0[{n}], r[{n}], mag[{n}], thr[{n}];",
+            f"    double f0[{n}], r[{n}], mag[{n}];",
             f"    int moves[{n}], j;"]
     out += [f"    f0[{i}] = {e.prefix}_step_array(&s->friction_{i}, x[{i}]);" for i, e in enumerate(entries)]
     out += [f"    for (j = 0; j < {n}; ++j) tau_f[j] = s->a[j] * f0[j] + s->b[j] * scale[j];",
@@ -80,9 +80,11 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             f"    for (j = 0; j < {n}; ++j) {{",
             "        s->p[j] = p[j];",
             "        r[j] = s->a[j] * s->f[j] + s->b[j] * scale[j] - s->y[j];",
-            "        mag[j] = fabs(r[j]);",
             "        moves[j] = fabs(qd[j]) > speed;",
-            "        thr[j] = moves[j] ? thr_move[j] : thr_rest[j];",
+            *(["        if (!moves[j]) {   /* at rest: the torque outside the static friction band */",
+               "            const double c = s->y[j] < -band[j] ? -band[j] : (s->y[j] > band[j] ? band[j] : s->y[j]);",
+               "            r[j] = c - s->y[j];", "        }"] if band is not None else []),
+            "        mag[j] = fabs(r[j]);",
             "        s->contact[j] = s->contact[j] ? mag[j] >= release * thr[j] : mag[j] > thr[j];",
             "        tau_ext[j] = r[j];", "        contact[j] = s->contact[j];", "    }"]
     if adaptation is not None:

@@ -197,9 +197,14 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
         if [str(j) for j in arm.joints] != names:
             raise DataError(f"{arm.name}: joints {', '.join(map(str, arm.joints))}, but {arms[0].name} has "
                             f"{', '.join(names)}: calibrate on logs of the same joints")
-    res = [run(arm, gain, None, None) for arm in arms]
-    return observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms],
-                              list(arms[0].joints), gain, arms[0].form, quantile, margin, release, moving_speed,
+    observer.check_settings(quantile, margin, release, moving_speed)
+    joints = list(arms[0].joints)
+    band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
+    free = observer.Thresholds(joints, np.full(len(joints), np.inf), band, np.ones(len(joints)), gain=gain,
+                               moving_speed=moving_speed, form=arms[0].form)
+    res = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, free) for a in arms]
+    return observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms], joints, gain,
+                              arms[0].form, band, quantile, margin, release, moving_speed,
                               logs=[os.path.basename(p) for p in log_paths])
 
 
