@@ -64,13 +64,16 @@ def test_adaptation_finds_the_days_friction_level_within_its_bounds():
     t, f0, tau_m, p, w, qd, _, _ = joint(seconds=60.0, scale=1.3, offset=0.2)
     thr = thresholds(value=5.0)
     static = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr)
-    adapted = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr, adaptation=observer.Adaptation())
+    adapted = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr, adaptation=observer.Adaptation(offset=True))
     assert adapted.scale[-1, 0] == pytest.approx(1.3, abs=0.03)
     assert adapted.offset[-1, 0] == pytest.approx(0.2, abs=0.05)
     late = t > 30
     true = 1.3 * f0[:, 0] + 0.2
     assert np.sqrt(np.mean((adapted.tau_f[late, 0] - true[late]) ** 2)) < 0.2 * np.sqrt(
         np.mean((static.tau_f[late, 0] - true[late]) ** 2))
+    # the scale alone (the default): the offset stays 0, the scale takes what it can of it
+    alone = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr, adaptation=observer.Adaptation())
+    assert np.all(alone.offset == 0.0) and alone.scale[-1, 0] == pytest.approx(1.3, abs=0.15)
     # bounds: a level far beyond them is clipped
     t, f0, tau_m, p, w, qd, _, _ = joint(seconds=20.0, scale=4.0)
     out = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thresholds(50.0), adaptation=observer.Adaptation())
@@ -78,8 +81,9 @@ def test_adaptation_finds_the_days_friction_level_within_its_bounds():
 
 
 def test_a_contact_held_for_ten_seconds_is_not_learned_as_friction():
-    t, f0, tau_m, p, w, qd, ext, _ = joint(seconds=50.0, scale=1.2, push=(35.0, 45.0, 4.0))
-    out = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thresholds(1.0), adaptation=observer.Adaptation())
+    t, f0, tau_m, p, w, qd, ext, _ = joint(seconds=50.0, scale=1.2, offset=0.1, push=(35.0, 45.0, 4.0))
+    out = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thresholds(1.0),
+                          adaptation=observer.Adaptation(offset=True))
     before, after = np.searchsorted(t, 35.0) - 1, np.searchsorted(t, 45.0)
     assert abs(out.scale[after, 0] / out.scale[before, 0] - 1) < 0.05
     assert abs(out.offset[after, 0] - out.offset[before, 0]) < 0.05 * 2.0

@@ -67,14 +67,17 @@ def test_the_exported_arm_header_equals_replay(folder, tmp_path):
     thr = tmp_path / "t.json"
     assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr).exit_code == 0
     header = tmp_path / "arm.h"
-    done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header)
-    assert done.exit_code == 0, done.output
     arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
-    want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
-    assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
     paths = [str(folder / "joint_2.npz")]
     data = observer_check.rows(arm, paths)
-    for cxx in (False, True):
+    for offset, cxx in ((False, False), (False, True), (True, False)):
+        done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header,
+                      *(["--adapt-offset"] if offset else []))
+        assert done.exit_code == 0, done.output
+        want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)),
+                          observer.Adaptation(offset=offset))
+        assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
+        assert (np.ptp(want.offset) > 0) == offset
         exe = observer_check.build(str(header), "arm", paths, str(tmp_path), cxx=cxx)
         got = observer_check.run(exe, data, 1, str(tmp_path))
         assert np.max(np.abs(got[:, 0] - want.tau_f[:, 0])) < 1e-9

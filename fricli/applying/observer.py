@@ -24,8 +24,11 @@ Where the controller's robot model is the log's own columns (a log without a URD
 form takes p = 0 and w = tau_g + tau_dyn: the same filter of tau_g + tau_dyn + tau_f_pred - tau_m,
 which needs the acceleration in tau_dyn.
 
-Adaptation: per joint, the scale a of the model's friction and an offset b, tracked by recursive
-least squares with exponential forgetting on (f_k, 1) -> y_k: the a-priori error is -r_k itself. The
+Adaptation: per joint, the scale a of the model's friction (and, with ``offset``, an offset b),
+tracked by recursive least squares with exponential forgetting on (f_k, 1) -> y_k (f_k -> y_k
+without the offset): the a-priori error is -r_k itself. The scale alone is the default: an offset
+also absorbs whatever torque error depends on the position (a gravity error, a gear ripple), which
+it then tracks with the memory's lag. The
 forgetting factor of a sample is exp(-dt_k / T) (T: the memory's time constant). The offset is
 normalised by the joint's friction scale S (the RMS of the model's friction in motion on the
 calibration logs, ``Thresholds``). An update is made only while the joint moves
@@ -68,6 +71,7 @@ class Adaptation:
 
     time_constant: float = 30.0          # T [s]: forgetting exp(-dt/T)
     scale_bounds: tuple = (0.5, 2.0)     # a
+    offset: bool = False                 # adapt the offset b too (else the scale a alone)
     offset_bound: float = 0.5            # |b| <= offset_bound x S
     freeze: float = 0.5                  # no update while |r| > freeze x threshold
     initial_covariance: float = 1.0      # P(0) = this x identity (a and b / S)
@@ -162,7 +166,7 @@ class Observer:
         self.b = np.zeros(joints)          # the offset divided by S
         p0 = adaptation.initial_covariance if adaptation is not None else 1.0
         self.P = np.array([np.full(joints, p0), np.zeros(joints), np.full(joints, p0)])   # P11, P12, P22
-        self.p_max = 2.0 * p0
+        self.p_max = (2.0 if adaptation is not None and adaptation.offset else 1.0) * p0
         self.contact = np.zeros(joints, dtype=bool)
         if thresholds is not None:
             self.threshold, self.band = thresholds.threshold, thresholds.static_friction
@@ -214,19 +218,20 @@ class Observer:
         lam = math.exp(-(t - self.t_adapt) / ad.time_constant)
         self.t_adapt = t
         go = moves & ~self.contact & (mag <= ad.freeze * self.threshold)
-        x1 = self.f / self.scale                       # regressor (f / S, 1), target y / S
+        x1 = self.f / self.scale                       # regressor (f / S, x2), target y / S
+        x2 = 1.0 if ad.offset else 0.0                 # without the offset: scalar least squares on a
         e = -r / self.scale                            # a-priori error y/S - (a f/S + b)
         P11, P12, P22 = self.P
-        g1 = P11 * x1 + P12
-        g2 = P12 * x1 + P22
-        den = lam + x1 * g1 + g2
+        g1 = P11 * x1 + P12 * x2
+        g2 = P12 * x1 + P22 * x2
+        den = lam + x1 * g1 + x2 * g2
         k1, k2 = g1 / den, g2 / den
         a = np.clip(self.a + k1 * e, self.lo, self.hi)
         b = np.clip(self.b + k2 * e, -self.b_bound, self.b_bound)
         n11 = (P11 - k1 * g1) / lam
         n12 = (P12 - k1 * g2) / lam
-        n22 = (P22 - k2 * g2) / lam
-        tr = n11 + n22
+        n22 = (P22 - k2 * g2) / lam if ad.offset else P22
+        tr = n11 + n22 * x2
         cap = np.where(tr > self.p_max, self.p_max / tr, 1.0)
         self.a = np.where(go, a, self.a)
         self.b = np.where(go, b, self.b)

@@ -21,12 +21,13 @@ from fricli.cli.options import common, output_option, say
               help="With --observer: contact thresholds of fricli thresholds.")
 @click.option("--adapt", is_flag=True, help="With --observer: the online friction-level adaptation (needs "
                                             "--thresholds), as fricli replay --adapt.")
+@click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, as fricli replay --adapt-offset.")
 @click.option("--time-constant", type=float, default=None,
               help="With --adapt: memory of the adaptation [s] (default: fricli replay's).")
 @click.option("--gain", type=float, default=None,
               help="With --observer: observer gain [1/s] (default: the thresholds file's, else fricli replay's).")
 @common
-def export_cmd(model, output, prefix, observer, thresholds_path, adapt, time_constant, gain, quiet):
+def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_offset, time_constant, gain, quiet):
     """Export MODEL (a model file, or a folder with one .npz per joint) as dependency-free C99.
 
     Writes one header with the parameters baked in: PREFIX_state, PREFIX_init and
@@ -50,9 +51,9 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, time_con
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--prefix") from None
     if observer:
-        text = _observer_header(model, prefix, thresholds_path, adapt, time_constant, gain)
-    elif thresholds_path or adapt or time_constant is not None or gain is not None:
-        raise click.UsageError("--thresholds, --adapt, --time-constant and --gain go with --observer")
+        text = _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain)
+    elif thresholds_path or adapt or adapt_offset or time_constant is not None or gain is not None:
+        raise click.UsageError("--thresholds, --adapt, --adapt-offset, --time-constant and --gain go with --observer")
     else:
         text = c.export(model, prefix)
     if output == "-":
@@ -62,12 +63,14 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, time_con
         say(f"wrote {output}", quiet)
 
 
-def _observer_header(model, prefix, thresholds_path, adapt, time_constant, gain) -> str:
+def _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain) -> str:
     from fricli.applying import observer as obs
     from fricli.export import observer
 
     if adapt and thresholds_path is None:
         raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
+    if adapt_offset and not adapt:
+        raise click.UsageError("--adapt-offset goes with --adapt")
     thr = obs.Thresholds.read(thresholds_path) if thresholds_path else None
     if thr is not None and gain is not None and gain != thr.gain:
         raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
@@ -76,5 +79,6 @@ def _observer_header(model, prefix, thresholds_path, adapt, time_constant, gain)
     if time_constant is not None and not time_constant > 0:
         raise click.BadParameter("must be above 0", param_hint="--time-constant")
     k = gain if gain is not None else (thr.gain if thr is not None else obs.DEFAULT_GAIN)
-    ad = obs.Adaptation(**({"time_constant": time_constant} if time_constant is not None else {})) if adapt else None
+    ad = obs.Adaptation(offset=adapt_offset, **({"time_constant": time_constant} if time_constant is not None
+                                                else {})) if adapt else None
     return observer.export(model, prefix, k, thr, ad)

@@ -29,6 +29,7 @@ def gain_option(f):
 @urdf_option
 @click.option("--adapt", is_flag=True, help="Adapt each joint's friction level (scale and offset) online; needs "
                                             "--thresholds (no update while a contact is suspected).")
+@click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, besides the scale.")
 @click.option("--thresholds", "thresholds_path", type=click.Path(), default=None,
               help="Contact thresholds of fricli thresholds: adds the flags and the events.")
 @click.option("--time-constant", type=Number(min=0, min_open=True), default=observer.Adaptation().time_constant,
@@ -36,7 +37,7 @@ def gain_option(f):
 @gain_option
 @json_flag
 @common
-def replay_cmd(model, log, output, urdf, adapt, thresholds_path, time_constant, gain, as_json, quiet):
+def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, time_constant, gain, as_json, quiet):
     """Run LOG row by row through what the controller runs: MODEL's friction, the momentum observer
     of the external torque, with --adapt the online friction level, with --thresholds contact
     detection. Writes the log with tau_f_pred, tau_ext_pred and contact (0/1) added.
@@ -54,12 +55,14 @@ def replay_cmd(model, log, output, urdf, adapt, thresholds_path, time_constant, 
 
     if adapt and thresholds_path is None:
         raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
+    if adapt_offset and not adapt:
+        raise click.UsageError("--adapt-offset goes with --adapt")
     thr = observer.Thresholds.read(thresholds_path) if thresholds_path else None
     if thr is not None and gain is not None and gain != thr.gain:
         raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
     k = gain if gain is not None else (thr.gain if thr is not None else observer.DEFAULT_GAIN)
     arm = replay.read_arm(model, log, urdf)
-    out = replay.run(arm, k, thr, observer.Adaptation(time_constant=time_constant) if adapt else None)
+    out = replay.run(arm, k, thr, observer.Adaptation(time_constant=time_constant, offset=adapt_offset) if adapt else None)
     replay.write(arm, out, output)
     figures = replay.summary(arm, out)
     if not quiet:

@@ -92,26 +92,26 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
         out += ["    if (!s->adapt_started) { s->adapt_started = 1; s->t_adapt = t; return; }",
                 "    {",
                 f"        const double lam = exp(-(t - s->t_adapt) / {c.num(ad.time_constant)});",
-                f"        const double freeze = {c.num(ad.freeze)}, pmax = {c.num(2.0 * ad.initial_covariance)};",
+                f"        const double freeze = {c.num(ad.freeze)}, "
+                f"pmax = {c.num((2.0 if ad.offset else 1.0) * ad.initial_covariance)}, x2 = {'1.0' if ad.offset else '0.0'};",
                 "        s->t_adapt = t;",
                 f"        for (j = 0; j < {n}; ++j) {{",
                 "            const double x1 = s->f[j] / scale[j], e = -r[j] / scale[j];",
-                "            const double g1 = s->P11[j] * x1 + s->P12[j], g2 = s->P12[j] * x1 + s->P22[j];",
-                "            const double den = s->lam_unused_placeholder;",
+                "            const double g1 = s->P11[j] * x1 + s->P12[j] * x2, g2 = s->P12[j] * x1 + s->P22[j] * x2;",
+                "            const double den = lam + x1 * g1 + x2 * g2;",
+                "            const double k1 = g1 / den, k2 = g2 / den;",
+                "            double an = s->a[j] + k1 * e, bn = s->b[j] + k2 * e;",
+                "            const double n11 = (s->P11[j] - k1 * g1) / lam, n12 = (s->P12[j] - k1 * g2) / lam;",
+                "            const double n22 = " + ("(s->P22[j] - k2 * g2) / lam" if ad.offset else "s->P22[j]")
+                + ", tr = n11 + n22 * x2;",
+                "            const double cap = tr > pmax ? pmax / tr : 1.0;",
+                "            if (!(moves[j] && !s->contact[j] && mag[j] <= freeze * thr[j])) continue;",
+                f"            an = an < {lo} ? {lo} : (an > {hi} ? {hi} : an);",
+                f"            bn = bn < -{c.num(ad.offset_bound)} ? -{c.num(ad.offset_bound)} : "
+                f"(bn > {c.num(ad.offset_bound)} ? {c.num(ad.offset_bound)} : bn);",
+                "            s->a[j] = an; s->b[j] = bn;",
+                "            s->P11[j] = n11 * cap; s->P12[j] = n12 * cap; s->P22[j] = n22 * cap;",
                 "        }", "    }"]
-        out[-3] = "            const double den = lam + x1 * g1 + g2;"
-        out[-2:] = ["            const double k1 = g1 / den, k2 = g2 / den;",
-                    "            double an = s->a[j] + k1 * e, bn = s->b[j] + k2 * e;",
-                    "            const double n11 = (s->P11[j] - k1 * g1) / lam, n12 = (s->P12[j] - k1 * g2) / lam;",
-                    "            const double n22 = (s->P22[j] - k2 * g2) / lam, tr = n11 + n22;",
-                    "            const double cap = tr > pmax ? pmax / tr : 1.0;",
-                    "            if (!(moves[j] && !s->contact[j] && mag[j] <= freeze * thr[j])) continue;",
-                    f"            an = an < {lo} ? {lo} : (an > {hi} ? {hi} : an);",
-                    f"            bn = bn < -{c.num(ad.offset_bound)} ? -{c.num(ad.offset_bound)} : "
-                    f"(bn > {c.num(ad.offset_bound)} ? {c.num(ad.offset_bound)} : bn);",
-                    "            s->a[j] = an; s->b[j] = bn;",
-                    "            s->P11[j] = n11 * cap; s->P12[j] = n12 * cap; s->P22[j] = n22 * cap;",
-                    "        }", "    }"]
     out.append("}")
     return "\n".join(out) + "\n"
 
