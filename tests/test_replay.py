@@ -105,3 +105,40 @@ def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
     assert np.all(err < 0.02 * scale + 0.05), (err, scale)
     # a wrong sign of the Coriolis term or the momentum would not agree
     assert np.sqrt(np.mean((smooth(-pdot + w) - smooth(rigid))[50:-50, 1] ** 2)) > 10 * err[1]
+
+
+def test_simulated_contacts_at_twice_the_threshold_are_flagged_within_20_ms(tmp_path):
+    from fricli.sim import simulator
+
+    p = simulator.true_params(2, "adapt", "base")
+    model = LuGreModel(*(p[k] for k in ("fc", "fs", "vs", "delta", "fv", "kc", "ks", "sigma0", "sigma1")))
+    folder = tmp_path / "m"
+    folder.mkdir()
+    free = tmp_path / "free.parquet"
+    simulator.write(simulator.simulate("adapt", 2, seed=1, rate=1000.0, friction_state="base"), str(free))
+    models.save_for_log(str(folder / "joint_2.npz"), model, logs.load_log(str(free)), rows_used=1, seed=1)
+    thr_path = tmp_path / "t.json"
+    assert invoke("thresholds", folder, free, "-o", thr_path, "-q").exit_code == 0
+    thr = observer.Thresholds.read(str(thr_path))
+    size = 2.0 * float(thr.threshold[0])
+    probe = simulator.simulate("adapt", 2, seed=2, rate=1000.0, friction_state="base")
+    t, qd = probe.column("t").to_numpy(), probe.column("qd").to_numpy()
+    moving = np.flatnonzero((np.abs(qd) > 0.1) & (t > 5.0))
+    starts = [float(t[moving[i]]) for i in np.linspace(0, len(moving) - 1, 4, endpoint=False).astype(int)]
+    contacts = [(s, size if k % 2 else -size, 0.3) for k, s in enumerate(starts)]
+    pushed = tmp_path / "pushed.parquet"
+    args = [a for c in contacts for a in ("--contact", f"{c[0]!r},{c[1]!r},{c[2]!r}")]
+    done = invoke("simulate", "--scenario", "adapt", "--seed", "2", "--rate", "1000", "--friction-state", "base",
+                  *args, "-o", pushed, "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(pushed)
+    assert np.max(np.abs(table.column("tau_ext").to_numpy())) == pytest.approx(size)
+    arm = replay.read_arm(str(folder), str(pushed))
+    out = replay.run(arm, thr.gain, thr, None)
+    for start, torque, length in contacts:
+        i = np.searchsorted(arm.t, start)
+        flagged = np.flatnonzero(out.contact[i:, 0])
+        assert len(flagged) and arm.t[i + flagged[0]] - start <= 0.020
+        assert np.sign(out.tau_ext[i + flagged[0], 0]) == np.sign(torque)
+    free_run = replay.run(replay.read_arm(str(folder), str(free)), thr.gain, thr, None)
+    assert free_run.contact.sum() <= 0.002 * len(free_run.contact)   # the quantile's share, at most
