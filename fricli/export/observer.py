@@ -44,7 +44,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
            f"enum {{ {a.upper()}_JOINTS = {n} }};",
            "typedef struct {"]
     out += [f"    {e.prefix}_state friction_{i};" for i, e in enumerate(entries)]
-    out += [f"    double t, t_adapt, p[{n}], y[{n}], f[{n}], a[{n}], b[{n}], P11[{n}], P12[{n}], P22[{n}];",
+    out += [f"    double t, t_adapt, p[{n}], y[{n}], f[{n}], a[{n}], b[{n}], P11[{n}], P12[{n}], P22[{n}], suspected[{n}];",
             f"    int started, adapt_started, contact[{n}];", f"}} {a}_state;", "",
             "/* Start a run (and after any pause in the samples). */",
             f"static inline void {a}_init({a}_state *s) {{", "    int j;"]
@@ -52,6 +52,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
     out += ["    s->t = 0.0; s->t_adapt = 0.0; s->started = 0; s->adapt_started = 0;",
             f"    for (j = 0; j < {n}; ++j) {{",
             "        s->p[j] = 0.0; s->y[j] = 0.0; s->f[j] = 0.0; s->a[j] = 1.0; s->b[j] = 0.0; s->contact[j] = 0;",
+            "        s->suspected[j] = -HUGE_VAL;",
             f"        s->P11[j] = {c.num(ad.initial_covariance)}; s->P12[j] = 0.0; s->P22[j] = {c.num(ad.initial_covariance)};",
             "    }", "}", "",
             f"/* One sample at time t [s]. x[j]: joint j's friction signals (its PREFIX_step_array order); tau_m, qd, p",
@@ -92,7 +93,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
         out += ["    if (!s->adapt_started) { s->adapt_started = 1; s->t_adapt = t; return; }",
                 "    {",
                 f"        const double lam = exp(-(t - s->t_adapt) / {c.num(ad.time_constant)});",
-                f"        const double freeze = {c.num(ad.freeze)}, "
+                f"        const double freeze = {c.num(ad.freeze)}, holdoff = {c.num(ad.holdoff)}, "
                 f"pmax = {c.num((2.0 if ad.offset else 1.0) * ad.initial_covariance)}, x2 = {'1.0' if ad.offset else '0.0'};",
                 "        s->t_adapt = t;",
                 f"        for (j = 0; j < {n}; ++j) {{",
@@ -105,7 +106,8 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
                 "            const double n22 = " + ("(s->P22[j] - k2 * g2) / lam" if ad.offset else "s->P22[j]")
                 + ", tr = n11 + n22 * x2;",
                 "            const double cap = tr > pmax ? pmax / tr : 1.0;",
-                "            if (!(moves[j] && !s->contact[j] && mag[j] <= freeze * thr[j])) continue;",
+                "            if (s->contact[j] || mag[j] > freeze * thr[j]) s->suspected[j] = t;",
+                "            if (!(moves[j] && t - s->suspected[j] >= holdoff)) continue;",
                 f"            an = an < {lo} ? {lo} : (an > {hi} ? {hi} : an);",
                 f"            bn = bn < -{c.num(ad.offset_bound)} ? -{c.num(ad.offset_bound)} : "
                 f"(bn > {c.num(ad.offset_bound)} ? {c.num(ad.offset_bound)} : bn);",
