@@ -33,8 +33,9 @@ forgetting factor of a sample is exp(-dt_k / T) (T: the memory's time constant).
 normalised by the joint's friction scale S (the RMS of the model's friction in motion on the
 calibration logs, ``Thresholds``). An update is made only while the joint moves
 (|qd| > ``moving_speed``: at rest friction is statically indeterminate) and no contact is suspected
-(no contact flagged and |r| at most ``freeze`` times the joint's threshold, on this row and for
-``holdoff`` seconds before it: a push whose residual dips for a moment is not learned then); a and b are clipped to
+(|r| at most ``freeze`` times the joint's threshold, and no contact flagged on this row or in the
+``holdoff`` seconds before it: a push whose residual dips below the release for a moment is not
+learned then); a and b are clipped to
 their bounds after every update and the covariance's trace is capped at its initial value
 (no wind-up while a direction is not excited). The friction of row k uses the level of rows < k.
 
@@ -75,7 +76,7 @@ class Adaptation:
     offset: bool = False                 # adapt the offset b too (else the scale a alone)
     offset_bound: float = 0.5            # |b| <= offset_bound x S
     freeze: float = 0.5                  # no update while |r| > freeze x threshold
-    holdoff: float = 1.0                 # [s] nor within this time after the last such row or flag
+    holdoff: float = 1.0                 # [s] nor within this time after a contact flag
     initial_covariance: float = 1.0      # P(0) = this x identity (a and b / S)
 
 
@@ -161,7 +162,7 @@ class Observer:
         self.started = False
         self.t = 0.0
         self.t_adapt = None
-        self.suspected = np.full(joints, -np.inf)   # time of the last row with a suspected contact
+        self.suspected = np.full(joints, -np.inf)   # time of the last row flagged
         self.p = np.zeros(joints)
         self.y = np.zeros(joints)
         self.f = np.zeros(joints)
@@ -220,9 +221,8 @@ class Observer:
             return
         lam = math.exp(-(t - self.t_adapt) / ad.time_constant)
         self.t_adapt = t
-        suspect = self.contact | (mag > ad.freeze * self.threshold)
-        self.suspected = np.where(suspect, t, self.suspected)
-        go = moves & (t - self.suspected >= ad.holdoff)
+        self.suspected = np.where(self.contact, t, self.suspected)
+        go = moves & (mag <= ad.freeze * self.threshold) & (t - self.suspected >= ad.holdoff)
         x1 = self.f / self.scale                       # regressor (f / S, x2), target y / S
         x2 = 1.0 if ad.offset else 0.0                 # without the offset: scalar least squares on a
         e = -r / self.scale                            # a-priori error y/S - (a f/S + b)

@@ -106,8 +106,8 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
                 "            const double n22 = " + ("(s->P22[j] - k2 * g2) / lam" if ad.offset else "s->P22[j]")
                 + ", tr = n11 + n22 * x2;",
                 "            const double cap = tr > pmax ? pmax / tr : 1.0;",
-                "            if (s->contact[j] || mag[j] > freeze * thr[j]) s->suspected[j] = t;",
-                "            if (!(moves[j] && t - s->suspected[j] >= holdoff)) continue;",
+                "            if (s->contact[j]) s->suspected[j] = t;",
+                "            if (!(moves[j] && mag[j] <= freeze * thr[j] && t - s->suspected[j] >= holdoff)) continue;",
                 f"            an = an < {lo} ? {lo} : (an > {hi} ? {hi} : an);",
                 f"            bn = bn < -{c.num(ad.offset_bound)} ? -{c.num(ad.offset_bound)} : "
                 f"(bn > {c.num(ad.offset_bound)} ? {c.num(ad.offset_bound)} : bn);",
