@@ -60,6 +60,8 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
     thr.write_text("[1]")
     assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out).exit_code == 6
+    missing = invoke("replay", folder, tmp_path / "none.parquet", "-o", out)
+    assert missing.exit_code == 3 and missing.output.count("\n") == 1 and "Traceback" not in missing.output
 
 
 @pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")

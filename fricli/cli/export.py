@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import common, output_option, say
+from fricli.cli.options import Number, common, output_option, say
 
 
 @cli.command("export")
@@ -22,9 +22,9 @@ from fricli.cli.options import common, output_option, say
 @click.option("--adapt", is_flag=True, help="With --observer: the online friction-level adaptation (needs "
                                             "--thresholds), as fricli replay --adapt.")
 @click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, as fricli replay --adapt-offset.")
-@click.option("--time-constant", type=float, default=None,
+@click.option("--time-constant", type=Number(min=0, min_open=True), default=None,
               help="With --adapt: memory of the adaptation [s] (default: fricli replay's).")
-@click.option("--gain", type=float, default=None,
+@click.option("--gain", type=Number(min=0, min_open=True), default=None,
               help="With --observer: observer gain [1/s] (default: the thresholds file's, else fricli replay's).")
 @common
 def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_offset, time_constant, gain, quiet):
@@ -64,21 +64,8 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_of
 
 
 def _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain) -> str:
-    from fricli.applying import observer as obs
+    from fricli.cli.replay import settings
     from fricli.export import observer
 
-    if adapt and thresholds_path is None:
-        raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
-    if adapt_offset and not adapt:
-        raise click.UsageError("--adapt-offset goes with --adapt")
-    thr = obs.Thresholds.read(thresholds_path) if thresholds_path else None
-    if thr is not None and gain is not None and gain != thr.gain:
-        raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
-    if gain is not None and not gain > 0:
-        raise click.BadParameter("must be above 0", param_hint="--gain")
-    if time_constant is not None and not time_constant > 0:
-        raise click.BadParameter("must be above 0", param_hint="--time-constant")
-    k = gain if gain is not None else (thr.gain if thr is not None else obs.DEFAULT_GAIN)
-    ad = obs.Adaptation(offset=adapt_offset, **({"time_constant": time_constant} if time_constant is not None
-                                                else {})) if adapt else None
-    return observer.export(model, prefix, k, thr, ad)
+    k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
+    return observer.export(model, prefix, k, thr, adaptation)

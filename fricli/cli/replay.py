@@ -22,6 +22,20 @@ def gain_option(f):
                              f"{observer.DEFAULT_GAIN:g}.")(f)
 
 
+def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: float | None, gain: float | None):
+    """(gain, thresholds or None, adaptation or None) of replay's and export --observer's options."""
+    if adapt and thresholds_path is None:
+        raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
+    if adapt_offset and not adapt:
+        raise click.UsageError("--adapt-offset goes with --adapt")
+    thr = observer.Thresholds.read(thresholds_path) if thresholds_path else None
+    if thr is not None and gain is not None and gain != thr.gain:
+        raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
+    k = gain if gain is not None else (thr.gain if thr is not None else observer.DEFAULT_GAIN)
+    extra = {"time_constant": time_constant} if time_constant is not None else {}
+    return k, thr, (observer.Adaptation(offset=adapt_offset, **extra) if adapt else None)
+
+
 @cli.command("replay")
 @click.argument("model", type=click.Path())
 @click.argument("log", type=click.Path())
@@ -53,16 +67,9 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
     """
     from fricli.robot import replay
 
-    if adapt and thresholds_path is None:
-        raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
-    if adapt_offset and not adapt:
-        raise click.UsageError("--adapt-offset goes with --adapt")
-    thr = observer.Thresholds.read(thresholds_path) if thresholds_path else None
-    if thr is not None and gain is not None and gain != thr.gain:
-        raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
-    k = gain if gain is not None else (thr.gain if thr is not None else observer.DEFAULT_GAIN)
+    k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
     arm = replay.read_arm(model, log, urdf)
-    out = replay.run(arm, k, thr, observer.Adaptation(time_constant=time_constant, offset=adapt_offset) if adapt else None)
+    out = replay.run(arm, k, thr, adaptation)
     replay.write(arm, out, output)
     figures = replay.summary(arm, out)
     if not quiet:
