@@ -72,14 +72,18 @@ def test_the_exported_arm_header_equals_replay(folder, tmp_path):
     arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
     paths = [str(folder / "joint_2.npz")]
     data = observer_check.rows(arm, paths)
-    for offset, cxx in ((False, False), (False, True), (True, False)):
-        done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header,
-                      *(["--adapt-offset"] if offset else []))
+    settings = observer.Thresholds.read(str(thr))
+    for offset, cxx in ((False, False), (False, True), (True, False), (None, False)):
+        if offset is None:   # the observer alone: no thresholds, no adaptation
+            done = invoke("export", folder, "--observer", "--prefix", "arm", "-o", header)
+            want = replay.run(arm, observer.DEFAULT_GAIN, None, None)
+        else:
+            done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o",
+                          header, *(["--adapt-offset"] if offset else []))
+            want = replay.run(arm, observer.DEFAULT_GAIN, settings, observer.Adaptation(offset=offset))
+            assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
+            assert (np.ptp(want.offset) > 0) == offset
         assert done.exit_code == 0, done.output
-        want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)),
-                          observer.Adaptation(offset=offset))
-        assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
-        assert (np.ptp(want.offset) > 0) == offset
         exe = observer_check.build(str(header), "arm", paths, str(tmp_path), cxx=cxx)
         got = observer_check.run(exe, data, 1, str(tmp_path))
         assert np.max(np.abs(got[:, 0] - want.tau_f[:, 0])) < 1e-9

@@ -21,8 +21,9 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
     out = ["# Contact detection and online friction adaptation: what the controller runs",
            "",
            "This document is written by `PYTHONPATH=. python docs/ur10e/run_contact_detection.py --work W` "
-           f"(about {r['seconds'] / 60:.0f} min on 2 shared cores, with the UR10e case study's work folder W; the script "
-           "runs `docs/ur10e/run_case_study.py` into W first when W does not hold it). Every figure below comes "
+           f"(about {r['seconds'] / 60:.0f} min on 2 shared cores with W holding the UR10e case study's work; the script "
+           "runs `docs/ur10e/run_case_study.py` into W first when it does not, about 2 min more). WORK below is W, DATA "
+           "the recordings (../shared/data/ur10e). Every figure below comes "
            "from that run; the numbers are also in `docs/contact-detection-results.json`, the fricli commands it "
            "ran are listed at the end.",
            "",

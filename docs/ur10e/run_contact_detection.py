@@ -335,13 +335,17 @@ def main(argv=None) -> None:
         if not c_figures:
             c_figures = c_check(work, fixed, thresholds, arm, replay.run(arm, thr.gain, thr, adaptation))
             c_figures["run"] = name
+    def shown(text: str) -> str:
+        return text.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA") \
+            .replace(ROOT + os.sep, "")
+
     result = {"thresholds": thr.as_json(), "baseline": base, "static": static_err, "adapt": adapt_err, "own": own,
               "fixed_case_study": [study["joints"][str(j)]["fixed"]["moving"] for j in JOINTS],
               "false_alarms": {n: {m: {"rows": {j: v["contact_rows"] for j, v in r[1]["joints"].items()},
                                        "events": len(r[1]["events"])} for m, r in modes.items()}
                                for n, modes in replays.items() if "push_pose" not in n},
               "pushes": push_rows, "added": added, "held": held, "c": c_figures,
-              "commands": COMMANDS, "seconds": time.time() - started}
+              "commands": [shown(c) for c in COMMANDS], "seconds": time.time() - started}
     atomic_write_bytes(os.path.join(args.out, "docs", "contact-detection-results.json"),
                        json.dumps(result, indent=1, default=float).encode())
     text = document(result, names)

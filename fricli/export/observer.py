@@ -37,10 +37,16 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
     a = f"{prefix}_arm"
     table = lambda xs: "{" + ", ".join(c.num(x) for x in xs) + "}"   # noqa: E731
     huge = "{" + ", ".join(["HUGE_VAL"] * n) + "}"
+    detection = (f"thresholds of fricli thresholds on {', '.join(thresholds.logs) or 'its logs'}" if thresholds
+                 else "detection off (no thresholds)")
+    adapting = "off"
+    if adaptation is not None:
+        adapting = (f"on: time constant {ad.time_constant:g} s, scale in [{ad.scale_bounds[0]:g}, {ad.scale_bounds[1]:g}]"
+                    + (f", offset within +-{ad.offset_bound:g} x friction scale" if ad.offset else ", no offset"))
     out = [f"/* ---------------------------------------------------------------- {a}: observer, adaptation, contact",
-           f" * Joints, in the order of every array below: {', '.join(names)}.",
-           f" * Observer gain K = {gain:g} 1/s; contact {'thresholds of ' + ', '.join(thresholds.logs) if thresholds else 'detection off (no thresholds)'};",
-           f" * adaptation {'on: time constant %g s, scale in [%g, %g], |offset| <= %g x friction scale' % (ad.time_constant, ad.scale_bounds[0], ad.scale_bounds[1], ad.offset_bound) if adaptation else 'off'}. */",
+           f" * Joints, in the order of every array below: {c.comment(', '.join(names))}.",
+           f" * Observer gain K = {gain:g} 1/s; contact {c.comment(detection)};",
+           f" * adaptation {adapting}. */",
            f"enum {{ {a.upper()}_JOINTS = {n} }};",
            "typedef struct {"]
     out += [f"    {e.prefix}_state friction_{i};" for i, e in enumerate(entries)]
@@ -82,6 +88,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             "        s->p[j] = p[j];",
             "        r[j] = s->a[j] * s->f[j] + s->b[j] * scale[j] - s->y[j];",
             "        moves[j] = fabs(qd[j]) > speed;",
+            *(["        (void)moves;"] if band is None and adaptation is None else []),
             *(["        if (!moves[j]) {   /* at rest: the torque outside the static friction band */",
                "            const double c = s->y[j] < -band[j] ? -band[j] : (s->y[j] > band[j] ? band[j] : s->y[j]);",
                "            r[j] = c - s->y[j];", "        }"] if band is not None else []),
