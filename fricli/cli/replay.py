@@ -41,8 +41,9 @@ def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: fl
 @click.argument("log", type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output log (Parquet).")
 @urdf_option
-@click.option("--adapt", is_flag=True, help="Adapt each joint's friction level (scale and offset) online; needs "
-                                            "--thresholds (no update while a contact is suspected).")
+@click.option("--adapt", is_flag=True,
+              help="Adapt each joint's friction level (the scale of its friction) online; needs --thresholds (no "
+                   "update while a contact is suspected).")
 @click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, besides the scale.")
 @click.option("--thresholds", "thresholds_path", type=click.Path(), default=None,
               help="Contact thresholds of fricli thresholds: adds the flags and the events.")
