@@ -186,7 +186,7 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
     out += ["",
             f"Every contact of twice the threshold detected within {1000 * s['delay']:.0f} ms: "
             f"**{'met' if all_within else 'not met'}**. Smallest detected in all: the smallest size of the grid "
-            "0.5, 0.75, ..., 3 × threshold flagged in every trial of the joint (in motion; at rest add the static band).",
+            "0.5, 0.75, ..., 3 × threshold flagged in every trial of the joint, in motion. At rest a push shows once the held friction and the push together leave the static band: between the threshold and the threshold plus 2 F_s, depending on the friction the joint holds and the direction of the push.",
             "",
             f"A contact of twice the threshold held for {s['hold']:g} s on one joint (5 s into each run), with "
             "`--adapt`: the adapted scale at the release against the one at the onset.",
@@ -218,5 +218,7 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
                 f"{c['load']:.1f} while it ran: shared, so an upper figure; target at most 2 µs).", ""]
     else:
         out += ["No C compiler on the machine that wrote this document: not checked here (tests/test_replay.py does).", ""]
-    out += ["## Commands", "", "```sh"] + [f"fricli {cmd}" for cmd in r["commands"]] + ["```", ""]
+    out += ["## Commands", "",
+            "The replays and exports of this run (imports already in WORK, and the case study's own commands, "
+            "listed in docs/case-study-ur10e.md, are not repeated):", "", "```sh"] + [f"fricli {cmd}" for cmd in r["commands"]] + ["```", ""]
     return "\n".join(out)
