@@ -148,3 +148,22 @@ def test_simulated_contacts_at_twice_the_threshold_are_flagged_within_20_ms(tmp_
         assert np.sign(out.tau_ext[i + flagged[0], 0]) == np.sign(torque)
     free_run = replay.run(replay.read_arm(str(folder), str(free)), thr.gain, thr, None)
     assert free_run.contact.sum() <= 0.002 * len(free_run.contact)   # the quantile's share, at most
+
+
+@pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
+def test_the_example_in_the_contact_detection_doc_compiles(folder, tmp_path):
+    import re
+
+    text = (ROOT / "docs" / "contact-detection.md").read_text()
+    blocks = re.findall(r"```c\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 1 and "arm_arm_step" in blocks[0]
+    thr = tmp_path / "t.json"
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr, "-q").exit_code == 0
+    assert invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o",
+                  tmp_path / "arm.h").exit_code == 0
+    src = tmp_path / "example.c"
+    src.write_text(blocks[0])
+    for compiler, flags in (("cc", observer_check.C_FLAGS), ("g++", observer_check.CXX_FLAGS)):
+        done = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
+                              capture_output=True, text=True)
+        assert done.returncode == 0 and done.stderr == "", done.stderr

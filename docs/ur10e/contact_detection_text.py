@@ -7,6 +7,27 @@ import math
 import numpy as np
 
 
+EXAMPLE = """
+```c
+#include "arm.h"   /* fricli export models/ --observer --thresholds t.json --adapt --prefix arm -o arm.h */
+
+static arm_arm_state arm;   /* arm_arm_init(&arm) at start-up */
+
+void cycle(double t, const double *const *signals, const double *tau_m, const double *qd,
+           const double *momentum, const double *w, double *command, int *stop)
+{
+    double tau_f[ARM_ARM_JOINTS], tau_ext[ARM_ARM_JOINTS];
+    int contact[ARM_ARM_JOINTS], j;
+    arm_arm_step(&arm, t, signals, tau_m, qd, momentum, w, tau_f, tau_ext, contact);
+    for (j = 0; j < ARM_ARM_JOINTS; ++j) {
+        command[j] += tau_f[j];                /* friction compensation at the adapted level */
+        if (contact[j]) *stop = 1;             /* a contact: the reaction is the controller's */
+    }
+}
+```
+"""
+
+
 def _short(name: str) -> str:
     return name.removeprefix("ur-").removesuffix("-cal").removesuffix("-payload")
 
@@ -66,6 +87,12 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
            "of S); it is not the default: an offset also absorbs any torque error that depends on the position (a "
            "gravity error, gear ripple), which it then tracks with the memory's lag (figures below). Row k's friction "
            "uses the level learned from rows before k.",
+           "",
+           "### The call from a control cycle",
+           "",
+           "`tests/test_replay.py` compiles this example against an exported header.",
+           "",
+           *EXAMPLE.strip("\n").splitlines(),
            "",
            "## Protocol",
            "",
