@@ -235,9 +235,10 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
     if c:
         out += [f"`fricli export fixed --observer --thresholds thresholds.json --adapt --prefix arm` compiled with "
                 "`-std=c99 -Wall -Wextra -pedantic -Werror -O2` and as C++ (`-x c++`, same warnings), run over "
-                f"`{c['run']}` (`tests/observer_check.py`'s driver) against `fricli replay --adapt`: largest difference "
+                f"every row of the {len(c['runs'])} runs of other days ({c['rows']:,} rows; `tests/observer_check.py`'s driver) "
+                f"against the replay with `--adapt`: largest difference "
                 f"C {max(c['c']['tau_f'], c['c']['tau_ext']):.2g} Nm, C++ {max(c['cxx']['tau_f'], c['cxx']['tau_ext']):.2g} "
-                f"Nm, contact flags differing {c['c']['contact'] + c['cxx']['contact']} (tolerance 1e-9: "
+                f"Nm, contact flags differing {c['c']['contact'] + c['cxx']['contact']} (tolerance 1e-9 on every row: "
                 f"**{'met' if max(c['c']['tau_f'], c['c']['tau_ext'], c['cxx']['tau_f'], c['cxx']['tau_ext']) <= 1e-9 and not c['c']['contact'] + c['cxx']['contact'] else 'not met'}**).",
                 "",
                 f"One step of the six-joint arm (the six diagnosed LuGre models, observer, adaptation, detection): "
