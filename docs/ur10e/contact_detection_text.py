@@ -163,7 +163,9 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
             f"{s['lowpass']:g} Hz (zero phase) minus its sliding 5 s median; a joint shows a push where that departs "
             "by more than a quarter of its largest departure in the run and by more than 6 times the measurement noise "
             "(1.4826 × the median absolute deviation of the unfiltered signal's sample-to-sample differences, / √2); "
-            "rows of any joint are merged into intervals (gaps under 0.3 s), intervals under 0.2 s dropped. A push counts as flagged when any joint is flagged from its start to "
+            "rows of any joint are merged into intervals (gaps under 0.3 s), intervals under 0.2 s dropped. (This rule "
+            "replaced a first one that took the noise from the spread of the departure itself: it missed every push of "
+            "joint 1 in pose 2, whose pushes fill much of the run.) A push counts as flagged when any joint is flagged from its start to "
             "0.5 s after its end (`fricli replay --adapt`).",
             "",
             "![collision runs](img/contact-collision-runs.png)",
