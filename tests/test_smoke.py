@@ -53,7 +53,7 @@ def check(name, proc, code=0):
 
 
 COMMANDS = ["adapt", "calibrate", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
-            "import", "inspect", "payload", "predict", "report", "simulate", "train-base", "trend"]
+            "import", "inspect", "payload", "predict", "replay", "report", "simulate", "thresholds", "train-base", "trend"]
 
 
 def test_fricli_never_uses_the_threaded_dataset_reader():
@@ -125,6 +125,7 @@ def test_every_command_in_a_process(tmp_path):
         "diagnose": ["diagnose", "lugre.npz", ext, "--fix", "-o", "fixed.npz", "--folds", "5", "-q"],
         "inspect": ["inspect", "lugre.npz"],
         "export": ["export", "lugre.npz", "-o", "friction.h", "-q"],
+        "thresholds": ["thresholds", "lugre.npz", base, "-o", "thresholds.json", "-q"],
         "unchanged": ["identify", base, "-o", "lugre.npz", "--if-changed", "-q"],
         "dynamics": ["dynamics", "rec.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "dyn.parquet",
                      "-q"],
@@ -136,11 +137,14 @@ def test_every_command_in_a_process(tmp_path):
         code = {"unchanged": errors.UNCHANGED, "dynamics": 0 if has_pinocchio else errors.DEPENDENCY,
                 "calibrate": 0 if has_pinocchio else errors.DEPENDENCY}.get(name, 0)
         check(name, proc, code)
-    if has_pinocchio:
-        third = run_all({"payload": ["payload", "dyn.parquet", "--frame", "link2", "--edge", "0.05", "-q"]}, tmp_path)
-        check("payload", third["payload"])
+    third = run_all({"replay": ["replay", "lugre.npz", ext, "--adapt", "--thresholds", "thresholds.json", "-o",
+                                "replay.parquet", "-q"]}
+                    | ({"payload": ["payload", "dyn.parquet", "--frame", "link2", "--edge", "0.05", "-q"]}
+                       if has_pinocchio else {}), tmp_path)
+    for name, proc in third.items():
+        check(name, proc)
     for name in ("lugre.npz", "nn.npz", "adapted.npz", "fixed.npz", "sim.parquet", "pred.parquet", "ext.parquet",
-                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h") + (("dyn.parquet", "cal.urdf") if has_pinocchio else ()):
+                 "report/index.html", "demo/table.md", "rec.parquet", "friction.h", "thresholds.json", "replay.parquet") + (("dyn.parquet", "cal.urdf") if has_pinocchio else ()):
         assert (tmp_path / name).stat().st_size > 0, name
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith((".tmp", ".lock"))]
 

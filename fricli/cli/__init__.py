@@ -33,8 +33,10 @@ COMMANDS = {
     "inspect": "fricli.cli.inspect_cmd:inspect_model",
     "payload": "fricli.cli.payload:payload_cmd",
     "predict": "fricli.cli.predict:predict_cmd",
+    "replay": "fricli.cli.replay:replay_cmd",
     "report": "fricli.cli.evaluate:report_cmd",
     "simulate": "fricli.cli.simulate:simulate_cmd",
+    "thresholds": "fricli.cli.replay:thresholds_cmd",
     "train-base": "fricli.cli.neural:train_base",
     "trend": "fricli.cli.fleet:trend_cmd",
 }

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import common, output_option, say
+from fricli.cli.options import Number, common, output_option, say
 
 
 @cli.command("export")
@@ -13,8 +13,21 @@ from fricli.cli.options import common, output_option, say
 @output_option(help="Output C header (- for stdout).")
 @click.option("--prefix", default="friction", show_default=True,
               help="Prefix of every C symbol (PREFIX_step, ...); a folder of models adds _JOINT per file.")
+@click.option("--observer", is_flag=True,
+              help="Also export the arm's momentum observer and contact detection around the joints' friction "
+                   "(PREFIX_arm_*; MODEL a folder of per-joint models): what fricli replay runs "
+                   "(docs/contact-detection.md).")
+@click.option("--thresholds", "thresholds_path", type=click.Path(), default=None,
+              help="With --observer: contact thresholds of fricli thresholds.")
+@click.option("--adapt", is_flag=True, help="With --observer: the online friction-level adaptation (needs "
+                                            "--thresholds), as fricli replay --adapt.")
+@click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, as fricli replay --adapt-offset.")
+@click.option("--time-constant", type=Number(min=0, min_open=True), default=None,
+              help="With --adapt: memory of the adaptation [s] (default: fricli replay's).")
+@click.option("--gain", type=Number(min=0, min_open=True), default=None,
+              help="With --observer: observer gain [1/s] (default: the thresholds file's, else fricli replay's).")
 @common
-def export_cmd(model, output, prefix, quiet):
+def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_offset, time_constant, gain, quiet):
     """Export MODEL (a model file, or a folder with one .npz per joint) as dependency-free C99.
 
     Writes one header with the parameters baked in: PREFIX_state, PREFIX_init and
@@ -37,9 +50,22 @@ def export_cmd(model, output, prefix, quiet):
         c.check_prefix(prefix)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--prefix") from None
-    text = c.export(model, prefix)
+    if observer:
+        text = _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain)
+    elif thresholds_path or adapt or adapt_offset or time_constant is not None or gain is not None:
+        raise click.UsageError("--thresholds, --adapt, --adapt-offset, --time-constant and --gain go with --observer")
+    else:
+        text = c.export(model, prefix)
     if output == "-":
         click.echo(text, nl=False)
     else:
         atomic_write_bytes(output, text.encode("ascii"))
         say(f"wrote {output}", quiet)
+
+
+def _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain) -> str:
+    from fricli.cli.replay import settings
+    from fricli.export import observer
+
+    k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
+    return observer.export(model, prefix, k, thr, adaptation)

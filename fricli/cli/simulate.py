@@ -19,6 +19,18 @@ def _effects(ctx, param, values):
         raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
+def _contacts(ctx, param, values):
+    out = []
+    for value in values:
+        try:
+            start, torque, length = (float(x) for x in value.split(","))
+        except ValueError:
+            raise click.BadParameter(f"expected START,TORQUE,DURATION like 30,5,2, got {value!r}", ctx=ctx,
+                                     param=param) from None
+        out.append((start, torque, length))
+    return tuple(out)
+
+
 def _fleet_size(ctx, param, value):
     if value is None:
         return None
@@ -58,10 +70,14 @@ def _fleet_size(ctx, param, value):
                    "with a manifest for fricli fleet (see docs/fleet.md).")
 @click.option("--wearing", type=click.IntRange(min=0), default=0, show_default=True,
               help="--fleet: joints whose Coulomb and viscous friction grow over the days.")
+@click.option("--contact", "contacts", multiple=True, callback=_contacts,
+              metavar="START,TORQUE,DURATION",
+              help="An external torque of TORQUE [Nm] from START for DURATION [s] (repeatable): the joint keeps "
+                   "its path, the motor torque takes the push, tau_ext holds it (docs/contact-detection.md).")
 @click.option("-o", "--output", required=True, help="Output Parquet log (- for stdout); with --fleet a folder.")
 @common
 def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, thin, fleet_size, wearing,
-                 output, quiet):
+                 contacts, output, quiet):
     """Simulate a log of a harmonic-drive robot joint with known friction.
 
     The log holds t, joint, q, qd, qdd, tau_m (with noise), tau_g, tau_dyn, tau_ext, temp and
@@ -75,6 +91,8 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
       fricli simulate --scenario adapt -o - | fricli predict lugre.npz - -o pred.parquet
     """
     if fleet_size is not None:
+        if contacts:
+            raise click.UsageError("--contact does not apply to --fleet")
         _fleet(fleet_size, wearing, seed, rate, output, quiet)
         return
     if wearing:
@@ -83,8 +101,13 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
         raise click.UsageError("--duration applies to --scenario extended only")
     if thin and scenario != "base":
         raise click.UsageError("--thin applies to --scenario base only")
-    table = simulator.simulate(scenario, int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
-                               duration=duration, friction_state=friction_state, thin=thin)
+    try:
+        table = simulator.simulate(scenario, int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
+                                   duration=duration, friction_state=friction_state, thin=thin, contacts=contacts)
+    except ValueError as exc:
+        if not contacts or "contact" not in str(exc):
+            raise
+        raise click.BadParameter(str(exc), param_hint="--contact") from None
     simulator.write(table, output)
     t = table.column("t")
     names = ", ".join(name if s is None else f"{name}={s:g}" for name, s in effect_specs) or "no effects"

@@ -126,7 +126,7 @@ def resolve_effects(specs) -> list[tuple[str, float | None]]:
 
 def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str = "none", effects=(), seed: int = 0,
              rate: float = 100.0, duration: float | None = None, friction_state: str | None = None,
-             thin: bool = False) -> pa.Table:
+             thin: bool = False, contacts=()) -> pa.Table:
     """A simulated log as a pyarrow table (columns and units of the log contract).
 
     scenario: base | extended | adapt | daily; joint: 2 | 4 or a ``joints.Joint``; load: none | sym | asym (external payload
@@ -134,7 +134,9 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
     ``fricli.sim.effects.EFFECTS``); rate: output rate [Hz]; duration [s]: extended only;
     friction_state: base | shifted (default: base for the base scenario, else shifted); thin:
     base only, each slow level one short stretch at a random position (see
-    ``trajectories.base_plan``). The same arguments give the same table.
+    ``trajectories.base_plan``); contacts: (start [s], torque [Nm], duration [s]) of external torques
+    of constant size added to tau_ext (the joint keeps its path: the motor torque takes the push;
+    the log's reference tau_ext holds them). The same arguments give the same table.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown scenario {scenario!r} (choose from {', '.join(SCENARIOS)})")
@@ -159,6 +161,8 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
     phi, phidd = conf.phi(t)
     tau_g = j.gravity_amplitude * np.sin(q + phi)
     tau_ext = _load_profile(load, j.load_amplitude, q, phi, rng_conf)
+    pushes = contact_torque(t, contacts)
+    tau_ext = tau_ext + pushes
 
     scene = fx.Scene(joint=j, t=t, q=q, v=qd, qdd=qdd, phi=phi, tau_g=tau_g, tau_ext=tau_ext,
                      temp=np.full_like(t, state_p["temperature"]), loaded=load != "none",
@@ -183,7 +187,7 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
     noise_ext = rng_noise.normal(0.0, j.ext_noise_sd, n_out)
     tau_m = (tau_dyn_true + scene.tau_g + tau_f - scene.tau_ext + scene.tau_m_extra)[out]
     tau_m = tau_m + noise_m + scene.tau_m_bias
-    sensor = scene.tau_ext[out] + noise_ext if scene.loaded else np.zeros(n_out)
+    sensor = scene.tau_ext[out] + noise_ext if scene.loaded else pushes[out]
 
     columns = {
         "t": t[out], "joint": np.full(n_out, j.number, dtype=np.int64),
@@ -209,7 +213,22 @@ def simulate(scenario: str = "base", joint: int | joints.Joint = 2, *, load: str
     }
     if thin:
         meta["thin"] = True
+    if contacts:
+        meta["contacts"] = [{"start_s": float(a), "torque_nm": float(b), "duration_s": float(c)} for a, b, c in contacts]
     return table.replace_schema_metadata({METADATA_KEY: json.dumps(meta, sort_keys=True)})
+
+
+def contact_torque(t: np.ndarray, contacts) -> np.ndarray:
+    """The external torque [Nm] of ``contacts`` (start [s], torque [Nm], duration [s]) at times ``t``."""
+    out = np.zeros_like(t)
+    for start, torque, length in contacts:
+        if not (math.isfinite(start) and math.isfinite(torque) and length > 0):
+            raise ValueError(f"a contact needs a finite start and torque and a duration above 0, got "
+                             f"{start:g}, {torque:g}, {length:g}")
+        if not t[0] <= start <= t[-1]:
+            raise ValueError(f"a contact at {start:g} s starts outside the simulated {t[0]:g} to {t[-1]:g} s")
+        out[(t >= start) & (t < start + length)] += torque
+    return out
 
 
 def write(table: pa.Table, path: str) -> None:

@@ -1,0 +1,236 @@
+"""``fricli replay`` and ``fricli thresholds``: a log run through what the controller runs, row by
+row (``fricli.applying.observer``), and the contact thresholds calibrated from collision-free logs.
+
+The friction model of each joint reads the log's columns as its exported step function reads
+them from the controller (docs/deploy.md); its output is causal (each model is a recurrence over
+the rows). The rigid-body terms of the observer come from a URDF through Pinocchio (``urdf``):
+p = M(q) qd = RNEA(q, 0, qd) without gravity (with the armature: the URDF's rotor_params, else the
+rotor inertias the log's import recorded, and the transmission's cross-inertia), g(q) by RNEA,
+C(q, qd) by ``computeCoriolisMatrix``; with the gravity, payload and held joints the log's
+import recorded, and its joints matched to the URDF's by the names it recorded. Without a URDF the
+observer takes the per-joint form on the log's tau_g and tau_dyn.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from fricli import models
+from fricli.applying import observer
+from fricli.core import joints as joint_rule
+from fricli.core import lazy, logs, metrics, modelset
+from fricli.core.atomic import atomic_open, atomic_write_bytes
+from fricli.core.errors import DataError, LogError, ModelFileError
+from fricli.models import coupled
+
+pa = lazy.module("pyarrow")
+pc = lazy.module("pyarrow.compute")
+pq = lazy.module("pyarrow.parquet")
+
+
+@dataclasses.dataclass
+class Arm:
+    """One log's rows as a controller sees them, per joint (n, J): time, the friction models'
+    output f0, tau_m, p, w (observer module), qd; the friction target for scoring; where each
+    joint's rows sit in the log's table."""
+
+    name: str
+    joints: list
+    t: np.ndarray
+    f0: np.ndarray
+    tau_m: np.ndarray
+    p: np.ndarray
+    w: np.ndarray
+    qd: np.ndarray
+    target: np.ndarray
+    table: object
+    rows: list                      # per joint: the row indices in ``table``
+    form: str
+    unit: str
+    signals: list = dataclasses.field(default_factory=list)   # per joint: the signals its model read
+
+
+def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -> Arm:
+    """The log at ``log_path`` with each covered joint's model of ``model_path`` (a model file or
+    a folder of them, the joint rule) and the rigid-body terms (``urdf``, or the per-joint form)."""
+    table, _digest = logs.read_table(log_path)
+    name = "stdin" if log_path == "-" else log_path
+    found = logs.joints_of(table, name)
+    pairs = joint_rule.pair(modelset.source(model_path), found, None, name)
+    jnames, f0, tau_m, qd, t, target, rows, tables, w = [], [], [], [], None, [], [], {}, []
+    index = np.arange(table.num_rows)
+    unit = "Nm"
+    for j, path in pairs:
+        model, meta = models.load(path)
+        model = models.set_precision(coupled.view(model, j), "double")
+        if j is None:
+            part, idx = table, index
+        else:
+            jcol = table.column("joint")
+            mask = pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)
+            part, idx = table.filter(pa.array(mask)), index[mask]
+        log = logs.from_table(part, name=name, zero=zero)
+        log.joint = j
+        coupled.add_partners(model, log, table, zero=zero)
+        models.check_log(meta, log, path)
+        sig = log.signals
+        if t is None:
+            t = sig["t"]
+        elif len(sig["t"]) != len(t) or not np.array_equal(sig["t"], t):
+            raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}: the replay of an arm "
+                           "needs one sample of every joint per time")
+        try:
+            tau, _ = model.predict(sig, None)
+        except DataError as exc:
+            raise DataError(f"{name}: {exc} ({path})") from None
+        jnames.append(j)
+        f0.append(np.asarray(tau, dtype=np.float64))
+        tau_m.append(sig["tau_m"])
+        qd.append(sig["qd"])
+        target.append(logs.friction_target(sig))
+        w.append(logs.column(sig, "tau_g") + logs.column(sig, "tau_dyn") if urdf is None else None)
+        rows.append(idx)
+        tables[j] = sig
+        unit = log.units["tau"]
+    stack = lambda xs: np.column_stack(xs)   # noqa: E731
+    if urdf is None:
+        p, wr, form = np.zeros((len(t), len(jnames))), stack(w), "per-joint"
+    else:
+        p, wr = momentum_terms(urdf, table.schema, jnames, {j: tables[j] for j in jnames}, name)
+        form = "urdf"
+    return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit,
+               [tables[j] for j in jnames])
+
+
+def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(p, w) per row and log joint: p = M(q) qd, w = g(q) - C(q, qd)^T qd, with Pinocchio."""
+    from fricli.robot import dynamics
+    from fricli.robot.mapping import Payload
+
+    pin = dynamics.pinocchio()
+    record = logs.robot_record(schema)
+    named = record.get("joints") or {}
+    payload = record.get("payload")
+    robot = dynamics.RobotModel(dynamics._urdf_text(urdf), urdf, gravity=logs.gravity_of(schema),
+                                payload=Payload(**payload) if isinstance(payload, dict) else None,
+                                held=tuple(record.get("held") or ()))
+    if named:
+        missing = [j for j in jnames if str(j) not in named]
+        if missing:
+            raise DataError(f"{name}: the log records no URDF joint for joint {missing[0]}")
+        idx = robot.match([named[str(j)] for j in jnames], "name")
+    else:
+        idx = robot.match([None] * len(jnames), "order")
+    nv = len(robot.joints)
+    n = len(next(iter(sig.values()))["t"])
+    q, qd = np.zeros((n, nv)), np.zeros((n, nv))
+    for k, j in zip(idx, jnames):
+        q[:, k], qd[:, k] = sig[j]["q"], sig[j]["qd"]
+    rotor = np.zeros(nv)
+    given = record.get("rotor_inertia") or {}
+    for k, j in zip(idx, jnames):
+        if np.isnan(robot.armature[k]):
+            rotor[k] = float(given.get(str(j), 0.0) or 0.0)
+    config = robot.configuration(q)
+    zeros = np.zeros_like(q)
+    p = dynamics._rnea(robot._no_g, config, zeros, qd) + qd * rotor + qd @ robot.cross_inertia.T
+    g = dynamics._rnea(robot._with_g, config, zeros, zeros)
+    model = robot.pin_model
+    data = model.createData()
+    ctq = np.empty_like(q)
+    for i in range(n):
+        c = pin.computeCoriolisMatrix(model, data, config[i], qd[i])
+        ctq[i] = c.T @ qd[i]
+    w = g - ctq
+    return np.ascontiguousarray(p[:, idx]), np.ascontiguousarray(w[:, idx])
+
+
+def run(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
+        adaptation: observer.Adaptation | None) -> observer.Replayed:
+    if thresholds is not None:
+        if thresholds.form != arm.form:
+            raise DataError(f"the thresholds were calibrated on the {thresholds.form} observer, this replay runs the "
+                            f"{arm.form} one ({'give --urdf' if thresholds.form == 'urdf' else 'leave out --urdf'})")
+        thresholds = thresholds.for_joints(arm.joints, arm.name)
+    return observer.replay(arm.t, arm.f0, arm.tau_m, arm.p, arm.w, arm.qd, gain, thresholds, adaptation)
+
+
+def write(arm: Arm, out: observer.Replayed, path: str) -> None:
+    """The log's rows of the covered joints with tau_f_pred, tau_ext_pred [unit] and contact (0/1)
+    added, in the log's order, written atomically."""
+    order = np.concatenate(arm.rows)
+    table = arm.table.take(pa.array(np.sort(order)))
+    pos = np.empty(arm.table.num_rows, dtype=np.int64)
+    pos[np.sort(order)] = np.arange(len(order))
+    cols = {k: np.empty(len(order)) for k in ("tau_f_pred", "tau_ext_pred")}
+    contact = np.zeros(len(order), dtype=np.int8)
+    for j, idx in enumerate(arm.rows):
+        cols["tau_f_pred"][pos[idx]] = out.tau_f[:, j]
+        cols["tau_ext_pred"][pos[idx]] = out.tau_ext[:, j]
+        contact[pos[idx]] = out.contact[:, j]
+    for key in ("tau_f_pred", "tau_ext_pred", "contact"):
+        if key in table.column_names:
+            table = table.drop_columns([key])
+    for key, values in cols.items():
+        table = logs.with_column(table, key, values, arm.unit)
+    table = table.append_column(pa.field("contact", pa.int8()), pa.array(contact))
+    with atomic_open(path, binary=True) as fh:
+        pq.write_table(table, fh, **logs.parquet_options(table.schema))
+
+
+def moving(arm: Arm) -> np.ndarray:
+    """(n, J): the rows in motion per joint, as ``fricli evaluate`` counts them."""
+    return np.column_stack([metrics.in_motion(arm.qd[:, j]) for j in range(len(arm.joints))])
+
+
+def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, gain: float = observer.DEFAULT_GAIN,
+              quantile: float = observer.DEFAULT_QUANTILE, margin: float = observer.DEFAULT_MARGIN,
+              release: float = observer.DEFAULT_RELEASE, moving_speed: float = observer.DEFAULT_MOVING_SPEED,
+              zero=()) -> observer.Thresholds:
+    """Thresholds from the static observer on collision-free logs (``observer.calibrate``)."""
+    arms = [read_arm(model_path, path, urdf, zero) for path in log_paths]
+    names = [str(j) for j in arms[0].joints]
+    for arm in arms[1:]:
+        if [str(j) for j in arm.joints] != names:
+            raise DataError(f"{arm.name}: joints {', '.join(map(str, arm.joints))}, but {arms[0].name} has "
+                            f"{', '.join(names)}: calibrate on logs of the same joints")
+    observer.check_settings(quantile, margin, release, moving_speed)
+    joints = list(arms[0].joints)
+    band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
+    free = observer.Thresholds(joints, np.full(len(joints), np.inf), band, np.ones(len(joints)), gain=gain,
+                               moving_speed=moving_speed, form=arms[0].form)
+    res = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, free) for a in arms]
+    return observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms], joints, gain,
+                              arms[0].form, band, quantile, margin, release, moving_speed,
+                              logs=[os.path.basename(p) for p in log_paths])
+
+
+def write_thresholds(thresholds: observer.Thresholds, path: str) -> None:
+    import json
+
+    data = thresholds.as_json()
+    atomic_write_bytes(path, (json.dumps(data, indent=1) + "\n").encode("utf-8"))
+
+
+def summary(arm: Arm, out: observer.Replayed) -> dict:
+    """Figures of a replay: per joint the RMS of the friction error in motion and over every row, the
+    rows flagged, the final adapted level; and the contact events."""
+    mv = moving(arm)
+    per = {}
+    for j, name in enumerate(arm.joints):
+        e = arm.target[:, j] - out.tau_f[:, j]
+        per[str(name)] = {"friction_rms_moving": float(np.sqrt(np.mean(e[mv[:, j]] ** 2))) if mv[:, j].any() else None,
+                          "friction_rms": float(np.sqrt(np.mean(e ** 2))),
+                          "contact_rows": int(out.contact[:, j].sum()),
+                          "scale": float(out.scale[-1, j]), "offset": float(out.offset[-1, j])}
+    evs = observer.events(arm.t, out.contact, out.tau_ext, arm.joints)
+    return {"rows": len(arm.t), "form": arm.form, "joints": per,
+            "events": [dataclasses.asdict(e) | {"joint": str(e.joint)} for e in evs]}
+
+
+def check_model_path(path: str) -> None:
+    if not os.path.exists(path):
+        raise ModelFileError(f"{path}: no such model file or folder")

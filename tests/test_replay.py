@@ -1,0 +1,169 @@
+"""fricli thresholds, fricli replay and the arm header of fricli export --observer: the replay is
+causal, its C code gives the same numbers, and the URDF form's rigid-body terms are the log's."""
+
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+
+from conftest import ROOT, shared_data
+from fricli import models
+from fricli.applying import observer
+from fricli.cli import cli
+from fricli.core import logs
+from fricli.models.lugre import LuGreModel
+from fricli.robot import replay
+
+sys.path.insert(0, str(ROOT / "tests"))
+import observer_check  # noqa: E402
+
+SAMPLE = "sample_data/joint2_base.parquet"
+HELD_OUT = "sample_data/joint2_extended_asym.parquet"
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """A model folder with the LuGre model of joint 2 (fitted values of the sample's simulator)."""
+    out = tmp_path_factory.mktemp("models")
+    log = logs.load_log(f"{ROOT}/{SAMPLE}")
+    model = LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, sigma0=1.7e4, sigma1=0.5)
+    models.save_for_log(str(out / "joint_2.npz"), model, log, rows_used=len(log), seed=1)
+    return out
+
+
+def invoke(*args):
+    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+
+
+def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
+    thr = tmp_path / "t.json"
+    done = invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr, "--quantile", "0.999", "--margin", "1.5")
+    assert done.exit_code == 0, done.output
+    out = tmp_path / "out.parquet"
+    done = invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "--thresholds", thr, "-o", out, "--json", "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(out)
+    for name in ("tau_f_pred", "tau_ext_pred", "contact"):
+        assert name in table.column_names
+    arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
+    again = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    assert np.array_equal(table.column("tau_ext_pred").to_numpy(), again.tau_ext[:, 0])
+    # the per-joint form: r is the low-pass of tau_g + tau_dyn + tau_f_pred - tau_m
+    static = replay.run(arm, observer.DEFAULT_GAIN, None, None)
+    direct = logs.external_torque(arm.signals[0], arm.f0[:, 0])
+    assert np.corrcoef(static.tau_ext[100:, 0], direct[100:])[0, 1] > 0.9
+    # bad input: one line and the exit code
+    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
+    thr.write_text("[1]")
+    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out).exit_code == 6
+    missing = invoke("replay", folder, tmp_path / "none.parquet", "-o", out)
+    assert missing.exit_code == 3 and missing.output.count("\n") == 1 and "Traceback" not in missing.output
+
+
+@pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
+def test_the_exported_arm_header_equals_replay(folder, tmp_path):
+    thr = tmp_path / "t.json"
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr).exit_code == 0
+    header = tmp_path / "arm.h"
+    arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
+    paths = [str(folder / "joint_2.npz")]
+    data = observer_check.rows(arm, paths)
+    settings = observer.Thresholds.read(str(thr))
+    for offset, cxx in ((False, False), (False, True), (True, False), (None, False)):
+        if offset is None:   # the observer alone: no thresholds, no adaptation
+            done = invoke("export", folder, "--observer", "--prefix", "arm", "-o", header)
+            want = replay.run(arm, observer.DEFAULT_GAIN, None, None)
+        else:
+            done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o",
+                          header, *(["--adapt-offset"] if offset else []))
+            want = replay.run(arm, observer.DEFAULT_GAIN, settings, observer.Adaptation(offset=offset))
+            assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
+            assert (np.ptp(want.offset) > 0) == offset
+        assert done.exit_code == 0, done.output
+        exe = observer_check.build(str(header), "arm", paths, str(tmp_path), cxx=cxx)
+        got = observer_check.run(exe, data, 1, str(tmp_path))
+        assert np.max(np.abs(got[:, 0] - want.tau_f[:, 0])) < 1e-9
+        assert np.max(np.abs(got[:, 1] - want.tau_ext[:, 0])) < 1e-9
+        assert np.array_equal(got[:, 2].astype(bool), want.contact[:, 0])
+
+
+def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
+    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
+    urdf = shared_data("ur10e/ur10e.urdf")
+    log = tmp_path / "j2.parquet"
+    subprocess.run([sys.executable, "-m", "fricli", "import", str(data), "--mapping", f"{ROOT}/docs/ur10e-mapping.toml",
+                    "--urdf", str(urdf), "--cutoff", "10", "-o", str(log), "-q"], check=True)
+    table = pq.read_table(log)
+    sig = {j: logs.from_table(table, name="x", joint=j).signals for j in range(1, 7)}
+    p, w = replay.momentum_terms(str(urdf), table.schema, list(range(1, 7)), sig, "x")
+    t = sig[1]["t"]
+    pdot = np.gradient(p, t, axis=0)
+    rigid = np.column_stack([sig[j]["tau_g"] + sig[j]["tau_dyn"] for j in range(1, 7)])
+    # dp/dt + g - C^T qd = M qdd + C qd + g: the log's tau_g + tau_dyn; both low-passed alike (the
+    # log's qdd is the measured velocity filtered at 10 Hz and differentiated, pdot is not filtered)
+    smooth = lambda x: np.column_stack([logs.lowpass(x[:, k], t, 5.0) for k in range(6)])   # noqa: E731
+    scale = np.sqrt(np.mean(rigid ** 2, axis=0))
+    err = np.sqrt(np.mean((smooth(pdot + w) - smooth(rigid))[50:-50] ** 2, axis=0))
+    assert np.all(err < 0.02 * scale + 0.05), (err, scale)
+    # a wrong sign of the Coriolis term or the momentum would not agree
+    assert np.sqrt(np.mean((smooth(-pdot + w) - smooth(rigid))[50:-50, 1] ** 2)) > 10 * err[1]
+
+
+def test_simulated_contacts_at_twice_the_threshold_are_flagged_within_20_ms(tmp_path):
+    from fricli.sim import simulator
+
+    p = simulator.true_params(2, "adapt", "base")
+    model = LuGreModel(*(p[k] for k in ("fc", "fs", "vs", "delta", "fv", "kc", "ks", "sigma0", "sigma1")))
+    folder = tmp_path / "m"
+    folder.mkdir()
+    free = tmp_path / "free.parquet"
+    simulator.write(simulator.simulate("adapt", 2, seed=1, rate=1000.0, friction_state="base"), str(free))
+    models.save_for_log(str(folder / "joint_2.npz"), model, logs.load_log(str(free)), rows_used=1, seed=1)
+    thr_path = tmp_path / "t.json"
+    assert invoke("thresholds", folder, free, "-o", thr_path, "-q").exit_code == 0
+    thr = observer.Thresholds.read(str(thr_path))
+    size = 2.0 * float(thr.threshold[0])
+    probe = simulator.simulate("adapt", 2, seed=2, rate=1000.0, friction_state="base")
+    t, qd = probe.column("t").to_numpy(), probe.column("qd").to_numpy()
+    moving = np.flatnonzero((np.abs(qd) > 0.1) & (t > 5.0))
+    starts = [float(t[moving[i]]) for i in np.linspace(0, len(moving) - 1, 4, endpoint=False).astype(int)]
+    contacts = [(s, size if k % 2 else -size, 0.3) for k, s in enumerate(starts)]
+    pushed = tmp_path / "pushed.parquet"
+    args = [a for c in contacts for a in ("--contact", f"{c[0]!r},{c[1]!r},{c[2]!r}")]
+    done = invoke("simulate", "--scenario", "adapt", "--seed", "2", "--rate", "1000", "--friction-state", "base",
+                  *args, "-o", pushed, "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(pushed)
+    assert np.max(np.abs(table.column("tau_ext").to_numpy())) == pytest.approx(size)
+    arm = replay.read_arm(str(folder), str(pushed))
+    out = replay.run(arm, thr.gain, thr, None)
+    for start, torque, length in contacts:
+        i = np.searchsorted(arm.t, start)
+        flagged = np.flatnonzero(out.contact[i:, 0])
+        assert len(flagged) and arm.t[i + flagged[0]] - start <= 0.020
+        assert np.sign(out.tau_ext[i + flagged[0], 0]) == np.sign(torque)
+    free_run = replay.run(replay.read_arm(str(folder), str(free)), thr.gain, thr, None)
+    assert free_run.contact.sum() <= 0.002 * len(free_run.contact)   # the quantile's share, at most
+
+
+@pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
+def test_the_example_in_the_contact_detection_doc_compiles(folder, tmp_path):
+    import re
+
+    text = (ROOT / "docs" / "contact-detection.md").read_text()
+    blocks = re.findall(r"```c\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 1 and "arm_arm_step" in blocks[0]
+    thr = tmp_path / "t.json"
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr, "-q").exit_code == 0
+    assert invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o",
+                  tmp_path / "arm.h").exit_code == 0
+    src = tmp_path / "example.c"
+    src.write_text(blocks[0])
+    for compiler, flags in (("cc", observer_check.C_FLAGS), ("g++", observer_check.CXX_FLAGS)):
+        done = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
+                              capture_output=True, text=True)
+        assert done.returncode == 0 and done.stderr == "", done.stderr
