@@ -428,12 +428,20 @@ def test_fleet_job_and_command_write_the_same_bytes(tmp_path, pipeline):
 
 
 def test_the_fleet_prints_the_warnings_identify_prints(tmp_path):
-    """A log on which identify warns (the Stribeck velocity of joint4_extended_asym spans its
-    speeds): the fleet prints the same warning, named by robot, joint and date, and keeps it in --json."""
+    """A log on which identify warns (joint4_extended_asym with three 40 Nm spikes in tau_m, which the
+    static curve cannot follow): the fleet prints the same warning, named by robot, joint and date, and
+    keeps it in --json."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
     from conftest import SAMPLE
 
     (tmp_path / "logs").mkdir()
-    shutil.copy(SAMPLE / "joint4_extended_asym.parquet", tmp_path / "logs" / "2026-05-04.parquet")
+    table = pq.read_table(SAMPLE / "joint4_extended_asym.parquet")
+    k = table.column_names.index("tau_m")
+    tau_m = table.column(k).to_numpy().copy()
+    tau_m[[3000, 6000, 9000]] += 40.0
+    pq.write_table(table.set_column(k, table.schema.field(k), pa.array(tau_m)),
+                   tmp_path / "logs" / "2026-05-04.parquet")
     (tmp_path / "m.toml").write_text('[[robot]]\nname = "r1"\nlogs = "logs/*.parquet"\njoints = [4]\n')
     command = invoke("identify", tmp_path / "logs" / "2026-05-04.parquet", "-o", tmp_path / "one.npz", "-q",
                      cwd=tmp_path)

@@ -538,7 +538,8 @@ class LuGreIdentifier:
         curve = fit["steady"]
         tail = TAIL * math.sqrt(2 * math.log(max(curve["n"], 2))) * curve["rmse"]
         if bounds and curve["max"] > tail:
-            which = " and ".join(_BOUND_TEXT[name][side] for name, side in bounds.items())
+            shown = {k: v for k, v in bounds.items() if not (k == "delta" and "fs" in bounds)}  # no effect then
+            which = " and ".join(_BOUND_TEXT[name][side] for name, side in shown.items())
             out.append(f"{which} (at the bound of the fit, held at its default) with a max error of {curve['max']:.3g} {tau} on the "
                        f"static-curve rows, {curve['max'] / curve['rmse']:.0f} times their RMS error: the static curve cannot follow some "
                        "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
