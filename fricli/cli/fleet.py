@@ -18,17 +18,20 @@ from fricli.cli.options import Number, common, emit_json, json_flag, progress_en
               help="Worker processes of the local cluster [default: one per core].")
 @click.option("--force", is_flag=True, help="Run every job, even when its model is up to date.")
 @click.option("--list", "list_only", is_flag=True, help="List the jobs and run nothing.")
+@click.option("--allow-outside", is_flag=True,
+              help="Trust MANIFEST: let it read logs and bases and write models and the history outside its folder.")
 @json_flag
 @common
 @errors.cite_codes
-def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
+def fleet_cmd(manifest, scheduler, workers, force, list_only, allow_outside, as_json, quiet):
     """Run every job of MANIFEST (robots, logs, joints, pipeline: see docs/fleet.md) on Dask.
 
     A job is one (robot, joint, log): its model is refreshed unless it was made from the same log
     bytes with the same options (as --if-changed). Every job that ran adds a row to the history
     dataset. The run ends with a table of every job (ok, unchanged, or failed with its reason).
-    Exit code {OK} when every job is ok or unchanged, {SOME_FAILED} when some failed,
-    {NOTHING_RAN} when nothing could run.
+    The manifest reads and writes only under its own folder unless --allow-outside; a second run of
+    the same manifest while one runs exits {LOCKED} at once. Exit code {OK} when every job is ok or
+    unchanged, {SOME_FAILED} when some failed, {NOTHING_RAN} when nothing could run.
 
     \b
     Example:
@@ -39,7 +42,7 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
     from fricli.fleet import manifest as mf
     from fricli.fleet import run
 
-    m = mf.load(manifest)
+    m = mf.load(manifest, allow_outside=allow_outside)
     for line in m.unmatched:     # a robot dropping out of a nightly run must not go unnoticed
         warn(f"warning: {line}")
     if list_only:

@@ -130,7 +130,7 @@ def fit_coupled(pipeline: str, log: str, output: str, report, report_group, *, i
     window = window.to_json() if window else None
     table, digest = read_log(log)
     name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts)
+    runs.check_table(table, name, opts, pipeline)
     try:
         tr = transmission.of_schema(table.schema.metadata)
     except ValueError as exc:

@@ -340,7 +340,7 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
     window = time_window()
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts)
+    runs.check_table(table, name, opts, pipeline)
     pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
     results: dict = {}
 

@@ -9,6 +9,9 @@ import dataclasses
 import datetime as dt
 import os
 import secrets
+import shutil
+import sys
+import tempfile
 from typing import Callable, Iterator
 
 from fricli.core import errors
@@ -74,13 +77,20 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
     n = workers or os.cpu_count() or 1
     import warnings
 
-    with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
-        warnings.simplefilter("ignore", UserWarning)
-        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
-                                           preload=["fricli.fleet.worker"])   # Ctrl-C, logging
-    with cluster, distributed.Client(cluster) as c:
-        yield c
+    # the workers' scratch space (and its lock files) in a folder of this run, removed at its end:
+    # Dask's default, dask-scratch-space in $TMPDIR, keeps lock files after the cluster closes
+    scratch = tempfile.mkdtemp(prefix="fricli-dask-")
+    try:
+        with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
+            warnings.simplefilter("ignore", UserWarning)
+            cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
+                                               local_directory=scratch,
+                                               preload=["fricli.fleet.worker"])   # Ctrl-C, logging
+        with cluster, distributed.Client(cluster) as c:
+            yield c
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def run_id(now: dt.datetime) -> str:
@@ -93,7 +103,27 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
     A job whose model is up to date but whose history row is missing (an interrupted run, a
     history that could not be written) runs again, so the history catches up.
 
-    ``on_done(done, total)`` is called as jobs finish (for a progress bar)."""
+    ``on_done(done, total)`` is called as jobs finish (for a progress bar). One run of a manifest
+    at a time: the run holds the lock on the manifest (``.NAME.lock`` beside it) from its start to
+    its end; a second run of the same manifest raises LockedError at once and touches nothing."""
+    from fricli.core import jobs as joblock
+
+    try:
+        lock = joblock.output_lock(manifest.path)
+        lock.__enter__()
+    except errors.LockedError:
+        raise errors.LockedError(f"{manifest.path} is being run by another fricli fleet job; this run did "
+                                 "nothing") from None
+    try:
+        return _run(manifest, scheduler=scheduler, workers=workers, if_changed=if_changed, on_done=on_done)
+    except BaseException:
+        lock.__exit__(*sys.exc_info())
+        raise
+    else:
+        lock.__exit__(None, None, None)
+
+
+def _run(manifest: Manifest, *, scheduler, workers, if_changed: bool, on_done) -> Outcome:
     now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
     run = run_id(now)
     jobs = list(manifest.jobs)
