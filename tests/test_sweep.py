@@ -304,3 +304,43 @@ def test_a_log_without_units_is_noted_at_run_time(tmp_path, model):
     with_units = log_file(tmp_path)
     res = CliRunner().invoke(cli, ["predict", str(model), str(with_units), "-o", str(tmp_path / "p.parquet")])
     assert res.exit_code == 0 and "no column carries a unit" not in res.stderr, res.stderr
+
+
+def test_a_line_break_in_a_joint_name_stays_escaped_in_success_lines(tmp_path):
+    table = pq.read_table(log_file(tmp_path))
+    table = table.append_column("joint", pa.array(["wrist\nroll"] * table.num_rows))
+    pq.write_table(table, tmp_path / "named.parquet")
+    from fricli.models.linear import LinearFriction
+
+    model = tmp_path / "lin.npz"
+    models.save(str(model), LinearFriction(1.0, 5.0), joint="wrist\nroll", axis="rotary",
+                units=logs.CANONICAL["rotary"], provenance={})
+    res = CliRunner().invoke(cli, ["estimate-ext", str(model), str(tmp_path / "named.parquet"), "-o",
+                                   str(tmp_path / "o.parquet")])
+    assert res.exit_code == 0, res.stderr
+    for line in res.stderr.splitlines():
+        assert not line.startswith("roll"), res.stderr
+    assert "rows of joint wrist\\nroll -> " in res.stderr, res.stderr
+
+
+def test_a_narrow_position_range_says_where_the_joint_dwells():
+    from fricli.fitting.diagnosis import structure
+
+    rng = np.random.default_rng(0)
+    n = 8000
+    m = 3 * n // 4
+    q = np.concatenate([np.linspace(-1.64, 1.22, m), 0.0111 + 1e-5 * rng.random(n - m)])   # rests a quarter of the time
+    e = rng.normal(0, 0.01, n)
+    e[m:] += 1.0                                        # an offset while it rests
+    s = structure.Structure(time=structure.View(0.0, False, {"frequency_hz": None}),
+                            velocity=structure.View(0.0, False, {"range": None}),
+                            position=structure.over_variable(e, q, 0.01))
+    line = s.line("Nm", "rad/s", "rad")
+    lo, hi = s.position.where["range"]
+    assert lo <= 0.0111 <= hi and hi - lo < 0.05 * 2.86
+    assert f"over position {structure.span(lo, hi)} rad (28 % of the rows, where the joint dwells; its position spans " \
+           "-1.64 .. 1.22 rad)" in line, line
+    e_wide = rng.normal(0, 0.01, n) + np.where(q > 0.5, 1.0, 0.0)       # over a stretch of the travel: no such clause
+    wide = structure.over_variable(e_wide, q, 0.01)
+    assert "dwells" not in structure.Structure(s.time, s.velocity, wide).line("Nm", "rad/s", "rad")
+

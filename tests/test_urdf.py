@@ -420,6 +420,7 @@ def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path)
     grid = derived["cutoff_choice"]["candidates_hz"]    # below the Nyquist frequency, then none (at it)
     assert grid[:-1] == [c for c in CUTOFF_GRID if c < 499] and grid[-1] == pytest.approx(500.0)
     assert f"cut-off of the derived columns: {chosen:g} Hz, chosen of 2 Hz to no low-pass" in res.stderr
+    assert re.search(r"leave the least of tau_m - tau_g in motion, [0-9.]+ Nm RMS \(geometric mean", res.stderr)
     assert f"derived qd and qdd (low-pass {chosen:g} Hz chosen from the data" in res.stderr
     errors_by_cutoff = {}
     for c in grid[:-1]:                       # what import derives with each cut-off (the log contract's way)

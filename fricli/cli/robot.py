@@ -83,7 +83,7 @@ def _choice_line(record: dict) -> str | None:
     others = ", ".join(f"{named(k)} x{score[k] / score[best]:.2f}" for k in sorted({0, default, len(grid) - 1} - {best}))
     return (f"cut-off of the derived columns: {named(best)}, chosen of {grid[0]:g} Hz to no low-pass (--cutoff HZ sets "
             f"one): the robot model's tau_dyn with a gain per joint and each joint's linear friction leave the least "
-            f"of tau_m - tau_g in motion, {score[best]:.4g} RMS (geometric mean over the joints, {choice['rows']:,} "
+            f"of tau_m - tau_g in motion, {score[best]:.4g} Nm RMS (geometric mean over the joints, {choice['rows']:,} "
             f"rows); {others}")
 
 
