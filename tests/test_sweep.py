@@ -344,3 +344,30 @@ def test_a_narrow_position_range_says_where_the_joint_dwells():
     wide = structure.over_variable(e_wide, q, 0.01)
     assert "dwells" not in structure.Structure(s.time, s.velocity, wide).line("Nm", "rad/s", "rad")
 
+
+
+def test_calibration_priors_of_a_coupled_motor_raise_no_numpy_warning():
+    """A joint whose diagonal of the mass matrix is 0 (nothing beyond it) under a motor that does
+    not drive it: 0 / 0 was computed and printed as a raw RuntimeWarning."""
+    pytest.importorskip("pinocchio")
+    import warnings
+
+    from fricli.robot import calibration
+    from fricli.robot.dynamics import RobotModel
+
+    urdf = """<robot name="r"><link name="base"/>
+      <joint name="a" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/>
+      <limit lower="-3" upper="3" effort="10" velocity="3"/></joint>
+      <link name="l1"><inertial><origin xyz="0.3 0 0"/><mass value="2"/>
+        <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+      <joint name="b" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0"/><axis xyz="0 0 1"/>
+      <limit lower="-3" upper="3" effort="10" velocity="3"/></joint>
+      <link name="l2"/></robot>"""
+    robot = RobotModel(urdf, "r.urdf")
+    ratio = np.array([[1.0, 0.0], [1.0, 1.0]])
+    ones = np.ones(2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        scales = calibration.prior_scales(robot, calibration.cad_parameters(robot), 1e-4 * ones, ones, ones, ones,
+                                          1.0, ratio)
+    assert np.isfinite(scales).all()

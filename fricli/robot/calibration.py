@@ -303,8 +303,9 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
     diag = np.diag(pin.crba(model, model.createData(), pin.neutral(model)))
     diag = diag - np.asarray(model.armature)
     ratio = np.eye(nj) if ratio is None else ratio
-    with np.errstate(divide="ignore"):        # each motor: the loosest of its joints' diagonals / R_mj^2
-        arm = np.maximum(armature0, np.where(ratio != 0, diag / np.square(ratio), -np.inf).max(axis=1))
+    # each motor: the loosest of its joints' diagonals / R_mj^2 (over the joints it drives)
+    per_joint = np.divide(diag, np.square(ratio), out=np.full(np.shape(ratio), -np.inf), where=ratio != 0)
+    arm = np.maximum(armature0, per_joint.max(axis=1))
     arm = np.maximum(arm, tau_rms / np.maximum(qdd_rms, 1e-300))   # a rotor may carry its motor's whole torque
     fric = []
     for j in range(nj):
