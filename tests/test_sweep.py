@@ -371,3 +371,21 @@ def test_calibration_priors_of_a_coupled_motor_raise_no_numpy_warning():
         scales = calibration.prior_scales(robot, calibration.cad_parameters(robot), 1e-4 * ones, ones, ones, ones,
                                           1.0, ratio)
     assert np.isfinite(scales).all()
+
+
+def test_the_deploy_page_names_what_a_coupled_group_exports():
+    from fricli.export import coupled
+
+    text = (ROOT / "docs" / "deploy.md").read_text()
+    assert "PREFIX_step(PREFIX_state *s, const double *qd, double *tau_f)" in text
+    assert "PREFIX_step(PREFIX_state *s, const double *qd, double *tau_f)" in coupled.__doc__
+    assert "_step_array" not in coupled.__doc__ and "_step_parts" not in coupled.__doc__
+
+
+def test_the_payload_page_counts_its_commands():
+    text = (ROOT / "docs" / "payload.md").read_text()
+    block = text.split("```sh\n", 1)[1].split("```", 1)[0].splitlines()
+    third = block[2]
+    assert third.startswith("fricli payload ")
+    assert "The third command, `fricli payload`, prints" in text
+    assert block[3].startswith("fricli import ") and "the fourth command's payload options" in text
