@@ -265,6 +265,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     source = f"{read.topic} in {name}" if bag else name
     for line in _robot_notes(robot, name):
         say(line, quiet)
+    for finding in (robot or {}).get("mapping_check", {}).get("findings", []):
+        warn(f"warning: {name}: the mapping disagrees with {urdf}: {finding['message']}")
     say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
 
 

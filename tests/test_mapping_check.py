@@ -1,0 +1,112 @@
+"""The import's check of a mapping against the robot model (fricli/robot/sanity.py): motor-side
+recordings of the simulated coupled-wrist arm (fricli/sim/coupled.py) with the torques of a six-joint
+URDF, imported with a mapping that has one mistake each: a joint's zero a quarter turn off, a joint
+turning the other way, a coupling term off by 2 in 32. Each is flagged with its joint and cause,
+and the correct mapping is not."""
+
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fricli.cli import cli
+from fricli.core.transmission import Transmission
+from fricli.sim import coupled
+
+pytest.importorskip("pinocchio")
+
+RATE = 500.0
+
+
+def urdf_text() -> str:
+    axes = ["0 0 1", "0 1 0", "0 1 0", "0 1 0", "0 0 1", "0 1 0"]
+    masses = [4.0, 8.0, 4.0, 2.0, 1.5, 0.8]
+    lengths = [0.1, 0.6, 0.5, 0.15, 0.1, 0.08]
+    parts = ['<?xml version="1.0"?>\n<robot name="arm6"><link name="base"/>']
+    parent = "base"
+    for k in range(6):
+        m, L = masses[k], lengths[k]
+        parts.append(f'<joint name="j{k + 1}" type="revolute"><parent link="{parent}"/><child link="l{k + 1}"/>'
+                     f'<origin xyz="{0.0 if k == 0 else lengths[k - 1]} 0 {0.1 if k == 0 else 0}"/><axis xyz="{axes[k]}"/>'
+                     '<limit lower="-6" upper="6" effort="500" velocity="5"/></joint>')
+        i = m * L * L / 12 + 0.001
+        parts.append(f'<link name="l{k + 1}"><inertial><origin xyz="{L / 2} 0 0.02"/><mass value="{m}"/>'
+                     f'<inertia ixx="{0.001 * m}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/></inertial></link>')
+        parent = f"l{k + 1}"
+    parts.append("</robot>")
+    return "\n".join(parts)
+
+
+def true_transmission() -> Transmission:
+    tr = coupled.default_arm().transmission
+    ratio = tr.ratio.copy()
+    ratio[5, 4] = 32.0
+    return Transmission(tr.joints, ratio, offset=tr.offset)
+
+
+def recording(folder, seed=3, duration=24.0):
+    """positions.csv and torques.csv of the arm: motor angles and motor torques."""
+    from fricli.robot.dynamics import RobotModel
+
+    tr = true_transmission()
+    arm = coupled.CoupledArm(tr, coupled.default_arm().friction, gravity=np.zeros(6), link_inertia=np.zeros(6),
+                             noise_sd=np.full(6, 0.002))
+    t = np.arange(int(duration * RATE)) / RATE
+    rng = np.random.default_rng(seed)
+    q, qd, qdd = coupled.trajectories(t, 6, rng)
+    q = q + np.array([0.0, -0.6, 0.9, 0.2, 0.0, 0.3])          # about a pose where gravity loads joints 2-4 and 6
+    g, d = RobotModel(urdf_text(), "arm6.urdf").terms(q, qd, qdd)
+    tau_motor = tr.motor_torques(g + d + arm.joint_friction(qd)) + rng.normal(size=q.shape) * arm.noise_sd
+    np.savetxt(folder / "positions.csv", tr.motor_positions(q), delimiter=",", fmt="%.17g")
+    np.savetxt(folder / "torques.csv", tau_motor, delimiter=",", fmt="%.17g")
+    (folder / "arm6.urdf").write_text(urdf_text())
+
+
+def import_with(folder, tr: Transmission):
+    text = coupled.mapping_text(tr, RATE, 1.0) + '\n[robot]\nmatch = "order"\n'
+    (folder / "map.toml").write_text(text)
+    res = CliRunner().invoke(cli, ["import", str(folder / "positions.csv"), str(folder / "torques.csv"), "--mapping",
+                                   str(folder / "map.toml"), "--urdf", str(folder / "arm6.urdf"), "-o",
+                                   str(folder / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    return [line for line in res.stderr.splitlines() if "the mapping disagrees" in line]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    path = tmp_path_factory.mktemp("arm6")
+    recording(path)
+    return path
+
+
+def test_the_right_mapping_passes_without_a_word(folder):
+    assert import_with(folder, true_transmission()) == []
+
+
+def test_a_zero_a_quarter_turn_off_is_flagged(folder):
+    tr = true_transmission()
+    wrong = Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)   # joint 2's offset left out
+    lines = import_with(folder, wrong)
+    assert len(lines) == 1, lines
+    assert "joint 2: its zero is +pi/2 away from the URDF's" in lines[0], lines
+    new = [float(x) for x in lines[0].split("[transmission] offset = [")[1].split("]")[0].split(",")]
+    assert np.allclose(new, tr.offset, atol=1e-4), (new, tr.offset)
+
+
+def test_a_joint_turning_the_other_way_is_flagged(folder):
+    tr = true_transmission()
+    ratio = tr.ratio.copy()
+    ratio[:, 2] = -ratio[:, 2]
+    lines = import_with(folder, Transmission(tr.joints, ratio, offset=tr.offset))
+    assert len(lines) == 1, lines
+    assert "joint 3: it turns the other way than the URDF's axis (a sign)" in lines[0], lines
+
+
+def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
+    tr = true_transmission()
+    ratio = tr.ratio.copy()
+    ratio[5, 4] = 30.0
+    lines = import_with(folder, Transmission(tr.joints, ratio, offset=tr.offset))
+    assert len(lines) == 1, lines
+    assert "joint 5: the coupling term of motor 6 on joint 5 is 30 in the mapping; 32" in lines[0], lines
