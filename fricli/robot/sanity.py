@@ -29,12 +29,12 @@ import math
 
 import numpy as np
 
-ROWS = 4000
+ROWS = 2000
 GAIN_MIN = 0.5
 MAX_FINDINGS = 3
 QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/2
 GROSS = (0.8, 1.25)                        # a diagonal ratio's or drive gain's factor inside this is no mistake
-FACTORS = np.geomspace(0.25, 4.0, 81)      # factors tried on a ratio term (then refined)
+FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then refined)
 
 
 class _Case:
@@ -145,20 +145,20 @@ def _hypotheses(case: _Case, terms, motor_side: bool):
         sign = case.ratio.T @ d @ np.linalg.inv(case.ratio).T     # motor i's torque reversed
         yield {"kind": "torque-sign", "joint": i, "motor": i,
                "case": _Case(case.q, case.qd, case.qdd, case.tau @ sign.T, case.ratio, terms)}
+    ss0, _ = case.residual_ss()
     for m in range(k):
         for j in range(k):
             if case.ratio[m, j] == 0.0:
                 continue
-            hyp = _best_factor(case, terms, m, j)
+            hyp = _best_factor(case, terms, m, j, ss0)
             if hyp is not None:
                 yield hyp
 
 
-def _best_factor(case: _Case, terms, m: int, j: int):
-    """The ratio term R[m, j] times the factor that explains the torques best (a grid, refined), or
-    None when it is a diagonal term within ``GROSS`` (a gear ratio is a small integer's ratio off,
-    not a few percent: those are the robot model's own errors)."""
-    ss0, _ = case.residual_ss()
+def _best_factor(case: _Case, terms, m: int, j: int, ss0: np.ndarray):
+    """The ratio term R[m, j] times the factor that explains the torques best (a grid, refined when
+    it comes near ``GAIN_MIN``), or None for a diagonal term within ``GROSS`` (a gear ratio is a small
+    integer's ratio off, not a few percent: those are the robot model's own errors)."""
 
     def scaled(f):
         new = case.ratio.copy()
@@ -172,14 +172,17 @@ def _best_factor(case: _Case, terms, m: int, j: int):
         c = scaled(f)
         return -math.inf if c is None else _gain(ss0, c.residual_ss()[0])
 
-    gains = [cost(f) for f in FACTORS]
+    grid = FACTORS[(FACTORS < GROSS[0]) | (FACTORS > GROSS[1])] if m == j else FACTORS
+    gains = [cost(f) for f in grid]
     i = int(np.argmax(gains))
-    lo, hi = FACTORS[max(i - 1, 0)], FACTORS[min(i + 1, len(FACTORS) - 1)]
+    if gains[i] < GAIN_MIN / 2:
+        return None                                  # nowhere near a finding: no need to refine
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     from scipy.optimize import minimize_scalar
 
     res = minimize_scalar(lambda x: -cost(math.exp(x)), bounds=(math.log(lo), math.log(hi)), method="bounded",
                           options={"xatol": 1e-4})
-    f = math.exp(res.x) if -res.fun >= gains[i] else float(FACTORS[i])
+    f = math.exp(res.x) if -res.fun >= gains[i] else float(grid[i])
     if m == j and GROSS[0] <= f <= GROSS[1]:
         return None
     c = scaled(f)
