@@ -349,6 +349,9 @@ def test_ur10e_import_with_urdf_as_documented(tmp_path):
     rows = np.asarray(table.column("joint")) == 2
     tau_m, tau_g = table.column("tau_m").to_numpy()[rows], table.column("tau_g").to_numpy()[rows]
     assert np.corrcoef(tau_m, tau_g)[0, 1] > 0.9
+    check = json.loads(table.schema.metadata[b"fricli.import"])["robot"]["mapping_check"]
+    assert check["findings"] == []            # the documented mapping agrees with the URDF: no warning
+    assert check["joints"]["2"]["correlation"] > 0.9 and 0.8 < check["joints"]["2"]["scale"] < 1.25
     # joint 1's axis is vertical: no gravity torque
     assert np.abs(table.column("tau_g").to_numpy()[np.asarray(table.column("joint")) == 1]).max() < 1e-9
     assert (folder / "ur10e.urdf").exists()
