@@ -114,3 +114,22 @@ def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
     assert "joint 5: the coupling term of motor 6 on joint 5 is 30 in the mapping; " in lines[0], lines
     fitted = float(lines[0].split("in the mapping; ")[1].split(" fits")[0])
     assert abs(fitted - 32.0) < 0.2, lines
+
+
+def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
+    (tmp_path / "arm6.urdf").write_text(urdf_text())
+    t = np.arange(600) / 100.0
+    rng = np.random.default_rng(0)
+    cols = [t] + [0.3 * np.sin(t + k) for k in range(6)] + [rng.normal(size=600) for _ in range(6)]
+    header = "time," + ",".join(f"pos_{k}" for k in range(1, 7)) + "," + ",".join(f"effort_{k}" for k in range(1, 7))
+    np.savetxt(tmp_path / "rec.csv", np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf", str(tmp_path / "arm6.urdf"),
+                                   "-o", str(tmp_path / "map.toml")])
+    assert res.exit_code == 0, res.stderr
+    text = (tmp_path / "map.toml").read_text()
+    assert 'name = "j6"' in text and 'tau_m = {column = 13, unit = "Nm"}' in text and "FILL IN" not in text
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--mapping", str(tmp_path / "map.toml"), "-o",
+                                   str(tmp_path / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "-o", str(tmp_path / "m2.toml")])
+    assert res.exit_code == 2 and "--template needs --urdf" in res.stderr
