@@ -133,3 +133,33 @@ def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
     assert res.exit_code == 0, res.stderr
     res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "-o", str(tmp_path / "m2.toml")])
     assert res.exit_code == 2 and "--template needs --urdf" in res.stderr
+
+
+def wrong_zero(tr: Transmission) -> Transmission:
+    return Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)
+
+
+def test_calibrate_checks_the_log_it_is_given(folder):
+    """calibrate's check of a log (no mapping at hand: the log's joint-side signals, its transmission)."""
+    import pyarrow.parquet as pq
+
+    from fricli.robot import calibration, sanity
+    from fricli.robot.calibration import motion_check_ratio
+    from fricli.robot.dynamics import RobotModel
+
+    import_with(folder, wrong_zero(true_transmission()))
+    robot = RobotModel(urdf_text(), "arm6.urdf")
+    motion = calibration.read_motion(pq.read_table(folder / "log.parquet"), "log", robot, match=None)
+    found = sanity.check_motion(robot, motion, motion_check_ratio(robot, motion))["findings"]
+    assert [(f["joint"], f["cause"]) for f in found] == [("2", "offset")], found
+    assert "joint 2's zero moved by +1.5708 rad ([transmission] offset)" in found[0]["message"]
+
+
+@pytest.mark.slow
+def test_calibrate_warns_of_a_wrong_zero(folder):
+    import_with(folder, wrong_zero(true_transmission()))
+    res = CliRunner().invoke(cli, ["calibrate", str(folder / "log.parquet"), "--urdf", str(folder / "arm6.urdf"), "-o",
+                                   str(folder / "cal.urdf")])
+    assert res.exit_code == 0, res.stderr
+    assert "warning: the log's mapping disagrees with the URDF: joint 2: its zero is +pi/2 away from the URDF's" \
+        in res.stderr

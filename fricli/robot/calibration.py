@@ -137,6 +137,13 @@ def _log_transmission(table, name: str, names: list, urdf_joints: list[str]):
     return transmission.Transmission([by_name[str(j)] for j in tr.joints], tr.ratio, tr.offset, tr.rotor_inertia)
 
 
+def motion_check_ratio(robot, motion: Motion) -> np.ndarray | None:
+    """The ratio matrix (URDF order) the mapping check of ``motion`` reads its motors through (None: a
+    motor per joint)."""
+    ratio, _, _, motors = motor_layout(robot, motion)
+    return ratio if motors is not None else None
+
+
 def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int] | None]:
     """(R, g, a0, motors): the ratio matrix R (joints, joints) in URDF order (row m: the motor of URDF
     joint m); each motor's ratio to its own joint g (joints,) (R_mm, else the row's largest); each
@@ -482,6 +489,11 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     report["links"] = link_table(cal)
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal, excitation["masses_not_determined_alone"])
+    from fricli.robot import sanity
+
+    report["mapping_check"] = sanity.check_motion(robot, motion, motion_check_ratio(robot, motion))
+    for finding in reversed(report["mapping_check"]["findings"]):
+        report["suspicious"].insert(0, f"the log's mapping disagrees with the URDF: {finding['message']}")
     if excitation["condition_number_scaled"] > POOR_EXCITATION:
         report["suspicious"].insert(0, (
             f"the run excites the arm's dynamics poorly: condition number {excitation['condition_number_scaled']:.3g} "

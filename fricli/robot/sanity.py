@@ -88,13 +88,14 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     k = len(names)
     inverse = [order.index(j) for j in range(k)]
     inertia = np.array([mapping.joints[i].rotor_inertia for i in inverse], dtype=float)
-    cross = transmission.cross_inertia() if transmission is not None else np.zeros((k, k))
+    cross = transmission.cross_inertia() if hasattr(transmission, "cross_inertia") else np.zeros((k, k))
 
     def terms(qq, vv, aa):
         g, d = model.terms(qq[:, inverse], vv[:, inverse], aa[:, inverse], inertia)
         return g[:, order], d[:, order] + aa @ cross.T
 
     ratio = np.array(transmission.ratio, dtype=float) if transmission is not None else np.eye(k)
+    cross = cross if cross.shape == (k, k) else np.zeros((k, k))
     case = _Case(q, qd, qdd, tau, ratio, terms)
     figures = {}
     for i, name in enumerate(names):
@@ -106,7 +107,9 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
                          "rms_tau_m": float(np.sqrt(np.mean(tau[:, i] ** 2))),
                          "rms_model": float(np.sqrt(np.mean(model_tau ** 2)))}
     findings = []
-    offset = np.array(transmission.offset, dtype=float) if transmission is not None else np.zeros(k)
+    given = getattr(transmission, "offset", None)
+    offset = None if transmission is not None and given is None else \
+        np.array(given, dtype=float) if transmission is not None else np.zeros(k)
     for _ in range(MAX_FINDINGS):
         ss0, _ = case.residual_ss()
         best = None
@@ -122,7 +125,7 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         after = math.sqrt(best["ss1"][m] / len(rows))
         finding = _describe(best, names, case, offset, transmission is not None, m, before, after)
         findings.append(finding)
-        if best["kind"] == "offset":
+        if best["kind"] == "offset" and offset is not None:
             offset = offset - best["delta"] * case.ratio[:, best["joint"]]
         case = best["case"]
     return {"joints": figures, "findings": findings}
@@ -203,7 +206,9 @@ def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, mot
     if kind == "offset":
         turn = {1: "+pi/2", 2: "pi", -1: "-pi/2"}[round(best["delta"] / (math.pi / 2))]
         cause = f"its zero is {turn} away from the URDF's (an encoder offset left out?)"
-        if motor_side:
+        if motor_side and offset is None:
+            line = f"joint {joint}'s zero moved by {best['delta']:+.6g} rad ([transmission] offset)"
+        elif motor_side:
             new = offset - best["delta"] * case.ratio[:, i]
             line = f"[transmission] offset = [{', '.join(f'{x:.6g}' for x in new)}]"
         else:
@@ -237,3 +242,30 @@ def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, mot
     message = f"joint {joint}: {cause}: {fig} with {line}"
     return {"joint": joint, "cause": kind, "line": line, "rms_before": before, "rms_after": after,
             "gain": best["gain"], "message": message}
+
+
+class _Joint:
+    def __init__(self, name, rotor_inertia):
+        self.name, self.rotor_inertia = name, rotor_inertia
+
+
+class _Joints:
+    def __init__(self, names, rotor_inertia):
+        self.joints = [_Joint(n, float(r)) for n, r in zip(names, rotor_inertia)]
+
+
+class _Ratio:
+    """A ratio matrix without the offsets (a log's transmission records no zeros)."""
+
+    def __init__(self, ratio):
+        self.ratio = ratio
+
+
+def check_motion(model, motion, ratio: np.ndarray | None) -> dict:
+    """``check`` of a whole-arm log in the URDF's order (``calibration.Motion``) and the full ratio
+    matrix of its motors (URDF order; None: one motor per joint): what ``fricli calibrate`` runs."""
+    per_joint = [{"q": motion.q[:, j], "qd": motion.qd[:, j], "qdd": motion.qdd[:, j], "tau_m": motion.tau[:, j]}
+                 for j in range(motion.q.shape[1])]
+    joints = _Joints(motion.names, np.nan_to_num(motion.rotor_inertia))
+    transmission = None if ratio is None or np.array_equal(ratio, np.eye(len(ratio))) else _Ratio(ratio)
+    return check(model, joints, list(range(len(per_joint))), per_joint, transmission)
