@@ -54,9 +54,9 @@ def log_file(tmp_path, n=4000):
     return path
 
 
-def fricli(args, cwd, prelude="", **kwargs):
+def fricli(args, cwd, prelude="", env=None, **kwargs):
     code = prelude + "from fricli.cli import main\nimport sys\nsys.argv = ['fricli', *sys.argv[1:]]\nmain()\n"
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    env = env or dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
     return subprocess.Popen([sys.executable, "-c", code, *map(str, args)], cwd=cwd, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, **kwargs)
 
@@ -389,3 +389,32 @@ def test_the_payload_page_counts_its_commands():
     assert third.startswith("fricli payload ")
     assert "The third command, `fricli payload`, prints" in text
     assert block[3].startswith("fricli import ") and "the fourth command's payload options" in text
+
+
+@pytest.mark.slow
+def test_a_fleet_run_leaves_no_dask_scratch_space(tmp_path):
+    pytest.importorskip("distributed")
+    path = manifest(tmp_path)
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    proc = fricli(["fleet", str(path), "--workers", "1"], tmp_path, env=dict(
+        os.environ, TMPDIR=str(scratch), OMP_NUM_THREADS="1",
+        PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])))
+    _, err = proc.communicate(timeout=300)
+    assert "appended to" in err, err       # the run ran (its one job fails on this log: exit 12 is fine here)
+    left = [str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*") if "dask" in p.name or p.suffix == ".lock"]
+    assert left == [], left
+
+
+@pytest.mark.slow
+def test_a_killed_fleet_prints_no_resource_tracker_warning(tmp_path):
+    pytest.importorskip("distributed")
+    path = manifest(tmp_path)
+    proc = fricli(["fleet", str(path), "--workers", "1"], tmp_path)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(tmp_path.glob("models/r1/*")):   # the worker has started its job
+        time.sleep(0.2)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGKILL)
+    _, err = proc.communicate(timeout=120)
+    assert "resource_tracker" not in err and "leaked" not in err, err

@@ -77,17 +77,25 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
     n = workers or os.cpu_count() or 1
     import warnings
 
+    # a fleet killed with SIGKILL leaves multiprocessing's resource tracker to clean up the cluster's
+    # semaphores, which it does with a warning of several lines on stderr: nothing for the user to do.
+    # The tracker is started with the interpreter's -W options, so this is where it is told.
+    quiet_tracker = "ignore:resource_tracker:UserWarning"
+    if quiet_tracker not in sys.warnoptions:
+        sys.warnoptions.append(quiet_tracker)
     # the workers' scratch space (and its lock files) in a folder of this run, removed at its end:
     # Dask's default, dask-scratch-space in $TMPDIR, keeps lock files after the cluster closes
     scratch = tempfile.mkdtemp(prefix="fricli-dask-")
+    import dask
+
     try:
-        with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
+        with dask.config.set({"temporary-directory": scratch}), warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
             warnings.simplefilter("ignore", UserWarning)
             cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
                                                local_directory=scratch,
                                                preload=["fricli.fleet.worker"])   # Ctrl-C, logging
-        with cluster, distributed.Client(cluster) as c:
+        with dask.config.set({"temporary-directory": scratch}), cluster, distributed.Client(cluster) as c:
             yield c
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
