@@ -163,3 +163,37 @@ def test_calibrate_warns_of_a_wrong_zero(folder):
     assert res.exit_code == 0, res.stderr
     assert "warning: the log's mapping disagrees with the URDF: joint 2: its zero is +pi/2 away from the URDF's" \
         in res.stderr
+
+
+@pytest.mark.slow
+def test_mistakes_planted_in_the_ur10e_mapping_are_flagged_on_real_data():
+    """The UR10e's own recording (no transmission, currents times drive gains) with the documented
+    mapping changed: joint 2's zero a quarter turn off, joint 3 reversed, joint 2's torque sign reversed."""
+    import dataclasses
+
+    from conftest import ROOT, shared_data
+    from fricli.robot import importing
+    from fricli.robot import mapping as mp
+    from fricli.robot.dynamics import load_model
+
+    folder = shared_data("ur10e")
+    data = (folder / "identification" / "ur-20_02_19_14harm50sec.csv").read_bytes()
+
+    def findings(change):
+        m = mp.load_mapping(str(ROOT / "docs" / "ur10e-mapping.toml"))
+        model = load_model(str(folder / "ur10e.urdf"), m)
+        change(m)
+        res = importing.import_recording(data, m, "run", model=model, cutoff_hz=10.0)
+        return [(f["joint"], f["cause"]) for f in res.meta["robot"]["mapping_check"]["findings"]]
+
+    def scaled(jm, signals, **kw):
+        for s in signals:
+            if s in jm.columns:
+                c = jm.columns[s]
+                jm.columns[s] = dataclasses.replace(c, **{k: v(c) for k, v in kw.items()})
+
+    assert findings(lambda m: None) == []
+    assert findings(lambda m: scaled(m.joints[1], ["q"], offset=lambda c: c.offset + math.pi / 2)) == [("2", "offset")]
+    assert findings(lambda m: scaled(m.joints[2], ["q", "qd", "i_m", "tau_m"], scale=lambda c: -c.scale)) == \
+        [("3", "direction")]
+    assert findings(lambda m: scaled(m.joints[1], ["i_m", "tau_m"], scale=lambda c: -c.scale)) == [("2", "torque-sign")]

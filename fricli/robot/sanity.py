@@ -212,7 +212,7 @@ def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, mot
             new = offset - best["delta"] * case.ratio[:, i]
             line = f"[transmission] offset = [{', '.join(f'{x:.6g}' for x in new)}]"
         else:
-            line = f"joint {joint}'s q: offset = {best['delta']:+.6g} rad added to its offset (in the column's unit)"
+            line = f"joint {joint}'s q: {best['delta']:+.6g} rad added to its offset (converted to the column's unit)"
     elif kind == "direction":
         cause = "it turns the other way than the URDF's axis (a sign)"
         if motor_side:
