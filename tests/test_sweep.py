@@ -418,3 +418,11 @@ def test_a_killed_fleet_prints_no_resource_tracker_warning(tmp_path):
     proc.send_signal(signal.SIGKILL)
     _, err = proc.communicate(timeout=120)
     assert "resource_tracker" not in err and "leaked" not in err, err
+
+
+def test_a_line_break_in_a_manifest_joint_stays_escaped_in_the_job_list(tmp_path):
+    path = manifest(tmp_path)
+    path.write_text(path.read_text() + 'joints = ["wrist\\nroll"]\n')
+    res = CliRunner().invoke(cli, ["fleet", str(path), "--list"])
+    assert res.exit_code == 0, res.stderr
+    assert len(res.stdout.splitlines()) == 1 and "\twrist\\nroll\t" in res.stdout, res.stdout

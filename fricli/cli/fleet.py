@@ -47,7 +47,8 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, allow_outside, as_
         warn(f"warning: {line}")
     if list_only:
         for job in m.jobs:
-            click.echo(f"{job.robot}\t{job.joint}\t{job.date}\t{job.pipeline}\t{job.log}\t{job.model}")
+            click.echo("\t".join(errors.one_line(str(x)) for x in (job.robot, job.joint, job.date, job.pipeline,
+                                                                    job.log, job.model)))
         return
     if not m.jobs:
         raise mf.ManifestError(f"{manifest}: no log matches the manifest's globs")
