@@ -323,6 +323,34 @@ def test_a_line_break_in_a_joint_name_stays_escaped_in_success_lines(tmp_path):
     assert "rows of joint wrist\\nroll -> " in res.stderr, res.stderr
 
 
+def test_a_line_break_in_a_joint_name_stays_escaped_in_the_evaluation_table(tmp_path):
+    table = pq.read_table(log_file(tmp_path))
+    table = table.append_column("joint", pa.array(["wrist\nroll"] * table.num_rows))
+    pq.write_table(table, tmp_path / "named\nlog.parquet")
+    from fricli.models.linear import LinearFriction
+
+    model = tmp_path / "lin.npz"
+    models.save(str(model), LinearFriction(1.0, 5.0), joint="wrist\nroll", axis="rotary",
+                units=logs.CANONICAL["rotary"], provenance={})
+    res = CliRunner().invoke(cli, ["evaluate", "--model", str(model), "--log", str(tmp_path / "named\nlog.parquet")])
+    assert res.exit_code == 0, res.stderr
+    assert "named\\nlog friction MAE" in res.stdout, res.stdout
+    for line in res.stdout.splitlines():
+        assert not line.startswith(("roll", "log.parquet")), res.stdout
+
+
+def test_a_line_break_in_a_name_stays_escaped_in_the_fleet_table():
+    from fricli.fleet import run
+    from fricli.fleet.manifest import Job
+
+    job = Job(robot="r1", joint="wrist\nroll", log="/l.parquet", date="2026-01-01", pipeline="lugre",
+              model="/m.npz", options=())
+    outcome = run.Outcome(run="x", jobs=[job], results=[{"status": "failed", "reason": "bad\nrow",
+                                                         "seconds": 1.0}], written=[])
+    lines = run.table(outcome).splitlines()
+    assert len(lines) == 3 and "wrist\\nroll" in lines[1] and "bad\\nrow" in lines[1], lines
+
+
 def test_a_narrow_position_range_says_where_the_joint_dwells():
     from fricli.fitting.diagnosis import structure
 

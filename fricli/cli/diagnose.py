@@ -38,7 +38,7 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
     joint) names the joint on every summary line."""
     u = d.tau_unit
     lines = []
-    who = f"joint {joint}: " if joint is not None else ""
+    who = errors.one_line(f"joint {joint}: ") if joint is not None else ""
     level = round(100 * driver.INTERVAL_LEVEL)
     if d.added:
         lo, hi = d.intervals["cut"]

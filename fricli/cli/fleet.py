@@ -139,8 +139,9 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
 
 
 def trend_table(result, rule) -> str:
-    rw = max([12] + [len(str(t.robot)) for t in result])
-    jw = max([6] + [len(str(t.joint)) for t in result])
+    name = lambda x: errors.one_line(str(x))   # noqa: E731 - names quoted from the manifest, one line each
+    rw = max([12] + [len(name(t.robot)) for t in result])
+    jw = max([6] + [len(name(t.joint)) for t in result])
     head = f"{'robot':<{rw}} {'joint':<{jw}} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
                                                                    for p in rule.params) + "  flag"
     lines = [head]
@@ -151,5 +152,6 @@ def trend_table(result, rule) -> str:
             cells.append(f"{'-' if lv is None else f'{100 * lv:+.1f}%':>9} "
                          f"{'-' if gr is None or gr != gr else f'{100 * gr:+.2f}%':>8}")
         flag = "WEAR: " + "; ".join(t.reasons) if t.flagged else t.note
-        lines.append(f"{t.robot:<{rw}} {t.joint:<{jw}} {len(t.dates):>4}  " + "  ".join(cells) + f"  {flag}".rstrip())
+        lines.append(f"{name(t.robot):<{rw}} {name(t.joint):<{jw}} {len(t.dates):>4}  " + "  ".join(cells)
+                     + f"  {name(flag)}".rstrip())
     return "\n".join(lines)

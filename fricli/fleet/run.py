@@ -183,14 +183,15 @@ def _recorded(path: str) -> set:
 
 def table(outcome: Outcome) -> str:
     """Every job and its status, one per line, and a summary line."""
-    rw = max([12] + [len(str(job.robot)) for job in outcome.jobs])
-    jw = max([6] + [len(str(job.joint or "-")) for job in outcome.jobs])
+    name = lambda x: errors.one_line(str(x))   # noqa: E731 - names quoted from the manifest, one line each
+    rw = max([12] + [len(name(job.robot)) for job in outcome.jobs])
+    jw = max([6] + [len(name(job.joint or "-")) for job in outcome.jobs])
     lines = [f"{'robot':<{rw}} {'joint':<{jw}} {'date':<10}  {'status':<9} {'s':>6}  reason"]
     for job, res in sorted(zip(outcome.jobs, outcome.results), key=lambda p: (p[0].robot, p[0].joint, p[0].log)):
         sec = res.get("seconds")
         sec = f"{sec:6.2f}" if sec == sec and sec is not None else "     -"
-        lines.append(f"{job.robot:<{rw}} {job.joint or '-':<{jw}} {job.date:<10}  {res['status']:<9} {sec}  "
-                     f"{res.get('reason', '')}".rstrip())
+        lines.append(f"{name(job.robot):<{rw}} {name(job.joint or '-'):<{jw}} {job.date:<10}  {res['status']:<9} {sec}  "
+                     f"{name(res.get('reason', ''))}".rstrip())
     lines.append(f"{len(outcome.jobs)} jobs: {outcome.count('ok')} ok, {outcome.count('unchanged')} unchanged, "
                  f"{outcome.count('failed')} failed")
     return "\n".join(lines)
