@@ -664,7 +664,8 @@ def test_an_implausible_gravity_scale_is_flagged_and_not_applied(tmp_path):
     assert "gravity" not in d.added and d.suspected == ["gravity"]
     g = next(e for e in d.effects if e.name == "gravity")
     assert g.params["scale"]["value"] == pytest.approx(2.0, abs=0.02) and not g.added
-    for cause in ("drive gain", "cable", "counterbalance spring", "payload"):
+    for cause in ("joint's zero or sign convention against the URDF", "drive gain", "cable", "counterbalance spring",
+                  "payload"):
         assert cause in g.implausible
     text = table(d)
     assert "suspicious, not added: gravity" in text and "--accept-implausible" in text
@@ -866,3 +867,14 @@ def test_a_joint_held_still_is_refused_not_diagnosed(lugre_base):
     with pytest.raises(DataError, match="held still"):
         diagnose(lugre_base, logs.from_table(held, name="held"))
     diagnose(lugre_base, logs.from_table(table, name="moving"))     # the same log in motion is diagnosed
+
+
+def test_a_negative_gravity_scale_names_the_joint_zero_and_sign_convention():
+    """Gravity acting against the measured torque: no mass, gain or spring does that; a joint zero a
+    quarter or half turn off, or a joint turning the other way, does."""
+    d = diagnose(CoulombViscous(), _gravity_off(np.random.default_rng(5), -0.5))
+    g = next(e for e in d.effects if e.name == "gravity")
+    assert g.params["scale"]["value"] == pytest.approx(-0.5, abs=0.02)
+    assert g.implausible.startswith("a gravity scale of -0.5")
+    assert "likely cause is the joint's zero or sign convention against the URDF" in g.implausible
+    assert "fricli import checks the mapping" in g.implausible

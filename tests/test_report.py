@@ -194,3 +194,19 @@ def test_trend_figure_has_units(tmp_path, rng, monkeypatch):
     assert "[-]" in ax.get_ylabel() and "[day]" in ax.get_xlabel()
     assert all("(baseline" in t.get_text() for t in ax.get_legend().get_texts()[:2])
     assert np.isfinite(ax.get_ylim()).all()
+
+
+def test_every_report_figure_names_its_joint_and_log(nn_model, tmp_path, monkeypatch):
+    """A PNG copied out of the report page still says what it shows."""
+    titles = []
+    original = report.save
+
+    def keep(fig, folder, name, caption):
+        titles.append((name, fig._suptitle.get_text() if fig._suptitle else ""))
+        return original(fig, folder, name, caption)
+
+    monkeypatch.setattr(report, "save", keep)
+    res = CliRunner().invoke(cli, ["report", nn_model, ASYM, "-o", str(tmp_path / "rep"), "-q"])
+    assert res.exit_code == 0, res.output
+    log = ASYM.split("/")[-1]
+    assert len(titles) == 6 and all(t == f"joint 2 of {log}, model nn.npz" for _, t in titles), titles

@@ -349,6 +349,9 @@ def test_ur10e_import_with_urdf_as_documented(tmp_path):
     rows = np.asarray(table.column("joint")) == 2
     tau_m, tau_g = table.column("tau_m").to_numpy()[rows], table.column("tau_g").to_numpy()[rows]
     assert np.corrcoef(tau_m, tau_g)[0, 1] > 0.9
+    check = json.loads(table.schema.metadata[b"fricli.import"])["robot"]["mapping_check"]
+    assert check["findings"] == []            # the documented mapping agrees with the URDF: no warning
+    assert check["joints"]["2"]["correlation"] > 0.9 and 0.8 < check["joints"]["2"]["scale"] < 1.25
     # joint 1's axis is vertical: no gravity torque
     assert np.abs(table.column("tau_g").to_numpy()[np.asarray(table.column("joint")) == 1]).max() < 1e-9
     assert (folder / "ur10e.urdf").exists()
@@ -420,6 +423,7 @@ def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path)
     grid = derived["cutoff_choice"]["candidates_hz"]    # below the Nyquist frequency, then none (at it)
     assert grid[:-1] == [c for c in CUTOFF_GRID if c < 499] and grid[-1] == pytest.approx(500.0)
     assert f"cut-off of the derived columns: {chosen:g} Hz, chosen of 2 Hz to no low-pass" in res.stderr
+    assert re.search(r"leave the least of tau_m - tau_g in motion, [0-9.]+ Nm RMS \(geometric mean", res.stderr)
     assert f"derived qd and qdd (low-pass {chosen:g} Hz chosen from the data" in res.stderr
     errors_by_cutoff = {}
     for c in grid[:-1]:                       # what import derives with each cut-off (the log contract's way)

@@ -9,7 +9,7 @@ import numpy as np
 from fricli import models
 from fricli.core import logs, metrics
 from fricli.core.envelope import share_outside
-from fricli.core.errors import DataError
+from fricli.core.errors import DataError, one_line
 from fricli.models import coupled
 from fricli.applying.predicting import external_estimate
 
@@ -101,9 +101,10 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
     unit = next((r.unit for r in results), "Nm")
     head = ["model"]
     for ln in log_names:
-        head += [f"{ln} friction {label} [{unit}]" for _, label in figures]
+        name = one_line(str(ln))   # a name quoted from a file: one line, whatever it holds
+        head += [f"{name} friction {label} [{unit}]" for _, label in figures]
         if has_ext[ln]:
-            head += [f"{ln} ext. torque {label} [{unit}]" for _, label in figures]
+            head += [f"{name} ext. torque {label} [{unit}]" for _, label in figures]
     motion = f"rows in motion, |qd| > {100 * metrics.REST_SHARE:g} % of the top speed"
     lines = [f"Error over all rows (in brackets: {motion}); RMS: root mean square", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -112,7 +113,8 @@ def markdown_table(results: list[Result], model_names: list[str], log_names: lis
         return f"{value:.3f} ({'–' if moving is None or not np.isfinite(moving) else f'{moving:.3f}'})"
 
     for mn, joint in rows:
-        row = [(f"{mn} (joint {joint})" if joint is not None else f"{mn} (log without joints)") if labelled else mn]
+        label = (f"{mn} (joint {joint})" if joint is not None else f"{mn} (log without joints)") if labelled else mn
+        row = [one_line(str(label))]
         for ln in log_names:
             r = by.get((mn, str(joint), ln))
             row += [cell(r.friction[k], r.friction_moving[k]) if r else "–" for k, _ in figures]

@@ -27,7 +27,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from fricli import models
-from fricli.core import joints, lazy, logs, timewindow
+from fricli.core import files, joints, lazy, logs, timewindow
 from fricli.core.atomic import atomic_open
 from fricli.core.errors import DataError, LogError, ModelFileError
 from fricli.models import coupled
@@ -99,8 +99,7 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
     """A ParquetFile for ``path`` (``-``: stdin, spooled to a temporary file) and its display name."""
     if path == "-":
         return logs.stdin_parquet(), "stdin"
-    if os.path.isdir(path):
-        raise LogError(f"{path}: is a folder, not a log")
+    files.check_regular(path, LogError, "file", "log")
     try:
         pf = pq.ParquetFile(path, **logs.STREAMING)
     except FileNotFoundError:

@@ -46,6 +46,22 @@ def save(fig: Figure, folder: str, name: str, caption: str) -> Shown:
     return Shown(name, caption)
 
 
+def _title(fig: Figure, label: str) -> None:
+    """Name what the figure shows (the joint and the log) in the figure itself, so that a PNG copied
+    out of the report still says what it is."""
+    if label:
+        fig.suptitle(label, fontsize=9, y=1.0)
+
+
+def figure_label(log: logs.Log, model_path: str | None = None) -> str:
+    """``joint J of LOG`` (with ``model MODEL`` when given), escaped to one line."""
+    from fricli.core.errors import one_line
+
+    who = f"joint {log.joint} of " if log.joint is not None else ""
+    what = f"{who}{os.path.basename(log.name)}" + (f", model {os.path.basename(model_path)}" if model_path else "")
+    return one_line(what)
+
+
 def _networks(model, path: str = "") -> list[tuple[str, object]]:
     """(path in the model tree, node) of every node with loss histories."""
     own = [(path or model.kind, model)] if getattr(model, "history_train_", np.empty(0)).size else []
@@ -53,7 +69,7 @@ def _networks(model, path: str = "") -> list[tuple[str, object]]:
                   for item in _networks(child, f"{path}/{name}" if path else name)]
 
 
-def fig_loss(model, folder: str) -> Shown | None:
+def fig_loss(model, folder: str, label: str = "") -> Shown | None:
     nets = _networks(model)
     if not nets:
         return None
@@ -61,15 +77,16 @@ def fig_loss(model, folder: str) -> Shown | None:
     axes = fig.subplots(1, len(nets), squeeze=False)[0]
     for ax, (where, net) in zip(axes, nets):
         every = max(int(getattr(net, "eval_every_", 0) or 1), 1)
-        for label, values, color in (("training", net.history_train_, OTHER),
+        for curve, values, color in (("training", net.history_train_, OTHER),
                                      ("validation", getattr(net, "history_val_", np.empty(0)), MODEL)):
             if values.size:
-                ax.semilogy(every * np.arange(1, values.size + 1), values, label=label, color=color)
+                ax.semilogy(every * np.arange(1, values.size + 1), values, label=curve, color=color)
         ax.set_title(f"training loss of {where}", fontsize=10)
         ax.set_xlabel("training step [Adam steps]")
         ax.set_ylabel("MSE of the standardised friction [-]")
         ax.grid(alpha=0.3)
         ax.legend()
+    _title(fig, label)
     return save(fig, folder, "loss.png",
                 "Training of the model's networks: the mean squared error of the friction in standardised units "
                 "(divided by its standard deviation on the training rows, so that a loss of one is no better than predicting the mean), "
@@ -79,7 +96,7 @@ def fig_loss(model, folder: str) -> Shown | None:
                 "(the saved weights are those of the lowest validation loss).")
 
 
-def fig_velocity(model, sig, u, folder: str, rng) -> Shown:
+def fig_velocity(model, sig, u, folder: str, rng, label: str = "") -> Shown:
     target = logs.friction_target(sig)
     qd = sig["qd"]
     idx = rng.choice(qd.size, size=min(qd.size, 6000), replace=False)
@@ -96,6 +113,7 @@ def fig_velocity(model, sig, u, folder: str, rng) -> Shown:
     ax.set_ylabel(f"friction [{u['tau']}]")
     ax.grid(alpha=0.3)
     ax.legend()
+    _title(fig, label)
     return save(fig, folder, "friction_velocity.png",
                 f"Friction against velocity. Grey dots: the measured friction tau_m + tau_ext - tau_g - tau_dyn "
                 f"[{u['tau']}] of up to 6,000 rows of the log; red line: the model's steady-state friction at "
@@ -104,7 +122,7 @@ def fig_velocity(model, sig, u, folder: str, rng) -> Shown:
                 f"does not explain (load, temperature, the motion before).")
 
 
-def fig_heatmap(model, sig, u, folder: str, envelope=None) -> Shown:
+def fig_heatmap(model, sig, u, folder: str, envelope=None, label: str = "") -> Shown:
     """Friction over (qd, tau_g); the region outside the model's training envelope is greyed and hatched."""
     qd, g = sig["qd"], logs.column(sig, "tau_g")
     vmax = float(np.max(np.abs(qd))) or 1.0
@@ -131,13 +149,14 @@ def fig_heatmap(model, sig, u, folder: str, envelope=None) -> Shown:
     ax.set_xlabel(f"velocity qd [{u['qd']}]")
     ax.set_ylabel(f"gravity torque tau_g [{u['tau']}]")
     ax.set_title(title, fontsize=10)
+    _title(fig, label)
     return save(fig, folder, "heatmap.png",
                 f"The model's steady-state friction [{u['tau']}] (colour: red along positive velocity, blue along "
                 f"negative) over velocity [{u['qd']}] and gravity torque [{u['tau']}]. Colour that changes along the "
                 f"vertical axis shows friction that grows with the load on the gear." + outside)
 
 
-def fig_time(sig, pred, u, folder: str) -> Shown:
+def fig_time(sig, pred, u, folder: str, label: str = "") -> Shown:
     t = sig["t"]
     fig = Figure(figsize=(9, 5.5))
     a1, a2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [2, 1]})
@@ -150,13 +169,14 @@ def fig_time(sig, pred, u, folder: str) -> Shown:
     a2.set_ylabel(f"qd [{u['qd']}]")
     a2.set_xlabel("time [s]")
     a2.grid(alpha=0.3)
+    _title(fig, label)
     return save(fig, folder, "friction_time.png",
                 f"Top: measured friction (grey) and the model's prediction (red) [{u['tau']}] over the log's time "
                 f"[s]; bottom: the velocity [{u['qd']}]. The gap between the curves is the prediction error; look "
                 f"at the velocity reversals, where friction changes sign and dynamic effects show.")
 
 
-def fig_quadrants(sig, u, folder: str) -> Shown:
+def fig_quadrants(sig, u, folder: str, label: str = "") -> Shown:
     qd, g = sig["qd"], logs.column(sig, "tau_g")
     same = np.sign(qd) == np.sign(g)
     fig = Figure(figsize=(5.5, 4.6))
@@ -171,6 +191,7 @@ def fig_quadrants(sig, u, folder: str) -> Shown:
     ax.set_title(f"four quadrants: {share:.0f} % of samples in I/III")
     ax.legend(loc="upper left", fontsize=8, markerscale=4)
     ax.grid(alpha=0.3)
+    _title(fig, label)
     return save(fig, folder, "quadrants.png",
                 f"Where the log's samples lie in velocity [{u['qd']}] and gravity torque [{u['tau']}]: blue where "
                 f"the two have the same sign (quadrants I and III, the motor lifts the load), red where they differ "
@@ -178,7 +199,7 @@ def fig_quadrants(sig, u, folder: str) -> Shown:
                 f"friction differs between the two, so a log covering only some quadrants cannot show it.")
 
 
-def fig_external(sig, pred, u, folder: str, lowpass_hz) -> Shown | None:
+def fig_external(sig, pred, u, folder: str, lowpass_hz, label: str = "") -> Shown | None:
     if "tau_ext" not in sig:
         return None
     est = external_estimate(sig, pred, lowpass_hz)
@@ -191,6 +212,7 @@ def fig_external(sig, pred, u, folder: str, lowpass_hz) -> Shown | None:
     ax.legend(loc="upper right")
     ax.grid(alpha=0.3)
     low = f", low-passed at {lowpass_hz:g} Hz" if lowpass_hz else ""
+    _title(fig, label)
     return save(fig, folder, "external_torque.png",
                 f"The external torque [{u['tau']}] over time [s]: grey, the log's sensor; red, the estimate "
                 f"tau_g + tau_dyn + predicted friction - tau_m{low}, which needs no sensor. Every error of the "
@@ -265,13 +287,14 @@ def write_report(model_path: str, log: logs.Log, folder: str, *, lowpass_hz: flo
     pred = model.predict(sig)[0]
     env = models.envelope(meta, model_path)
     rng = np.random.default_rng(seed)
+    label = figure_label(log, model_path)
     shown = [f for f in (
-        fig_loss(model, folder),
-        fig_velocity(model, sig, u, folder, rng),
-        fig_heatmap(model, sig, u, folder, env),
-        fig_time(sig, pred, u, folder),
-        fig_quadrants(sig, u, folder),
-        fig_external(sig, pred, u, folder, lowpass_hz),
+        fig_loss(model, folder, label=label),
+        fig_velocity(model, sig, u, folder, rng, label=label),
+        fig_heatmap(model, sig, u, folder, env, label=label),
+        fig_time(sig, pred, u, folder, label=label),
+        fig_quadrants(sig, u, folder, label=label),
+        fig_external(sig, pred, u, folder, lowpass_hz, label=label),
     ) if f]
     summary = {"model": os.path.basename(model_path), "kind": meta.get("kind"), "log": os.path.basename(log.name),
                "unit": u["tau"], "friction": metrics.errors(logs.friction_target(sig), pred)}

@@ -7,7 +7,7 @@ import os
 import click
 
 from fricli import models
-from fricli.core import logs, modelset
+from fricli.core import errors, logs, modelset
 from fricli.cli import cli
 from fricli.cli.options import (Number, common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
                                 log_reading, read_log, reading_kwargs, say, warn)
@@ -38,7 +38,7 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
     joint) names the joint on every summary line."""
     u = d.tau_unit
     lines = []
-    who = f"joint {joint}: " if joint is not None else ""
+    who = errors.one_line(f"joint {joint}: ") if joint is not None else ""
     level = round(100 * driver.INTERVAL_LEVEL)
     if d.added:
         lo, hi = d.intervals["cut"]
@@ -193,7 +193,7 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     def show(result, data, model_path) -> None:
         if not as_json:
             if several:
-                click.echo(f"joint {data.joint} ({model_path}):")
+                click.echo(errors.one_line(f"joint {data.joint} ({model_path}):"))
             click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
                        + ("\n" if several else ""))
 

@@ -18,17 +18,20 @@ from fricli.cli.options import Number, common, emit_json, json_flag, progress_en
               help="Worker processes of the local cluster [default: one per core].")
 @click.option("--force", is_flag=True, help="Run every job, even when its model is up to date.")
 @click.option("--list", "list_only", is_flag=True, help="List the jobs and run nothing.")
+@click.option("--allow-outside", is_flag=True,
+              help="Trust MANIFEST: let it read logs and bases and write models and the history outside its folder.")
 @json_flag
 @common
 @errors.cite_codes
-def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
+def fleet_cmd(manifest, scheduler, workers, force, list_only, allow_outside, as_json, quiet):
     """Run every job of MANIFEST (robots, logs, joints, pipeline: see docs/fleet.md) on Dask.
 
     A job is one (robot, joint, log): its model is refreshed unless it was made from the same log
     bytes with the same options (as --if-changed). Every job that ran adds a row to the history
     dataset. The run ends with a table of every job (ok, unchanged, or failed with its reason).
-    Exit code {OK} when every job is ok or unchanged, {SOME_FAILED} when some failed,
-    {NOTHING_RAN} when nothing could run.
+    The manifest reads and writes only under its own folder unless --allow-outside; a second run of
+    the same manifest while one runs exits {LOCKED} at once. Exit code {OK} when every job is ok or
+    unchanged, {SOME_FAILED} when some failed, {NOTHING_RAN} when nothing could run.
 
     \b
     Example:
@@ -39,12 +42,13 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, as_json, quiet):
     from fricli.fleet import manifest as mf
     from fricli.fleet import run
 
-    m = mf.load(manifest)
+    m = mf.load(manifest, allow_outside=allow_outside)
     for line in m.unmatched:     # a robot dropping out of a nightly run must not go unnoticed
         warn(f"warning: {line}")
     if list_only:
         for job in m.jobs:
-            click.echo(f"{job.robot}\t{job.joint}\t{job.date}\t{job.pipeline}\t{job.log}\t{job.model}")
+            click.echo("\t".join(errors.one_line(str(x)) for x in (job.robot, job.joint, job.date, job.pipeline,
+                                                                    job.log, job.model)))
         return
     if not m.jobs:
         raise mf.ManifestError(f"{manifest}: no log matches the manifest's globs")
@@ -135,8 +139,9 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
 
 
 def trend_table(result, rule) -> str:
-    rw = max([12] + [len(str(t.robot)) for t in result])
-    jw = max([6] + [len(str(t.joint)) for t in result])
+    name = lambda x: errors.one_line(str(x))   # noqa: E731 - names quoted from the manifest, one line each
+    rw = max([12] + [len(name(t.robot)) for t in result])
+    jw = max([6] + [len(name(t.joint)) for t in result])
     head = f"{'robot':<{rw}} {'joint':<{jw}} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
                                                                    for p in rule.params) + "  flag"
     lines = [head]
@@ -147,5 +152,6 @@ def trend_table(result, rule) -> str:
             cells.append(f"{'-' if lv is None else f'{100 * lv:+.1f}%':>9} "
                          f"{'-' if gr is None or gr != gr else f'{100 * gr:+.2f}%':>8}")
         flag = "WEAR: " + "; ".join(t.reasons) if t.flagged else t.note
-        lines.append(f"{t.robot:<{rw}} {t.joint:<{jw}} {len(t.dates):>4}  " + "  ".join(cells) + f"  {flag}".rstrip())
+        lines.append(f"{name(t.robot):<{rw}} {name(t.joint):<{jw}} {len(t.dates):>4}  " + "  ".join(cells)
+                     + f"  {name(flag)}".rstrip())
     return "\n".join(lines)

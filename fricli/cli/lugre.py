@@ -67,7 +67,7 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
             unit = made.data.units["tau"]
             say(f"identified the coupled friction of joints {label} on {made.data.name} ({len(made.data):,} rows "
                 "per joint), per motor:")
-            say("\n".join(model.describe().splitlines()[1:]))
+            say(model.describe().splitlines()[1:])
             for x, errs in fit["joints"].items():
                 say(f"fit error, joint {x}: {_figures(errs, unit)}")
             say(wrote(made.output))
@@ -93,8 +93,8 @@ def _report_linear(data, model, fit, out, quiet: bool) -> dict:
             say(f"note: {note}", quiet)
 
     unit, params = data.units["tau"], model.parameters()
-    say(f"{model.describe()}\nfit error, all rows: {_figures(fit, unit)}\n"
-        f"fit error, {fit['moving_rows']:,} rows in motion: {_figures(fit['moving'], unit)}\n{wrote(out)}", quiet)
+    say([*model.describe().splitlines(), f"fit error, all rows: {_figures(fit, unit)}",
+         f"fit error, {fit['moving_rows']:,} rows in motion: {_figures(fit['moving'], unit)}", wrote(out)], quiet)
     return {"model": out, "log": data.name, "joint": data.joint, "axis": data.axis, "units": data.units,
             "parameters": params, "parameter_units": {k: linear.unit_of(k, data.axis) for k in params}, "fit": fit}
 
@@ -135,7 +135,7 @@ def fit_coupled(pipeline: str, log: str, output: str, report, report_group, *, i
     window = window.to_json() if window else None
     table, digest = read_log(log)
     name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts)
+    runs.check_table(table, name, opts, pipeline)
     try:
         tr = transmission.of_schema(table.schema.metadata)
     except ValueError as exc:

@@ -186,15 +186,25 @@ def wrote(output: str) -> str:
     return "wrote the model to stdout" if output == "-" else f"wrote {output}"
 
 
-def say(message: str, quiet: bool = False) -> None:
+def say(message, quiet: bool = False) -> None:
     """A message for people: stderr, unless --quiet."""
     if not quiet:
-        click.echo(message, err=True)
+        click.echo(_printable(message), err=True)
 
 
-def warn(message: str) -> None:
+def warn(message) -> None:
     """Warnings always reach stderr."""
-    click.echo(message, err=True)
+    click.echo(_printable(message), err=True)
+
+
+def _printable(message: str) -> str:
+    """``message`` with what it quotes from a file (a joint name holding a line break, a terminal
+    escape) escaped: each message is one line; a message of several lines is given as a list."""
+    from fricli.core.errors import one_line
+
+    if isinstance(message, (list, tuple)):
+        return "\n".join(one_line(str(m)) for m in message)
+    return one_line(str(message))
 
 
 def extrapolation_line(extrapolation: dict | None, joint=None) -> str | None:
@@ -340,7 +350,7 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
     window = time_window()
     table, digest = read or read_log(log)
     name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts)
+    runs.check_table(table, name, opts, pipeline)
     pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
     results: dict = {}
 

@@ -9,7 +9,7 @@ import click
 
 from fricli.cli import cli
 from fricli.cli.options import Cutoff, Number, common, output_option, say, warn
-from fricli.core.errors import LogError
+from fricli.core.errors import LogError, ModelFileError
 
 
 def _pairs(what: str, nonnegative: bool = False):
@@ -83,7 +83,7 @@ def _choice_line(record: dict) -> str | None:
     others = ", ".join(f"{named(k)} x{score[k] / score[best]:.2f}" for k in sorted({0, default, len(grid) - 1} - {best}))
     return (f"cut-off of the derived columns: {named(best)}, chosen of {grid[0]:g} Hz to no low-pass (--cutoff HZ sets "
             f"one): the robot model's tau_dyn with a gain per joint and each joint's linear friction leave the least "
-            f"of tau_m - tau_g in motion, {score[best]:.4g} RMS (geometric mean over the joints, {choice['rows']:,} "
+            f"of tau_m - tau_g in motion, {score[best]:.4g} Nm RMS (geometric mean over the joints, {choice['rows']:,} "
             f"rows); {others}")
 
 
@@ -142,10 +142,13 @@ def urdf_joint_names(pairs) -> dict[str, str]:
 @urdf_options
 @click.option("--drop-backward", is_flag=True,
               help="Drop rows whose time goes back a little (reported) instead of refusing the recording.")
+@click.option("--template", is_flag=True,
+              help="Write a skeleton mapping (TOML) from RECORDING's first line and --urdf's joints to -o, "
+                   "instead of importing.")
 @output_option(help="Output Parquet log (- for stdout).")
 @common
 def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_pairs, gravity, payload_mass,
-               payload_com, payload_frame, held, cutoff, drop_backward, output, quiet):
+               payload_com, payload_frame, held, cutoff, drop_backward, template, output, quiet):
     """Import a robot's delimited text recording or ROS bag as one long-format log.
 
     RECORDING is a CSV (or other delimited) text file, - for stdin, several text files that the
@@ -173,6 +176,22 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     from fricli.robot.importing import build_log, import_files, import_recording
 
     recording = recordings[0]
+    if template:
+        from fricli.core import files
+        from fricli.core.atomic import atomic_write_bytes
+        from fricli.robot.template import skeleton
+
+        if urdf is None:
+            raise click.UsageError("--template needs --urdf ROBOT.urdf (the joints of the mapping)")
+        urdf_data = files.read_bytes(urdf, ModelFileError, "URDF file", "URDF file")
+        text = skeleton(read_bytes(recording), "stdin" if recording == "-" else recording,
+                        urdf_data.decode("utf-8", "replace"), urdf)
+        if output == "-":
+            click.echo(text, nl=False)
+        else:
+            atomic_write_bytes(output, text.encode())
+            say(f"wrote a skeleton mapping for {urdf} -> {output}: fill in and check it (docs/robot-import.md)", quiet)
+        return
     bag = rosbag.is_bag(recording)
     if len(recordings) > 1 and (bag or mapping_path is None):
         raise click.UsageError("several recordings are the files of one text recording: give --mapping MAP.toml "
@@ -265,6 +284,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     source = f"{read.topic} in {name}" if bag else name
     for line in _robot_notes(robot, name):
         say(line, quiet)
+    for finding in (robot or {}).get("mapping_check", {}).get("findings", []):
+        warn(f"warning: {name}: the mapping disagrees with {urdf}: {finding['message']}")
     say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
 
 

@@ -65,11 +65,12 @@ TABLE: tuple[ExitCode, ...] = (
              "a valid log holds too little for the job (too short, no motion, no samples in one "
              "direction) or lacks a robot-model column it needs (`tau_g`, `tau_dyn`: unknown, not zero; "
              "[log format](log-format.md#robot-model-columns)); for `fricli calibrate`, also a log longer than "
-             "the memory available allows (calibrate on part of it with `--from`/`--until`)"),
+             "the memory available allows (calibrate on part of it with `--from`/`--until`); for `fricli identify`, a "
+             "joint with more rows than it fits within its memory limit (identify on part of it with `--from`/`--until`)"),
     ExitCode(OUTPUT, "OUTPUT", "an output could not be written",
              "an output could not be written (missing folder, disk full, permissions)"),
     ExitCode(LOCKED, "LOCKED", "another job holds the lock on the output",
-             "another job holds the lock on the same output"),
+             "another job holds the lock on the same output; for `fleet`, another run of the same manifest"),
     ExitCode(UNCHANGED, "UNCHANGED", "--if-changed: the output is up to date, nothing was done",
              "`--if-changed`: the model was made from the same log bytes, the same options and the "
              "same input models; nothing was done"),

@@ -127,7 +127,7 @@ def _field_spelling(field: pa.Field, name: str) -> str:
 def read_bytes(path: str) -> bytes:
     """Whole file (or stdin for ``-``) as bytes; stdin may be a pipe, so it is read first."""
     if path == "-":
-        return sys.stdin.buffer.read()
+        return files.read_stdin(LogError)
     return files.read_bytes(path, LogError, "file", "log")
 
 
@@ -177,8 +177,13 @@ def stdin_parquet() -> pq.ParquetFile:
         raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
     try:
         with os.fdopen(fd, "wb") as out:
-            shutil.copyfileobj(sys.stdin.buffer, out, 1 << 20)
-            size = out.tell()
+            size = 0
+            while chunk := sys.stdin.buffer.read(files.CHUNK):
+                out.write(chunk)
+                size += len(chunk)
+                if size > files.SPOOL_LIMIT:
+                    raise LogError(f"stdin: more than {files.SPOOL_LIMIT:,} bytes on stdin (the limit); write "
+                                   "the log to a file and give its path")
         source = pa.OSFile(spool, "rb")
     except OSError as exc:
         raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
@@ -239,6 +244,15 @@ class Log:
 
     def has(self, column: str) -> bool:
         return column in self.signals
+
+
+def unitless_note(schema: pa.Schema, name: str) -> str | None:
+    """A note when no column of the log carries a unit (field metadata ``unit``): every column is
+    then read in SI units, which a log in degrees, millimetres or mNm silently breaks."""
+    if any(field_unit(f) is not None for f in schema if f.name in _EXPECTED):
+        return None
+    return (f"note: {name}: no column carries a unit (Parquet field metadata 'unit'): read as SI (s, rad, rad/s, "
+            "rad/s^2, Nm); a log in other units gives wrong figures (docs/log-format.md#units)")
 
 
 def axis_of(schema: pa.Schema, name: str) -> str:
@@ -572,6 +586,9 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     filled with zeros in ``signals``, with a note through ``warn``."""
     table, joint = select_joint(table, joint, name)
     axis = axis_of(table.schema, name)
+    note = unitless_note(table.schema, name)
+    if note and warn:
+        warn(note)
     sig = table_signals(table, axis, name, kt=kt)
     mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
     if mask is not None:

@@ -61,6 +61,17 @@ def _non_finite(obj, path: str = "meta") -> str | None:
     return None
 
 
+# Deflate packs the float arrays of a model by a few percent; an archive that unpacks to many
+# times its own size holds runs of one byte (a decompression bomb), not a model.
+MAX_EXPANSION = 32
+MIN_UNPACKED = 16 << 20
+
+
+def decompressed_limit(file_size: int) -> int:
+    """Bytes a model file of ``file_size`` bytes may unpack to (``MAX_ARRAY_BYTES`` at most)."""
+    return min(MAX_ARRAY_BYTES, MIN_UNPACKED + MAX_EXPANSION * file_size)
+
+
 _PICKLED = "holds a pickled object; refused (model files never load pickles)"
 MAX_ARRAY_BYTES = 1 << 30   # fricli models hold kilobytes to a few megabytes
 
@@ -69,7 +80,12 @@ def _check_entries(data: bytes, name: str) -> None:
     """Refuse, before numpy allocates anything, an archive whose arrays claim more bytes than
     their entries hold (or than any model needs) and arrays of Python objects."""
     total = 0
+    limit = decompressed_limit(len(data))
     with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        declared = sum(info.file_size for info in zf.infolist())
+        if declared > limit:
+            raise ModelFileError(f"{name}: not a fricli model file: its entries unpack to {declared:,} bytes, "
+                                 f"more than {limit:,} for a file of {len(data):,} bytes")
         for info in zf.infolist():
             with zf.open(info) as fh:
                 version = np.lib.format.read_magic(fh)
@@ -114,7 +130,8 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
         raise ModelFileError(f"{name}: not a fricli model file")
     version = meta.get("format_version")
     if version != FORMAT_VERSION:
-        raise ModelFileError(f"{name}: model format version {version} is not supported "
+        shown = version if isinstance(version, int) and not isinstance(version, bool) else json.dumps(version)
+        raise ModelFileError(f"{name}: model format version {shown} is not supported "
                              f"(this fricli reads version {FORMAT_VERSION})")
     for key, arr in arrays.items():
         if arr.dtype.kind not in "biuf":  # model arrays are real numbers
@@ -126,6 +143,8 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
 
 
 def read(path: str) -> tuple[dict, dict[str, np.ndarray]]:
+    if path == "-":
+        raise ModelFileError("-: a model is read from a file, not from stdin (give the model file's path)")
     return loads(files.read_bytes(path, ModelFileError, "file", "model file"), path)
 
 

@@ -99,13 +99,30 @@ def _check_options(where: str, options) -> dict:
     return {k.replace("-", "_"): v for k, v in options.items()}
 
 
-def load(path: str) -> Manifest:
-    """Read a manifest and list its jobs; ManifestError when it cannot be used."""
+def inside(path: str, root: str) -> bool:
+    """Whether ``path`` (symbolic links resolved) is ``root`` or lies under it."""
+    real, top = os.path.realpath(path), os.path.realpath(root)
+    return real == top or real.startswith(top.rstrip(os.sep) + os.sep)
+
+
+def _confine(manifest: str, root: str, what: str, path: str) -> None:
+    if not inside(path, root):
+        raise ManifestError(f"{manifest}: {what} {path} is outside the manifest's folder {root}; a manifest reads "
+                            "and writes only under its folder unless it is trusted (--allow-outside)")
+
+
+def load(path: str, *, allow_outside: bool = False) -> Manifest:
+    """Read a manifest and list its jobs; ManifestError when it cannot be used.
+
+    A manifest is confined to its folder: the history, the models, the bases and every log its
+    globs match must lie under the folder that holds it (symbolic links resolved), so a manifest
+    from elsewhere can neither read other files into models and the history nor write outside
+    its folder. ``allow_outside`` lifts that for a manifest the user trusts."""
+    from fricli.core import files
+
+    data = files.read_bytes(path, ManifestError, "manifest", "manifest")
     try:
-        with open(path, "rb") as fh:
-            raw = tomllib.load(fh)
-    except OSError as exc:
-        raise ManifestError(f"{path}: cannot read ({exc.strerror})") from None
+        raw = tomllib.loads(data.decode("utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ManifestError(f"{path}: not valid TOML ({exc})") from None
     root = os.path.dirname(os.path.abspath(path))
@@ -122,6 +139,9 @@ def load(path: str) -> Manifest:
     _known(f"{path}: [options]", "pipeline", set(all_options), set(PIPELINES), ", ".join(PIPELINES))
     history = os.path.join(root, str(fleet.get("history", "history")))
     models_dir = os.path.join(root, str(fleet.get("models", "models")))
+    confine = (lambda what, p: None) if allow_outside else (lambda what, p: _confine(path, root, what, p))
+    confine("the history", history)
+    confine("the models folder", models_dir)
     jobs, seen, unmatched = [], set(), []
     for index, entry in enumerate(robots):
         if not isinstance(entry, dict):
@@ -177,9 +197,12 @@ def load(path: str) -> Manifest:
                 unmatched.append(f"robot {name}{f' joint {jname}' if jname else ''}: no log matches "
                                  + " or ".join(_fill(p, name, jname) for p in patterns))
             for log in files:
+                confine(f"robot {name}'s log", log)
                 stem = os.path.splitext(os.path.basename(log))[0]
                 model = os.path.join(models_dir, name, f"joint{jname}" if jname else "joint", f"{stem}.npz")
                 base = robot.get("base")
+                if base:
+                    confine(f"robot {name}'s base", os.path.join(root, _fill(base, name, jname)))
                 jobs.append(Job(robot=name, joint=jname, log=log, date=data_date(log), pipeline=pipeline,
                                 model=model, options=tuple(sorted(options.items())),
                                 base=os.path.join(root, _fill(base, name, jname)) if base else None,

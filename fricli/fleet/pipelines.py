@@ -45,7 +45,7 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
         except OSError as exc:
             raise errors.OutputError(f"cannot write {job.model}: {exc.strerror or exc}") from None
         table, out["sha256"] = logs.read_table(job.log)
-        runs.check_table(table, job.log, opts)
+        runs.check_table(table, job.log, opts, job.pipeline)
         made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts, base=job.base), job.model, opts, base=job.base,
                         if_changed=if_changed)
         if made is None:

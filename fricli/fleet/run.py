@@ -9,6 +9,9 @@ import dataclasses
 import datetime as dt
 import os
 import secrets
+import shutil
+import sys
+import tempfile
 from typing import Callable, Iterator
 
 from fricli.core import errors
@@ -74,13 +77,28 @@ def client(scheduler: str | None = None, workers: int | None = None) -> Iterator
     n = workers or os.cpu_count() or 1
     import warnings
 
-    with warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
-        warnings.simplefilter("ignore", UserWarning)
-        cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                           dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
-                                           preload=["fricli.fleet.worker"])   # Ctrl-C, logging
-    with cluster, distributed.Client(cluster) as c:
-        yield c
+    # a fleet killed with SIGKILL leaves multiprocessing's resource tracker to clean up the cluster's
+    # semaphores, which it does with a warning of several lines on stderr: nothing for the user to do.
+    # The tracker is started with the interpreter's -W options, so this is where it is told.
+    quiet_tracker = "ignore:resource_tracker:UserWarning"
+    if quiet_tracker not in sys.warnoptions:
+        sys.warnoptions.append(quiet_tracker)
+    # the workers' scratch space (and its lock files) in a folder of this run, removed at its end:
+    # Dask's default, dask-scratch-space in $TMPDIR, keeps lock files after the cluster closes
+    scratch = tempfile.mkdtemp(prefix="fricli-dask-")
+    import dask
+
+    try:
+        with dask.config.set({"temporary-directory": scratch}), warnings.catch_warnings():  # "port 8787 in use" of its HTTP server: nothing for the user to do
+            warnings.simplefilter("ignore", UserWarning)
+            cluster = distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, host="127.0.0.1", env=_SINGLE_THREADED,
+                                               local_directory=scratch,
+                                               preload=["fricli.fleet.worker"])   # Ctrl-C, logging
+        with dask.config.set({"temporary-directory": scratch}), cluster, distributed.Client(cluster) as c:
+            yield c
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 def run_id(now: dt.datetime) -> str:
@@ -93,7 +111,27 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
     A job whose model is up to date but whose history row is missing (an interrupted run, a
     history that could not be written) runs again, so the history catches up.
 
-    ``on_done(done, total)`` is called as jobs finish (for a progress bar)."""
+    ``on_done(done, total)`` is called as jobs finish (for a progress bar). One run of a manifest
+    at a time: the run holds the lock on the manifest (``.NAME.lock`` beside it) from its start to
+    its end; a second run of the same manifest raises LockedError at once and touches nothing."""
+    from fricli.core import jobs as joblock
+
+    try:
+        lock = joblock.output_lock(manifest.path)
+        lock.__enter__()
+    except errors.LockedError:
+        raise errors.LockedError(f"{manifest.path} is being run by another fricli fleet job; this run did "
+                                 "nothing") from None
+    try:
+        return _run(manifest, scheduler=scheduler, workers=workers, if_changed=if_changed, on_done=on_done)
+    except BaseException:
+        lock.__exit__(*sys.exc_info())
+        raise
+    else:
+        lock.__exit__(None, None, None)
+
+
+def _run(manifest: Manifest, *, scheduler, workers, if_changed: bool, on_done) -> Outcome:
     now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
     run = run_id(now)
     jobs = list(manifest.jobs)
@@ -145,14 +183,15 @@ def _recorded(path: str) -> set:
 
 def table(outcome: Outcome) -> str:
     """Every job and its status, one per line, and a summary line."""
-    rw = max([12] + [len(str(job.robot)) for job in outcome.jobs])
-    jw = max([6] + [len(str(job.joint or "-")) for job in outcome.jobs])
+    name = lambda x: errors.one_line(str(x))   # noqa: E731 - names quoted from the manifest, one line each
+    rw = max([12] + [len(name(job.robot)) for job in outcome.jobs])
+    jw = max([6] + [len(name(job.joint or "-")) for job in outcome.jobs])
     lines = [f"{'robot':<{rw}} {'joint':<{jw}} {'date':<10}  {'status':<9} {'s':>6}  reason"]
     for job, res in sorted(zip(outcome.jobs, outcome.results), key=lambda p: (p[0].robot, p[0].joint, p[0].log)):
         sec = res.get("seconds")
         sec = f"{sec:6.2f}" if sec == sec and sec is not None else "     -"
-        lines.append(f"{job.robot:<{rw}} {job.joint or '-':<{jw}} {job.date:<10}  {res['status']:<9} {sec}  "
-                     f"{res.get('reason', '')}".rstrip())
+        lines.append(f"{name(job.robot):<{rw}} {name(job.joint or '-'):<{jw}} {job.date:<10}  {res['status']:<9} {sec}  "
+                     f"{name(res.get('reason', ''))}".rstrip())
     lines.append(f"{len(outcome.jobs)} jobs: {outcome.count('ok')} ok, {outcome.count('unchanged')} unchanged, "
                  f"{outcome.count('failed')} failed")
     return "\n".join(lines)

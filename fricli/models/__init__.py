@@ -101,7 +101,11 @@ def load(path: str) -> tuple[FrictionModel, dict]:
     meta, arrays = modelfile.read(path)
     if "model" not in meta:
         raise ModelFileError(f"{path}: not a fricli model file (no model spec)")
-    return from_parts(meta["model"], arrays, name=path), meta
+    model = from_parts(meta["model"], arrays, name=path)
+    if "kind" in meta and meta["kind"] != model.kind:
+        raise ModelFileError(f"{path}: damaged model file (its kind {meta['kind']!r} disagrees with its model "
+                             f"spec's {model.kind!r})")
+    return model, meta
 
 
 def check_log(meta: dict, log, model_name: str = "model") -> None:

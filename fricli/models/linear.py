@@ -106,6 +106,9 @@ class LinearFriction(FrictionModel):
         unknown = set(params) - set(PARAM_INFO) - {"axis"}
         if unknown:
             raise ValueError(f"unknown parameters {sorted(unknown)}")
+        from fricli.models.lugre import check_numbers
+
+        check_numbers(params, ("fv", "fc"), ("offset", "fv_neg", "fc_neg"))
         return cls(params["fv"], params["fc"], params.get("offset", 0.0), fv_neg=params.get("fv_neg"),
                    fc_neg=params.get("fc_neg"), axis=params.get("axis", "rotary"))
 

@@ -53,6 +53,23 @@ PARAM_INFO = {
 }
 
 
+# parameters a dissipative friction model never has below 0 (a model file with one is damaged)
+NON_NEGATIVE = ("fc", "fs", "fv", "sigma1", "fc_neg", "fs_neg", "fv_neg")
+
+
+def check_numbers(params: dict, required, optional=()) -> None:
+    """ValueError unless every ``required`` parameter is a number (a JSON number, not a string or a
+    boolean) and every ``optional`` one present is a number or null."""
+    for k in tuple(required) + tuple(optional):
+        value = params.get(k)
+        if value is None and k in optional:
+            continue
+        if k not in params:
+            raise ValueError(f"parameter {k!r} is missing")
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"parameter {k!r} is {type(value).__name__} {value!r}, not a number")
+
+
 def unit_of(name: str, axis: str = "rotary") -> str:
     rot, lin, _ = PARAM_INFO[name]
     return lin if axis == "linear" else rot
@@ -235,6 +252,11 @@ class LuGreModel(FrictionModel):
         unknown = set(params) - known
         if unknown:
             raise ValueError(f"unknown parameters {sorted(unknown)}")
+        check_numbers(params, STATIC + DYNAMIC, OPTIONAL)
+        negative = [k for k in NON_NEGATIVE if params.get(k) is not None and params[k] < 0]
+        if negative:
+            raise ValueError(f"{negative[0]} = {params[negative[0]]:g} is negative (friction levels, viscous "
+                             "friction and damping are at least 0)")
         args = {k: params[k] for k in STATIC + DYNAMIC}
         args.update({k: params.get(k) for k in ("fc_neg", "fs_neg", "fv_neg", "t_ref")})
         args.update(alpha_c=params.get("alpha_c") or 0.0, alpha_v=params.get("alpha_v") or 0.0,

@@ -137,6 +137,13 @@ def _log_transmission(table, name: str, names: list, urdf_joints: list[str]):
     return transmission.Transmission([by_name[str(j)] for j in tr.joints], tr.ratio, tr.offset, tr.rotor_inertia)
 
 
+def motion_check_ratio(robot, motion: Motion) -> np.ndarray | None:
+    """The ratio matrix (URDF order) the mapping check of ``motion`` reads its motors through (None: a
+    motor per joint)."""
+    ratio, _, _, motors = motor_layout(robot, motion)
+    return ratio if motors is not None else None
+
+
 def motor_layout(robot, motion: Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int] | None]:
     """(R, g, a0, motors): the ratio matrix R (joints, joints) in URDF order (row m: the motor of URDF
     joint m); each motor's ratio to its own joint g (joints,) (R_mm, else the row's largest); each
@@ -303,8 +310,9 @@ def prior_scales(robot, pi_cad: np.ndarray, armature0: np.ndarray, qd_rms: np.nd
     diag = np.diag(pin.crba(model, model.createData(), pin.neutral(model)))
     diag = diag - np.asarray(model.armature)
     ratio = np.eye(nj) if ratio is None else ratio
-    with np.errstate(divide="ignore"):        # each motor: the loosest of its joints' diagonals / R_mj^2
-        arm = np.maximum(armature0, np.where(ratio != 0, diag / np.square(ratio), -np.inf).max(axis=1))
+    # each motor: the loosest of its joints' diagonals / R_mj^2 (over the joints it drives)
+    per_joint = np.divide(diag, np.square(ratio), out=np.full(np.shape(ratio), -np.inf), where=ratio != 0)
+    arm = np.maximum(armature0, per_joint.max(axis=1))
     arm = np.maximum(arm, tau_rms / np.maximum(qdd_rms, 1e-300))   # a rotor may carry its motor's whole torque
     fric = []
     for j in range(nj):
@@ -481,6 +489,11 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     report["links"] = link_table(cal)
     report["consistency"] = consistency(cal)
     report["suspicious"] = suspicious(cal, excitation["masses_not_determined_alone"])
+    from fricli.robot import sanity
+
+    report["mapping_check"] = sanity.check_motion(robot, motion, motion_check_ratio(robot, motion))
+    for finding in reversed(report["mapping_check"]["findings"]):
+        report["suspicious"].insert(0, f"the log's mapping disagrees with the URDF: {finding['message']}")
     if excitation["condition_number_scaled"] > POOR_EXCITATION:
         report["suspicious"].insert(0, (
             f"the run excites the arm's dynamics poorly: condition number {excitation['condition_number_scaled']:.3g} "

@@ -248,11 +248,28 @@ def link_inertials(urdf_text: str, name: str) -> dict[str, np.ndarray]:
             raise ModelFileError(f"{who}: mass {mass:g} kg: a link's mass is a finite number, not negative")
         tensor = np.array([[get["ixx"], get["ixy"], get["ixz"]], [get["ixy"], get["iyy"], get["iyz"]],
                            [get["ixz"], get["iyz"], get["izz"]]])
+        check_inertia(tensor, who)
         c = np.array(xyz, dtype=float)   # the inertia at the frame's origin by the parallel-axis theorem
         i_o = rot @ tensor @ rot.T + mass * (c @ c * np.eye(3) - np.outer(c, c))
         out[link.get("name")] = np.array([mass, *(mass * c), i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2],
                                           i_o[2, 2]])
     return out
+
+
+def check_inertia(tensor: np.ndarray, who: str) -> None:
+    """ModelFileError unless a link's rotational inertia (3, 3) [kg m^2] is finite and positive
+    semi-definite (no principal moment below 0, beyond rounding): a negative moment of inertia has
+    no body, and Pinocchio would take it without complaint."""
+    if not np.isfinite(tensor).all():
+        raise ModelFileError(f"{who}: its <inertia> holds a value that is not finite")
+    for axis in ("xx", "yy", "zz"):
+        k = "xyz".index(axis[0])
+        if tensor[k, k] < 0:
+            raise ModelFileError(f"{who}: i{axis} {tensor[k, k]:g} kg m^2: a moment of inertia is not negative")
+    moments = np.linalg.eigvalsh(tensor)
+    if moments[0] < -1e-9 * max(1.0, float(np.abs(moments).max())):
+        raise ModelFileError(f"{who}: its inertia tensor has a negative principal moment ({moments[0]:.3g} kg m^2): "
+                             "the products of inertia are too large for its moments")
 
 
 def rotor_params(urdf_text: str, name: str, model) -> np.ndarray:
@@ -341,13 +358,13 @@ def _rnea_rows(model, q, qd, qdd) -> np.ndarray:
 
 
 def _urdf_text(path: str) -> str:
+    from fricli.core import files
+
+    data = files.read_bytes(path, ModelFileError, "URDF file", "URDF file")
     try:
-        with open(path, encoding="utf-8") as fh:
-            return fh.read()
-    except FileNotFoundError:
-        raise ModelFileError(f"{path}: no such URDF file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ModelFileError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"{path}: cannot read ({exc})") from None
 
 
 def load_model(path: str, mapping) -> RobotModel:

@@ -229,6 +229,11 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         for k, sig in enumerate(per_joint):
             sig["tau_dyn"] = sig["tau_dyn"] + torque[:, k]
         robot["cross_inertia"] = cross.tolist()
+    if robot is not None:
+        from fricli.robot import sanity
+
+        order = model.match([jm.urdf or str(jm.name) for jm in mapping.joints], mapping.match)
+        robot["mapping_check"] = sanity.check(model, mapping, order, per_joint, tr)
     units = dict(logs.CANONICAL[axis])
     units = {"t": "s", "q": units["q"], "qd": units["qd"], "qdd": units["qdd"], "i_m": "A", "temp": "degC",
              **{c: units["tau"] for c in logs.TORQUES}}

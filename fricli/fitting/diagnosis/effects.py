@@ -440,10 +440,16 @@ class Gravity(Effect):
         scale = params["scale"]["value"]
         if scale is None or abs(scale - 1.0) <= ROBOT_MODEL_TOLERANCE:
             return None
+        mapping = ("the joint's zero or sign convention against the URDF (an encoder offset of a multiple of pi/2 "
+                   "left out of the mapping, or the joint turning the other way: fricli import checks the mapping "
+                   "against the URDF, docs/robot-import.md)")
+        if scale < 0:     # no mass, gain or spring makes gravity act the other way round
+            return (f"a gravity scale of {_fmt(scale)}: the logged tau_g acts against the measured torque; the "
+                    f"likely cause is {mapping}, or a reversed sign of tau_m")
         return (f"a gravity scale of {_fmt(scale)} is outside 1 +- {100 * ROBOT_MODEL_TOLERANCE:g} %, more than "
                 f"CAD masses usually miss by (calibrate the robot model to tell); a torque proportional to tau_g "
-                f"also comes from a drive gain or torque constant error, a cable or hose, a counterbalance spring, "
-                f"or a wrong payload")
+                f"also comes from {mapping}, a drive gain or torque constant error, a cable or hose, a "
+                f"counterbalance spring, or a wrong payload")
 
     def params(self, coef, ctx):
         k = coef["tau_g"]

@@ -74,11 +74,17 @@ class Structure:
             unit = v_unit if self.main == "velocity" else q_unit
             at = f"at rest (velocity 0 {unit})" if self.main == "velocity" and lo == hi == 0 else \
                 f"over {self.main} {span(lo, hi)} {unit}"
+            a, b = view.where.get("extent") or (lo, hi)
+            if not (self.main == "velocity" and lo == hi == 0) and (hi - lo) < NARROW * (b - a):
+                # quantile bins: a narrow range is where the joint dwells, not a feature of the travel
+                at += (f" ({100 * view.where.get('rows', 0.0):.0f} % of the rows, where the joint dwells; its "
+                       f"{self.main} spans {a:.3g} .. {b:.3g} {unit})")
         return (f"unexplained structure: {100 * self.share:.0f} % of what is left is not noise, {at}; "
                 f"no candidate effect describes it")
 
 
 SMALL_SHARE = 0.1
+NARROW = 0.05     # a range narrower than this share of the variable's span is named with its rows
 
 
 def span(lo: float, hi: float, digits: int = 2) -> str:
@@ -142,7 +148,10 @@ def over_variable(e: np.ndarray, x: np.ndarray, alpha: float) -> View:
     while hi < bins - 1 and abs(z[hi + 1]) > SIGNIFICANT_Z and np.sign(z[hi + 1]) == np.sign(z[k]):
         hi += 1
     where = [float(x[groups[lo]].min()), float(x[groups[hi]].max())] if significant else None
-    return View(share if significant else 0.0, significant, {"range": where})
+    if where is None:
+        return View(0.0, False, {"range": None})
+    rows = float(counts[lo:hi + 1].sum()) / n
+    return View(share, True, {"range": where, "rows": rows, "extent": [float(x.min()), float(x.max())]})
 
 
 def analyse(e: np.ndarray, signals: dict[str, np.ndarray], alpha: float) -> Structure:

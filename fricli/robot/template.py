@@ -1,0 +1,98 @@
+"""A skeleton mapping (TOML) from a recording's first line and a URDF: ``fricli import --template``.
+
+The URDF gives the joints that move (their names and order); the recording's first line gives
+the columns: a header names them, and a column whose name holds a signal's word (position, q,
+velocity, qd, current, i, torque, effort, tau) and a joint's number or URDF name is taken for that
+signal of that joint; a line of numbers only gives their count. Every guess is marked; what
+cannot be guessed is left as a comment to fill in. The skeleton is a start to be checked, not a
+mapping to trust: ``fricli import --urdf`` then checks the result against the robot model.
+"""
+
+from __future__ import annotations
+
+import re
+import xml.etree.ElementTree as ET
+
+from fricli.core.errors import LogError, ModelFileError, one_line
+
+_WORDS = {  # signal: words in a column name, most specific first
+    "q": ("position", "pos", "angle", "q"),
+    "qd": ("velocity", "vel", "speed", "qd", "dq"),
+    "i_m": ("current", "cur", "i", "iq"),
+    "tau_m": ("torque", "effort", "tau", "trq"),
+}
+_UNITS = {"q": "rad", "qd": "rad/s", "i_m": "A", "tau_m": "Nm"}
+
+
+def urdf_joints(text: str, name: str) -> list[str]:
+    """The URDF's moving joints (not fixed), in the file's order."""
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        raise ModelFileError(f"{name}: not a usable URDF ({exc})") from None
+    joints = [j.get("name") for j in root.findall("joint") if j.get("type") not in (None, "fixed")]
+    if not joints:
+        raise ModelFileError(f"{name}: the URDF has no moving joint")
+    return joints
+
+
+def header_fields(data: bytes, name: str) -> tuple[list[str] | None, int, str]:
+    """(column names or None when the first line holds numbers only, the number of columns, delimiter)."""
+    first = data.split(b"\n", 1)[0].decode("utf-8", "replace").strip("\r\ufeff ")
+    if not first:
+        raise LogError(f"{name}: empty input, no first line to read the columns from")
+    delimiter = max((",", ";", "\t", " "), key=first.count)
+    fields = [f.strip().strip('"') for f in first.split(delimiter)]
+    numbers = all(re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", f) for f in fields if f)
+    return (None if numbers else fields), len(fields), delimiter
+
+
+def _tokens(field: str) -> list[str]:
+    return [t for t in re.split(r"[^a-z0-9]+|(?<=[a-z])(?=[0-9])", field.lower()) if t]
+
+
+def _guess(fields: list[str], signal: str, k: int, joint: str) -> int | None:
+    """The 1-based column of ``signal`` of the k-th joint (1-based), or None."""
+    for word in _WORDS[signal]:
+        for c, f in enumerate(fields, 1):
+            tokens = _tokens(f)
+            if word in tokens and (str(k) in tokens or joint.lower() in f.lower()):
+                return c
+    return None
+
+
+def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
+    """The skeleton mapping of the recording ``data`` for the URDF ``urdf_text``."""
+    joints = urdf_joints(urdf_text, urdf_name)
+    fields, count, delimiter = header_fields(data, name)
+    lines = [f"# fricli import mapping: a skeleton from {one_line(name)} and {one_line(urdf_name)}.",
+             "# Check every line (docs/robot-import.md); then fricli import --urdf checks it against the robot model.",
+             f"# The recording has {count} columns"
+             + (f": {', '.join(f'{c}={one_line(f)}' for c, f in enumerate(fields, 1))}" if fields else
+                " and no header"), ""]
+    if delimiter != ",":
+        lines.append(f"delimiter = {delimiter!r}".replace("'", '"'))
+    time = None
+    if fields:
+        time = next((c for c, f in enumerate(fields, 1) if _tokens(f)[:1] in (["t"], ["time"], ["timestamp"])), None)
+    if time:
+        lines.append(f'time = {{column = {time}, unit = "s"}}        # guessed from the header; check the unit')
+    else:
+        lines.append('time = {column = 1, unit = "s"}             # FILL IN: the time column (or time = {rate = HZ})')
+    lines += ["", "[robot]", 'match = "name"                              # joints matched to the URDF by name', ""]
+    for k, joint in enumerate(joints, 1):
+        lines += ["[[joints]]", f'name = "{joint}"                 # URDF joint {k} of {len(joints)}']
+        found = False
+        for signal in ("q", "qd", "tau_m", "i_m"):
+            column = _guess(fields, signal, k, joint) if fields else None
+            if column is not None and not (signal == "i_m" and found):
+                found = found or signal in ("tau_m", "i_m")
+                lines.append(f'{signal} = {{column = {column}, unit = "{_UNITS[signal]}"}}'
+                             f"        # guessed from {one_line(fields[column - 1])!r}; check the unit")
+            elif signal == "q":
+                lines.append(f'# q = {{column = N, unit = "rad"}}          # FILL IN: joint {k}\'s position')
+        if not found:
+            lines.append('# tau_m = {column = N, unit = "Nm"}         # FILL IN: the torque, or i_m with kt [Nm/A]')
+        lines.append("")
+    lines += ["# A motor-side recording: theta and tau_motor per joint and a [transmission]", "# (docs/drives.md).", ""]
+    return "\n".join(lines) + "\n"

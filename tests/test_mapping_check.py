@@ -1,0 +1,199 @@
+"""The import's check of a mapping against the robot model (fricli/robot/sanity.py): motor-side
+recordings of the simulated coupled-wrist arm (fricli/sim/coupled.py) with the torques of a six-joint
+URDF, imported with a mapping that has one mistake each: a joint's zero a quarter turn off, a joint
+turning the other way, a coupling term off by 2 in 32. Each is flagged with its joint and cause,
+and the correct mapping is not."""
+
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from fricli.cli import cli
+from fricli.core.transmission import Transmission
+from fricli.sim import coupled
+
+pytest.importorskip("pinocchio")
+
+RATE = 500.0
+
+
+def urdf_text() -> str:
+    axes = ["0 0 1", "0 1 0", "0 1 0", "0 1 0", "0 0 1", "0 1 0"]
+    # the last link carries a tool: its weight, 20 cm off joint 6's axis, loads the coupled wrist (a coupling
+    # term off by d shows in motor 5's torque as d tau_6 / (R55 R66), which must stand above the noise)
+    masses = [4.0, 8.0, 4.0, 2.0, 1.5, 6.0]
+    lengths = [0.1, 0.6, 0.5, 0.15, 0.1, 0.4]
+    parts = ['<?xml version="1.0"?>\n<robot name="arm6"><link name="base"/>']
+    parent = "base"
+    for k in range(6):
+        m, L = masses[k], lengths[k]
+        parts.append(f'<joint name="j{k + 1}" type="revolute"><parent link="{parent}"/><child link="l{k + 1}"/>'
+                     f'<origin xyz="{0.0 if k == 0 else lengths[k - 1]} 0 {0.1 if k == 0 else 0}"/><axis xyz="{axes[k]}"/>'
+                     '<limit lower="-6" upper="6" effort="500" velocity="5"/></joint>')
+        i = m * L * L / 12 + 0.001
+        parts.append(f'<link name="l{k + 1}"><inertial><origin xyz="{L / 2} 0 0.02"/><mass value="{m}"/>'
+                     f'<inertia ixx="{0.001 * m}" ixy="0" ixz="0" iyy="{i}" iyz="0" izz="{i}"/></inertial></link>')
+        parent = f"l{k + 1}"
+    parts.append("</robot>")
+    return "\n".join(parts)
+
+
+def true_transmission() -> Transmission:
+    tr = coupled.default_arm().transmission
+    ratio = tr.ratio.copy()
+    ratio[5, 4] = 32.0
+    return Transmission(tr.joints, ratio, offset=tr.offset)
+
+
+def recording(folder, seed=3, duration=24.0):
+    """positions.csv and torques.csv of the arm: motor angles and motor torques."""
+    from fricli.robot.dynamics import RobotModel
+
+    tr = true_transmission()
+    arm = coupled.CoupledArm(tr, coupled.default_arm().friction, gravity=np.zeros(6), link_inertia=np.zeros(6),
+                             noise_sd=np.full(6, 0.002))
+    t = np.arange(int(duration * RATE)) / RATE
+    rng = np.random.default_rng(seed)
+    q, qd, qdd = coupled.trajectories(t, 6, rng)
+    q = q + np.array([0.0, -0.6, 0.9, 0.2, 0.0, 0.3])          # about a pose where gravity loads joints 2-4 and 6
+    g, d = RobotModel(urdf_text(), "arm6.urdf").terms(q, qd, qdd)
+    tau_motor = tr.motor_torques(g + d + arm.joint_friction(qd)) + rng.normal(size=q.shape) * arm.noise_sd
+    np.savetxt(folder / "positions.csv", tr.motor_positions(q), delimiter=",", fmt="%.17g")
+    np.savetxt(folder / "torques.csv", tau_motor, delimiter=",", fmt="%.17g")
+    (folder / "arm6.urdf").write_text(urdf_text())
+
+
+def import_with(folder, tr: Transmission):
+    text = coupled.mapping_text(tr, RATE, 1.0) + '\n[robot]\nmatch = "order"\n'
+    (folder / "map.toml").write_text(text)
+    res = CliRunner().invoke(cli, ["import", str(folder / "positions.csv"), str(folder / "torques.csv"), "--mapping",
+                                   str(folder / "map.toml"), "--urdf", str(folder / "arm6.urdf"), "-o",
+                                   str(folder / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    return [line for line in res.stderr.splitlines() if "the mapping disagrees" in line]
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    path = tmp_path_factory.mktemp("arm6")
+    recording(path)
+    return path
+
+
+def test_the_right_mapping_passes_without_a_word(folder):
+    assert import_with(folder, true_transmission()) == []
+
+
+def test_a_zero_a_quarter_turn_off_is_flagged(folder):
+    tr = true_transmission()
+    wrong = Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)   # joint 2's offset left out
+    lines = import_with(folder, wrong)
+    assert len(lines) == 1, lines
+    assert "joint 2: its zero is +pi/2 away from the URDF's" in lines[0], lines
+    new = [float(x) for x in lines[0].split("[transmission] offset = [")[1].split("]")[0].split(",")]
+    assert np.allclose(new, tr.offset, atol=1e-4), (new, tr.offset)
+
+
+def test_a_joint_turning_the_other_way_is_flagged(folder):
+    tr = true_transmission()
+    ratio = tr.ratio.copy()
+    ratio[:, 2] = -ratio[:, 2]
+    lines = import_with(folder, Transmission(tr.joints, ratio, offset=tr.offset))
+    assert len(lines) == 1, lines
+    assert "joint 3: it turns the other way than the URDF's axis (a sign)" in lines[0], lines
+
+
+def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
+    tr = true_transmission()
+    ratio = tr.ratio.copy()
+    ratio[5, 4] = 30.0
+    lines = import_with(folder, Transmission(tr.joints, ratio, offset=tr.offset))
+    assert len(lines) == 1, lines
+    assert "joint 5: the coupling term of motor 6 on joint 5 is 30 in the mapping; " in lines[0], lines
+    fitted = float(lines[0].split("in the mapping; ")[1].split(" fits")[0])
+    assert abs(fitted - 32.0) < 0.2, lines
+
+
+def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
+    (tmp_path / "arm6.urdf").write_text(urdf_text())
+    t = np.arange(600) / 100.0
+    rng = np.random.default_rng(0)
+    cols = [t] + [0.3 * np.sin(t + k) for k in range(6)] + [rng.normal(size=600) for _ in range(6)]
+    header = "time," + ",".join(f"pos_{k}" for k in range(1, 7)) + "," + ",".join(f"effort_{k}" for k in range(1, 7))
+    np.savetxt(tmp_path / "rec.csv", np.column_stack(cols), delimiter=",", header=header, comments="", fmt="%.9g")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf", str(tmp_path / "arm6.urdf"),
+                                   "-o", str(tmp_path / "map.toml")])
+    assert res.exit_code == 0, res.stderr
+    text = (tmp_path / "map.toml").read_text()
+    assert 'name = "j6"' in text and 'tau_m = {column = 13, unit = "Nm"}' in text and "FILL IN" not in text
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--mapping", str(tmp_path / "map.toml"), "-o",
+                                   str(tmp_path / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "-o", str(tmp_path / "m2.toml")])
+    assert res.exit_code == 2 and "--template needs --urdf" in res.stderr
+
+
+def wrong_zero(tr: Transmission) -> Transmission:
+    return Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)
+
+
+def test_calibrate_checks_the_log_it_is_given(folder):
+    """calibrate's check of a log (no mapping at hand: the log's joint-side signals, its transmission)."""
+    import pyarrow.parquet as pq
+
+    from fricli.robot import calibration, sanity
+    from fricli.robot.calibration import motion_check_ratio
+    from fricli.robot.dynamics import RobotModel
+
+    import_with(folder, wrong_zero(true_transmission()))
+    robot = RobotModel(urdf_text(), "arm6.urdf")
+    motion = calibration.read_motion(pq.read_table(folder / "log.parquet"), "log", robot, match=None)
+    found = sanity.check_motion(robot, motion, motion_check_ratio(robot, motion))["findings"]
+    assert [(f["joint"], f["cause"]) for f in found] == [("2", "offset")], found
+    assert "joint 2's zero moved by +1.5708 rad ([transmission] offset)" in found[0]["message"]
+
+
+@pytest.mark.slow
+def test_calibrate_warns_of_a_wrong_zero(folder):
+    import_with(folder, wrong_zero(true_transmission()))
+    res = CliRunner().invoke(cli, ["calibrate", str(folder / "log.parquet"), "--urdf", str(folder / "arm6.urdf"), "-o",
+                                   str(folder / "cal.urdf")])
+    assert res.exit_code == 0, res.stderr
+    assert "warning: the log's mapping disagrees with the URDF: joint 2: its zero is +pi/2 away from the URDF's" \
+        in res.stderr
+
+
+@pytest.mark.slow
+def test_mistakes_planted_in_the_ur10e_mapping_are_flagged_on_real_data():
+    """The UR10e's own recording (no transmission, currents times drive gains) with the documented
+    mapping changed: joint 2's zero a quarter turn off, joint 3 reversed, joint 2's torque sign reversed."""
+    import dataclasses
+
+    from conftest import ROOT, shared_data
+    from fricli.robot import importing
+    from fricli.robot import mapping as mp
+    from fricli.robot.dynamics import load_model
+
+    folder = shared_data("ur10e")
+    data = (folder / "identification" / "ur-20_02_19_14harm50sec.csv").read_bytes()
+
+    def findings(change):
+        m = mp.load_mapping(str(ROOT / "docs" / "ur10e-mapping.toml"))
+        model = load_model(str(folder / "ur10e.urdf"), m)
+        change(m)
+        res = importing.import_recording(data, m, "run", model=model, cutoff_hz=10.0)
+        return [(f["joint"], f["cause"]) for f in res.meta["robot"]["mapping_check"]["findings"]]
+
+    def scaled(jm, signals, **kw):
+        for s in signals:
+            if s in jm.columns:
+                c = jm.columns[s]
+                jm.columns[s] = dataclasses.replace(c, **{k: v(c) for k, v in kw.items()})
+
+    assert findings(lambda m: None) == []
+    assert findings(lambda m: scaled(m.joints[1], ["q"], offset=lambda c: c.offset + math.pi / 2)) == [("2", "offset")]
+    assert findings(lambda m: scaled(m.joints[2], ["q", "qd", "i_m", "tau_m"], scale=lambda c: -c.scale)) == \
+        [("3", "direction")]
+    assert findings(lambda m: scaled(m.joints[1], ["i_m", "tau_m"], scale=lambda c: -c.scale)) == [("2", "torque-sign")]
