@@ -393,7 +393,9 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     the held-out rows ``val``.
 
     Both train at once (``WORKERS`` threads), with the same scales (those of every row), the
-    same steps and learning-rate schedule, and generators spawned from ``rng``; the full model
+    same steps and learning-rate schedule and the same initial weights (generators of one seed
+    drawn from ``rng``): the model is the probe's network trained on more rows, so the probe's
+    best step carries over to it, early steps included. The full model
     records its weights at every loss record and keeps those of the probe's best record.
     Returns (model, probe, summary): the probe stays fitted for the choices made on its
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
@@ -402,7 +404,8 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     rows = np.union1d(train, val)
     model, probe = new_model(steps), new_model(steps)
     model.set_scales(subset(sig, rows), target[rows])
-    seeds = rng.spawn(2)
+    seed = int(rng.integers(2 ** 63))
+    seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
     progress = shared_progress(on_eval, 2 * steps)
     jobs = ((probe, (subset(sig, train), target[train], subset(sig, val), target[val]),
              dict(rng=seeds[0], scales_from=model, on_eval=progress[0])),
