@@ -553,7 +553,7 @@ class _Curve:
     def __init__(self, steps):
         self.steps = steps
 
-    def fit(self, sig, target, val_sig, val_target, *, rng, on_eval=None):
+    def fit(self, sig, target, val_sig, val_target, *, rng, on_eval=None, stop=None):
         first = int(training_data.time_block(1000)[int(val_sig["t"][0])])
         m = {0: 1, 2: 1}.get(first, 8)
         self.history_val_ = (np.arange(self.steps // 10) - m) ** 2 + 1.0
@@ -562,6 +562,32 @@ class _Curve:
         self.rows = (sig["t"].astype(int), val_sig["t"].astype(int))
         _Curve.made.append(self)
         return self
+
+
+def test_trainings_side_by_side_stop_together_when_one_fails():
+    """A failure (or an interruption) in one training stops the others at their next loss record:
+    a command interrupted while two networks train does not wait for the other's steps."""
+    import threading
+    import time
+
+    stop = threading.Event()
+    report = learning.shared_progress(None, 100, 2, stop)
+    records = []
+
+    def fails():
+        time.sleep(0.05)
+        raise ValueError("diverged")
+
+    def trains():
+        for step in range(10 ** 6):   # far longer than the test allows, unless stopped
+            records.append(step)
+            report[1](step, 100, 0.0, None)
+            time.sleep(0.001)
+
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match="diverged"):
+        learning.run_parallel([fails, trains], stop)
+    assert stop.is_set() and len(records) < 10 ** 6 and time.perf_counter() - start < 60
 
 
 def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds():

@@ -19,6 +19,7 @@ from fricli.models.base import FrictionModel, predict_parts
 from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
+from fricli.numerics.nn.training import Stopped
 from fricli.numerics.threads import pinned, single_threaded
 
 LONG_ADAPT_S = 300.0     # s: adapt says that a minute would do when it is given more than this
@@ -406,12 +407,13 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     model.set_scales(subset(sig, rows), target[rows])
     seed = int(rng.integers(2 ** 63))
     seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
-    progress = shared_progress(on_eval, 2 * steps)
+    stop = threading.Event()
+    progress = shared_progress(on_eval, 2 * steps, 2, stop)
     jobs = ((probe, (subset(sig, train), target[train], subset(sig, val), target[val]),
-             dict(rng=seeds[0], scales_from=model, on_eval=progress[0])),
+             dict(rng=seeds[0], scales_from=model, on_eval=progress[0], stop=stop)),
             (model, (subset(sig, rows), target[rows]),
-             dict(rng=seeds[1], scales_from=model, on_eval=progress[1], snapshots=True)))
-    run_parallel([lambda m=m, a=a, k=k: m.fit(*a, **k) for m, a, k in jobs])
+             dict(rng=seeds[1], scales_from=model, on_eval=progress[1], snapshots=True, stop=stop)))
+    run_parallel([lambda m=m, a=a, k=k: m.fit(*a, **k) for m, a, k in jobs], stop)
     record = min(int(np.argmin(probe.history_val_)), len(model.snapshots_) - 1)
     model.net_.theta[...] = model.snapshots_[record]
     model.snapshots_ = None
@@ -423,28 +425,42 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
                           "held_out_rmse": float(np.sqrt(probe.history_val_[record])) * probe.y_scale_}
 
 
-def run_parallel(tasks: list[Callable[[], object]]) -> list:
+def run_parallel(tasks: list[Callable[[], object]], stop: threading.Event | None = None) -> list:
     """Run the calls ``tasks`` on ``WORKERS`` threads (BLAS pinned to one thread each, set from
     this thread); their results in order. numpy releases the GIL in its array work, so two
-    trainings take about the time of one on two cores."""
+    trainings take about the time of one on two cores. When this thread is interrupted (Ctrl-C,
+    SIGTERM) or a task fails, ``stop`` is set, which the tasks' progress callbacks
+    (``shared_progress``) and trainers (``Trainer``'s ``stop``) turn into an exception, and the interruption
+    is raised once every task has ended."""
     if len(tasks) <= 1:
         return [task() for task in tasks]
     with single_threaded(), ThreadPoolExecutor(max_workers=WORKERS) as pool:
-        return [f.result() for f in [pool.submit(task) for task in tasks]]
+        futures = [pool.submit(task) for task in tasks]
+        try:
+            return [f.result() for f in futures]
+        except BaseException:
+            if stop is not None:
+                stop.set()
+            for f in futures:
+                f.cancel()
+            raise
 
 
-def shared_progress(on_eval: Callable | None, total: int, parts: int = 2) -> list[Callable | None]:
+def shared_progress(on_eval: Callable | None, total: int, parts: int = 2,
+                    stop: threading.Event | None = None) -> list[Callable]:
     """``parts`` progress callbacks for trainings that run at once: each reports the sum of the
-    steps all of them have done, out of ``total``, through ``on_eval`` (one call at a time)."""
-    if on_eval is None:
-        return [None] * parts
+    steps all of them have done, out of ``total``, through ``on_eval`` (None: no report; one call
+    at a time), and raises ``Stopped`` once ``stop`` is set."""
     done, lock = [0] * parts, threading.Lock()
 
     def part(k: int) -> Callable:
         def report(step, _total, train_loss, val_loss):
-            with lock:
-                done[k] = step
-                on_eval(sum(done), total, train_loss, val_loss)
+            if stop is not None and stop.is_set():
+                raise Stopped("stopped")
+            if on_eval is not None:
+                with lock:
+                    done[k] = step
+                    on_eval(sum(done), total, train_loss, val_loss)
         return report
     return [part(k) for k in range(parts)]
 
@@ -472,11 +488,13 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
         if train.size and val.size:
             splits.append((held, train, val))
     seeds = rng.spawn(len(splits))
-    progress = shared_progress(on_eval, len(splits) * steps, len(splits))
+    stop = threading.Event()
+    progress = shared_progress(on_eval, len(splits) * steps, len(splits), stop)
     fitted = [new_model(steps) for _ in splits]
     run_parallel([lambda m=m, tv=tv, r=r, p=p: m.fit(subset(sig, tv[1]), target[tv[1]], subset(sig, tv[2]),
-                                                     target[tv[2]], rng=r, on_eval=p, **fit_kwargs)
-                  for m, tv, r, p in zip(fitted, splits, seeds, progress)])
+                                                     target[tv[2]], rng=r, on_eval=p, stop=stop,
+                                                     **fit_kwargs)
+                  for m, tv, r, p in zip(fitted, splits, seeds, progress)], stop)
     curves = [np.asarray(model.history_val_) * model.y_scale_ ** 2 for model in fitted]
     weights = [val.size for _, _, val in splits]
     held_out = [held for held, _, _ in splits]
