@@ -59,6 +59,14 @@ def main(argv=None) -> dict:
         models = {"default": os.path.join(tmp, "one.npz"), "--ensemble 5": os.path.join(tmp, "five.npz")}
         summaries = {"default": train(log_path, models["default"], steps),
                      "--ensemble 5": train(log_path, models["--ensemble 5"], [*steps, "--ensemble", "5"])}
+        from fricli import models as fricli_models
+        default, _ = fricli_models.load(models["default"])
+        parts = [f"{len(default.nets_)} network"]
+        if getattr(default, "prior_", None) is not None:
+            parts.append(f"prior share {1.0 - default.blend_:.3g}")
+        if getattr(default, "sigma0_", None) is not None:
+            parts.append("pre-sliding state")
+        res_model = ", ".join(parts)
         big, out = os.path.join(tmp, "big.parquet"), os.path.join(tmp, "out.parquet")
         big_file(log_path, args.rows, big)
         times = {"plain pyarrow": [], "default": [], "--ensemble 5": []}
@@ -67,9 +75,9 @@ def main(argv=None) -> dict:
                 times["plain pyarrow"].append(run.plain_pyarrow_s(big, out))
                 times[name].append(run.run_cli(["predict", models[name], big, "-o", out], 1))
     plain = statistics.median(times["plain pyarrow"])
-    res = {"rows": args.rows, "times_s": times, "ratios": {}, "train_base": summaries}
+    res = {"rows": args.rows, "times_s": times, "ratios": {}, "train_base": summaries, "default_model": res_model}
     print(f"{args.rows:,} rows, velocities all different; plain pyarrow {plain:.2f} s (median of "
-          f"{len(times['plain pyarrow'])})")
+          f"{len(times['plain pyarrow'])}); the default model: {res_model}")
     for name in ("default", "--ensemble 5"):
         secs = statistics.median(times[name])
         res["ratios"][name] = plain / secs
