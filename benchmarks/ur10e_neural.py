@@ -4,7 +4,7 @@ days, and adapt on one run of a day scored on another run of the same day.
     python benchmarks/ur10e_neural.py                 # both tables (about 10 minutes on 2 cores)
     python benchmarks/ur10e_neural.py --part base     # the train-base table only
     python benchmarks/ur10e_neural.py --part adapt --json out.json
-    python benchmarks/ur10e_neural.py --part base --train-base-option=--no-folds   # one network, one fold
+    python benchmarks/ur10e_neural.py --part base --train-base-option=--ensemble=5   # the mean of five networks
     python benchmarks/ur10e_neural.py --part base --train-base-option=--bristles=off  # no pre-sliding state
     python benchmarks/ur10e_neural.py --part base --train-base-option=--no-prior      # the network alone
 
@@ -227,7 +227,7 @@ def main() -> None:
     parser.add_argument("--json", default=None, help="also write the figures to this file")
     parser.add_argument("--train-base-option", action="append", default=[], metavar="OPT",
                         help="add OPT to the base part's train-base command (repeatable), e.g. "
-                             "--train-base-option=--no-folds")
+                             "--train-base-option=--ensemble=5")
     args = parser.parse_args()
     if not os.path.isdir(os.path.join(args.data, "identification")):
         raise SystemExit(f"no UR10e data at {args.data}")

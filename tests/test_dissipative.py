@@ -279,7 +279,7 @@ def ensemble(tmp_path_factory):
     d = tmp_path_factory.mktemp("ensemble")
     log_path = write(harmonic_log(seed=8, seconds=30.0), d / "harmonic.parquet")
     log = logs.load_log(str(log_path))
-    model, summary = learning.train_base(log, steps=150, seed=1)
+    model, summary = learning.train_base(log, steps=150, seed=1, ensemble=5)
     path = str(d / "ensemble.npz")
     models.save_for_log(path, model, log, rows_used=summary["train_rows"], seed=1, fit=summary)
     return {"log": str(log_path), "model": model, "summary": summary, "path": path}

@@ -494,12 +494,17 @@ def test_train_base_says_it_trains_on_the_moving_rows(harmonic, tmp_path):
     result = run("train-base", harmonic["log"], "-o", tmp_path / "m.npz", "--steps", 20)
     assert result.exit_code == 0, result.stderr
     assert "rows in motion" in result.stderr and "no steady velocity levels" in result.stderr
-    assert "the mean of 5 networks, each validated on 2 of 10 time blocks" in result.stderr
-    one = run("train-base", harmonic["log"], "-o", tmp_path / "one.npz", "--steps", 20, "--no-folds", "--json")
-    assert one.exit_code == 0, one.stderr
-    out = json.loads(one.stdout)
-    assert "cross_validation" not in out and out["val_rows"] > 0 and "validation in 2 of 10 time blocks" in one.stderr
-    assert len(models.load(str(tmp_path / "one.npz"))[0].nets_) == 1
+    assert "one network on all of them" in result.stderr and "2 of 10 time blocks held out" in result.stderr
+    assert len(models.load(str(tmp_path / "m.npz"))[0].nets_) == 1
+    five = run("train-base", harmonic["log"], "-o", tmp_path / "five.npz", "--steps", 20, "--ensemble", 5, "--json")
+    assert five.exit_code == 0, five.stderr
+    out = json.loads(five.stdout)
+    assert out["cross_validation"]["folds"] == 5 and "held_out_choice" not in out
+    assert "the mean of 5 networks, each validated on 2 of 10 time blocks" in five.stderr
+    assert len(models.load(str(tmp_path / "five.npz"))[0].nets_) == 5
+    # more networks than folds of time blocks: one line on stderr, exit code 6 (DATA)
+    many = run("train-base", harmonic["log"], "-o", tmp_path / "many.npz", "--steps", 20, "--ensemble", 6)
+    assert many.exit_code == 6 and "needs 6 folds of time blocks" in many.stderr and "Traceback" not in many.stderr
     levels = run("train-base", write(motion_log(LEVELS, seed=1), tmp_path / "b.parquet"), "-o", tmp_path / "b.npz",
                  "--steps", 20)
     assert "velocity levels" in levels.stderr and "rows in motion" not in levels.stderr
@@ -548,7 +553,7 @@ class _Curve:
     def __init__(self, steps):
         self.steps = steps
 
-    def fit(self, sig, target, val_sig, val_target, *, rng, on_eval=None):
+    def fit(self, sig, target, val_sig, val_target, *, rng, on_eval=None, stop=None):
         first = int(training_data.time_block(1000)[int(val_sig["t"][0])])
         m = {0: 1, 2: 1}.get(first, 8)
         self.history_val_ = (np.arange(self.steps // 10) - m) ** 2 + 1.0
@@ -557,6 +562,32 @@ class _Curve:
         self.rows = (sig["t"].astype(int), val_sig["t"].astype(int))
         _Curve.made.append(self)
         return self
+
+
+def test_trainings_side_by_side_stop_together_when_one_fails():
+    """A failure (or an interruption) in one training stops the others at their next loss record:
+    a command interrupted while two networks train does not wait for the other's steps."""
+    import threading
+    import time
+
+    stop = threading.Event()
+    report = learning.shared_progress(None, 100, 2, stop)
+    records = []
+
+    def fails():
+        time.sleep(0.05)
+        raise ValueError("diverged")
+
+    def trains():
+        for step in range(10 ** 6):   # far longer than the test allows, unless stopped
+            records.append(step)
+            report[1](step, 100, 0.0, None)
+            time.sleep(0.001)
+
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match="diverged"):
+        learning.run_parallel([fails, trains], stop)
+    assert stop.is_set() and len(records) < 10 ** 6 and time.perf_counter() - start < 60
 
 
 def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds():
@@ -569,8 +600,9 @@ def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds(
     folds = [np.array([k, k + 1]) for k in range(0, training_data.PIECES, 2)]
     cv = learning.cross_validated_steps(_Curve, 100, sig, np.zeros(n), np.arange(n), blocks, folds,
                                         np.random.default_rng(0))
+    assert sorted(map(id, cv["models"])) == sorted(map(id, _Curve.made))   # trained side by side
     # every fold validates on its own blocks and trains on all the others
-    for fold, held in zip(_Curve.made, folds):
+    for fold, held in zip(cv["models"], folds):
         train, val = fold.rows
         assert np.array_equal(val, np.flatnonzero(np.isin(blocks, held)))
         assert np.array_equal(train, np.flatnonzero(~np.isin(blocks, held)))
@@ -582,7 +614,7 @@ def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds(
 
 
 def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves_step(harmonic):
-    summary, model = harmonic["summary"], harmonic["model"]
+    model, summary = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
     cv = summary["cross_validation"]
     assert cv["folds"] == len(model.nets_) == 5 and len(cv["fold_best_steps"]) == 5
     # the weights are those of the step chosen on the pooled curve (recorded as the model's
@@ -591,6 +623,26 @@ def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves
     assert cv["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
     # every selected row served for training (in four folds of five) and none is set apart
     assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]
+    # the same seed gives the same networks, whichever thread trained which fold
+    again, _ = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
+    for a, b in zip(model.nets_, again.nets_):
+        np.testing.assert_array_equal(a.theta, b.theta)
+
+
+def test_train_base_on_continuous_excitation_trains_one_network_at_the_held_out_step(harmonic):
+    summary, model = harmonic["summary"], harmonic["model"]
+    choice = summary["held_out_choice"]
+    assert len(model.nets_) == 1 and "cross_validation" not in summary
+    # one network on every selected row, stopped at the step least on the probe's held-out blocks
+    assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]
+    assert summary["best_step"] == choice["step"] == model.eval_every_ * (int(np.argmin(model.history_val_)) + 1)
+    assert choice["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
+    # two networks trained side by side on spawned generators: the same seed, the same network
+    sig = load(harmonic["log"]).signals
+    last, _ = learning.train_base(load(harmonic["log"]), steps=300, seed=0)
+    np.testing.assert_array_equal(last.net_.theta, model.net_.theta)   # the same seed, the same network
+    assert "prior" in summary and 0.0 <= summary["prior"]["blend"] <= 1.0
+    assert np.isfinite(model.predict(sig)[0]).all()
 
 
 def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):

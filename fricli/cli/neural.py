@@ -49,6 +49,11 @@ def _rows_used(summary: dict, tau: str) -> str:
     if mode == "moving" and cv is not None:
         return (f"{rows} (the mean of {cv['folds']} networks, each validated on {summary['groups']} of "
                 f"{training_data.PIECES} time blocks, held-out RMS {cv['held_out_rmse']:.3g} {tau}; {why})")
+    choice = summary.get("held_out_choice")
+    if mode == "moving" and choice is not None:
+        return (f"{rows} (one network on all of them, stopped at step {choice['step']:,}: the best on "
+                f"{summary['groups']} of {training_data.PIECES} time blocks held out from a second network, "
+                f"held-out RMS {choice['held_out_rmse']:.3g} {tau}; {why})")
     if mode == "moving":
         return (f"{rows} ({val} for validation in {summary['groups']} of "
                 f"{training_data.PIECES} time blocks; {why})")

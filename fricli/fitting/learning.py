@@ -4,6 +4,8 @@ figures; the command line saves and prints them."""
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
@@ -17,7 +19,8 @@ from fricli.models.base import FrictionModel, predict_parts
 from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
-from fricli.numerics.threads import pinned
+from fricli.numerics.nn.training import Stopped
+from fricli.numerics.threads import pinned, single_threaded
 
 LONG_ADAPT_S = 300.0     # s: adapt says that a minute would do when it is given more than this
 
@@ -61,6 +64,7 @@ MIN_GAIN = 0.01
 SIGNIFICANCE = 2.0
 FOLDS = 2
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
+WORKERS = 2   # trainings run side by side (numpy releases the GIL; each trains on one BLAS thread)
 
 
 def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -86,7 +90,7 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               folds: bool = True, bristles: str = "on", prior: bool = True,
+               ensemble: int = 1, bristles: str = "on", prior: bool = True,
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch``) on the friction target of ``log``: ``train`` on the log's
     signals with the generator of ``seed``."""
@@ -94,14 +98,14 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                  hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr, batch_size=batch_size,
                  rng=np.random.default_rng(seed), val_fraction=val_fraction, balance=balance,
                  max_samples=max_samples, velocity_input=velocity_input, velocity_scale=velocity_scale,
-                 folds=folds, bristles=bristles, prior=prior, on_eval=on_eval)
+                 ensemble=ensemble, bristles=bristles, prior=prior, on_eval=on_eval)
 
 
 def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: dict, rng: np.random.Generator,
           arch: str = DEFAULT_ARCH, hidden: tuple[int, ...] | None = None, steps: int | None = None,
           schedule: str = "cosine", patience: int | None = None, lr: float = 0.01, batch_size: int = 0,
           val_fraction: float = 0.2, balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
-          velocity_input: str = "asinh", velocity_scale: float | None = None, folds: bool = True,
+          velocity_input: str = "asinh", velocity_scale: float | None = None, ensemble: int = 1,
           bristles: str = "on", prior: bool = True, on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch`` dissipative, mlp, selmic or nnacm) on signals ``sig`` (n,) each
     against the friction target ``target`` (n,) [Nm] (``name``: the log's name for messages;
@@ -110,10 +114,13 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     A log of constant-velocity sweeps trains on its velocity levels (``training_data``), rows
     slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
     trains on its rows in motion (``metrics.in_motion``) and validates on whole blocks of time
-    (summary "velocity_groups": "moving"); there the dissipative network (with ``folds``) is the
-    mean of one network per fold of ``training_data.time_folds``, every one stopped at the step
-    of the least validation loss pooled over the folds (``cross_validated_steps``; summary
-    "cross_validation"), while the other networks validate on one fold. At rest the friction
+    (summary "velocity_groups": "moving"). There the dissipative network is one network trained
+    on every row in motion, at the step, prior share and pre-sliding choice that a network trained
+    on the rows outside the held-out blocks showed best on them (``chosen_on_held_out``; summary
+    "held_out_choice"); with ``ensemble`` N > 1 it is the mean of one network per fold of
+    ``training_data.time_folds`` (the first N folds), every one stopped at the step of the least
+    validation loss pooled over the folds (``cross_validated_steps``; summary "cross_validation").
+    The other networks validate on one fold. At rest the friction
     is held by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
@@ -162,15 +169,20 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
                            batch_size=batch_size, units=units, schedule=trainer_schedule, patience=patience,
                            velocity_scale=None if velocity_input == "linear" else (velocity_scale or "auto"))
 
-    cv = prior_summary = None
-    if sel.mode == "moving" and sel.val.size and folds and arch == "dissipative":
-        # continuous excitation: one network per fold of time blocks, all stopped at the step
-        # of the least mean validation loss, and the model their mean
+    cv = prior_summary = choice = None
+    if ensemble < 1:
+        raise ValueError("ensemble must be at least 1")
+    if sel.mode == "moving" and sel.val.size and ensemble > 1 and arch == "dissipative":
+        # continuous excitation, an ensemble asked for: one network per fold of time blocks, all
+        # stopped at the step of the least mean validation loss, and the model their mean
         rows = np.union1d(sel.train, sel.val)
+        folds = training_data.time_folds(val_fraction, rng)
+        if ensemble > len(folds):
+            raise DataError(f"{name}: an ensemble of {ensemble} networks needs {ensemble} folds of time blocks; "
+                            f"--val-fraction {val_fraction:g} gives {len(folds)}")
         model = new_model(steps)
         model.set_scales(subset(sig, rows), target[rows])
-        cv = cross_validated_steps(new_model, steps, sig, target, rows, sel.blocks,
-                                   training_data.time_folds(val_fraction, rng), rng, on_eval,
+        cv = cross_validated_steps(new_model, steps, sig, target, rows, sel.blocks, folds[:ensemble], rng, on_eval,
                                    scales_from=model, snapshots=True)
         members, held = cv.pop("models"), cv.pop("held")
         for fold in members:
@@ -194,6 +206,21 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             check = bristle_check(members, splits, sig, target)
             if bristles == "on" or check["helps"]:
                 model.fit_bristles(sig, target, np.flatnonzero(moving))
+    elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
+        # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
+        rows, train_rows = np.union1d(sel.train, sel.val), sel.train
+        model, probe, choice = chosen_on_held_out(new_model, steps, sig, target, sel.train, sel.val, rng, on_eval)
+        sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+        block = training_data.time_block(moving.size)
+        held = np.unique(block[choice.pop("val_rows")])
+        split = (np.flatnonzero(moving & ~np.isin(block, held)), np.flatnonzero(moving & np.isin(block, held)))
+        if prior:
+            # the prior share from the probe (its prior fitted on its training rows), held-out rows scoring
+            prior_summary = blend_prior(model, [probe], [train_rows], [split[1]], sig, target, rows, units)
+        if bristles != "off":
+            check = bristle_check([probe], [split], sig, target)
+            if bristles == "on" or check["helps"]:
+                model.fit_bristles(sig, target, np.flatnonzero(moving))
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
@@ -213,6 +240,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
                "log": metrics.errors(target, pred)}
     if cv is not None:
         summary["cross_validation"] = cv
+    if choice is not None:
+        summary["held_out_choice"] = choice
     if sel.val.size:
         summary["val"] = _errors(target, pred, sel.val)
     if getattr(model, "v_ps_", None) is not None:
@@ -357,6 +386,85 @@ def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarr
     return {"static_rmse": static, "bristles_rmse": state, "helps": bool(state <= (1.0 - MIN_GAIN) * static)}
 
 
+def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
+                       target: np.ndarray, train: np.ndarray, val: np.ndarray, rng: np.random.Generator,
+                       on_eval: Callable | None = None) -> tuple[FrictionModel, FrictionModel, dict]:
+    """One network on every row (``train`` and ``val``, indices into ``sig`` and ``target`` (n,)
+    [Nm]) stopped at the step that a probe network, trained on ``train`` alone, shows best on
+    the held-out rows ``val``.
+
+    Both train at once (``WORKERS`` threads), with the same scales (those of every row), the
+    same steps and learning-rate schedule and the same initial weights (generators of one seed
+    drawn from ``rng``): the model is the probe's network trained on more rows, so the probe's
+    best step carries over to it, early steps included. The full model
+    records its weights at every loss record and keeps those of the probe's best record.
+    Returns (model, probe, summary): the probe stays fitted for the choices made on its
+    held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
+    chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
+    """
+    rows = np.union1d(train, val)
+    model, probe = new_model(steps), new_model(steps)
+    model.set_scales(subset(sig, rows), target[rows])
+    seed = int(rng.integers(2 ** 63))
+    seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
+    stop = threading.Event()
+    progress = shared_progress(on_eval, 2 * steps, 2, stop)
+    jobs = ((probe, (subset(sig, train), target[train], subset(sig, val), target[val]),
+             dict(rng=seeds[0], scales_from=model, on_eval=progress[0], stop=stop)),
+            (model, (subset(sig, rows), target[rows]),
+             dict(rng=seeds[1], scales_from=model, on_eval=progress[1], snapshots=True, stop=stop)))
+    run_parallel([lambda m=m, a=a, k=k: m.fit(*a, **k) for m, a, k in jobs], stop)
+    record = min(int(np.argmin(probe.history_val_)), len(model.snapshots_) - 1)
+    model.net_.theta[...] = model.snapshots_[record]
+    model.snapshots_ = None
+    model.set_members([model.net_], sig["qd"][rows])   # the extrapolation from the weights kept
+    model.best_step_ = min((record + 1) * model.eval_every_, steps)
+    model.history_val_ = np.asarray(probe.history_val_)
+    model.n_val_ = 0
+    return model, probe, {"step": int(model.best_step_), "val_rows": val,
+                          "held_out_rmse": float(np.sqrt(probe.history_val_[record])) * probe.y_scale_}
+
+
+def run_parallel(tasks: list[Callable[[], object]], stop: threading.Event | None = None) -> list:
+    """Run the calls ``tasks`` on ``WORKERS`` threads (BLAS pinned to one thread each, set from
+    this thread); their results in order. numpy releases the GIL in its array work, so two
+    trainings take about the time of one on two cores. When this thread is interrupted (Ctrl-C,
+    SIGTERM) or a task fails, ``stop`` is set, which the tasks' progress callbacks
+    (``shared_progress``) and trainers (``Trainer``'s ``stop``) turn into an exception, and the interruption
+    is raised once every task has ended."""
+    if len(tasks) <= 1:
+        return [task() for task in tasks]
+    with single_threaded(), ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        futures = [pool.submit(task) for task in tasks]
+        try:
+            return [f.result() for f in futures]
+        except BaseException:
+            if stop is not None:
+                stop.set()
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def shared_progress(on_eval: Callable | None, total: int, parts: int = 2,
+                    stop: threading.Event | None = None) -> list[Callable]:
+    """``parts`` progress callbacks for trainings that run at once: each reports the sum of the
+    steps all of them have done, out of ``total``, through ``on_eval`` (None: no report; one call
+    at a time), and raises ``Stopped`` once ``stop`` is set."""
+    done, lock = [0] * parts, threading.Lock()
+
+    def part(k: int) -> Callable:
+        def report(step, _total, train_loss, val_loss):
+            if stop is not None and stop.is_set():
+                raise Stopped("stopped")
+            if on_eval is not None:
+                with lock:
+                    done[k] = step
+                    on_eval(sum(done), total, train_loss, val_loss)
+        return report
+    return [part(k) for k in range(parts)]
+
+
 def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
                           target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
                           rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
@@ -373,22 +481,23 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     "curve" (the pooled curve [Nm^2]), "models" (the K fitted models) and "held" (the blocks each
     of them held out).
     """
-    done = 0
-    curves, weights, fitted, held_out = [], [], [], []
+    splits = []
     for held in folds:
         is_val = np.isin(blocks[rows], held)
         train, val = rows[~is_val], rows[is_val]
-        if not train.size or not val.size:
-            continue
-        model = new_model(steps)
-        fold_eval = None if on_eval is None else fold_progress(on_eval, done, len(folds) * steps)
-        model.fit(subset(sig, train), target[train], subset(sig, val), target[val], rng=rng, on_eval=fold_eval,
-                  **fit_kwargs)
-        done += steps
-        curves.append(np.asarray(model.history_val_) * model.y_scale_ ** 2)
-        weights.append(val.size)
-        fitted.append(model)
-        held_out.append(held)
+        if train.size and val.size:
+            splits.append((held, train, val))
+    seeds = rng.spawn(len(splits))
+    stop = threading.Event()
+    progress = shared_progress(on_eval, len(splits) * steps, len(splits), stop)
+    fitted = [new_model(steps) for _ in splits]
+    run_parallel([lambda m=m, tv=tv, r=r, p=p: m.fit(subset(sig, tv[1]), target[tv[1]], subset(sig, tv[2]),
+                                                     target[tv[2]], rng=r, on_eval=p, stop=stop,
+                                                     **fit_kwargs)
+                  for m, tv, r, p in zip(fitted, splits, seeds, progress)], stop)
+    curves = [np.asarray(model.history_val_) * model.y_scale_ ** 2 for model in fitted]
+    weights = [val.size for _, _, val in splits]
+    held_out = [held for held, _, _ in splits]
     if not curves:
         raise DataError("no fold of time blocks holds both training and validation rows")
     length = min(c.size for c in curves)
@@ -397,14 +506,6 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
     step = min((best + 1) * fitted[0].eval_every_, steps)
     return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
             "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted, "held": held_out}
-
-
-def fold_progress(on_eval: Callable, offset: int, total: int) -> Callable:
-    """One fold's ``on_eval``: its steps counted after the ``offset`` steps of the folds before,
-    out of ``total`` over all folds."""
-    def report(step, _fold_total, train_loss, val_loss):
-        on_eval(offset + step, total, train_loss, val_loss)
-    return report
 
 
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:

@@ -175,9 +175,11 @@ TRAIN_BASE = (
     Option("val_fraction", "float", 0.2,
            "Share of every constant-velocity stretch held out for validation, in whole pieces (a log without "
            "velocity levels: whole blocks of time).", low=0, high=0.9),
-    Option("no_folds", "flag", False,
-           "On a log without velocity levels, train one network validated on one fold of time blocks instead of "
-           "the mean of one network per fold (dissipative; five times faster, more dependent on the seed)."),
+    Option("ensemble", "int", 1,
+           "On a log without velocity levels: the mean of N networks, one per fold of time blocks, each validated "
+           "on its fold (dissipative; N at most 1 / --val-fraction; trained two at a time). 1: one network "
+           "trained on every row, at the step, prior share and pre-sliding choice held-out blocks showed best.",
+           low=1, metavar="N"),
     Option("no_balance", "flag", False,
            "Train on every row instead of the same number of rows per velocity level."),
     Option("max_samples", "int", learning.DEFAULT_MAX_SAMPLES,

@@ -243,7 +243,7 @@ def _train_options(opts: dict) -> dict:
     """train-base's options as the keyword arguments of ``learning.train_base`` and ``train_group``."""
     return dict(arch=opts["arch"], hidden=opts["hidden"], steps=opts["steps"], schedule=opts["schedule"],
                 patience=opts["patience"], lr=opts["lr"], batch_size=opts["batch_size"], seed=opts["seed"],
-                val_fraction=opts["val_fraction"], folds=not opts["no_folds"], balance=not opts["no_balance"],
+                val_fraction=opts["val_fraction"], ensemble=opts["ensemble"], balance=not opts["no_balance"],
                 max_samples=opts["max_samples"], velocity_input=opts["velocity_input"],
                 velocity_scale=opts["velocity_scale"], bristles=opts["bristles"],
                 prior=not opts["no_prior"])

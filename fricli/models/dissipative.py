@@ -171,7 +171,7 @@ class DissipativeFriction(FrictionModel):
     def fit(self, sig: dict[str, np.ndarray], target: np.ndarray, val_sig: dict[str, np.ndarray] | None = None,
             val_target: np.ndarray | None = None, *, rng: np.random.Generator,
             on_eval: Callable | None = None, scales_from: "DissipativeFriction | None" = None,
-            snapshots: bool = False) -> "DissipativeFriction":
+            snapshots: bool = False, stop=None) -> "DissipativeFriction":
         """Train on signals ``sig`` (moving rows already selected) against ``target`` (n,) [Nm].
 
         ``scales_from``: a model whose scales (``set_scales``) to take instead of fitting them
@@ -203,7 +203,7 @@ class DissipativeFriction(FrictionModel):
                     on_eval(*args)
         trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
                           batch_size=self.batch_size, eval_every=self.eval_every, on_eval=record,
-                          schedule=self.schedule, patience=self.patience)
+                          schedule=self.schedule, patience=self.patience, stop=stop)
         trainer.fit(net, x, y, xv, tv, rng=rng)
         self.net_ = net
         record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])

@@ -173,6 +173,10 @@ def sse(net: Network, x: np.ndarray, t: np.ndarray) -> float:
     return Evaluator(net, x, t).sse()
 
 
+class Stopped(Exception):
+    """A training stopped from outside (``Trainer``'s ``stop``)."""
+
+
 class Trainer:
     """Adam on the mean squared error.
 
@@ -188,6 +192,8 @@ class Trainer:
                 else training) falling below (1 - min_delta) times its best, the learning rate
                 is multiplied by ``lr_factor``, from the best weights so far, up to ``lr_drops``
                 times; after one more such stretch training stops. None = run every step.
+    stop        an event (``threading.Event``) checked at every step: once set, ``fit`` raises
+                ``Stopped`` (a training run beside others that are being stopped)
     schedule    "constant": Adam at ``lr`` throughout; "cosine": the learning rate falls from
                 ``lr`` to ``lr_final`` over the steps as lr_final + (lr - lr_final) (1 + cos(pi s / S)) / 2
     """
@@ -196,7 +202,7 @@ class Trainer:
                  batch_size: int = 0, eval_every: int | None = None,
                  on_eval: Callable[[int, int, float, float | None], None] | None = None,
                  patience: int | None = None, min_delta: float = 1e-3, lr_drops: int = 0, lr_factor: float = 0.3,
-                 schedule: str = "constant", lr_final: float = 0.0):
+                 schedule: str = "constant", lr_final: float = 0.0, stop=None):
         if steps is None and epochs is None:
             raise ValueError("give steps or epochs")
         if epochs is not None and batch_size <= 0:
@@ -207,6 +213,7 @@ class Trainer:
         self.batch_size, self.eval_every, self.on_eval = int(batch_size), eval_every, on_eval
         self.patience, self.min_delta, self.lr_drops, self.lr_factor = patience, min_delta, lr_drops, lr_factor
         self.schedule, self.lr_final = schedule, lr_final
+        self.stop = stop
 
     def fit(self, net: Network, x: np.ndarray, t: np.ndarray, x_val: np.ndarray | None = None,
             t_val: np.ndarray | None = None, rng: np.random.Generator | None = None) -> "Trainer":
@@ -274,6 +281,8 @@ class Trainer:
         def step_done(step: int, loss: float, grad: np.ndarray) -> bool:
             """Apply the step; True when training should stop early."""
             self._check(loss, step)
+            if self.stop is not None and self.stop.is_set():
+                raise Stopped(f"stopped at step {step}")
             if cosine:
                 opt.lr = self.lr_final + 0.5 * (self.lr - self.lr_final) * (1.0 + math.cos(math.pi * (step - 1) / total))
             opt.step(net.theta, grad)
