@@ -43,7 +43,8 @@ def motion_log(levels, seed=0, rate=50.0, seconds=6.0, shift=False, rest=0.4, no
     g = 30 * np.sin(2 * q + 0.3)
     f = static_friction(qd, g, shift)
     tau_m = g + f + rng.normal(0, noise, qd.size)
-    cols = {"t": t, "q": q, "qd": qd, "qdd": np.zeros_like(t), "tau_m": tau_m, "tau_g": g, "tau_f_true": f}
+    # no qdd column: zeros would contradict the steps of qd (read as not measured, with a note)
+    cols = {"t": t, "q": q, "qd": qd, "tau_m": tau_m, "tau_g": g, "tau_f_true": f}
     return no_inertia(table_from_arrays(cols, UNITS))   # no inertia torque in tau_m
 
 
