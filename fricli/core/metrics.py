@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from fricli.core.errors import DataError
+
 
 def errors(y: np.ndarray, y_pred: np.ndarray) -> dict[str, float]:
     """MAE, RMSE and max absolute error of y_pred against y, shapes (n,)."""
@@ -65,3 +67,13 @@ def in_motion(qd: np.ndarray, share: float = REST_SHARE) -> np.ndarray:
     speed = np.abs(qd)
     top = float(speed.max()) if speed.size else 0.0
     return speed > share * top if top > 0 else np.zeros(speed.shape, dtype=bool)
+
+
+def moving_both_ways(qd: np.ndarray, what: str) -> np.ndarray:
+    """The rows in motion (``in_motion``), (n,) bool; DataError naming ``what`` (e.g. "the linear
+    model") when none of them moves in one of the two directions."""
+    moving = in_motion(qd)
+    for name, side in (("positive", qd > 0), ("negative", qd < 0)):
+        if not (moving & side).any():
+            raise DataError(f"no rows in motion with {name} velocity: {what} needs motion in both directions")
+    return moving

@@ -107,10 +107,7 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
         raise DataError("the GMS model needs the position q (its elements deflect with it)")
     q = np.asarray(signals["q"], dtype=np.float64)
     qd = np.asarray(signals["qd"], dtype=np.float64)
-    moving = metrics.in_motion(qd)
-    for name, side in (("positive", qd > 0), ("negative", qd < 0)):
-        if not (moving & side).any():
-            raise DataError(f"no rows in motion with {name} velocity: the GMS model needs motion in both directions")
+    moving = metrics.moving_both_ways(qd, "the GMS model")
     y = logs.friction_target(signals)
     tau_g = signals.get("tau_g")
     load = tau_g is not None and bool(metrics.load_can_show(np.abs(tau_g[moving]), y[moving]))

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from fricli.core import logs, metrics
-from fricli.core.errors import DataError, FitError
+from fricli.core.errors import FitError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 
@@ -125,10 +125,7 @@ def fit(signals: dict[str, np.ndarray], *, asymmetric: bool = False,
     model and its fit record: errors [Nm] over all rows and (``moving``) the rows in motion,
     ``moving_rows`` and the condition number of the regressor."""
     qd = np.asarray(signals["qd"], dtype=np.float64)
-    moving = metrics.in_motion(qd)
-    for name, side in (("positive", qd > 0), ("negative", qd < 0)):
-        if not (moving & side).any():
-            raise DataError(f"no rows in motion with {name} velocity: the linear model needs motion in both directions")
+    moving = metrics.moving_both_ways(qd, "the linear model")
     y = logs.friction_target(signals)
     X = np.column_stack(regressors(qd[moving], asymmetric))
     theta, *_ = np.linalg.lstsq(X, y[moving], rcond=None)
