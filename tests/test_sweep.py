@@ -306,16 +306,22 @@ def test_a_log_without_units_is_noted_at_run_time(tmp_path, model):
     assert res.exit_code == 0 and "no column carries a unit" not in res.stderr, res.stderr
 
 
-def test_a_line_break_in_a_joint_name_stays_escaped_in_success_lines(tmp_path):
-    table = pq.read_table(log_file(tmp_path))
-    table = table.append_column("joint", pa.array(["wrist\nroll"] * table.num_rows))
-    pq.write_table(table, tmp_path / "named.parquet")
+def named_log_and_model(tmp_path, log_name):
+    """A log of joint "wrist\\nroll" saved as ``log_name`` and a linear model of that joint: (log, model)."""
     from fricli.models.linear import LinearFriction
 
+    table = pq.read_table(log_file(tmp_path))
+    table = table.append_column("joint", pa.array(["wrist\nroll"] * table.num_rows))
+    pq.write_table(table, tmp_path / log_name)
     model = tmp_path / "lin.npz"
     models.save(str(model), LinearFriction(1.0, 5.0), joint="wrist\nroll", axis="rotary",
                 units=logs.CANONICAL["rotary"], provenance={})
-    res = CliRunner().invoke(cli, ["estimate-ext", str(model), str(tmp_path / "named.parquet"), "-o",
+    return tmp_path / log_name, model
+
+
+def test_a_line_break_in_a_joint_name_stays_escaped_in_success_lines(tmp_path):
+    log, model = named_log_and_model(tmp_path, "named.parquet")
+    res = CliRunner().invoke(cli, ["estimate-ext", str(model), str(log), "-o",
                                    str(tmp_path / "o.parquet")])
     assert res.exit_code == 0, res.stderr
     for line in res.stderr.splitlines():
@@ -324,15 +330,8 @@ def test_a_line_break_in_a_joint_name_stays_escaped_in_success_lines(tmp_path):
 
 
 def test_a_line_break_in_a_joint_name_stays_escaped_in_the_evaluation_table(tmp_path):
-    table = pq.read_table(log_file(tmp_path))
-    table = table.append_column("joint", pa.array(["wrist\nroll"] * table.num_rows))
-    pq.write_table(table, tmp_path / "named\nlog.parquet")
-    from fricli.models.linear import LinearFriction
-
-    model = tmp_path / "lin.npz"
-    models.save(str(model), LinearFriction(1.0, 5.0), joint="wrist\nroll", axis="rotary",
-                units=logs.CANONICAL["rotary"], provenance={})
-    res = CliRunner().invoke(cli, ["evaluate", "--model", str(model), "--log", str(tmp_path / "named\nlog.parquet")])
+    log, model = named_log_and_model(tmp_path, "named\nlog.parquet")
+    res = CliRunner().invoke(cli, ["evaluate", "--model", str(model), "--log", str(log)])
     assert res.exit_code == 0, res.stderr
     assert "named\\nlog friction MAE" in res.stdout, res.stdout
     for line in res.stdout.splitlines():
