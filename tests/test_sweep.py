@@ -64,6 +64,16 @@ def fricli(args, cwd, prelude="", env=None, **kwargs):
 # ------------------------------------------------------------------ devices, pipes, stdin
 
 
+def finish(proc, timeout: float, why: str) -> str:
+    """The stderr of ``proc`` once it ends; the test fails with ``why`` if it runs past ``timeout`` s."""
+    try:
+        return proc.communicate(timeout=timeout)[1]
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        pytest.fail(why)
+
+
 @pytest.mark.parametrize("where", ["log", "model"])
 def test_a_device_or_a_named_pipe_is_refused_before_it_is_read(tmp_path, model, where):
     fifo = tmp_path / "fifo"
@@ -72,12 +82,7 @@ def test_a_device_or_a_named_pipe_is_refused_before_it_is_read(tmp_path, model, 
     for path in ("/dev/zero", str(fifo)):
         args = ["predict", str(model), path] if where == "log" else ["predict", path, str(log)]
         proc = fricli([*args, "-o", "out.parquet"], tmp_path)
-        try:
-            out, err = proc.communicate(timeout=60)   # a FIFO without a writer would block its open for ever
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
-            pytest.fail(f"{path} as {where} was read without end")
+        err = finish(proc, 60, f"{path} as {where} was read without end")   # a FIFO without a writer would block its open
         code = errors.INPUT if where == "log" else errors.MODEL
         assert proc.returncode == code, err
         assert err.splitlines() == [f"fricli: error: {path}: is {'a device' if path == '/dev/zero' else 'a named pipe'}"
@@ -105,12 +110,7 @@ def test_stdin_from_a_device_stops_at_the_limit(tmp_path):
     with open("/dev/zero", "rb") as zero:
         proc = fricli(["identify", "-", "-o", "m.npz"], tmp_path, stdin=zero,
                       prelude="import fricli.core.files as f\nf.STDIN_LIMIT = 1 << 22\n")
-        try:
-            _, err = proc.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
-            pytest.fail("an endless stdin was read without end")
+        err = finish(proc, 60, "an endless stdin was read without end")
     assert proc.returncode == errors.INPUT, err
     assert err.splitlines() == [f"fricli: error: stdin: more than {1 << 22:,} bytes on stdin (the limit); write the "
                                 "input to a file and give its path"]
@@ -122,12 +122,7 @@ def test_sigterm_is_honoured_while_stdin_is_read(tmp_path):
     proc.stdin.flush()
     time.sleep(3)   # the interpreter is up and reading
     proc.send_signal(signal.SIGTERM)
-    try:
-        _, err = proc.communicate(timeout=30)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
-        pytest.fail("SIGTERM was not honoured while stdin was read")
+    err = finish(proc, 30, "SIGTERM was not honoured while stdin was read")
     assert proc.returncode == errors.TERMINATED, err
     assert err.splitlines() == ["fricli: terminated"]
 
