@@ -228,10 +228,15 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
 
     robot = None
     if calibrated:
+        opts = _calibrate_options(table_, urdf)
+        if if_changed:
+            _exit_if_up_to_date(log, output, opts, (table_, digest), source, quiet)
         before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
         cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet,
                                  calibrate_friction or cb.LOOP_FRICTION)
-        results, folder_run = _fix_refitted(table_, digest, name, output, source, report), True
+        results, folder_run = fit_joints("diagnose", log, output, lambda made: report(made, refitted=True),
+                                         if_changed=if_changed, quiet=quiet, source=source, read=(table_, digest),
+                                         refit=True, opts=opts)
         robot = _calibrated_record(before, results, cal, calibrated)
     elif fix:
         results, folder_run = fit_joints("diagnose", log, output, report, if_changed=if_changed, quiet=quiet,
@@ -249,31 +254,29 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
             emit_results(results, folder_run)
 
 
-def _fix_refitted(table, digest: str, name: str, output: str, source, report) -> dict:
-    """--fix after --calibrate: each joint's base model refitted on the recomputed log
-    (``fix.refit``), diagnosed and fixed there, written under the job's record and lock as
-    ``fricli.fitting.runs`` writes a fixed model; {joint: report(made)}."""
+def _calibrate_options(table, urdf: str | None) -> dict:
+    """diagnose's options for --fix --calibrate, with the sha256 of the URDF the robot model is
+    calibrated from (an input of the models written, for --if-changed) when it is there."""
     from fricli.core import jobs
-    from fricli.fitting import runs
     from fricli.cli.options import command_options
-    from fricli.fitting.diagnosis.fix import refit
 
     opts = command_options("diagnose")
-    pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
-    results = {}
+    path = _urdf_of(table, urdf)
+    if path is not None and os.path.isfile(path):
+        opts["urdf_sha256"] = jobs.file_sha256(path)
+    return opts
 
-    def work(j):
-        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j], refitted=True)
-        out = modelset.path_for(folder, data.joint)
-        base, meta = models.load(pairs[j])
-        base = refit(base, data)
-        job = runs.record("diagnose", opts, data, pairs[j])
-        with jobs.output_lock(out):
-            made = runs.fix_model(base, data, out, opts, job, pairs[j], meta, refitted_on_calibrated_log=True)
-        results[j] = report(made, refitted=True)
 
-    modelset.each_joint(list(pairs), work)
-    return results
+def _exit_if_up_to_date(log: str, output: str, opts: dict, read: tuple, source, quiet: bool) -> None:
+    """--calibrate --if-changed: exit UNCHANGED before calibrating when every fixed model is up to date."""
+    from fricli.cli.options import time_window, up_to_date_line
+    from fricli.fitting import plan
+
+    fresh = plan.up_to_date("diagnose", log, output, opts, read=read, inputs=source, window=time_window())
+    if fresh is not None:
+        for outcome in fresh.outcomes:
+            say(up_to_date_line(outcome.output, outcome.digest, True), quiet)
+        click.get_current_context().exit(errors.UNCHANGED)
 
 
 def _urdf_of(table, urdf: str | None) -> str | None:

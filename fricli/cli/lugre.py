@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-import os
-
 import click
 
-from fricli.core import errors
 from fricli.cli import cli
-from fricli.cli.options import (check_outputs, command_options, common, emit_results, fit_joints, if_changed_option,
-                                json_flag, log_reading, output_option, read_log, say, spec_options, time_window,
-                                up_to_date_line, warn, wrote)
+from fricli.cli.options import (check_outputs, common, emit_results, fit_joints, if_changed_option, json_flag,
+                                log_reading, output_option, say, spec_options, warn, wrote)
 from fricli.models.lugre import PARAM_INFO, unit_of
 
 
@@ -75,11 +71,8 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
                 "parameters": {k: getattr(model, k).tolist() for k in model.names()},
                 "ratio": model.ratio.tolist(), "fit": fit}
 
-    if coupling:
-        results, folder_run = fit_coupled("identify", log, output, report, report_group, if_changed=if_changed,
-                                          quiet=quiet)
-    else:
-        results, folder_run = fit_joints("identify", log, output, report, if_changed=if_changed, quiet=quiet)
+    results, folder_run = fit_joints("identify", log, output, report, report_group=report_group,
+                                     if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)
 
@@ -115,81 +108,3 @@ def _report(data, model, fit, output, quiet) -> None:
     for warning in fit["warnings"]:
         warn(f"warning: {warning}")
     say(wrote(output), quiet)
-
-
-def fit_coupled(pipeline: str, log: str, output: str, report, report_group, *, if_changed: bool, quiet: bool,
-                progress=None) -> tuple[dict, bool]:
-    """``fit_joints`` for ``pipeline`` (identify, train-base) with --coupling: a joint of a coupled
-    group of the log's transmission brings its whole group into one model (DIR/joints_<a>_<b>.npz,
-    ``fricli.fitting.runs.run_group``; ``report_group(made, label)`` prints it and returns its JSON
-    result); the other joints get theirs (``report(made)``). ``progress(data)``: a trainer
-    progress callback with ``close()``, for a joint's log; ``progress(data, motor)`` for a group's motor."""
-    from fricli.core import joints, logs, modelset
-    from fricli.fitting import runs
-    from fricli.core.errors import LogError
-    from fricli.models import coupled
-    from fricli.core import transmission
-
-    opts = command_options(pipeline)
-    window = time_window()
-    window = window.to_json() if window else None
-    table, digest = read_log(log)
-    name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts, pipeline)
-    try:
-        tr = transmission.of_schema(table.schema.metadata)
-    except ValueError as exc:
-        raise LogError(f"{name}: {exc}") from None
-    if tr is None:
-        raise LogError(f"{name}: --coupling needs the log's transmission (written by fricli import from a mapping "
-                       "with a transmission, docs/drives.md); the log records none")
-    log_joints = logs.joints_of(table, name)
-    covered = joints.select(log_joints, opts["joint"], name)
-    groups = [tr.sub(g) for g in tr.coupled_groups()]
-    units, seen = [], set()
-    for j in covered:
-        group = next((g for g in groups if any(joints.same(j, x) for x in g.joints)), None)
-        key = tuple(map(str, group.joints)) if group else (str(j),)
-        if key not in seen:
-            seen.add(key)
-            units.append((j, group))
-    labels = {j: (", ".join(map(str, g.joints)) if g else j) for j, g in units}
-    folder = modelset.output_folder(output, [j for j, _ in units], log_joints, name)   # a group alone: one file
-    reading = {"kt": opts["kt"], "cutoff_hz": opts["cutoff"], "drop_invalid": opts["drop_invalid"], "warn": warn,
-               "zero": runs.zero(opts)}
-    results: dict = {}
-
-    def work(label):
-        j, group = next(u for u in units if labels[u[0]] == label)
-        if group is None:
-            data = runs.read(table, digest, name, opts, joint=j, warn=warn)
-            out = modelset.path_for(folder, j) if folder else output
-            on_eval = progress(data) if progress else None
-            try:
-                made = runs.run(pipeline, data, out, opts, if_changed=if_changed, window=window, on_eval=on_eval)
-            finally:
-                if on_eval is not None:
-                    on_eval.close()
-        else:
-            missing = [x for x in group.joints if not any(joints.same(x, y) for y in log_joints)]
-            if missing:
-                raise LogError(f"{name}: joint {j} shares motors with joints {joints.listed(missing)}, which the log "
-                               "does not hold: the coupled group needs every joint's rows")
-            _, datas = coupled.group_rows(table, list(group.joints), name, sha256=digest, **reading)
-            out = os.path.join(folder, modelset.group_file_name(group.joints)) if folder else output
-            made = runs.run_group(datas, group, out, opts, if_changed=if_changed, window=window, pipeline=pipeline,
-                                  progress=(lambda i: progress(datas[0], i)) if progress else None)
-        if made is None:
-            say(up_to_date_line(out, digest, False), quiet)
-            if folder is None:
-                click.get_current_context().exit(errors.UNCHANGED)
-            return
-        if group is None:
-            results[j] = report(made)
-            return
-        results[labels[j]] = report_group(made, labels[j])
-
-    modelset.each_joint([labels[j] for j, _ in units], work)
-    if folder and not results:
-        click.get_current_context().exit(errors.UNCHANGED)
-    return results, folder is not None

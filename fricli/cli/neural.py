@@ -180,14 +180,8 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
         return {"model": made.output, "log": made.data.name, "joints": list(model.joints), "kind": "coupled",
                 "ratio": model.ratio.tolist(), "seconds": round(made.seconds, 3), **summary}
 
-    if coupling:
-        from fricli.cli.lugre import fit_coupled
-
-        results, folder_run = fit_coupled("train-base", log, output, report, report_group, if_changed=if_changed,
-                                          quiet=quiet, progress=progress)
-    else:
-        results, folder_run = fit_joints("train-base", log, output, report, if_changed=if_changed, quiet=quiet,
-                                         progress=progress)
+    results, folder_run = fit_joints("train-base", log, output, report, report_group=report_group,
+                                     if_changed=if_changed, quiet=quiet, progress=progress)
     if as_json:
         emit_results(results, folder_run)
 

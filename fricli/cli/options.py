@@ -245,10 +245,9 @@ def time_window() -> timewindow.Window:
 def read_log(log: str):
     """(table, sha256) of LOG (- for stdin) with the rows of --from/--until; the sha256 is the
     whole file's (the window is recorded with the options, ``model_job``)."""
-    from fricli.core import logs
+    from fricli.fitting import plan
 
-    table, digest = logs.read_table(log)
-    return timewindow.slice_table(table, time_window(), "stdin" if log == "-" else log, warn=warn), digest
+    return plan.read_log(log, time_window(), warn)
 
 
 def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
@@ -331,50 +330,36 @@ def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
     return f"{out} is up to date: made from the same log ({digest[:12]}...) with the same {same}; nothing to do"
 
 
-def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool,
-               source=None, read=None, progress=None) -> tuple[dict, bool]:
-    """Run ``pipeline`` (``fricli.fitting.runs.run``) with the command's options for every joint LOG's run
-    covers (the joint rule, fricli.core.joints): one model file at OUTPUT, or one per joint in the
-    folder OUTPUT; ``report(made)`` prints what was made and returns its JSON result.
+def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool, source=None,
+               read=None, progress=None, report_group=None, refit: bool = False,
+               opts: dict | None = None) -> tuple[dict, bool]:
+    """Make ``pipeline``'s models with the command's options (``fricli.fitting.plan.fit_log``) and
+    report each: ``report(made)`` prints a joint's model and returns its JSON result,
+    ``report_group(made, label)`` a coupled group's (--coupling). ``source``, ``read``,
+    ``progress`` and ``refit`` as ``fit_log`` takes them (``inputs``, ``read``, ``progress``,
+    ``refit``); ``opts``: the options when not the running command's (``command_options``).
 
-    ``source``: the input models (``joints.Source``) of a command that starts from a model, each
-    joint paired with its own; ``read``: (table, sha256) of LOG when already read; ``progress(data)``:
-    a trainer progress callback with ``close()``. Returns ({joint: result} for the joints fitted,
-    whether OUTPUT is a folder). With --if-changed an up-to-date output is left untouched; exits
-    UNCHANGED (9) when every output is up to date. LOCKED (8) when another job holds an output."""
-    from fricli.core import logs, modelset
-    from fricli.fitting import runs
+    Returns ({joint or group label: result} for the models written, whether OUTPUT is a
+    folder). An up-to-date output (--if-changed) is said and left untouched; exits UNCHANGED
+    (9) when every output is up to date. LOCKED (8) when another job holds an output."""
+    from fricli.fitting import plan
 
-    ctx = click.get_current_context()
-    opts = command_options(pipeline)
-    window = time_window()
-    table, digest = read or read_log(log)
-    name = "stdin" if log == "-" else log
-    runs.check_table(table, name, opts, pipeline)
-    pairs, folder = modelset.plan(logs.joints_of(table, name), opts["joint"], output, name, source)
+    opts = command_options(pipeline) if opts is None else opts
     results: dict = {}
 
-    def work(j):
-        data = runs.read(table, digest, name, opts, joint=j, warn=warn, base=pairs[j])
-        out = modelset.path_for(folder, data.joint) if folder else output
-        on_eval = progress(data) if progress else None
-        try:
-            made = runs.run(pipeline, data, out, opts, base=pairs[j], if_changed=if_changed, on_eval=on_eval,
-                            window=window.to_json() if window else None)
-        finally:
-            if on_eval is not None:
-                on_eval.close()
-        if made is None:
-            say(up_to_date_line(out, digest, bool(pairs[j])), quiet)
-            if folder is None:
-                ctx.exit(errors.UNCHANGED)
-            return
-        results[j] = report(made)
+    def done(outcome) -> None:
+        if outcome.unchanged:
+            say(up_to_date_line(outcome.output, outcome.digest, outcome.base is not None), quiet)
+        elif outcome.group:
+            results[outcome.label] = report_group(outcome.made, outcome.label)
+        else:
+            results[outcome.label] = report(outcome.made)
 
-    modelset.each_joint(list(pairs), work)
-    if folder and not results:
-        ctx.exit(errors.UNCHANGED)
-    return results, folder is not None
+    run = plan.fit_log(pipeline, log, output, opts, inputs=source, read=read, window=time_window(),
+                       if_changed=if_changed, refit=refit, warn=warn, progress=progress, done=done)
+    if run.unchanged:
+        click.get_current_context().exit(errors.UNCHANGED)
+    return results, run.folder is not None
 
 
 def emit_results(results: dict, folder_run: bool) -> None:
