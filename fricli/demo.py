@@ -9,9 +9,8 @@ from typing import Callable
 from fricli import models
 from fricli.applying import evaluation, report
 from fricli.core import logs
-from fricli.fitting import learning
+from fricli.fitting import learning, plan
 from fricli.core.atomic import atomic_write_bytes
-from fricli.fitting.identify import LuGreIdentifier
 from fricli.applying.predicting import external_estimate
 from fricli.sim.samples import sample_path
 
@@ -25,6 +24,7 @@ LOWPASS_HZ = 5.0
 def run(out: str, *, data: str | None = None, joint: int = 2, steps: int | None = None, seed: int = 0,
         say: Callable[[str], None] = lambda s: None) -> dict:
     """Identify, train, adapt, evaluate and report into folder ``out``; returns the results.
+    Each model is the file the command of the same name writes (``fricli.fitting.plan``).
 
     data: folder with the sample logs (missing ones are simulated into ``out/data``); steps:
     Adam steps of the base networks (None: train-base's default).
@@ -32,26 +32,28 @@ def run(out: str, *, data: str | None = None, joint: int = 2, steps: int | None 
     os.makedirs(out, exist_ok=True)
     folder = data if data and os.path.isdir(data) else os.path.join(out, "data")
 
+    def log_path(name: str) -> str:
+        return sample_path(folder, f"joint{joint}_{name}")
+
     def load(name: str) -> logs.Log:
-        return logs.load_log(sample_path(folder, f"joint{joint}_{name}"))
+        return logs.load_log(log_path(name))
+
+    def make(pipeline: str, log: str, key: str, base: str | None = None, **options) -> None:
+        """The model ``fricli PIPELINE LOG -o KEY.npz`` writes with these options."""
+        plan.fit_log(pipeline, log, paths[key], options, inputs=base)
 
     base_log, adapt_log = load("base"), load("adapt")
     paths = {key: os.path.join(out, f"{key}.npz") for _, key in ROWS}
 
     say(f"identify: extended LuGre on {os.path.basename(base_log.name)}")
-    idf = LuGreIdentifier().fit(base_log.signals, units=base_log.units, axis=base_log.axis)
-    models.save_for_log(paths["lugre"], idf.model_, base_log, rows_used=len(base_log), fit=idf.fit_)
+    make("identify", log_path("base"), "lugre")
     for arch, key in ((learning.DEFAULT_ARCH, "nn_base"), ("selmic", "selmic"), ("nnacm", "nnacm")):
         say(f"train-base: {arch}, {steps or learning.default_steps(arch):,} full-batch Adam steps")
-        model, summary = learning.train_base(base_log, arch=arch, steps=steps, seed=seed)
-        models.save_for_log(paths[key], model, base_log, rows_used=summary["train_rows"], seed=seed, fit=summary)
+        make("train-base", log_path("base"), key, arch=arch, steps=steps, seed=seed)
     say(f"adapt: NN_add on the residual of NN_base over {os.path.basename(adapt_log.name)} "
         f"({adapt_log.signals['t'][-1] - adapt_log.signals['t'][0]:.1f} s, no external load)")
     for base_key, key in (("nn_base", "adapted"), ("lugre", "lugre_adapted")):
-        base, base_meta = models.load(paths[base_key])
-        adapted, summary = learning.adapt(base, adapt_log, seed=seed)
-        models.save_for_log(paths[key], adapted, adapt_log, rows_used=summary["rows_used"], seed=seed, fit=summary,
-                            envelope=base_meta.get("envelope"))
+        make("adapt", log_path("adapt"), key, base=paths[base_key], seed=seed)
 
     say("evaluate: friction and external torque on the extended logs")
     loaded = {key: models.load(path) for key, path in paths.items()}

@@ -1,14 +1,15 @@
-"""One fleet job: a pipeline (identify, train-base, adapt) on one (robot, joint, log), run by
-``fricli.fitting.runs`` like the command of the same name: a model written by the fleet is up to date
-for ``fricli identify ... --if-changed`` with the same options, and the other way round."""
+"""One fleet job: a pipeline (identify, train-base, adapt) on one (robot, joint, log), made by
+``fricli.fitting.plan`` like the command of the same name: a model written by the fleet is the
+bytes ``fricli identify`` writes with the same options, and up to date for its ``--if-changed``,
+and the other way round."""
 
 from __future__ import annotations
 
 import os
 import time
 
-from fricli.core import errors, logs
-from fricli.fitting import runs
+from fricli.core import errors
+from fricli.fitting import plan, runs
 from fricli.fleet.manifest import Job
 
 
@@ -44,10 +45,11 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
             os.makedirs(os.path.dirname(job.model), exist_ok=True)
         except OSError as exc:
             raise errors.OutputError(f"cannot write {job.model}: {exc.strerror or exc}") from None
-        table, out["sha256"] = logs.read_table(job.log)
-        runs.check_table(table, job.log, opts, job.pipeline)
-        made = runs.run(job.pipeline, runs.read(table, out["sha256"], job.log, opts, base=job.base), job.model, opts, base=job.base,
-                        if_changed=if_changed)
+        read = plan.read_log(job.log)
+        out["sha256"] = read[1]
+        outcome, = plan.fit_log(job.pipeline, job.log, job.model, opts, inputs=job.base, read=read,
+                                if_changed=if_changed).outcomes
+        made = outcome.made
         if made is None:
             out["status"] = "unchanged"
             return out
