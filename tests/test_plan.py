@@ -205,3 +205,23 @@ def test_a_time_window_is_recorded_and_read(arm, tmp_path):
     assert run.folder is None and len(run.outcomes[0].made.data) == 1200     # 60 % of the joint's 2000 rows
     assert (tmp_path / "lib.npz").read_bytes() == (tmp_path / "cmd.npz").read_bytes()
     assert models.load(str(tmp_path / "lib.npz"))[1]["provenance"]["job"]["options"]["window"] == window.to_json()
+
+
+def test_import_is_one_library_call(tmp_path):
+    """The command's log is the library's (``import_log``), and the library flags a time step no
+    controller samples at, as the command does."""
+    import pyarrow.parquet as pq
+    from test_import import MAPPING, mapping, rows
+
+    from fricli.robot import importing
+
+    (tmp_path / "map.toml").write_text(MAPPING.replace('unit = "s"', 'unit = "s", scale = 1e6'))
+    (tmp_path / "rec.csv").write_text("\n".join(rows()) + "\n")
+    res = invoke("import", tmp_path / "rec.csv", "--mapping", tmp_path / "map.toml", "-o", tmp_path / "cmd.parquet")
+    assert res.exit_code == 0, res.stderr
+    result = importing.import_log([str(tmp_path / "rec.csv")], mapping(MAPPING.replace('unit = "s"',
+                                                                                   'unit = "s", scale = 1e6')))
+    assert result.table.equals(pq.read_table(tmp_path / "cmd.parquet"))
+    assert [level for level, line in result.notices if "median time step is 1e+04 s" in line] == ["warning"]
+    assert [line for _, line in result.notices][0] in res.stderr
+    assert result.name == result.source == str(tmp_path / "rec.csv") and len(result.mapping.joints) == 2

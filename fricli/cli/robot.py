@@ -101,23 +101,6 @@ def _robot_notes(record: dict | None, name: str) -> list[str]:
     return out
 
 
-PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
-
-
-def _where(entry: dict, unit: str) -> str:
-    """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known; for a
-    recording in several files, each file's ('pos.csv: line 101; cur.csv: line 301')."""
-    if "files" in entry:
-        return "; ".join(f"{name}: {_where(d, unit)}" for name, d in entry["files"].items())
-    runs = entry.get(f"{unit}s")
-    if runs is None:
-        return f"first at {unit} {entry[f'first_{unit}']}"
-    shown = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs[:5])
-    more = f", ... ({len(runs)} runs)" if len(runs) > 5 else ""
-    return f"{unit}{'s' if entry['count'] != 1 else ''} {shown}{more}"
-
-
-
 def urdf_joint_names(pairs) -> dict[str, str]:
     """--urdf-joint JOINT=NAME pairs as {log joint: URDF joint name}."""
     names = {}
@@ -171,9 +154,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
       fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
     from fricli.core.logs import read_bytes, write_table
+    from fricli.robot import importing
     from fricli.robot import mapping as mp
-    from fricli.robot import rosbag
-    from fricli.robot.importing import build_log, import_files, import_recording
 
     recording = recordings[0]
     if template:
@@ -192,7 +174,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
             atomic_write_bytes(output, text.encode())
             say(f"wrote a skeleton mapping for {urdf} -> {output}: fill in and check it (docs/robot-import.md)", quiet)
         return
-    bag = rosbag.is_bag(recording)
+    bag = importing.is_bag(recording)
     if len(recordings) > 1 and (bag or mapping_path is None):
         raise click.UsageError("several recordings are the files of one text recording: give --mapping MAP.toml "
                                "with their 'files' (docs/robot-import.md)")
@@ -205,75 +187,20 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
     if (held or mapping.held) and urdf is None:
         raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
-    name = "stdin" if recording == "-" else recording
     if len(recordings) > 1 or mapping.files:
-        if len(recordings) != len(mapping.files):
-            raise LogError(f"{mapping_path}: the mapping names {len(mapping.files)} files "
-                           f"({', '.join(mapping.files) or 'none'}), but {len(recordings)} recordings were given")
+        importing.check_files(recordings, mapping, mapping_path)
         if "-" in recordings:
             raise click.UsageError("the files of a recording in several files cannot be read from stdin")
-        name = " + ".join(recordings)
-    if bag:
-        from fricli.robot.dynamics import held_joints
-
-        leave_out = held_joints(urdf, (*mapping.held, *held)) if urdf is not None else ()
-        read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward, leave_out=leave_out)
-        mapping = read.mapping
     payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
     payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
-    mp.apply_overrides(mapping, kt=kt_pairs, rotor_inertia=inertia_pairs,
-                       match=match, gravity=gravity or None, payload=payload, held=held)
-    model = None
-    if urdf is not None:
-        from fricli.robot.dynamics import load_model
-
-        model = load_model(urdf, mapping)
-    if bag:
-        extra = {"topic": read.topic, "stamps": read.stamps, "time_origin_ns": read.origin_ns,
-                 "reordered": None if read.reordered is None else
-                 {"count": read.reordered.count, "messages": read.reordered.ranges}}
-        result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff,
-                           unit="message", extra=extra)
-        for field, d in read.partly_empty.items():
-            warn(f"warning: {name}: {d.count} {'messages' if d.count != 1 else 'message'} on {read.topic} "
-                 f"{'hold' if d.count != 1 else 'holds'} no {field} "
-                 f"(first at message {d.first_line}): the {field} of every message is left out"
-                 + (" (qd and qdd are derived from the positions)" if field == "velocity" else ""))
-        if read.stamps == "receive":
-            say(f"note: {name}: the messages on {read.topic} all have the same header stamp (unset or set once): "
-                "t is the time the bag received them", quiet)
-        if read.standalone:
-            say(f"note: {name}: no rosbag2 metadata.yaml (a recording that did not end cleanly?): read "
-                f"{', '.join(read.standalone)} as {'it is' if len(read.standalone) == 1 else 'they are'}", quiet)
-        if read.unread:
-            warn(f"warning: {name}: {read.unread} of the messages the bag's metadata lists on {read.topic} could not "
-                 "be read (a damaged or unfinished file): they are missing from the log")
-    elif mapping.files:
-        result = import_files([read_bytes(r) for r in recordings], mapping, list(recordings), model=model,
-                              cutoff_hz=cutoff, drop_backward=drop_backward)
-    else:
-        result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff,
-                                  drop_backward=drop_backward)
-    unit = result.meta["counted_in"]
-    for kind, d in result.meta["dropped"].items():
-        rows = unit if unit == "message" else "row"
-        warn(f"warning: {name}: dropped {d['count']} {rows}{'s' if d['count'] != 1 else ''} with {d['what']} "
-             f"({_where(d, unit)}{': ' + d['example'] if d.get('example') else ''})")
-    if bag and read.reordered is not None:
-        d = read.reordered
-        warn(f"warning: {name}: {d.count} {'messages list' if d.count != 1 else 'message lists'} the joints in another order "
-             f"than most messages ({_where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name")
-    step = result.meta["time_step_s"]
-    if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
-        warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the time "
-             "column's unit in the mapping (s or ms; a scale for other units, e.g. 1e-9 for ns)")
-    if result.meta["i_m_left_out"]:
-        left = result.meta['i_m_left_out']
-        say(f"note: {name}: the effort of joint{'s' if len(left) > 1 else ''} {', '.join(left)} is a current and of the "
-            "others not: tau_m holds each joint's torque, and the log has no i_m column", quiet)
-    if result.meta["unterminated_last_line"]:
-        say(f"note: {name}: the last line (line {result.meta['unterminated_last_line']}) has no line end; it is "
-            "complete and kept", quiet)
+    result = importing.import_log(list(recordings), mapping, urdf=urdf, topic=topic, kt=kt_pairs,
+                                  rotor_inertia=inertia_pairs, match=match, gravity=gravity, payload=payload,
+                                  held=held, cutoff_hz=cutoff, drop_backward=drop_backward, mapping_name=mapping_path)
+    for level, line in result.notices:
+        if level == "warning":
+            warn(line)
+        else:
+            say(line, quiet)
     write_table(result.table, output)
     robot = result.meta["robot"]
     extra = ""
@@ -281,12 +208,12 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
         extra = f", tau_g and tau_dyn from {urdf} (joints matched by {robot['match']}{_derived_text(robot)})"
     where = "stdout" if output == "-" else output
     rows = f"{result.meta['rows']:,} {'messages' if bag else 'rows'}"
-    source = f"{read.topic} in {name}" if bag else name
+    name = result.name
     for line in _robot_notes(robot, name):
         say(line, quiet)
     for finding in (robot or {}).get("mapping_check", {}).get("findings", []):
         warn(f"warning: {name}: the mapping disagrees with {urdf}: {finding['message']}")
-    say(f"imported {rows} x {len(mapping.joints)} joints from {source}{extra} -> {where}", quiet)
+    say(f"imported {rows} x {len(result.mapping.joints)} joints from {result.source}{extra} -> {where}", quiet)
 
 
 @cli.command("dynamics")

@@ -29,6 +29,137 @@ class Imported:
     table: object                  # pyarrow.Table
     recording: Recording
     meta: dict
+    notices: list = dataclasses.field(default_factory=list)   # (warning | note, one line) of ``import_log``
+    mapping: Mapping | None = None   # the mapping imported with (a bag's: its joints filled in)
+    name: str = ""                   # the recording's name (stdin; several files' joined by +)
+    source: str = ""                 # what was imported: the name, or a bag's topic in it
+
+
+PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
+
+
+def is_bag(path: str) -> bool:
+    """True when ``path`` is a ROS bag (a rosbag2 folder or a ROS 1 .bag file)."""
+    from fricli.robot import rosbag
+
+    return rosbag.is_bag(path)
+
+
+def check_files(recordings: list[str], mapping: Mapping, mapping_name: str = "the mapping") -> None:
+    """LogError when a recording in several files (``mapping.files``) is not given as that many files."""
+    if (len(recordings) > 1 or mapping.files) and len(recordings) != len(mapping.files):
+        raise LogError(f"{mapping_name}: the mapping names {len(mapping.files)} files "
+                       f"({', '.join(mapping.files) or 'none'}), but {len(recordings)} recordings were given")
+
+
+def import_log(recordings: list[str], mapping: Mapping, *, urdf: str | None = None, topic: str | None = None,
+               kt=None, rotor_inertia=None, match: str | None = None, gravity=None, payload=None, held=(),
+               cutoff_hz: float | str | None = None, drop_backward: bool = False,
+               mapping_name: str = "the mapping") -> Imported:
+    """One long-format log of a recording: a ROS bag (``recordings[0]``, read with ``topic``), the
+    files of a recording in several files (``mapping.files``), or one delimited text file (- for
+    stdin), read with ``mapping`` and the overrides of the command line (``mapping.apply_overrides``:
+    ``kt``, ``rotor_inertia`` {joint: value}, ``match``, ``gravity``, ``payload``, ``held``); with
+    ``urdf`` tau_g and tau_dyn added (``cutoff_hz``: of the derived qd, qdd). ``Imported.notices``
+    holds the warnings and notes on what was dropped or assumed, in order."""
+    from fricli.core.logs import read_bytes
+    from fricli.robot import mapping as mp
+
+    recording = recordings[0]
+    bag = is_bag(recording)
+    check_files(recordings, mapping, mapping_name)
+    name = " + ".join(recordings) if len(recordings) > 1 or mapping.files else log_name(recording)
+    read = None
+    if bag:
+        from fricli.robot import rosbag
+        from fricli.robot.dynamics import held_joints
+
+        leave_out = held_joints(urdf, (*mapping.held, *held)) if urdf is not None else ()
+        read = rosbag.read_bag(recording, mapping, topic, drop_backward=drop_backward, leave_out=leave_out)
+        mapping = read.mapping
+    mp.apply_overrides(mapping, kt=kt, rotor_inertia=rotor_inertia, match=match, gravity=gravity or None,
+                       payload=payload, held=held)
+    model = None
+    if urdf is not None:
+        from fricli.robot.dynamics import load_model
+
+        model = load_model(urdf, mapping)
+    if bag:
+        extra = {"topic": read.topic, "stamps": read.stamps, "time_origin_ns": read.origin_ns,
+                 "reordered": None if read.reordered is None else
+                 {"count": read.reordered.count, "messages": read.reordered.ranges}}
+        result = build_log(read.recording, mapping, name, read.sha256, model=model, cutoff_hz=cutoff_hz,
+                           unit="message", extra=extra)
+    elif mapping.files:
+        result = import_files([read_bytes(r) for r in recordings], mapping, list(recordings), model=model,
+                              cutoff_hz=cutoff_hz, drop_backward=drop_backward)
+    else:
+        result = import_recording(read_bytes(recording), mapping, name, model=model, cutoff_hz=cutoff_hz,
+                                  drop_backward=drop_backward)
+    result.mapping, result.name, result.source = mapping, name, f"{read.topic} in {name}" if bag else name
+    result.notices = _notices(result.meta, name, read)
+    return result
+
+
+def log_name(path: str) -> str:
+    return "stdin" if path == "-" else path
+
+
+def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
+    """The warnings and notes of an import, in the order they are told."""
+    out = []
+    if read is not None:
+        for field, d in read.partly_empty.items():
+            out.append(("warning", f"warning: {name}: {d.count} {'messages' if d.count != 1 else 'message'} on "
+                        f"{read.topic} {'hold' if d.count != 1 else 'holds'} no {field} "
+                        f"(first at message {d.first_line}): the {field} of every message is left out"
+                        + (" (qd and qdd are derived from the positions)" if field == "velocity" else "")))
+        if read.stamps == "receive":
+            out.append(("note", f"note: {name}: the messages on {read.topic} all have the same header stamp (unset or "
+                        "set once): t is the time the bag received them"))
+        if read.standalone:
+            out.append(("note", f"note: {name}: no rosbag2 metadata.yaml (a recording that did not end cleanly?): "
+                        f"read {', '.join(read.standalone)} as "
+                        f"{'it is' if len(read.standalone) == 1 else 'they are'}"))
+        if read.unread:
+            out.append(("warning", f"warning: {name}: {read.unread} of the messages the bag's metadata lists on "
+                        f"{read.topic} could not be read (a damaged or unfinished file): they are missing from the log"))
+    unit = meta["counted_in"]
+    for d in meta["dropped"].values():
+        rows = unit if unit == "message" else "row"
+        out.append(("warning", f"warning: {name}: dropped {d['count']} {rows}{'s' if d['count'] != 1 else ''} with "
+                    f"{d['what']} ({where(d, unit)}{': ' + d['example'] if d.get('example') else ''})"))
+    if read is not None and read.reordered is not None:
+        d = read.reordered
+        out.append(("warning", f"warning: {name}: {d.count} {'messages list' if d.count != 1 else 'message lists'} "
+                    f"the joints in another order than most messages "
+                    f"({where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name"))
+    step = meta["time_step_s"]
+    if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+        out.append(("warning", f"warning: {name}: the median time step is {step:.3g} s, which no controller samples "
+                    "at: check the time column's unit in the mapping (s or ms; a scale for other units, e.g. 1e-9 "
+                    "for ns)"))
+    if meta["i_m_left_out"]:
+        left = meta["i_m_left_out"]
+        out.append(("note", f"note: {name}: the effort of joint{'s' if len(left) > 1 else ''} {', '.join(left)} is a "
+                    "current and of the others not: tau_m holds each joint's torque, and the log has no i_m column"))
+    if meta["unterminated_last_line"]:
+        out.append(("note", f"note: {name}: the last line (line {meta['unterminated_last_line']}) has no line end; "
+                    "it is complete and kept"))
+    return out
+
+
+def where(entry: dict, unit: str) -> str:
+    """'first at line 5', or 'lines 1-4, 9' from the runs of dropped lines when known; for a
+    recording in several files, each file's ('pos.csv: line 101; cur.csv: line 301')."""
+    if "files" in entry:
+        return "; ".join(f"{name}: {where(d, unit)}" for name, d in entry["files"].items())
+    runs = entry.get(f"{unit}s")
+    if runs is None:
+        return f"first at {unit} {entry[f'first_{unit}']}"
+    shown = ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs[:5])
+    more = f", ... ({len(runs)} runs)" if len(runs) > 5 else ""
+    return f"{unit}{'s' if entry['count'] != 1 else ''} {shown}{more}"
 
 
 def _signals(mapping: Mapping, rec: Recording, name: str) -> tuple[np.ndarray, list[dict], str]:
