@@ -67,7 +67,7 @@ class PriorStrength(click.ParamType):
 @output_option(help="The calibrated URDF (- for stdout).")
 @common
 def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consistency, edge, cutoff, report_file, as_json,
-                  output, quiet):
+                  output, quiet, window):
     """Identify the arm's rigid-body model and each joint's friction from one whole-arm log.
 
     LOG is a long-format log of every moving joint of the URDF (as fricli import writes it) with
@@ -86,7 +86,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     import json
 
     from fricli.core.atomic import atomic_write_bytes
-    from fricli.cli.options import _json_safe
+    from fricli.cli.options import json_safe
     from fricli.cli.robot import urdf_joint_names
     from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, held_of
     from fricli.robot import calibration as cb
@@ -98,7 +98,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     names = urdf_joint_names(urdf_pairs)
     if names and match is None:
         match = "name"
-    table, _ = read_log(log)
+    table, _ = read_log(log, window)
     name = "stdin" if log == "-" else log
     robot = load_model(urdf, Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity),
                                      held=held_of(table.schema)))
@@ -125,7 +125,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     report["report"] = where
     atomic_write_bytes(output, text.encode())
     if where:
-        body = json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
+        body = json.dumps(json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
         atomic_write_bytes(where, body.encode())
     say(f"calibrated {len(cal.joints)} joints of {urdf} on {report['rows']:,} rows of {name} -> {output} "
         f"(report: {where or 'none'})", quiet)

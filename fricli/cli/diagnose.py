@@ -125,7 +125,8 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
-                 urdf, calibrated, calibrate_friction, joint, kt, cutoff, drop_invalid, if_changed, as_json, quiet):
+                 urdf, calibrated, calibrate_friction, joint, kt, cutoff, drop_invalid, zero, window, if_changed, as_json,
+                 quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library
@@ -175,9 +176,9 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         if not os.path.isdir(folder):
             raise OutputError(f"cannot write {output}: folder {folder} does not exist")
     source = modelset.source(model)
-    reading = reading_kwargs(None, kt, cutoff, drop_invalid)
+    reading = reading_kwargs(None, kt, cutoff, drop_invalid, zero)
     del reading["joint"]
-    table_, digest = read_log(log)
+    table_, digest = read_log(log, window)
     name = "stdin" if log == "-" else log
     pairs = modelset.paired(source, table_, name, joint)
     several = len(pairs) > 1
@@ -230,17 +231,17 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
     if calibrated:
         opts = _calibrate_options(table_, urdf)
         if if_changed:
-            _exit_if_up_to_date(log, output, opts, (table_, digest), source, quiet)
+            _exit_if_up_to_date(log, output, opts, (table_, digest), source, window, quiet)
         before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
         cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet,
                                  calibrate_friction or cb.LOOP_FRICTION)
         results, folder_run = fit_joints("diagnose", log, output, lambda made: report(made, refitted=True),
-                                         if_changed=if_changed, quiet=quiet, source=source, read=(table_, digest),
-                                         refit=True, opts=opts)
+                                         window=window, if_changed=if_changed, quiet=quiet, source=source,
+                                         read=(table_, digest), refit=True, opts=opts)
         robot = _calibrated_record(before, results, cal, calibrated)
     elif fix:
-        results, folder_run = fit_joints("diagnose", log, output, report, if_changed=if_changed, quiet=quiet,
-                                         source=source, read=(table_, digest))
+        results, folder_run = fit_joints("diagnose", log, output, report, window=window, if_changed=if_changed,
+                                         quiet=quiet, source=source, read=(table_, digest))
     else:
         results, folder_run = diagnose_all(table_), several
     if several and robot is None:
@@ -267,12 +268,12 @@ def _calibrate_options(table, urdf: str | None) -> dict:
     return opts
 
 
-def _exit_if_up_to_date(log: str, output: str, opts: dict, read: tuple, source, quiet: bool) -> None:
+def _exit_if_up_to_date(log: str, output: str, opts: dict, read: tuple, source, window, quiet: bool) -> None:
     """--calibrate --if-changed: exit UNCHANGED before calibrating when every fixed model is up to date."""
-    from fricli.cli.options import time_window, up_to_date_line
+    from fricli.cli.options import up_to_date_line
     from fricli.fitting import plan
 
-    fresh = plan.up_to_date("diagnose", log, output, opts, read=read, inputs=source, window=time_window())
+    fresh = plan.up_to_date("diagnose", log, output, opts, read=read, inputs=source, window=window)
     if fresh is not None:
         for outcome in fresh.outcomes:
             say(up_to_date_line(outcome.output, outcome.digest, True), quiet)
@@ -293,7 +294,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
 
     from fricli.core.atomic import atomic_write_bytes
     from fricli.cli.calibrate import report_path
-    from fricli.cli.options import _json_safe
+    from fricli.cli.options import json_safe
 
     path = _urdf_of(table, urdf)
     if path is None:
@@ -302,7 +303,7 @@ def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: b
     cal, text, new = cb.recalibrate(table, name, path, friction=friction,
                                     cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
     report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
-    atomic_write_bytes(report["report"], (json.dumps(_json_safe(report), indent=2, sort_keys=True, allow_nan=False)
+    atomic_write_bytes(report["report"], (json.dumps(json_safe(report), indent=2, sort_keys=True, allow_nan=False)
                                           + "\n").encode())
     atomic_write_bytes(output, text.encode())
     for line in cb.warnings(cal.report):

@@ -37,7 +37,7 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 @log_reading
 @json_flag
 @common
-def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invalid, as_json, quiet):
+def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invalid, zero, window, as_json, quiet):
     """Friction (and external-torque) MAE and RMS of every model on every log, as a table.
 
     The friction error is against the target tau_m + tau_ext - tau_g - tau_dyn; the
@@ -57,7 +57,8 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
     model_paths = _named(model_specs, "model")
     log_paths = _named(log_specs, "log")
     results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
-                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid), read=read_log)
+                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid, zero),
+                                  read=lambda log: read_log(log, window))
     if as_json:
         emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
     else:
@@ -84,7 +85,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
                    "estimate-ext; --lowpass 5 smooths it).")
 @log_reading
 @common
-def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, quiet):
+def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, zero, window, quiet):
     """PNG figures of MODEL on LOG and an index.html that shows them, each with a caption
     saying what it shows and how to read it, and the errors with their units (MAE, RMS, max).
 
@@ -104,9 +105,9 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, qui
     from fricli.models import coupled
 
     source = modelset.source(model)
-    table, digest = read_log(log)
+    table, digest = read_log(log, window)
     name = "stdin" if log == "-" else log
-    kwargs = reading_kwargs(None, kt, cutoff, drop_invalid)
+    kwargs = reading_kwargs(None, kt, cutoff, drop_invalid, zero)
     del kwargs["joint"]
     runs = []
     for j, path in modelset.paired(source, table, name, joint).items():

@@ -23,7 +23,7 @@ def _figures(errs: dict, unit: str) -> str:
 @json_flag
 @common
 def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribeck: bool, if_changed: bool,
-                 as_json: bool, quiet: bool, **_options) -> None:
+                 as_json: bool, quiet: bool, window, **_options) -> None:
     """Fit the extended LuGre friction model to LOG (- for stdin) and write it to a model file.
 
     Static parameters (Fc, Fs, vs, delta, Fv and the load slopes kc, ks) are fitted on the
@@ -71,7 +71,7 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
                 "parameters": {k: getattr(model, k).tolist() for k in model.names()},
                 "ratio": model.ratio.tolist(), "fit": fit}
 
-    results, folder_run = fit_joints("identify", log, output, report, report_group=report_group,
+    results, folder_run = fit_joints("identify", log, output, report, report_group=report_group, window=window,
                                      if_changed=if_changed, quiet=quiet)
     if as_json:
         emit_results(results, folder_run)

@@ -98,7 +98,7 @@ def _decision(summary: dict, tau: str) -> str:
 @if_changed_option
 @json_flag
 @common
-def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_options):
+def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, **_options):
     """Train a neural friction model on LOG and write it to MODEL.npz.
 
     The default network (--arch dissipative) predicts tau_f = tanh(qd / v_ps) * m with a
@@ -180,7 +180,7 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
         return {"model": made.output, "log": made.data.name, "joints": list(model.joints), "kind": "coupled",
                 "ratio": model.ratio.tolist(), "seconds": round(made.seconds, 3), **summary}
 
-    results, folder_run = fit_joints("train-base", log, output, report, report_group=report_group,
+    results, folder_run = fit_joints("train-base", log, output, report, report_group=report_group, window=window,
                                      if_changed=if_changed, quiet=quiet, progress=progress)
     if as_json:
         emit_results(results, folder_run)
@@ -195,7 +195,7 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, **_optio
 @if_changed_option
 @json_flag
 @common
-def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
+def adapt_cmd(base, log, output, if_changed, as_json, quiet, window, **_options):
     """Adapt BASE (any fricli model) to LOG by learning its residual: tau_f = base + NN_add(tau_g, sign(qd)).
 
     NN_add (ELU layers, --hidden; one of 30 units by default) is trained on the friction target minus BASE's
@@ -245,7 +245,7 @@ def adapt_cmd(base, log, output, if_changed, as_json, quiet, **_options):
     def progress(data):
         return _Progress(quiet, "adapt" + (f" joint {data.joint}" if data.joint is not None else ""))
 
-    results, folder_run = fit_joints("adapt", log, output, report, if_changed=if_changed, quiet=quiet,
+    results, folder_run = fit_joints("adapt", log, output, report, window=window, if_changed=if_changed, quiet=quiet,
                                      source=modelset.source(base), progress=progress)
     if as_json:
         emit_results(results, folder_run)

@@ -121,33 +121,27 @@ def common(f):
     return f
 
 
-def _window_bound(ctx: click.Context, param, value: str | None) -> None:
-    if value is not None:
-        try:
-            ctx.meta.setdefault("fricli.window", {})[param.name] = timewindow.Bound.parse(value)
-        except ValueError as exc:
-            raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
-
-
-def _declare_zero(ctx: click.Context, param, value: bool) -> bool:
-    from fricli.fitting import optionspec
-
-    if value:
-        ctx.meta.setdefault("fricli.zero", []).append(optionspec.ZERO_FLAGS[param.name])
-    return value
-
-
-def declared_zero() -> tuple[str, ...]:
-    """Robot-model columns declared zero by --no-gravity/--no-dynamics (docs/log-format.md)."""
-    ctx = click.get_current_context(silent=True)
-    return tuple(ctx.meta.get("fricli.zero", ())) if ctx else ()
+def _window_bound(ctx: click.Context, param, value: str | None):
+    if value is None:
+        return None
+    try:
+        return timewindow.Bound.parse(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
 def window_options(f):
-    """--from, --until: the rows read (``time_window``, ``read_log``; fricli.core.timewindow)."""
+    """--from, --until: the rows read, given to the command as ``window`` (a
+    ``fricli.core.timewindow.Window``; open without them)."""
+    command = f
+
+    @functools.wraps(command)
+    def windowed(*args, time_from=None, time_until=None, **params):
+        return command(*args, window=timewindow.Window(time_from, time_until), **params)
+
+    f = windowed
     for name in ("until", "from"):
-        f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", expose_value=False,
-                         callback=_window_bound,
+        f = click.option(f"--{name}", f"time_{name}", metavar="SECONDS|PERCENT%", callback=_window_bound,
                          help=f"Use only the rows {'from' if name == 'from' else 'before'} this time: seconds of the "
                               "log's t (12.5) or a share of its time span (60%). --until 60% and --from 60% split a "
                               "log in two (docs/tutorial.md).")(f)
@@ -156,16 +150,21 @@ def window_options(f):
 
 def log_reading(f):
     """--joint, --kt, --cutoff, --drop-invalid, --no-gravity, --no-dynamics: how a log is read (see
-    docs/log-format.md); --from, --until (``window_options``)."""
-    f = window_options(f)
+    docs/log-format.md); the robot-model columns declared zero are given to the command as
+    ``zero`` (a tuple of column names); --from, --until as ``window`` (``window_options``)."""
     from fricli.fitting.optionspec import READING, ZERO_FLAGS
 
+    command = f
+
+    @functools.wraps(command)
+    def declared(*args, **params):
+        zero = tuple(column for flag, column in ZERO_FLAGS.items() if params.pop(flag, False))
+        return command(*args, zero=zero, **params)
+
+    f = declared
     for opt in reversed(READING):
-        if opt.name in ZERO_FLAGS:   # read by declared_zero, like --from/--until by time_window
-            f = click.option(opt.flag, is_flag=True, expose_value=False, callback=_declare_zero, help=opt.help)(f)
-        else:
-            f = _click_option(opt)(f)
-    return f
+        f = click.option(opt.flag, is_flag=True, help=opt.help)(f) if opt.name in ZERO_FLAGS else _click_option(opt)(f)
+    return window_options(f)
 
 
 def json_flag(f):
@@ -217,47 +216,42 @@ def extrapolation_line(extrapolation: dict | None, joint=None) -> str | None:
             f"{extrapolation['of']:,}) lie outside the model's training envelope")
 
 
-def _json_safe(obj):
+def json_safe(obj):
     """``obj`` with NaN and infinite floats as None (JSON null): e.g. the MAE over no rows."""
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
+        return {k: json_safe(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
+        return [json_safe(v) for v in obj]
     return obj
 
 
 def emit_json(obj) -> None:
-    sys.stdout.write(json.dumps(_json_safe(obj), indent=2, sort_keys=True, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(json_safe(obj), indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
 def progress_enabled(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
-def time_window() -> timewindow.Window:
-    """The window --from/--until give (an open window without them)."""
-    bounds = click.get_current_context().meta.get("fricli.window", {})
-    return timewindow.Window(bounds.get("time_from"), bounds.get("time_until"))
-
-
-def read_log(log: str):
-    """(table, sha256) of LOG (- for stdin) with the rows of --from/--until; the sha256 is the
-    whole file's (the window is recorded with the options, ``model_job``)."""
+def read_log(log: str, window: timewindow.Window | None = None):
+    """(table, sha256) of LOG (- for stdin) with the rows of ``window`` (--from/--until); the
+    sha256 is the whole file's (the window is recorded with the options)."""
     from fricli.fitting import plan
 
-    return plan.read_log(log, time_window(), warn)
+    return plan.read_log(log, window, warn)
 
 
-def reading_kwargs(joint, kt, cutoff, drop_invalid) -> dict:
+def reading_kwargs(joint, kt, cutoff, drop_invalid, zero=()) -> dict:
     return {"joint": joint, "kt": kt, "cutoff_hz": cutoff, "drop_invalid": drop_invalid, "warn": warn,
-            "zero": declared_zero()}
+            "zero": tuple(zero)}
 
 
 # Options that do not change the model a command writes (arguments are files: the log is
 # recorded by its sha256, input models by theirs, ``fricli.fitting.runs.record``).
-_NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix"}
+# The window (--from/--until) is recorded apart, as ``window``.
+_NOT_SHAPING = {"output", "quiet", "as_json", "if_changed", "fix", "time_from", "time_until"}
 
 
 def _click_option(opt):
@@ -316,8 +310,8 @@ def command_options(pipeline: str) -> dict:
 
     ctx = click.get_current_context()
     arguments = {p.name for p in ctx.command.params if isinstance(p, click.Argument)}
-    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments}
-    given.update({flag: True for flag, column in optionspec.ZERO_FLAGS.items() if column in declared_zero()})
+    given = {k: v for k, v in ctx.params.items() if k not in _NOT_SHAPING | arguments
+             and not (k in optionspec.ZERO_FLAGS and not v)}   # a column declared zero is recorded, others not
     try:
         return runs.options(pipeline, given)
     except optionspec.OptionError as exc:
@@ -330,11 +324,11 @@ def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
     return f"{out} is up to date: made from the same log ({digest[:12]}...) with the same {same}; nothing to do"
 
 
-def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool, quiet: bool, source=None,
-               read=None, progress=None, report_group=None, refit: bool = False,
+def fit_joints(pipeline: str, log: str, output: str, report, *, window: timewindow.Window, if_changed: bool,
+               quiet: bool, source=None, read=None, progress=None, report_group=None, refit: bool = False,
                opts: dict | None = None) -> tuple[dict, bool]:
     """Make ``pipeline``'s models with the command's options (``fricli.fitting.plan.fit_log``) and
-    report each: ``report(made)`` prints a joint's model and returns its JSON result,
+    report each (``window``: --from/--until): ``report(made)`` prints a joint's model and returns its JSON result,
     ``report_group(made, label)`` a coupled group's (--coupling). ``source``, ``read``,
     ``progress`` and ``refit`` as ``fit_log`` takes them (``inputs``, ``read``, ``progress``,
     ``refit``); ``opts``: the options when not the running command's (``command_options``).
@@ -355,7 +349,7 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, if_changed: bool
         else:
             results[outcome.label] = report(outcome.made)
 
-    run = plan.fit_log(pipeline, log, output, opts, inputs=source, read=read, window=time_window(),
+    run = plan.fit_log(pipeline, log, output, opts, inputs=source, read=read, window=window,
                        if_changed=if_changed, refit=refit, warn=warn, progress=progress, done=done)
     if run.unchanged:
         click.get_current_context().exit(errors.UNCHANGED)

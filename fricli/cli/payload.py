@@ -19,7 +19,7 @@ from fricli.cli.options import Number, common, emit_json, read_log, say, window_
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
 @window_options
 @common
-def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet):
+def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
     """Identify the payload at FRAME from a whole-arm log imported with a URDF.
 
     A point mass and its centre of mass in FRAME's coordinates are fitted to what the robot model
@@ -34,7 +34,7 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet):
     """
     from fricli.robot import payload
 
-    table, _ = read_log(log)
+    table, _ = read_log(log, window)
     name = "stdin" if log == "-" else log
     found = payload.identify_log(table, name, frame, urdf=urdf, cutoff_hz=cutoff, edge_s=edge)
     for line in summary(found):

@@ -7,8 +7,8 @@ import click
 from fricli.applying import predicting
 from fricli.core import modelset
 from fricli.cli import cli
-from fricli.cli.options import (Number, common, declared_zero, emit_json, extrapolation_line, json_flag, log_reading,
-                                output_option, progress_enabled, say, time_window, warn)
+from fricli.cli.options import (Number, common, emit_json, extrapolation_line, json_flag, log_reading, output_option,
+                                progress_enabled, say, warn)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -32,7 +32,7 @@ def precision_option(f):
                              "as the code of fricli export).")(f)
 
 
-def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *,
+def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, *, zero, window,
          external: bool, lowpass=None, flag_extrapolation=False, precision="single"):
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
@@ -44,7 +44,7 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         return models.set_precision(model, precision), meta
 
     reading = predicting.Reading(joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid,
-                                 window=time_window(), batch_rows=batch_rows, zero=declared_zero())
+                                 window=window, batch_rows=batch_rows, zero=zero)
     outputs = predicting.Outputs(external=external, lowpass_hz=lowpass, flag_extrapolation=flag_extrapolation)
     bar = None
     if progress_enabled(quiet):
@@ -96,8 +96,8 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
 @precision_option
 @json_flag
 @common
-def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation, precision,
-                as_json, quiet):
+def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, zero, window, batch_rows, flag_extrapolation,
+                precision, as_json, quiet):
     """Predict friction with MODEL on LOG (- for stdin): writes the log with tau_f_pred added.
 
     Every column and its metadata is carried through. The friction error (MAE, RMSE, max)
@@ -114,8 +114,8 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
       fricli predict lugre.npz sample_data/joint2_extended_asym.parquet -o pred.parquet
       fricli simulate --scenario base --joint 2 --seed 2 -o - | fricli predict lugre.npz - -o - > pred.parquet
     """
-    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=False,
-         flag_extrapolation=flag_extrapolation, precision=precision)
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, zero=zero, window=window,
+         external=False, flag_extrapolation=flag_extrapolation, precision=precision)
 
 
 @cli.command("estimate-ext")
@@ -130,8 +130,8 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, batch_rows,
 @precision_option
 @json_flag
 @common
-def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, batch_rows, flag_extrapolation,
-                     precision, as_json, quiet):
+def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, zero, window, batch_rows,
+                     flag_extrapolation, precision, as_json, quiet):
     """Estimate the external torque on LOG with MODEL's friction: adds tau_f_pred and
     tau_ext_pred = tau_g + tau_dyn + tau_f_pred - tau_m.
 
@@ -143,5 +143,6 @@ def estimate_ext_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invali
     Example:
       fricli estimate-ext adapted.npz sample_data/joint2_extended_asym.parquet --lowpass 2 -o ext.parquet
     """
-    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, external=True,
+    _run(model, log, output, joint, kt, cutoff, drop_invalid, as_json, batch_rows, quiet, zero=zero, window=window,
+         external=True,
          lowpass=lowpass, flag_extrapolation=flag_extrapolation, precision=precision)
