@@ -125,8 +125,8 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
 @json_flag
 @common
 def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effects, no_carry, accept_implausible,
-                 urdf, calibrated, calibrate_friction, joint, kt, cutoff, drop_invalid, zero, window, if_changed, as_json,
-                 quiet):
+                 urdf, calibrated, calibrate_friction, joint, kt, cutoff, drop_invalid, zero, window, if_changed,
+                 as_json, quiet):
     """Find which physical effect MODEL is missing on LOG (- for stdin), and fix it.
 
     The residual (friction target minus the model's prediction) is tested against a library

@@ -148,6 +148,8 @@ def fit_log(pipeline: str, log: str, output: str, opts: dict, *, inputs=None, re
 
     A unit's FricliError does not stop the others (``modelset.each_joint``: PartialFailure after
     the rest). LockedError when another job holds an output."""
+    if refit and pipeline != "diagnose":
+        raise ValueError("refit applies to diagnose")
     name = log_name(log)
     opts = runs.options(pipeline, opts)
     table, digest = read if read is not None else read_log(log, window, warn)
@@ -155,9 +157,10 @@ def fit_log(pipeline: str, log: str, output: str, opts: dict, *, inputs=None, re
     units, folder = _plan(pipeline, table, name, output, opts, _source(inputs))
     recorded = window.to_json() if window else None
     outcomes = []
+    by_label = {u.label: u for u in units}
 
     def work(label):
-        unit = next(u for u in units if u.label == label)
+        unit = by_label[label]
         if unit.group is not None:
             made = _run_group(pipeline, unit, table, digest, name, opts, if_changed, recorded, warn, progress)
         elif refit:

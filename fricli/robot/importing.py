@@ -123,7 +123,8 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
                         f"{'it is' if len(read.standalone) == 1 else 'they are'}"))
         if read.unread:
             out.append(("warning", f"warning: {name}: {read.unread} of the messages the bag's metadata lists on "
-                        f"{read.topic} could not be read (a damaged or unfinished file): they are missing from the log"))
+                        f"{read.topic} could not be read (a damaged or unfinished file): they are missing from the "
+                        "log"))
     unit = meta["counted_in"]
     for d in meta["dropped"].values():
         rows = unit if unit == "message" else "row"
