@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fricli.core import effectnames as N
 from fricli.core.logs import KNOWN
 from fricli.models import terms as T
 # the context and base class, and the robot-model effects, importable from here as before
@@ -35,7 +36,7 @@ from fricli.fitting.diagnosis.torque_effects import (RATIO_BOUND, ROBOT_MODEL_TO
 
 
 class Offset(Effect):
-    name = "offset"
+    name = N.OFFSET
     description = "a constant (a bias in the torque measurement)"
     part = "model"
 
@@ -47,7 +48,7 @@ class Offset(Effect):
 
 
 class Level(Effect):
-    name = "level"
+    name = N.LEVEL
     description = "the model's Coulomb and viscous level changed as a whole"
 
     def terms(self, ctx, residual):
@@ -65,8 +66,8 @@ class Level(Effect):
 
 
 class Direction(Effect):
-    name = "direction"
-    rivals = (("level", "offset"),)
+    name = N.DIRECTION
+    rivals = ((N.LEVEL, N.OFFSET),)
     description = "separate Coulomb and viscous levels for positive and negative velocity"
 
     def applicable(self, ctx):
@@ -92,7 +93,7 @@ class _ScaledBy(Effect):
     """Level terms plus the level terms multiplied by a slowly varying signal's deviation."""
 
     signal = ""
-    rivals = (("level",),)
+    rivals = ((N.LEVEL,),)
     per = 1.0          # report slopes per this many units of the signal
 
     def center(self, ctx) -> float:
@@ -115,7 +116,7 @@ class _ScaledBy(Effect):
 
 
 class Temperature(_ScaledBy):
-    name = "temperature"
+    name = N.TEMPERATURE
     signal = "temp"
     description = "Coulomb and viscous levels scaled by the temperature deviation"
 
@@ -137,7 +138,7 @@ class Temperature(_ScaledBy):
 
 
 class Drift(_ScaledBy):
-    name = "drift"
+    name = N.DRIFT
     signal = "t"
     per = 3600.0
     description = "Coulomb and viscous levels growing with time (wear)"
@@ -162,8 +163,8 @@ class Drift(_ScaledBy):
 
 
 class Velocity(Effect):
-    name = "velocity"
-    rivals = (("level",),)
+    name = N.VELOCITY
+    rivals = ((N.LEVEL,),)
     description = "a smooth correction in qd (a wrong curve shape)"
     fractions = (0.05, 0.2, 0.6)
 
@@ -198,7 +199,7 @@ class Position(Effect):
     each direction's rows, each removed before the next is sought: not always harmonics of the
     strongest one (twice the wave generator's turn and its multiples, the motor's cogging)."""
 
-    name = "position"
+    name = N.POSITION
     description = "periodic in q (gear ripple)"
     peaks = 3
     max_bins = 1 << 20
@@ -291,11 +292,11 @@ class Position(Effect):
 class Column(Effect):
     """Another numeric column of the log: a Coulomb-like and an additive term in its deviation."""
 
-    rivals = (("level",),)
+    rivals = ((N.LEVEL,),)
 
     def __init__(self, column: str):
         self.column = column
-        self.name = f"column:{column}"
+        self.name = f"{N.COLUMN_PREFIX}{column}"
         self.description = f"friction depending on the column {column!r}"
 
     def applicable(self, ctx):
@@ -334,12 +335,13 @@ def extra_columns(signals: dict[str, np.ndarray]) -> list[str]:
 
 
 def library(signals: dict[str, np.ndarray], only: list[str] | None = None) -> list[Effect]:
-    """All candidate effects for these signals (``only``: names to keep, ``column`` = all columns)."""
+    """All candidate effects for these signals (``only``: names to keep, ``column`` = all columns; an
+    earlier name, ``fricli.core.effectnames.ALIASES``, stands for its effect)."""
     out: list[Effect] = [cls() for cls in BUILTIN]
     out += [Column(c) for c in extra_columns(signals)]
     if only:
-        keep = set(only)
-        out = [e for e in out if e.name in keep or (e.name.startswith("column:") and "column" in keep)]
+        keep = {N.canonical(name) for name in only}
+        out = [e for e in out if e.name in keep or (e.name.startswith(N.COLUMN_PREFIX) and N.COLUMN in keep)]
     return out
 
 
@@ -350,7 +352,7 @@ class Coupling(Effect):
     log records a coupled transmission. A per-joint model cannot follow a motor that turns with
     two joints; the remedy is one model of the group."""
 
-    name = "coupling"
+    name = N.COUPLING
     description = "friction moving with the joints it shares motors with (their velocities, the shared motors' directions)"
 
     @staticmethod

@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from fricli.core import effectnames as N
 from fricli.fitting.diagnosis.context import Context, Effect, _fmt, _par
 from fricli.models import terms as T
 
 
 class Acceleration(Effect):
-    name = "acceleration"
+    name = N.ACCELERATION
     description = "a term in qdd (inertia missing or wrong in tau_dyn)"
     part = "model"
 
@@ -102,7 +103,7 @@ def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
 
 
 class Load(Effect):
-    name = "load"
+    name = N.LOAD
     description = "Coulomb level growing with |tau_g|, the gravity load on the gear (its normal force)"
 
     def applicable(self, ctx):
@@ -126,7 +127,7 @@ class Payload(Effect):
     torque through the gear, |tau_l| with tau_l = tau_m - tau_dyn - p (motor torque minus inertia and friction),
     where the model sees only |tau_g|."""
 
-    name = "payload"
+    name = N.PAYLOAD
     description = "friction growing with |tau_l| - |tau_g|: the gear carries a load tau_g lacks (a payload)"
 
     def applicable(self, ctx):
@@ -158,7 +159,7 @@ class Gravity(Effect):
     """The logged gravity torque is off by a factor: the residual holds k*tau_g, at rest as in
     motion, and the true gravity torque is (1 + k) times the logged one."""
 
-    name = "gravity"
+    name = N.GRAVITY
     description = "the logged tau_g (the robot model's gravity) is off by a factor: a robot-model error"
     part = "model"
 
@@ -203,8 +204,8 @@ class Quadrant(Effect):
     kq*tau_g, held through rests at its value when the motion stopped (the bristles hold the
     friction they had), which tells it apart from an error of the logged gravity torque."""
 
-    name = "quadrant"
-    rivals = (("offset",),)
+    name = N.QUADRANT
+    rivals = ((N.OFFSET,),)
     description = "friction kq*|tau_g| higher when the joint drives against tau_g than when back-driven"
 
     def applicable(self, ctx):
