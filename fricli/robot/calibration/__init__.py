@@ -44,18 +44,22 @@ from fricli.numerics.threads import pinned
 
 # the parts (motion: the log and its motors; parameters: the regressor and the prior's scales; fit: the
 # estimates; report: the checks and tables; urdf: the calibrated URDF), every name importable from here
-from fricli.robot.calibration.motion import (Motion, read_motion, _log_transmission, motion_check_ratio,
-    motor_layout, motor_units, reflected, edge_rows, recorded_urdf, recorded_motion)
-from fricli.robot.calibration.parameters import (PARAMS, FRICTION, MIN_LENGTH, bodies, attached, moved,
-    parameter_names, regressor, stribeck_columns, _pin, cad_parameters, prior_scales, pseudo_inertia,
-    _from_pseudo, _random_regressor, base_parameters)
-from fricli.robot.calibration.fit import (PRIOR_GRID, PRIOR_FOLDS, PRIOR_START, UNDETERMINED, NUMERIC_ZERO,
-    MAX_ITERATIONS, _with_prior, choose_prior, _map_fit, _stribeck_rss, _TRIL, consistent_fit, _excitation)
-from fricli.robot.calibration.report import (SUSPICIOUS, TOLERANCE, OTHER_CAUSES, _motor_report,
-    _friction_report, body_inertias, link_table, _physical, _scale, whole_bodies, consistency, suspicious,
-    warnings, refuse_inconsistent)
-from fricli.robot.calibration.result import Calibration
-from fricli.robot.calibration.urdf import _set_inertial, calibrated_urdf
+from fricli.robot.calibration.motion import (Motion, edge_rows, _log_transmission, motion_check_ratio,  # noqa: F401
+                                             motor_layout, motor_units, read_motion, recorded_motion,
+                                             recorded_urdf, reflected)
+from fricli.robot.calibration.parameters import (FRICTION, MIN_LENGTH, PARAMS, attached, base_parameters,  # noqa: F401
+                                                 bodies, cad_parameters, _from_pseudo, moved,
+                                                 parameter_names, _pin, prior_scales, pseudo_inertia,
+                                                 _random_regressor, regressor, stribeck_columns)
+from fricli.robot.calibration.fit import (MAX_ITERATIONS, NUMERIC_ZERO, PRIOR_FOLDS, PRIOR_GRID,  # noqa: F401
+                                          PRIOR_START, _TRIL, UNDETERMINED, choose_prior, consistent_fit,
+                                          _excitation, _map_fit, _stribeck_rss, _with_prior)
+from fricli.robot.calibration.report import (OTHER_CAUSES, SUSPICIOUS, TOLERANCE, body_inertias,  # noqa: F401
+                                             consistency, _friction_report, link_table, _motor_report,
+                                             _physical, refuse_inconsistent, _scale, suspicious, warnings,
+                                             whole_bodies)
+from fricli.robot.calibration.result import Calibration  # noqa: F401
+from fricli.robot.calibration.urdf import calibrated_urdf, _set_inertial  # noqa: F401
 
 #: the friction fitted with the robot model by diagnose --calibrate, which refits each joint's friction
 #: model afterwards: the calibration's friction only has to keep friction out of the inertial
