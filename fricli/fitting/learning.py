@@ -14,7 +14,7 @@ from fricli.fitting import training_data
 from fricli.fitting.heldout import (FOLDS, MIN_GAIN, SIGNIFICANCE, WORKERS, chosen_on_held_out,  # noqa: F401
                                     cross_validate, cross_validated_steps, rms_ratio, run_parallel,
                                     shared_progress, subset)
-from fricli.fitting.identify import steady_state_mask
+from fricli.fitting.steady import steady_state_mask
 from fricli.core.envelope import share_outside
 from fricli.core.errors import DataError, FitError
 from fricli.models.base import FrictionModel, predict_parts
