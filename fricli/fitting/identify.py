@@ -17,9 +17,9 @@ region reflective, x_scale='jac'):
    fitted jointly on the whole log; a refinement that does not converge keeps its best iterate
    (or the two-stage estimate) with a note.
 
-Steady-state samples (``steady_state_mask``, in ``fricli.fitting.steady``): the velocity has kept its sign and stayed within
-``rel_tol``*|v| (plus a small absolute tolerance from the velocity noise) from a hold time before
-the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
+Steady-state samples (``steady_state_mask``, in ``fricli.fitting.steady``): the velocity has kept
+its sign and stayed within ``rel_tol``*|v| (plus a small absolute tolerance from the velocity
+noise) from a hold time before the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
 at that speed, whichever is longer. This keeps samples away from reversals and accelerations,
 where bristle dynamics and inertia errors would bias the static curve. Logs of continuous
 excitation have few such holds; when the log has tau_dyn (the inertia is out of the target),
