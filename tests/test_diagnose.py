@@ -467,7 +467,7 @@ def test_simulated_inertia_is_reported_in_kg_m2(lugre_base):
     from fricli import sim
 
     t2, log2 = _sim(2, "inertia")
-    missing = next(e for e in sim.metadata(t2)["effects"] if e["name"] == "inertia")["params"]["missing"]
+    missing = next(e for e in sim.metadata(t2)["effects"] if e["name"] == "acceleration")["params"]["missing"]
     d = diagnose(lugre_base, log2)
     par = d.effects[0].params["inertia"]
     assert par["unit"] == "kg m^2" and par["value"] == pytest.approx(missing, rel=0.05)

@@ -34,14 +34,14 @@ ALLOWED = {
     ("fitting/training_data.py", "a speed threshold"):
         "the lowest bin of the velocity histogram that finds a sweep's levels (LOW, below the in-motion share: "
         "a sweep's slowest levels), not a choice of rows in motion",
-    ("fitting/identify.py", "a speed threshold"):
+    ("fitting/steady.py", "a speed threshold"):
         "the velocity noise floor of steady-state and settled detection (NOISE_FLOOR, or four times the "
         "sample-to-sample velocity noise): rows whose velocity is known well enough to lie on the static "
         "curve (steady or settled), a question other than which rows move",
     ("applying/observer.py", "a speed threshold"):
         "the controller's rest speed (moving_speed, from the thresholds file, `fricli thresholds "
         "--moving-speed`): the observer runs causally, row by row, and knows no top speed of a log",
-    ("fitting/identify.py", "a share of the top speed"):
+    ("fitting/steady.py", "a share of the top speed"):
         "the same velocity noise floor of steady-state detection",
 }
 

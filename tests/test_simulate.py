@@ -212,7 +212,7 @@ def test_the_shifted_state_differs_from_base_by_tau_g_and_direction():
 
 # -------------------------------------------------------------------- effects
 
-FRICTION_EFFECTS = sorted(set(EFFECTS) - {"inertia", "offset", "payload", "gravity", "disturbance"})
+FRICTION_EFFECTS = sorted(set(EFFECTS) - {"acceleration", "offset", "payload", "gravity", "disturbance"})
 
 
 @pytest.mark.parametrize("scenario", ["extended", "base"])
@@ -252,8 +252,8 @@ def test_disturbance_is_a_periodic_torque_in_tau_m():
 
 def test_inertia_error_is_in_the_logged_tau_dyn():
     j = JOINTS[2]
-    clean, sig = signals(sim("extended", 2)), signals(sim("extended", 2, effects=("inertia",)))
-    missing = fx.EFFECTS["inertia"].default(j) * j.inertia
+    clean, sig = signals(sim("extended", 2)), signals(sim("extended", 2, effects=("acceleration",)))
+    missing = fx.EFFECTS["acceleration"].default(j) * j.inertia
     change = logs.friction_target(sig) - logs.friction_target(clean)
     np.testing.assert_allclose(change, missing * sig["qdd"], atol=1e-9)
     accelerating = np.abs(sig["qdd"]) > 0.5

@@ -18,24 +18,17 @@ the options --no-gravity/--no-dynamics, or the schema metadata key ``fricli.zero
 
 from __future__ import annotations
 
-import collections
-import contextlib
 import dataclasses
-import hashlib
 import json
-import os
-import shutil
-import sys
-import tempfile
-import weakref
 
 import numpy as np
-from fricli.core import files, joints, lazy
-from fricli.core.atomic import atomic_open
+from fricli.core import joints
 from fricli.core.errors import DataError, LogError
-
-pa = lazy.module("pyarrow")
-pq = lazy.module("pyarrow.parquet")
+# reading and writing Parquet, and the motion's filter and derivatives, importable from here as before
+from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
+                                 read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
+                                 write_table)
+from fricli.core.logs_motion import _contradicts, derive_motion, lowpass, lowpass_applies, not_measured  # noqa: F401
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -119,103 +112,6 @@ def _field_spelling(field: pa.Field, name: str) -> str:
         return canonical_unit(unit)
     except LogError:
         raise LogError(f"{name}: column {field.name!r} has an unknown unit {unit!r} (docs/log-format.md)") from None
-
-
-# ---------------------------------------------------------------------------- reading
-
-
-def read_bytes(path: str) -> bytes:
-    """Whole file (or stdin for ``-``) as bytes; stdin may be a pipe, so it is read first."""
-    if path == "-":
-        return files.read_stdin(LogError)
-    return files.read_bytes(path, LogError, "file", "log")
-
-
-def parquet_file(data: bytes, name: str) -> pq.ParquetFile:
-    if not data:
-        raise LogError(f"{name}: empty input, not a Parquet log")
-    try:
-        # an Arrow buffer, not a Python file object: pyarrow's reader threads reading through
-        # Python now and then abort the interpreter at exit ("terminate called without an active
-        # exception"); pre_buffer would keep a second copy
-        pf = pq.ParquetFile(pa.BufferReader(data), pre_buffer=False)
-    except Exception:  # pyarrow raises several types for corrupt input
-        raise LogError(not_parquet(name, data[:4])) from None
-    return unique_columns(pf, name)
-
-
-def unique_columns(pf: pq.ParquetFile, name: str) -> pq.ParquetFile:
-    """``pf``, or LogError when a column name appears twice (no column could be told which)."""
-    seen = collections.Counter(pf.schema_arrow.names)
-    twice = [c for c, k in seen.items() if k > 1]
-    if twice:
-        raise LogError(f"{name}: column {twice[0]!r} appears {seen[twice[0]]} times")
-    return pf
-
-
-def not_parquet(name: str, head: bytes) -> str:
-    """The message for input that is not Parquet; ``head``: its first bytes."""
-    if head == b"PAR1":   # a damaged Parquet file, not another format
-        return f"{name}: not a Parquet file"
-    return f"{name}: not a Parquet file (convert a CSV or other text recording with fricli import, docs/robot-import.md)"
-
-
-# Reading a large log in record batches: pyarrow's default pre_buffer keeps every column chunk
-# read so far until the file is closed (a 20-million-row log would end up in memory whole), and
-# without a buffer size a whole column chunk is read at once (a log written as one row group).
-STREAMING = {"pre_buffer": False, "buffer_size": 1 << 20}
-
-
-def stdin_parquet() -> pq.ParquetFile:
-    """stdin as a ParquetFile for reading in batches. Parquet needs random access (its footer
-    is at the end), so stdin is spooled to a temporary file in $TMPDIR rather than held in
-    memory. pyarrow reads it as its own file (not through a Python file object, as in
-    ``parquet_file``); the name is removed as soon as it is open, so nothing is left behind."""
-    try:
-        fd, spool = tempfile.mkstemp(prefix="fricli-stdin-")
-    except OSError as exc:
-        raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
-    try:
-        with os.fdopen(fd, "wb") as out:
-            size = 0
-            while chunk := sys.stdin.buffer.read(files.CHUNK):
-                out.write(chunk)
-                size += len(chunk)
-                if size > files.SPOOL_LIMIT:
-                    raise LogError(f"stdin: more than {files.SPOOL_LIMIT:,} bytes on stdin (the limit); write "
-                                   "the log to a file and give its path")
-        source = pa.OSFile(spool, "rb")
-    except OSError as exc:
-        raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
-    finally:
-        with contextlib.suppress(OSError):
-            os.unlink(spool)
-    if size == 0:
-        source.close()
-        raise LogError("stdin: empty input, not a Parquet log")
-    try:
-        pf = pq.ParquetFile(source, **STREAMING)
-    except Exception:
-        source.seek(0)
-        message = not_parquet("stdin", source.read(4))
-        source.close()
-        raise LogError(message) from None
-    weakref.finalize(pf, source.close)   # the ParquetFile reads the file but does not own it
-    return unique_columns(pf, "stdin")
-
-
-def read_table(path: str) -> tuple[pa.Table, str]:
-    """The whole table and the sha256 of the file's bytes."""
-    data = read_bytes(path)
-    name = "stdin" if path == "-" else path
-    pf = parquet_file(data, name)
-    try:
-        # every pyarrow read in fricli is single-threaded: its reader threads now and then abort
-        # the interpreter at exit on a loaded machine (docs/reliability.md)
-        table = pf.read(use_threads=False)
-    except Exception as exc:
-        raise LogError(f"{name}: cannot read Parquet data ({str(exc).splitlines()[0]})") from None
-    return table, hashlib.sha256(data).hexdigest()
 
 
 # ------------------------------------------------------------------------- the Log
@@ -477,69 +373,6 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     return mask
 
 
-def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
-    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below the Nyquist
-    frequency (by more than 1 ppm: a recorded sample rate carries rounding in its timestamps)."""
-    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t))) * (1 - 1e-6)
-
-
-def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
-    if not lowpass_applies(t, cutoff_hz):
-        return x.copy()
-    fs = 1.0 / float(np.median(np.diff(t)))
-    from scipy import signal  # imported here: it costs about a second at start-up
-
-    sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
-    # padded by the ends' odd reflection over three periods of the cut-off (scipy's default pads a
-    # few samples, so a low cut-off left a transient in the first and last tenth of a second)
-    return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
-
-
-def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:
-    """Whether a rate column constant over the rows (``rate``) contradicts the signal ``x`` it is
-    the derivative of: x departs from x[0] + rate (t - t[0]) by more than a tenth of its range (a
-    constant-velocity sweep, or a constant-acceleration ramp, agrees with it)."""
-    if len(x) < 3 or np.ptp(rate) != 0 or not np.ptp(x) > 0:
-        return False
-    return bool(np.max(np.abs(x - x[0] - rate[0] * (t - t[0]))) > 0.1 * np.ptp(x))
-
-
-def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
-    """Motion columns that cannot be measurements, as (column, note): an acceleration ``qdd``
-    constant over a log whose velocity varies otherwise (a column of zeros a recorder filled in),
-    a velocity ``qd`` constant while the position moves otherwise. Such a column is unknown, not a
-    value: the caller drops it and it is derived like a missing one."""
-    out, t = [], sig["t"]
-    if "q" in sig and "qd" in sig and _contradicts(sig["q"], sig["qd"], t):
-        out.append(("qd", f"the velocity column qd is constant ({sig['qd'][0]:g}) while the position moves "
-                          "otherwise: not a measurement, derived from q instead"))
-    if "qdd" in sig and "qd" in sig and not out and _contradicts(sig["qd"], sig["qdd"], t):
-        out.append(("qdd", f"the acceleration column qdd is constant ({sig['qdd'][0]:g}) while the velocity "
-                           "varies otherwise: not a measurement, derived from the velocity instead"))
-    elif "qdd" in sig and out and np.ptp(sig["qdd"]) == 0:
-        out.append(("qdd", "the acceleration column qdd is constant too: derived with the velocity"))
-    return out
-
-
-def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
-    """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
-    derived = []
-    t = sig["t"]
-    if len(t) < 3 and ("qd" not in sig or "qdd" not in sig):
-        raise DataError("too few samples to derive velocity and acceleration")
-    if "qd" not in sig:
-        sig["qd"] = np.gradient(lowpass(sig["q"], t, cutoff_hz), t)
-        derived.append("qd")
-        if "qdd" not in sig:
-            sig["qdd"] = np.gradient(sig["qd"], t)
-            derived.append("qdd")
-    elif "qdd" not in sig:
-        sig["qdd"] = np.gradient(lowpass(sig["qd"], t, cutoff_hz), t)
-        derived.append("qdd")
-    return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
-
-
 def _joint_values(table: pa.Table) -> np.ndarray:
     col = table.column("joint")
     if pa.types.is_integer(col.type) and not col.null_count:
@@ -654,27 +487,4 @@ def with_column(table: pa.Table, name: str, values: np.ndarray, unit: str | None
         return table.set_column(idx, field, array)
     return table.append_column(field, array)
 
-
-def parquet_options(schema: pa.Schema) -> dict:
-    """How fricli writes a log: zstd, no dictionaries (signals rarely repeat a value), float
-    columns byte-stream-split (about 40 % smaller for smooth signals, and faster to write)."""
-    floats = [f.name for f in schema if pa.types.is_floating(f.type)]
-    return {"compression": "zstd", "use_dictionary": False, "use_byte_stream_split": floats}
-
-
-def write_table(table: pa.Table, path: str) -> None:
-    """Write Parquet atomically (``-`` for stdout) with ``parquet_options``. Same table, same bytes."""
-    with atomic_open(path, binary=True) as fh:
-        pq.write_table(table, fh, **parquet_options(table.schema))
-
-
-def table_from_arrays(columns: dict[str, np.ndarray], units: dict[str, str]) -> pa.Table:
-    """A table with field metadata ``unit`` for every column named in ``units``."""
-    fields, arrays = [], []
-    for name, values in columns.items():
-        arr = pa.array(values)
-        unit = units.get(name)
-        fields.append(pa.field(name, arr.type, metadata={"unit": unit} if unit else None))
-        arrays.append(arr)
-    return pa.Table.from_arrays(arrays, schema=pa.schema(fields))
 

@@ -162,6 +162,19 @@ def emitter(*kinds: str):
     return register
 
 
+#: model kinds whose code is not one part with a per-joint step function (a coupled group): kind ->
+#: function (model, meta, prefix, sign function's name) -> the model's whole C code
+WHOLE: dict[str, Callable[[FrictionModel, dict, str, str], str]] = {}
+
+
+def whole_emitter(kind: str):
+    """Register a function (model, meta, prefix, sgn) -> C code for a kind with a step function of its own shape."""
+    def register(fn):
+        WHOLE[kind] = fn
+        return fn
+    return register
+
+
 def emit(model: FrictionModel, name: str, ctx: Context) -> Part:
     """The part of ``model`` under the symbol prefix ``name``."""
     _load_emitters()
@@ -280,9 +293,10 @@ class Entry:
 
 
 def _code(entry: Entry, sgn: str) -> str:
-    if entry.model.kind == "coupled":   # a group of joints: a step function of its own shape
-        from fricli.export.coupled import group_code
-        return group_code(entry.model, entry.meta, entry.prefix, sgn)
+    _load_emitters()
+    whole = WHOLE.get(entry.model.kind)   # a group of joints: a step function of its own shape
+    if whole is not None:
+        return whole(entry.model, entry.meta, entry.prefix, sgn)
     return model_code(entry.model, entry.meta, entry.prefix, sgn)
 
 

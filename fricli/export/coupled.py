@@ -20,7 +20,7 @@ step function takes the joint's ``qd`` and its partners' velocities ``qd@<joint>
 from __future__ import annotations
 
 from fricli.core.errors import ModelFileError
-from fricli.export.c import Context, Part, comment, emit, emitter, num
+from fricli.export.c import Context, Part, comment, emit, emitter, num, whole_emitter
 
 
 def motor_friction(model, i: int, w: str, sgn: str) -> str:
@@ -57,6 +57,7 @@ def member(model, name: str, ctx: Context) -> Part:
                 stateful=False)
 
 
+@whole_emitter("coupled")
 def group_code(model, meta: dict, prefix: str, sgn: str) -> str:
     """The public API of a coupled model under ``prefix``; ``sgn`` names the header's sign function."""
     k = len(model.joints)

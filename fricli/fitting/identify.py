@@ -17,9 +17,9 @@ region reflective, x_scale='jac'):
    fitted jointly on the whole log; a refinement that does not converge keeps its best iterate
    (or the two-stage estimate) with a note.
 
-Steady-state samples (``steady_state_mask``): the velocity has kept its sign and stayed within
-``rel_tol``*|v| (plus a small absolute tolerance from the velocity noise) from a hold time before
-the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
+Steady-state samples (``steady_state_mask``, in ``fricli.fitting.steady``): the velocity has kept
+its sign and stayed within ``rel_tol``*|v| (plus a small absolute tolerance from the velocity
+noise) from a hold time before the sample to a quarter of it after; the hold is ``hold`` seconds or the time to travel ``travel``
 at that speed, whichever is longer. This keeps samples away from reversals and accelerations,
 where bristle dynamics and inertia errors would bias the static curve. Logs of continuous
 excitation have few such holds; when the log has tau_dyn (the inertia is out of the target),
@@ -38,6 +38,13 @@ from fricli.core import lazy, logs, metrics
 from fricli.core.errors import DataError, FitError
 from fricli.models.lugre import LuGreModel
 from fricli.numerics.threads import single_threaded
+# the parameter layout, held parameters and solver, importable from here as before
+from fricli.fitting.lugre_parameters import (_BOUND_TEXT, _DELTAS, HELD, HELD_TEXT, _at_bounds, _bristles,  # noqa: F401
+                                            _coulomb_in_load, _held_values, _hold, _inside, _Layout,
+                                            _least_squares, _linear_fit, _powers, _sumsq, _typical)
+# the static-curve rows, importable from here as before
+from fricli.fitting.steady import (NOISE_FLOOR, _noise_tol, settled_mask, speed_levels,  # noqa: F401
+                                   steady_state_mask, window_extreme)
 
 optimize = lazy.module("scipy.optimize")
 
@@ -45,175 +52,11 @@ optimize = lazy.module("scipy.optimize")
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
 TAU1_MAX = 0.01           # upper bound on sigma1/sigma0 [s]
-_DELTAS = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0, 3.0)
 _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cache for no better start)
-NOISE_FLOOR = 1e-3        # velocity tolerance of the static-curve selection: at least this share of the top speed
 MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
 VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the top speed: exp(-3) < MINOR at half of it
 FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
-# the default a bounded static parameter is held at when the fit runs it to a bound (the log does not
-# determine it): no viscous or load term, Fs = Fc (the excess Fs - Fc is 0), an exponential Stribeck decay
-# (delta: held at the bound it reached, the steepest or flattest Stribeck drop the model has, or at 1
-# where Fs = Fc and ks = kc leave it no effect; vs: no
-# Stribeck effect, Fs = Fc; fc: held at its lower bound)
-HELD = {"fv": 0.0, "kc": 0.0, "ks": 0.0, "fs": 0.0}
-HELD_TEXT = {"fc": "Coulomb friction Fc", "fv": "viscous friction Fv", "kc": "load slope kc", "ks": "load slope ks",
-             "fs": "Stribeck rise Fs - Fc", "delta": "Stribeck exponent delta",
-             "vs": "Stribeck velocity vs (no breakaway the log's speeds show)"}
-
-
-def steady_state_mask(t: np.ndarray, qd: np.ndarray, *, hold: float = 0.2, travel: float = 0.002,
-                      rel_tol: float = 0.05, abs_tol: float | None = None) -> np.ndarray:
-    """Rows (n,) bool where the velocity qd (n,) [rad/s] has been held constant.
-
-    A row is steady when, over a window from H seconds before to H/4 after it, qd keeps its
-    sign and its range stays within rel_tol*|qd| + abs_tol. The hold H is ``hold`` [s] or the
-    time to cover ``travel`` [rad or m] at that speed, whichever is longer (so the bristles have
-    settled at slow speeds too), rounded up to hold*2^k and capped at 16*hold. ``abs_tol``
-    defaults to 1e-3 of the top speed or four times the sample-to-sample velocity noise,
-    whichever is larger. The window is counted in samples at the median sample rate.
-    """
-    n = len(qd)
-    if n < 3:
-        return np.zeros(n, dtype=bool)
-    dt = float(np.median(np.diff(t)))
-    speed = np.abs(qd)
-    top = float(np.percentile(speed, 99))
-    if abs_tol is None:
-        abs_tol = _noise_tol(qd, top)
-    with np.errstate(divide="ignore"):
-        need = np.maximum(hold, travel / speed)            # hold required at each row [s]
-    level = np.clip(np.ceil(np.log2(need / hold) - 1e-9), 0, 4).astype(int)
-    mask = np.zeros(n, dtype=bool)
-    for k in range(5):
-        rows = level == k
-        if not rows.any():
-            continue
-        h = hold * 2 ** k
-        before = max(1, int(min(n, round(h / dt))))  # min: a window longer than the log is no window
-        after = max(1, int(min(n, round(h / 4 / dt))))
-        vmax = window_extreme(qd, before, after, np.maximum)
-        vmin = window_extreme(qd, before, after, np.minimum)
-        ok = ((vmin > 0) | (vmax < 0)) & ((vmax - vmin) <= rel_tol * speed + abs_tol)
-        ok[:before] = False                                # the window must not run off the log
-        ok[n - after:] = False
-        mask |= rows & ok
-    return mask & (speed > max(abs_tol, NOISE_FLOOR * top))
-
-
-def settled_mask(t: np.ndarray, qd: np.ndarray, *, settle: float = 0.01,
-                 abs_tol: float | None = None) -> np.ndarray:
-    """Rows (n,) bool where the joint has moved at least ``settle`` [rad or m] since the last
-    velocity reversal (the bristles have reached their steady deflection, so the friction is
-    on the static curve whatever the acceleration) and |qd| exceeds the noise level ``abs_tol``
-    (default as ``steady_state_mask``). For continuous excitation without plateaus."""
-    n = len(qd)
-    if n < 3:
-        return np.zeros(n, dtype=bool)
-    speed = np.abs(qd)
-    top = float(np.percentile(speed, 99))
-    if abs_tol is None:
-        abs_tol = _noise_tol(qd, top)
-    moving = speed > abs_tol
-    sign = np.where(moving, np.sign(qd), 0.0)
-    # sign of the last moving row at or before each row: a reversal is a change of it
-    idx = np.where(moving, np.arange(n), 0)
-    np.maximum.accumulate(idx, out=idx)
-    held = sign[idx]
-    start = np.r_[True, held[1:] != held[:-1]]
-    dist = np.r_[0.0, np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(t))]
-    seg_start = np.where(start, np.arange(n), 0)
-    np.maximum.accumulate(seg_start, out=seg_start)
-    return moving & (held != 0) & (dist - dist[seg_start] >= settle)
-
-
-def _noise_tol(qd: np.ndarray, top: float) -> float:
-    """Velocity tolerance: NOISE_FLOOR of the top speed or four times the sample-to-sample noise."""
-    jitter = float(np.median(np.abs(np.diff(qd)))) / 0.6745 / math.sqrt(2)
-    return max(NOISE_FLOOR * top, 4 * jitter)
-
-
-def window_extreme(x: np.ndarray, before: int, after: int, op=np.maximum) -> np.ndarray:
-    """op-extreme (np.maximum or np.minimum) of x (n,) over rows i - before .. i + after for
-    every row i, the ends extended with the first and last value; O(n) whatever the window
-    (van Herk / Gil-Werman: extremes of whole blocks from the left and from the right)."""
-    n, size = len(x), before + after + 1
-    padded = np.concatenate([np.full(before, x[0]), x, np.full(after, x[-1])])
-    blocks = -(-len(padded) // size)
-    fill = -np.inf if op is np.maximum else np.inf
-    grid = np.full(blocks * size, fill)
-    grid[:len(padded)] = padded
-    grid = grid.reshape(blocks, size)
-    left = op.accumulate(grid, axis=1).reshape(-1)
-    right = op.accumulate(grid[:, ::-1], axis=1)[:, ::-1].reshape(-1)
-    return op(right[:n], left[size - 1:size - 1 + n])
-
-
-def speed_levels(speed: np.ndarray, width: float = 1.1) -> int:
-    """Number of distinct speeds in ``speed`` (n,) > 0: occupied bins of log-width ``width``
-    holding at least 10 samples (and 0.5 % of them)."""
-    if len(speed) == 0:
-        return 0
-    bins = np.floor(np.log(speed) / math.log(width)).astype(np.int64)
-    _, counts = np.unique(bins, return_counts=True)
-    return int((counts >= max(10, 0.005 * len(speed))).sum())
-
-
-@dataclasses.dataclass
-class _Layout:
-    """Which static parameters are free, and how the parameter vector maps onto them."""
-
-    stribeck: bool          # Fs, vs, delta identifiable (slow steady samples exist)
-    load: bool              # kc, ks identifiable (tau_g present and varying)
-    held: tuple = ()        # parameters held at their defaults (``HELD``): the log does not determine them
-    vs_max: float = math.inf  # bounds of the Stribeck velocity from the speeds of the static-curve rows
-    vs_min: float = 0.0
-    fc_min: float = 0.0       # lower bound of the Coulomb level
-
-    @property
-    def names(self) -> list[str]:
-        out = ["fc"]
-        if self.stribeck:
-            out += ["fs", "vs", "delta"]
-        out.append("fv")
-        if self.load:
-            out.append("kc")
-            if self.stribeck:
-                out.append("ks")
-        return [k for k in out if k not in self.held]
-
-    _LOG = ("fc", "vs", "delta")
-
-    def encode(self, p: dict) -> np.ndarray:
-        """fs is carried as the excess fs - fc >= 0, so that Fs >= Fc >= 0 holds by construction."""
-        q = dict(p, fs=max(p["fs"] - p["fc"], 0.0))
-        return np.array([math.log(q[k]) if k in self._LOG else q[k] for k in self.names])
-
-    def decode(self, x: np.ndarray, fixed: dict) -> dict:
-        p = dict(fixed)
-        for k, xi in zip(self.names, x):
-            # a trial step of the solver can go far up or down in log-space: 1e304 gives residuals it
-            # rejects (non-finite ones shrink its trust region), where exp(710) would raise, and 1e-304
-            # keeps the parameter positive, where exp(-750) would be 0, which no LuGre model takes
-            p[k] = math.exp(min(max(xi, -700.0), 700.0)) if k in self._LOG else float(xi)
-        for k in self.held:
-            if k in HELD:        # the others (delta, vs, fc) are held at their values in ``fixed``
-                p[k] = HELD[k]   # fs: the excess Fs - Fc
-        if self.stribeck:
-            p["fs"] = p["fc"] + p["fs"]
-        if not self.stribeck:
-            p["fs"] = p["fc"]
-            p["ks"] = p.get("kc", 0.0)
-        if not self.load:
-            p["kc"] = p["ks"] = 0.0
-        return p
-
-    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        lo = {"fc": math.log(self.fc_min) if self.fc_min > 0 else -np.inf, "delta": math.log(0.2), "vs": math.log(self.vs_min) if self.vs_min > 0 else -np.inf, "fs": 0.0, "fv": 0.0, "kc": 0.0, "ks": 0.0}
-        hi = {"delta": math.log(5.0), "vs": math.log(self.vs_max)}
-        return (np.array([lo.get(k, -np.inf) for k in self.names]),
-                np.array([hi.get(k, np.inf) for k in self.names]))
 
 
 class LuGreIdentifier:
@@ -636,121 +479,6 @@ class LuGreIdentifier:
         fit["warnings"] = list(self.warnings_)
         self.fit_ = fit
         return self
-
-
-def _powers(root: np.ndarray):
-    """(delta, x^delta) for delta in _DELTAS from root = x^(1/4) (n,), by multiplication: one
-    exp for the whole grid of exponents instead of one each."""
-    p = {1: root}
-    for k in (2, 3, 4, 5, 6, 8, 12):
-        p[k] = p[k // 2] * p[k - k // 2] if k % 2 == 0 else p[k - 1] * root
-    return [(delta, p[int(round(4 * delta))]) for delta in _DELTAS]
-
-
-def _linear_fit(rows: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
-    """Least-squares coefficients (k,) for regressors stored as rows (k, n) and y (n,), and the
-    sum of squared residuals. Normal equations on unit-norm rows (k is small); the sum from them
-    too, y.y - 2 c.(rows y) + c.G.c, without forming the residuals (it ranks start points)."""
-    gram = rows @ rows.T
-    ry = rows @ y
-    scale = np.sqrt(np.diag(gram)).copy()
-    scale[scale == 0] = 1.0
-    try:
-        coef = np.linalg.solve(gram / np.outer(scale, scale), ry / scale)
-    except np.linalg.LinAlgError:
-        coef = np.linalg.lstsq(gram / np.outer(scale, scale), ry / scale, rcond=None)[0]
-    coef = coef / scale
-    sse = _sumsq(y) - 2.0 * float(coef @ ry) + float(coef @ gram @ coef)
-    return coef, max(sse, 0.0)
-
-
-_BOUND_TEXT = {"fc": {"lower": "Fc = 0.1 % of the median friction"}, "fs": {"lower": "Fs = Fc"}, "vs": {"upper": "vs = 1/6 of the top speed", "lower": "vs = 5 % of the slowest speed"}, "delta": {"lower": "delta = 0.2", "upper": "delta = 5"},
-               "fv": {"lower": "Fv = 0"}, "kc": {"lower": "kc = 0"}, "ks": {"lower": "ks = 0"}}
-
-
-def _at_bounds(names: list[str], res, lb=None, ub=None) -> dict[str, str]:
-    """{name: "lower" or "upper"} of the bounded static parameters ``names`` that a fit ``res``
-    (scipy's result) left at a bound, from its active_mask or, given the bounds (lb, ub), a value
-    within 1e-6 (relative to the bound, absolute at 0) of one (the bristle parameters, listed
-    after them, have notes of their own)."""
-    out = {}
-    for i, (name, a) in enumerate(zip(names, res.active_mask)):
-        if name not in _BOUND_TEXT:
-            continue
-        if a:
-            out[name] = "lower" if a < 0 else "upper"
-        elif lb is not None:
-            x = float(res.x[i])
-            for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
-                if np.isfinite(bound) and abs(x - bound) <= 1e-6 * max(abs(bound), 1.0):
-                    out[name] = side
-    return out
-
-
-def _hold(layout: _Layout, bound: dict) -> _Layout:
-    """The layout with the parameters ``bound`` held (no Stribeck effect once Fs - Fc or vs is)."""
-    return dataclasses.replace(layout, held=layout.held + tuple(k for k in bound if k not in layout.held),
-                               stribeck=layout.stribeck and not {"fs", "vs"} & set(bound))
-
-
-def _held_values(layout: _Layout, p: dict, bound: dict) -> dict:
-    """Parameters ``p`` with those in ``bound`` set to the value they are held at."""
-    q = dict(p)
-    q.update({k: HELD[k] for k in bound if k in HELD and k != "fs"})
-    if "delta" in bound:
-        q["delta"] = 5.0 if bound["delta"] == "upper" else 0.2
-    if "fc" in bound:
-        q["fc"] = layout.fc_min
-    if not layout.stribeck:   # no Stribeck effect: Fs = Fc, ks = kc
-        q["fs"], q["ks"] = q["fc"], q["kc"]
-    return q
-
-
-def _coulomb_in_load(layout: _Layout, p: dict, load: float) -> dict[str, str]:
-    """{"kc": "lower"(, "ks": "lower")} when the fit put the whole Coulomb level into the load slope
-    (Fc under 1e-6 of Fc + kc |tau_g| at the typical load ``load`` [Nm]): the log does not separate
-    the two, and the load slopes are held at 0; else {}."""
-    if not layout.load or "kc" not in layout.names or not p["fc"] < 1e-6 * (p["fc"] + p["kc"] * load):
-        return {}
-    return {k: "lower" for k in ("kc", "ks") if k in layout.names}
-
-
-def _typical(signals: dict, name: str, rows: np.ndarray) -> float:
-    """Median |signals[name]| over ``rows``; 0 without the column."""
-    col = signals.get(name)
-    return float(np.median(np.abs(col[rows]))) if col is not None else 0.0
-
-
-def _sumsq(r: np.ndarray) -> float:
-    """Sum of squares of r (n,)."""
-    # einsum, not r @ r: a threaded BLAS dot is erratic on a busy 2-core machine
-    return float(np.einsum("i,i->", r, r))
-
-
-def _bristles(x) -> tuple[float, float]:
-    """(sigma0 [Nm/rad], sigma1 [Nm s/rad]) from x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
-    s0 = math.exp(x[0])
-    return s0, s0 * math.exp(x[1])
-
-
-def _inside(x0: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> np.ndarray:
-    """A start point strictly inside the bounds (least squares starts from an interior point)."""
-    return np.clip(x0, lb + 1e-9, ub - 1e-9)
-
-
-def _least_squares(fun, x0, bounds, max_nfev: int, what: str):
-    """``scipy.optimize.least_squares`` (trf, x_scale='jac') of fun from x0 within bounds;
-    failures become FitError. A fit stopped at ``max_nfev`` (status 0) returns its last iterate:
-    trf accepts only steps that lower the cost, so that is the best one."""
-    x0 = _inside(x0, *bounds)
-    try:
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
-            res = optimize.least_squares(fun, x0, bounds=bounds, method="trf", x_scale="jac", max_nfev=max_nfev)
-    except (ValueError, np.linalg.LinAlgError) as exc:
-        raise FitError(f"fitting the {what} failed: {exc}") from None
-    if res.status < 0 or not np.isfinite(res.x).all():
-        raise FitError(f"fitting the {what} failed: {res.message}")
-    return res
 
 
 def identify(log: logs.Log, **kwargs) -> LuGreIdentifier:

@@ -4,23 +4,24 @@ figures; the command line saves and prints them."""
 
 from __future__ import annotations
 
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from typing import Callable
 
 import numpy as np
 
 from fricli.core import logs, metrics
 from fricli.fitting import training_data
-from fricli.fitting.identify import steady_state_mask
+# held-out scoring, importable from here as before
+from fricli.fitting.heldout import (FOLDS, MIN_GAIN, SIGNIFICANCE, WORKERS, chosen_on_held_out,  # noqa: F401
+                                    cross_validate, cross_validated_steps, rms_ratio, run_parallel,
+                                    shared_progress, subset)
+from fricli.fitting.steady import steady_state_mask
 from fricli.core.envelope import share_outside
 from fricli.core.errors import DataError, FitError
 from fricli.models.base import FrictionModel, predict_parts
 from fricli.models.dissipative import PRIOR_KEYS, DissipativeFriction
 from fricli.models.neural import ARCHS as _PAPER_ARCHS
 from fricli.models.residual import ResidualFriction
-from fricli.numerics.nn.training import Stopped
-from fricli.numerics.threads import pinned, single_threaded
+from fricli.numerics.threads import pinned
 
 LONG_ADAPT_S = 300.0     # s: adapt says that a minute would do when it is given more than this
 
@@ -46,29 +47,11 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
     if schedule == "cosine" and arch in COSINE_STEPS:
         return COSINE_STEPS[arch]
     return SCHEDULES[schedule][1]
+
+
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state (bristle_check)
-# adapt keeps NN_add only when, trained on one half of the log's pieces and scored on the other
-# half (both ways round), it lowers the RMS error by MIN_GAIN at least on each half, on the
-# held-out rows slower than their median speed and on the faster ones, and the gain per piece is
-# positive by SIGNIFICANCE standard errors (about 95 % one-sided over the ten pieces): a network
-# fitted to pure noise moves the RMS by a fraction of a per cent, and a gain that only some pieces
-# of the log show is not one that another run of the joint will show. The halves put every
-# held-out row on the far side in time of all the rows its network was trained on, as another run
-# is: a real joint's residual drifts over seconds (the friction level moves as the joint warms
-# up), and held-out pieces between training pieces would share their error. A network whose gain
-# shows on one side in time only fails on the other half. NN_add sees no velocity: a gain at some
-# speeds only is a velocity dependence it turned into a level, which another run moving at other
-# speeds does not share.
-MIN_GAIN = 0.01
-SIGNIFICANCE = 2.0
-FOLDS = 2
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
-WORKERS = 2   # trainings run side by side (numpy releases the GIL; each trains on one BLAS thread)
-
-
-def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray]:
-    return {k: v[rows] for k, v in sig.items()}
 
 
 def _errors(y: np.ndarray, pred: np.ndarray, rows: np.ndarray) -> dict:
@@ -386,128 +369,6 @@ def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarr
     return {"static_rmse": static, "bristles_rmse": state, "helps": bool(state <= (1.0 - MIN_GAIN) * static)}
 
 
-def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
-                       target: np.ndarray, train: np.ndarray, val: np.ndarray, rng: np.random.Generator,
-                       on_eval: Callable | None = None) -> tuple[FrictionModel, FrictionModel, dict]:
-    """One network on every row (``train`` and ``val``, indices into ``sig`` and ``target`` (n,)
-    [Nm]) stopped at the step that a probe network, trained on ``train`` alone, shows best on
-    the held-out rows ``val``.
-
-    Both train at once (``WORKERS`` threads), with the same scales (those of every row), the
-    same steps and learning-rate schedule and the same initial weights (generators of one seed
-    drawn from ``rng``): the model is the probe's network trained on more rows, so the probe's
-    best step carries over to it, early steps included. The full model
-    records its weights at every loss record and keeps those of the probe's best record.
-    Returns (model, probe, summary): the probe stays fitted for the choices made on its
-    held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
-    chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
-    """
-    rows = np.union1d(train, val)
-    model, probe = new_model(steps), new_model(steps)
-    model.set_scales(subset(sig, rows), target[rows])
-    seed = int(rng.integers(2 ** 63))
-    seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
-    stop = threading.Event()
-    progress = shared_progress(on_eval, 2 * steps, 2, stop)
-    jobs = ((probe, (subset(sig, train), target[train], subset(sig, val), target[val]),
-             dict(rng=seeds[0], scales_from=model, on_eval=progress[0], stop=stop)),
-            (model, (subset(sig, rows), target[rows]),
-             dict(rng=seeds[1], scales_from=model, on_eval=progress[1], snapshots=True, stop=stop)))
-    run_parallel([lambda m=m, a=a, k=k: m.fit(*a, **k) for m, a, k in jobs], stop)
-    record = min(int(np.argmin(probe.history_val_)), len(model.snapshots_) - 1)
-    model.net_.theta[...] = model.snapshots_[record]
-    model.snapshots_ = None
-    model.set_members([model.net_], sig["qd"][rows])   # the extrapolation from the weights kept
-    model.best_step_ = min((record + 1) * model.eval_every_, steps)
-    model.history_val_ = np.asarray(probe.history_val_)
-    model.n_val_ = 0
-    return model, probe, {"step": int(model.best_step_), "val_rows": val,
-                          "held_out_rmse": float(np.sqrt(probe.history_val_[record])) * probe.y_scale_}
-
-
-def run_parallel(tasks: list[Callable[[], object]], stop: threading.Event | None = None) -> list:
-    """Run the calls ``tasks`` on ``WORKERS`` threads (BLAS pinned to one thread each, set from
-    this thread); their results in order. numpy releases the GIL in its array work, so two
-    trainings take about the time of one on two cores. When this thread is interrupted (Ctrl-C,
-    SIGTERM) or a task fails, ``stop`` is set, which the tasks' progress callbacks
-    (``shared_progress``) and trainers (``Trainer``'s ``stop``) turn into an exception, and the interruption
-    is raised once every task has ended."""
-    if len(tasks) <= 1:
-        return [task() for task in tasks]
-    with single_threaded(), ThreadPoolExecutor(max_workers=WORKERS) as pool:
-        futures = [pool.submit(task) for task in tasks]
-        try:
-            return [f.result() for f in futures]
-        except BaseException:
-            if stop is not None:
-                stop.set()
-            for f in futures:
-                f.cancel()
-            raise
-
-
-def shared_progress(on_eval: Callable | None, total: int, parts: int = 2,
-                    stop: threading.Event | None = None) -> list[Callable]:
-    """``parts`` progress callbacks for trainings that run at once: each reports the sum of the
-    steps all of them have done, out of ``total``, through ``on_eval`` (None: no report; one call
-    at a time), and raises ``Stopped`` once ``stop`` is set."""
-    done, lock = [0] * parts, threading.Lock()
-
-    def part(k: int) -> Callable:
-        def report(step, _total, train_loss, val_loss):
-            if stop is not None and stop.is_set():
-                raise Stopped("stopped")
-            if on_eval is not None:
-                with lock:
-                    done[k] = step
-                    on_eval(sum(done), total, train_loss, val_loss)
-        return report
-    return [part(k) for k in range(parts)]
-
-
-def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
-                          target: np.ndarray, rows: np.ndarray, blocks: np.ndarray, folds: list[np.ndarray],
-                          rng: np.random.Generator, on_eval: Callable | None = None, **fit_kwargs) -> dict:
-    """The number of training steps, chosen on the mean validation curve of K networks.
-
-    ``rows`` (sorted indices) are the rows to use, ``blocks`` (n,) the time block of every row
-    and ``folds`` the blocks each fold holds out. Fold k fits ``new_model(steps)`` (with
-    ``fit_kwargs``; a model whose validation loss is that of target / ``y_scale_``) on the rows
-    outside its blocks, recording its validation loss; the curves, in Nm^2 and weighted by their
-    validation rows, are pooled into the mean squared error over
-    every held-out row, and the step of its least value is chosen. Returns "folds" (K), "step"
-    (the step chosen), "record" (its index in the loss records), "held_out_rmse" [Nm] (the
-    pooled curve's least value, rooted), "fold_best_steps" (each fold's own best step),
-    "curve" (the pooled curve [Nm^2]), "models" (the K fitted models) and "held" (the blocks each
-    of them held out).
-    """
-    splits = []
-    for held in folds:
-        is_val = np.isin(blocks[rows], held)
-        train, val = rows[~is_val], rows[is_val]
-        if train.size and val.size:
-            splits.append((held, train, val))
-    seeds = rng.spawn(len(splits))
-    stop = threading.Event()
-    progress = shared_progress(on_eval, len(splits) * steps, len(splits), stop)
-    fitted = [new_model(steps) for _ in splits]
-    run_parallel([lambda m=m, tv=tv, r=r, p=p: m.fit(subset(sig, tv[1]), target[tv[1]], subset(sig, tv[2]),
-                                                     target[tv[2]], rng=r, on_eval=p, stop=stop,
-                                                     **fit_kwargs)
-                  for m, tv, r, p in zip(fitted, splits, seeds, progress)], stop)
-    curves = [np.asarray(model.history_val_) * model.y_scale_ ** 2 for model in fitted]
-    weights = [val.size for _, _, val in splits]
-    held_out = [held for held, _, _ in splits]
-    if not curves:
-        raise DataError("no fold of time blocks holds both training and validation rows")
-    length = min(c.size for c in curves)
-    pooled = np.average([c[:length] for c in curves], axis=0, weights=weights)
-    best = int(np.argmin(pooled))
-    step = min((best + 1) * fitted[0].eval_every_, steps)
-    return {"folds": len(fitted), "step": int(step), "record": best, "held_out_rmse": float(np.sqrt(pooled[best])),
-            "fold_best_steps": [int(m.best_step_) for m in fitted], "curve": pooled, "models": fitted, "held": held_out}
-
-
 def first_seconds(log: logs.Log, seconds: float | None) -> dict[str, np.ndarray]:
     """The log's signals over its first ``seconds`` (all of it for None)."""
     sig = log.signals
@@ -592,51 +453,3 @@ def adapt(base: FrictionModel, log: logs.Log, *, hidden: int | tuple[int, ...] =
     return (model if summary["adapted"] else base), summary
 
 
-def cross_validate(fit_predict: Callable, blocks: np.ndarray, target: np.ndarray, base_pred: np.ndarray,
-                   speed: np.ndarray | None = None) -> dict:
-    """Whether a residual model beats its base on rows it was not trained on.
-
-    ``blocks`` (n,) int gives the piece 0..PIECES-1 of every usable row (-1: not used); the
-    pieces fall into FOLDS = 2 folds, the first half of the pieces and the second, and
-    ``fit_predict(train_rows)`` trains on the rows of one fold and returns the prediction (n,)
-    [Nm] for every row, kept for the other fold. Returns the RMS [Nm] of base and adapted model
-    over the held-out rows and the ratio of the two on each half ("half_ratios": the second
-    half's, trained on the first, then the first half's); with ``speed`` (n,) [|qd|], the same
-    ratio on the held-out rows slower than their median speed and on the others
-    ("speed_ratios", slow then fast; none when all rows move at one speed); the mean and
-    standard error of the per-piece gain in mean squared error [Nm^2], and "helps": the RMS
-    falls by MIN_GAIN on each half and each speed half, and the mean gain exceeds SIGNIFICANCE
-    standard errors (False when fewer than two pieces hold rows).
-    """
-    first = (blocks >= 0) & (blocks < training_data.PIECES // 2)
-    second = blocks >= training_data.PIECES // 2
-    pred = np.array(base_pred, dtype=np.float64)
-    half_ratios = []
-    for train, held in ((first, second), (second, first)):
-        if train.any() and held.any():
-            pred[held] = fit_predict(np.flatnonzero(train))[held]
-            half_ratios.append(rms_ratio(target, pred, base_pred, held))
-    rows = blocks >= 0
-    speed_ratios = []
-    if speed is not None and len(half_ratios) == FOLDS:
-        slow = speed < np.median(speed[rows])
-        if (rows & slow).any():
-            speed_ratios = [rms_ratio(target, pred, base_pred, rows & part) for part in (slow, ~slow)]
-    e_base, e_new = (target - base_pred)[rows], (target - pred)[rows]
-    gains = np.array([np.mean(e_base[b] ** 2 - e_new[b] ** 2) for b in
-                      (blocks[rows] == k for k in range(training_data.PIECES)) if b.any()])
-    out = {"rows": int(rows.sum()), "pieces": int(gains.size), "folds": FOLDS, "helps": False}
-    if gains.size < 2:
-        return out
-    base_rms, new_rms = float(np.sqrt(np.mean(e_base ** 2))), float(np.sqrt(np.mean(e_new ** 2)))
-    mean, se = float(gains.mean()), float(gains.std(ddof=1) / np.sqrt(gains.size))
-    return {**out, "base_rmse": base_rms, "adapted_rmse": new_rms, "half_ratios": half_ratios,
-            "speed_ratios": speed_ratios, "gain_mean": mean, "gain_se": se,
-            "helps": bool(len(half_ratios) == FOLDS and max(half_ratios + speed_ratios) <= 1.0 - MIN_GAIN
-                          and mean > SIGNIFICANCE * se)}
-
-
-def rms_ratio(target: np.ndarray, pred: np.ndarray, base_pred: np.ndarray, rows: np.ndarray) -> float:
-    """RMS error of ``pred`` over that of ``base_pred`` on ``rows`` (bool (n,))."""
-    new, old = np.mean((target - pred)[rows] ** 2), np.mean((target - base_pred)[rows] ** 2)
-    return float(np.sqrt(new / old)) if old > 0 else (1.0 if new == 0 else np.inf)

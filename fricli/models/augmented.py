@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from fricli.core import effectnames
 from fricli.models import register
 from fricli.models import terms as T
 from fricli.models.base import FrictionModel, predict_parts
@@ -87,10 +88,14 @@ class AugmentedModel(FrictionModel):
 
     @classmethod
     def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "AugmentedModel":
-        return cls(children["base"], params["terms"], arrays["coef"], effects=params.get("effects", []),
-                   carried=params.get("carried", []), refitted=params.get("refitted", []),
-                   params=params.get("params", {}), error_terms=params.get("error_terms", []),
-                   error_coef=arrays.get("error_coef", np.zeros(0)), errors=params.get("errors", []))
+        def names(key):   # effect names as registered (an earlier name read as the one it stands for)
+            return [effectnames.canonical(e) for e in params.get(key, [])]
+
+        return cls(children["base"], params["terms"], arrays["coef"], effects=names("effects"),
+                   carried=names("carried"), refitted=params.get("refitted", []),
+                   params={effectnames.canonical(k): v for k, v in params.get("params", {}).items()},
+                   error_terms=params.get("error_terms", []), error_coef=arrays.get("error_coef", np.zeros(0)),
+                   errors=names("errors"))
 
     def describe(self) -> str:
         friction = [e for e in self.effects if e not in self.errors]

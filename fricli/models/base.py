@@ -6,6 +6,35 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+#: the parameters the physical model kinds (lugre, linear, gms) share, declared once:
+#: name -> (unit on a rotary axis, unit on a linear axis, meaning)
+PARAMETERS = {
+    "fc": ("Nm", "N", "Coulomb friction"),
+    "fs": ("Nm", "N", "static (stiction) friction"),
+    "fst": ("Nm", "N", "Stribeck excess friction near rest"),
+    "vs": ("rad/s", "m/s", "Stribeck velocity"),
+    "delta": ("-", "-", "Stribeck exponent"),
+    "fv": ("Nm s/rad", "N s/m", "viscous friction"),
+    "offset": ("Nm", "N", "torque offset"),
+    "kc": ("Nm/Nm", "N/N", "load slope of Coulomb friction (per |tau_g|)"),
+    "ks": ("Nm/Nm", "N/N", "load slope of static friction (per |tau_g|)"),
+    "sigma0": ("Nm/rad", "N/m", "bristle stiffness"),
+    "sigma1": ("Nm s/rad", "N s/m", "bristle (micro-)damping"),
+    "fc_neg": ("Nm", "N", "Coulomb friction for negative velocity"),
+    "fs_neg": ("Nm", "N", "static friction for negative velocity"),
+    "fv_neg": ("Nm s/rad", "N s/m", "viscous friction for negative velocity"),
+    "t_ref": ("degC", "degC", "reference temperature"),
+    "alpha_c": ("1/K", "1/K", "temperature coefficient of Coulomb/static friction"),
+    "alpha_v": ("1/K", "1/K", "temperature coefficient of viscous friction (exponential)"),
+    "q_lo": ("rad", "m", "start of the position range of the position terms"),
+    "q_hi": ("rad", "m", "end of the position range of the position terms"),
+}
+
+
+def parameter_info(*names: str, **meanings: str) -> dict[str, tuple[str, str, str]]:
+    """``PARAMETERS`` of ``names``, in that order; ``meanings``: a kind's own meaning of a parameter."""
+    return {name: PARAMETERS[name][:2] + (meanings.get(name, PARAMETERS[name][2]),) for name in names}
+
 
 class FrictionModel:
     """A friction model: ``predict`` maps a log's signals to tau_f [Nm] (positive along motion).

@@ -39,19 +39,12 @@ from typing import Any
 import numpy as np
 
 from fricli.models import register
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, parameter_info
 from fricli.models.terms import held_sign
 
 # name -> (unit on a rotary axis, unit on a linear axis, meaning)
-PARAM_INFO = {
-    "fc": ("Nm", "N", "Coulomb friction (an element that slips at once)"),
-    "fst": ("Nm", "N", "Stribeck excess friction near rest"),
-    "vs": ("rad/s", "m/s", "Stribeck velocity"),
-    "fv": ("Nm s/rad", "N s/m", "viscous friction"),
-    "kc": ("Nm/Nm", "N/N", "load slope of Coulomb friction (per |tau_g|)"),
-    "q_lo": ("rad", "m", "start of the position range of the position terms"),
-    "q_hi": ("rad", "m", "end of the position range of the position terms"),
-}
+PARAM_INFO = parameter_info("fc", "fst", "vs", "fv", "kc", "q_lo", "q_hi",
+                            fc="Coulomb friction (an element that slips at once)")
 
 
 def unit_of(name: str, axis: str = "rotary") -> str:

@@ -22,16 +22,10 @@ import numpy as np
 from fricli.core import logs, metrics
 from fricli.core.errors import FitError
 from fricli.models import register
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, parameter_info
 
 # name -> (unit on a rotary axis, unit on a linear axis, meaning)
-PARAM_INFO = {
-    "fv": ("Nm s/rad", "N s/m", "viscous friction"),
-    "fc": ("Nm", "N", "Coulomb friction"),
-    "offset": ("Nm", "N", "torque offset"),
-    "fv_neg": ("Nm s/rad", "N s/m", "viscous friction for negative velocity"),
-    "fc_neg": ("Nm", "N", "Coulomb friction for negative velocity"),
-}
+PARAM_INFO = parameter_info("fv", "fc", "offset", "fv_neg", "fc_neg")
 SYMMETRIC = ("fv", "fc", "offset")
 ASYMMETRIC = ("fv", "fc", "fv_neg", "fc_neg")
 

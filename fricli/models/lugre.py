@@ -23,7 +23,7 @@ import numpy as np
 from fricli.numerics import physics
 from fricli.core.errors import DataError
 from fricli.models import register
-from fricli.models.base import FrictionModel
+from fricli.models.base import FrictionModel, parameter_info
 
 CHUNK = 1 << 16           # rows per internal block: keeps the temporaries in cache
 _G_MIN = 1e-12            # floor on the Stribeck curve g [Nm], so the bristle rate stays finite
@@ -33,24 +33,8 @@ STATIC = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")
 DYNAMIC = ("sigma0", "sigma1")
 OPTIONAL = ("fc_neg", "fs_neg", "fv_neg", "t_ref", "alpha_c", "alpha_v")
 
-# (name, unit on a rotary axis, unit on a linear axis, meaning)
-PARAM_INFO = {
-    "fc": ("Nm", "N", "Coulomb friction"),
-    "fs": ("Nm", "N", "static (stiction) friction"),
-    "vs": ("rad/s", "m/s", "Stribeck velocity"),
-    "delta": ("-", "-", "Stribeck exponent"),
-    "fv": ("Nm s/rad", "N s/m", "viscous friction"),
-    "kc": ("Nm/Nm", "N/N", "load slope of Coulomb friction (per |tau_g|)"),
-    "ks": ("Nm/Nm", "N/N", "load slope of static friction (per |tau_g|)"),
-    "sigma0": ("Nm/rad", "N/m", "bristle stiffness"),
-    "sigma1": ("Nm s/rad", "N s/m", "bristle (micro-)damping"),
-    "fc_neg": ("Nm", "N", "Coulomb friction for negative velocity"),
-    "fs_neg": ("Nm", "N", "static friction for negative velocity"),
-    "fv_neg": ("Nm s/rad", "N s/m", "viscous friction for negative velocity"),
-    "t_ref": ("degC", "degC", "reference temperature"),
-    "alpha_c": ("1/K", "1/K", "temperature coefficient of Coulomb/static friction"),
-    "alpha_v": ("1/K", "1/K", "temperature coefficient of viscous friction (exponential)"),
-}
+# name -> (unit on a rotary axis, unit on a linear axis, meaning)
+PARAM_INFO = parameter_info(*STATIC, *DYNAMIC, *OPTIONAL)
 
 
 # parameters a dissipative friction model never has below 0 (a model file with one is damaged)

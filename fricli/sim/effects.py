@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from fricli.core import effectnames as N
 from fricli.sim.joints import Joint
 
 RIPPLE_PERIOD = 0.2137     # spatial period of the ripple [rad]
@@ -97,8 +98,8 @@ class Effect:
 RIPPLE_PHASES = {2: (0.7, 2.1), 4: (1.9, 0.4)}  # [rad] of the fundamental and second harmonic
 
 
-class Ripple(Effect):
-    name, unit = "position", "Nm"
+class Position(Effect):
+    name, unit = N.POSITION, "Nm"
     help = "position-periodic torque (gear ripple) of this amplitude, with a second harmonic"
 
     def default(self, j):
@@ -112,8 +113,8 @@ class Ripple(Effect):
                 "phases": [float(x) for x in ph]}
 
 
-class Asymmetry(Effect):
-    name, unit = "direction", "-"
+class Direction(Effect):
+    name, unit = N.DIRECTION, "-"
     help = "Coulomb, static and viscous friction scaled by 1+r for v > 0 and 1-r for v < 0"
 
     def default(self, j):
@@ -134,7 +135,7 @@ class Asymmetry(Effect):
 
 
 class Drift(Effect):
-    name, unit = "drift", "-"
+    name, unit = N.DRIFT, "-"
     help = "wear: Coulomb/static and viscous levels grow linearly by this fraction over the log"
 
     def default(self, j):
@@ -152,7 +153,7 @@ class Drift(Effect):
 
 
 class Temperature(Effect):
-    name, unit = "temperature", "K"
+    name, unit = N.TEMPERATURE, "K"
     help = f"the joint warms from {WARM_START:g} degC by this much over the log (first-order warming)"
 
     def default(self, j):
@@ -174,8 +175,8 @@ class Temperature(Effect):
                 "t_ref": j.t_ref, "alpha_c": j.alpha_c, "alpha_v": j.alpha_v}
 
 
-class Inertia(Effect):
-    name, unit = "inertia", "-"
+class Acceleration(Effect):
+    name, unit = N.ACCELERATION, "-"
     help = "the logged tau_dyn uses J*(1-f) instead of the true inertia J"
 
     def default(self, j):
@@ -193,7 +194,7 @@ class Inertia(Effect):
 
 
 class Offset(Effect):
-    name, unit = "offset", "Nm"
+    name, unit = N.OFFSET, "Nm"
     help = "a constant bias on the measured motor torque tau_m"
 
     def default(self, j):
@@ -205,7 +206,7 @@ class Offset(Effect):
 
 
 class Level(Effect):
-    name, unit = "level", "-"
+    name, unit = N.LEVEL, "-"
     help = "Coulomb/static and viscous friction scaled as a whole by this factor"
 
     def default(self, j):
@@ -222,7 +223,7 @@ class Level(Effect):
 
 
 class Load(Effect):
-    name, unit = "load", "Nm/Nm"
+    name, unit = N.LOAD, "Nm/Nm"
     help = "Coulomb/static levels gain k*|tau_gear| (the gear's normal force grows with the load)"
 
     def default(self, j):
@@ -234,7 +235,7 @@ class Load(Effect):
 
 
 class Quadrant(Effect):
-    name, unit = "quadrant", "Nm/Nm"
+    name, unit = N.QUADRANT, "Nm/Nm"
     help = ("quadrant dependence: Coulomb/static levels gain k*tau_gear*sign(v), more friction when the "
             "joint drives against the gear torque than when it is back-driven")
 
@@ -247,7 +248,7 @@ class Quadrant(Effect):
 
 
 class Gravity(Effect):
-    name, unit = "gravity", "-"
+    name, unit = N.GRAVITY, "-"
     help = "the logged tau_g (the robot model's gravity) is this fraction too low: (1-f) times the true one"
 
     def default(self, j):
@@ -263,7 +264,7 @@ class Gravity(Effect):
 
 
 class Disturbance(Effect):
-    name, unit = "disturbance", "Nm"
+    name, unit = N.DISTURBANCE, "Nm"
     help = (f"a {DISTURBANCE_HZ:g} Hz sinusoidal torque of this amplitude in tau_m (e.g. a pump or fan), "
             "not friction")
 
@@ -277,7 +278,7 @@ class Disturbance(Effect):
 
 
 class Velocity(Effect):
-    name, unit = "velocity", "-"
+    name, unit = N.VELOCITY, "-"
     help = f"viscous term ~ |v|^p instead of linear (equal at {VELOCITY_REF:g} rad/s)"
 
     def default(self, j):
@@ -293,7 +294,7 @@ class Velocity(Effect):
 
 
 class Column(Effect):
-    name, unit = "column", "1/%"
+    name, unit = N.COLUMN, "1/%"
     help = "an extra column 'humidity' [%]; Coulomb/static levels scale by 1 + k*(h - 45 %)"
 
     def default(self, j):
@@ -315,7 +316,7 @@ class Column(Effect):
 
 
 class Payload(Effect):
-    name, unit = "payload", "Nm"
+    name, unit = N.PAYLOAD, "Nm"
     help = "an undeclared payload: tau_ext of 0..P Nm varying with the configuration (not in tau_g)"
 
     def default(self, j):
@@ -333,7 +334,7 @@ HYSTERESIS_SHARES = (0.5, 0.3, 0.2)              # their shares of the total bre
 
 
 class Hysteresis(Effect):
-    name, unit = "hysteresis", "Nm"
+    name, unit = N.HYSTERESIS, "Nm"
     help = ("friction with memory: Maxwell-slip elements (springs that slip at 0.002, 0.006, 0.02 rad) of "
             "this total break-away force")
 
@@ -356,17 +357,17 @@ class Hysteresis(Effect):
 
 # Registry order is the order effects are applied in (and their random streams).
 EFFECTS: dict[str, Effect] = {e.name: e for e in (
-    Payload(), Temperature(), Column(), Ripple(), Asymmetry(), Drift(), Inertia(), Offset(), Level(),
+    Payload(), Temperature(), Column(), Position(), Direction(), Drift(), Acceleration(), Offset(), Level(),
     Load(), Velocity(), Quadrant(), Gravity(), Disturbance(), Hysteresis())}
-# The effects are named as ``fricli diagnose`` names what it finds (fricli.fitting.diagnosis.effects);
-# the simulator's earlier names stay accepted.
-ALIASES = {"ripple": "position", "asymmetry": "direction"}
+# The effects are named as every layer names them (``fricli.core.effectnames``); the simulator's
+# earlier names stay accepted.
+ALIASES = N.ALIASES
+Ripple, Asymmetry, Inertia = Position, Direction, Acceleration   # the classes' earlier names
 
 
 def canonical(name: str) -> str:
     """An effect's name, an alias (``ALIASES``) replaced by the name it stands for."""
-    name = name.strip().lower()
-    return ALIASES.get(name, name)
+    return N.canonical(name.strip().lower())
 
 
 def parse(spec: str) -> tuple[str, float | None]:

@@ -7,6 +7,7 @@ import dataclasses
 
 import numpy as np
 
+from fricli.core import effectnames as N
 from fricli.core import logs, metrics
 from fricli.fitting.diagnosis import effects as E
 from fricli.fitting.diagnosis import selection, structure
@@ -20,9 +21,9 @@ MIN_ROWS_PER_FOLD = 20
 INTERVAL_LEVEL = 0.95
 WORST_GAIN = -1.0                  # gains are clipped here: an effect that doubles the residual or worse is "worse"
 #: effects that the same log may explain about equally, and what tells them apart
-TWINS = {("gravity", "quadrant"): "rests with a varying tau_g"}
+TWINS = {(N.GRAVITY, N.QUADRANT): "rests with a varying tau_g"}
 #: robot-model effects that a calibration of the URDF (``fricli calibrate``) corrects where they live
-CALIBRATED_EFFECTS = ("gravity", "acceleration")
+CALIBRATED_EFFECTS = (N.GRAVITY, N.ACCELERATION)
 
 
 @dataclasses.dataclass

@@ -22,140 +22,21 @@ makes the effect a suspicion, reported but not added (docs/diagnose.md).
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from fricli.core import metrics
-from fricli.models import terms as T
+from fricli.core import effectnames as N
 from fricli.core.logs import KNOWN
-
-# ---------------------------------------------------------------------------- context
-
-
-@dataclasses.dataclass
-class Context:
-    """What the effects may use: signals (n,), base prediction p (n,), units, column units."""
-
-    signals: dict[str, np.ndarray]
-    p: np.ndarray
-    axis: str = "rotary"
-    column_units: dict[str, str] = dataclasses.field(default_factory=dict)
-    residual_ms: float = 0.0       # mean square of the model's residual [Nm^2] (0: not known)
-    min_gain: float = 0.1          # share of it an effect must be able to remove to be tested
-
-    @property
-    def tau_unit(self) -> str:
-        return "Nm" if self.axis == "rotary" else "N"
-
-    @property
-    def q_unit(self) -> str:
-        return "rad" if self.axis == "rotary" else "m"
-
-    @property
-    def v_unit(self) -> str:
-        return self.q_unit + "/s"
-
-    @property
-    def fv_unit(self) -> str:
-        return f"{self.tau_unit} s/{self.q_unit}"
-
-    @property
-    def inertia_unit(self) -> str:
-        return "kg m^2" if self.axis == "rotary" else "kg"
-
-    def model_inertia(self) -> float | None:
-        """The joint's inertia as the robot model sees it: rms(tau_dyn) / rms(qdd) [kg m^2 or kg],
-        None without tau_dyn or acceleration."""
-        sig = self.signals
-        if "tau_dyn" not in sig or "qdd" not in sig:
-            return None
-        a = float(np.sqrt(np.mean(np.square(sig["qdd"]))))
-        return float(np.sqrt(np.mean(np.square(sig["tau_dyn"])))) / a if a > 0 else None
-
-    def moving(self) -> np.ndarray:
-        return metrics.in_motion(self.signals["qd"])
-
-    def v_scale(self) -> float:
-        """A typical high speed: the 95th percentile of |qd| over the rows in motion [rad/s]."""
-        v = np.abs(self.signals["qd"][self.moving()])
-        return float(np.percentile(v, 95)) if len(v) else 0.0
-
-
-def equivalent_levels(y: np.ndarray, qd: np.ndarray) -> dict[str, float]:
-    """Coulomb and viscous levels of a friction curve y (n,) over velocity qd (n,):
-    ``Fc``, ``Fv`` (both directions) and ``Fc+``, ``Fv+``, ``Fc-``, ``Fv-`` (one each), with
-    tau = Fc*sign(qd) + Fv*qd, i.e. Fc- is the magnitude of the Coulomb level for qd < 0. Only
-    the rows in motion (``metrics.in_motion``) count."""
-    out = {}
-    moving = metrics.in_motion(qd)
-    for key, mask in (("", moving), ("+", moving & (qd > 0)), ("-", moving & (qd < 0))):
-        if mask.sum() < 3:
-            out["Fc" + key], out["Fv" + key] = float("nan"), float("nan")
-            continue
-        X = np.column_stack([np.sign(qd[mask]), qd[mask]])
-        (fc, fv), *_ = np.linalg.lstsq(X, y[mask], rcond=None)
-        out["Fc" + key], out["Fv" + key] = float(fc), float(fv)
-    return out
-
-
-def _par(value: float, unit: str) -> dict:
-    """A parameter for the report; a value the log cannot determine is None (JSON null)."""
-    value = float(value)
-    return {"value": value if np.isfinite(value) else None, "unit": unit}
-
-
-# ---------------------------------------------------------------------------- effects
-
-
-class Effect:
-    """A candidate effect: a group of terms and how to read their coefficients."""
-
-    name: str = ""
-    #: combinations of simpler effects this one must beat on held-out data to be chosen
-    rivals: tuple[tuple[str, ...], ...] = ()
-    description: str = ""
-    #: "friction", or "model" for an error of the robot model or the measurement (not friction)
-    part: str = "friction"
-
-    def applicable(self, ctx: Context) -> str | None:
-        """None when the log supports the effect, else the reason it does not."""
-        return None
-
-    def implausible(self, params: dict[str, dict], ctx: Context) -> str | None:
-        """None when the fitted parameters are physically plausible, else why not (and what
-        else produces the same shape)."""
-        return None
-
-    def terms(self, ctx: Context, residual: np.ndarray) -> list[dict]:
-        raise NotImplementedError
-
-    def params(self, coef: dict[str, float], ctx: Context) -> dict[str, dict]:
-        raise NotImplementedError
-
-    def summary(self, params: dict[str, dict]) -> str:
-        """One line for people."""
-        return ", ".join(f"{k} {_fmt(v['value'])} {v['unit']}".rstrip() for k, v in params.items())
-
-
-def _fmt(x: float | None) -> str:
-    if x is None:
-        return "n/a"
-    if x == 0 or not np.isfinite(x):
-        return f"{x:g}"
-    digits = max(0, 3 - int(np.floor(np.log10(abs(x)))))
-    return f"{x:.{min(digits, 6)}f}"
-
-
-LEVEL_TERMS = [T.term("p", T.P), T.term("qd", T.sig_("qd"))]
-
-
-def _level_coefs(coef: dict[str, float]) -> tuple[float, float]:
-    return coef.get("p", 0.0), coef.get("qd", 0.0)
+from fricli.models import terms as T
+# the context and base class, and the robot-model effects, importable from here as before
+from fricli.fitting.diagnosis.context import (LEVEL_TERMS, Context, Effect, _fmt, _level_coefs, _par,  # noqa: F401
+                                              equivalent_levels)
+from fricli.fitting.diagnosis.torque_effects import (RATIO_BOUND, ROBOT_MODEL_TOLERANCE, Acceleration,  # noqa: F401
+                                                     Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g,
+                                                     _ratio_implausible, _ratio_reach, _ratio_text)
 
 
 class Offset(Effect):
-    name = "offset"
+    name = N.OFFSET
     description = "a constant (a bias in the torque measurement)"
     part = "model"
 
@@ -167,7 +48,7 @@ class Offset(Effect):
 
 
 class Level(Effect):
-    name = "level"
+    name = N.LEVEL
     description = "the model's Coulomb and viscous level changed as a whole"
 
     def terms(self, ctx, residual):
@@ -185,8 +66,8 @@ class Level(Effect):
 
 
 class Direction(Effect):
-    name = "direction"
-    rivals = (("level", "offset"),)
+    name = N.DIRECTION
+    rivals = ((N.LEVEL, N.OFFSET),)
     description = "separate Coulomb and viscous levels for positive and negative velocity"
 
     def applicable(self, ctx):
@@ -212,7 +93,7 @@ class _ScaledBy(Effect):
     """Level terms plus the level terms multiplied by a slowly varying signal's deviation."""
 
     signal = ""
-    rivals = (("level",),)
+    rivals = ((N.LEVEL,),)
     per = 1.0          # report slopes per this many units of the signal
 
     def center(self, ctx) -> float:
@@ -235,7 +116,7 @@ class _ScaledBy(Effect):
 
 
 class Temperature(_ScaledBy):
-    name = "temperature"
+    name = N.TEMPERATURE
     signal = "temp"
     description = "Coulomb and viscous levels scaled by the temperature deviation"
 
@@ -257,7 +138,7 @@ class Temperature(_ScaledBy):
 
 
 class Drift(_ScaledBy):
-    name = "drift"
+    name = N.DRIFT
     signal = "t"
     per = 3600.0
     description = "Coulomb and viscous levels growing with time (wear)"
@@ -281,219 +162,9 @@ class Drift(_ScaledBy):
                 "rate": _par(100.0 * rel, "%/h")}
 
 
-class Acceleration(Effect):
-    name = "acceleration"
-    description = "a term in qdd (inertia missing or wrong in tau_dyn)"
-    part = "model"
-
-    def applicable(self, ctx):
-        if _constant(ctx.signals["qdd"]):
-            return "the log has no acceleration"
-        return None
-
-    def terms(self, ctx, residual):
-        return [T.term("qdd", T.sig_("qdd"))]
-
-    def params(self, coef, ctx):
-        return {"inertia": _par(coef["qdd"], ctx.inertia_unit)}
-
-    def implausible(self, params, ctx):
-        j = params["inertia"]["value"]
-        if j is None:
-            return None
-        ref = ctx.model_inertia()
-        u = ctx.inertia_unit
-        if j < 0 and (ref is None or -j > ROBOT_MODEL_TOLERANCE * ref):
-            seen = f" ({_fmt(100 * -j / ref)} % of the {_fmt(ref)} {u} the robot model's tau_dyn shows)" if ref else ""
-            return (f"a negative inertia{seen}; more likely a delay between the torque and the filtered "
-                    f"acceleration, or a friction lag, than a robot model that heavy")
-        sig = ctx.signals
-        if j > 0 and "tau_m" in sig:
-            need = j * float(np.sqrt(np.mean(np.square(sig["qdd"]))))
-            have = float(np.sqrt(np.mean(np.square(sig["tau_m"]))))
-            if need > have:
-                return (f"its torque alone (rms {_fmt(need)} {ctx.tau_unit}) would exceed all the motor gave "
-                        f"(rms {_fmt(have)} {ctx.tau_unit}); more likely a wrong acceleration (its unit or filter)")
-        return None
-
-    def summary(self, params):
-        return f"missing inertia {_fmt(params['inertia']['value'])} {params['inertia']['unit']}"
-
-
-#: a robot-model correction beyond this share (a gravity scale, a negative inertia) is suspicious
-ROBOT_MODEL_TOLERANCE = 0.3
-#: a ratio of torques [Nm/Nm] beyond this magnitude is not physical (kc, kq)
-RATIO_BOUND = 1.0
-
-
-def _needs_tau_g(ctx) -> str | None:
-    if "tau_g" not in ctx.signals or _constant(ctx.signals["tau_g"]):
-        return "the log has no varying 'tau_g'"
-    return None
-
-
-def _constant(x: np.ndarray) -> bool:
-    """x (n,) is constant up to rounding: its spread is below sqrt(eps) of its magnitude."""
-    return not np.ptp(x) > np.sqrt(np.finfo(np.float64).eps) * float(np.max(np.abs(x)))
-
-
-def _ratio_reach(effect: Effect, ctx: Context, what: str) -> str | None:
-    """None when ``effect``'s single term, a torque times a coefficient in Nm/Nm, could remove
-    ``ctx.min_gain`` of the residual's mean square at the physical bound of that coefficient
-    (``RATIO_BOUND``); else why the log cannot identify it."""
-    if ctx.residual_ms <= 0:
-        return None
-    col = T.matrix(effect.terms(ctx, None), ctx.signals, ctx.p)[:, 0]
-    spread = float(np.std(col))
-    reach = RATIO_BOUND ** 2 * spread ** 2 / ctx.residual_ms
-    if reach >= ctx.min_gain:
-        return None
-    u = ctx.tau_unit
-    share = f"{100 * reach:.2g} %" if reach >= 1e-4 else "under 0.01 %"
-    return (f"{what} varies too little on this log (std {spread:.2g} {u}): even {RATIO_BOUND:g} {u}/{u} would "
-            f"explain {share} of the residual, under the {100 * ctx.min_gain:g} % an effect must remove")
-
-
-def _ratio_text(name: str, par: dict) -> str:
-    """``"kc 0.01 Nm/Nm"``; beyond the physical bound only the side it lies on (the figure means nothing)."""
-    v = par["value"]
-    if v is not None and abs(v) > RATIO_BOUND:
-        return f"{name} {'>' if v > 0 else '<'} {RATIO_BOUND if v > 0 else -RATIO_BOUND:g} {par['unit']} (not physical)"
-    return f"{name} {_fmt(v)} {par['unit']}"
-
-
-def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
-    if value is None or abs(value) <= RATIO_BOUND:
-        return None
-    return (f"|{name}| > {RATIO_BOUND:g} {unit} is not physical (the friction would exceed the torque through "
-            f"the gear); the shape more likely comes from tau_g (a gravity or payload error) than from friction")
-
-
-class Load(Effect):
-    name = "load"
-    description = "Coulomb level growing with |tau_g|, the gravity load on the gear (its normal force)"
-
-    def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_g|*sign(qd)")
-
-    def terms(self, ctx, residual):
-        return [T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN)]
-
-    def params(self, coef, ctx):
-        return {"kc": _par(coef["|tau_g|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
-
-    def implausible(self, params, ctx):
-        return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
-
-    def summary(self, params):
-        return _ratio_text("kc", params["kc"])
-
-
-class Payload(Effect):
-    """A payload the robot model lacks loads the gear: the friction's load dependence follows the
-    torque through the gear, |tau_l| with tau_l = tau_m - tau_dyn - p (motor torque minus inertia and friction),
-    where the model sees only |tau_g|."""
-
-    name = "payload"
-    description = "friction growing with |tau_l| - |tau_g|: the gear carries a load tau_g lacks (a payload)"
-
-    def applicable(self, ctx):
-        # a payload loads the gear through gravity: where tau_g cannot load it, neither can a payload,
-        # and the gear load tau_l would only echo the model's own residual
-        return (_needs_tau_g(ctx) or _ratio_reach(Load(), ctx, "|tau_g|*sign(qd)")
-                or _ratio_reach(self, ctx, "(|tau_l| - |tau_g|)*sign(qd)"))
-
-    def terms(self, ctx, residual):
-        return [T.term("(|tau_l|-|tau_g|)*sign", T.OVERLOAD, T.SIGN)]
-
-    def params(self, coef, ctx):
-        return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
-
-    def implausible(self, params, ctx):
-        kc = params["kc"]["value"]
-        if kc is not None and kc < 0:
-            # |tau_l| - |tau_g| is the residual itself where no payload loads the gear, so a
-            # fit of it can echo any residual; a real payload only adds friction
-            return ("kc < 0 is not physical (friction falling as the gear carries more load); tau_l holds "
-                    "the model's own residual, so the term echoes it rather than a payload")
-        return _ratio_implausible("kc", kc, params["kc"]["unit"])
-
-    def summary(self, params):
-        return _ratio_text("kc", params["kc"])
-
-
-class Gravity(Effect):
-    """The logged gravity torque is off by a factor: the residual holds k*tau_g, at rest as in
-    motion, and the true gravity torque is (1 + k) times the logged one."""
-
-    name = "gravity"
-    description = "the logged tau_g (the robot model's gravity) is off by a factor: a robot-model error"
-    part = "model"
-
-    def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_g")
-
-    def terms(self, ctx, residual):
-        return [T.term("tau_g", T.sig_("tau_g"))]
-
-    def implausible(self, params, ctx):
-        scale = params["scale"]["value"]
-        if scale is None or abs(scale - 1.0) <= ROBOT_MODEL_TOLERANCE:
-            return None
-        mapping = ("the joint's zero or sign convention against the URDF (an encoder offset of a multiple of pi/2 "
-                   "left out of the mapping, or the joint turning the other way: fricli import checks the mapping "
-                   "against the URDF, docs/robot-import.md)")
-        if scale < 0:     # no mass, gain or spring makes gravity act the other way round
-            return (f"a gravity scale of {_fmt(scale)}: the logged tau_g acts against the measured torque; the "
-                    f"likely cause is {mapping}, or a reversed sign of tau_m")
-        return (f"a gravity scale of {_fmt(scale)} is outside 1 +- {100 * ROBOT_MODEL_TOLERANCE:g} %, more than "
-                f"CAD masses usually miss by (calibrate the robot model to tell); a torque proportional to tau_g "
-                f"also comes from {mapping}, a drive gain or torque constant error, a cable or hose, a "
-                f"counterbalance spring, or a wrong payload")
-
-    def params(self, coef, ctx):
-        k = coef["tau_g"]
-        return {"scale": _par(1.0 + k, ""),
-                "error": _par(100.0 * (1.0 / (1.0 + k) - 1.0) if k > -1 else float("nan"), "%")}
-
-    def summary(self, params):
-        e = params["error"]["value"]
-        if e is None:
-            return "logged tau_g has the wrong sign"
-        return (f"logged tau_g {_fmt(abs(e))} % {'low' if e < 0 else 'high'} "
-                f"(true = {_fmt(params['scale']['value'])} x logged)")
-
-
-class Quadrant(Effect):
-    """Friction that differs between the quadrants of (qd, tau_g): the Coulomb level is
-    Fc + kq*tau_g*sign(qd), higher when the joint drives against the gravity load on the gear
-    (sign(qd*tau_g) > 0) than when that load back-drives it. In the signed friction that is
-    kq*tau_g, held through rests at its value when the motion stopped (the bristles hold the
-    friction they had), which tells it apart from an error of the logged gravity torque."""
-
-    name = "quadrant"
-    rivals = (("offset",),)
-    description = "friction kq*|tau_g| higher when the joint drives against tau_g than when back-driven"
-
-    def applicable(self, ctx):
-        return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "tau_g held through rests")
-
-    def terms(self, ctx, residual):
-        return [T.term("tau_g held", T.HELDGRAVITY)]
-
-    def implausible(self, params, ctx):
-        return _ratio_implausible("kq", params["kq"]["value"], params["kq"]["unit"])
-
-    def params(self, coef, ctx):
-        return {"kq": _par(coef["tau_g held"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
-
-    def summary(self, params):
-        return f"{_ratio_text('kq', params['kq'])}: Coulomb level + kq*tau_g*sign(qd) (driving vs back-driven)"
-
-
 class Velocity(Effect):
-    name = "velocity"
-    rivals = (("level",),)
+    name = N.VELOCITY
+    rivals = ((N.LEVEL,),)
     description = "a smooth correction in qd (a wrong curve shape)"
     fractions = (0.05, 0.2, 0.6)
 
@@ -528,7 +199,7 @@ class Position(Effect):
     each direction's rows, each removed before the next is sought: not always harmonics of the
     strongest one (twice the wave generator's turn and its multiples, the motor's cogging)."""
 
-    name = "position"
+    name = N.POSITION
     description = "periodic in q (gear ripple)"
     peaks = 3
     max_bins = 1 << 20
@@ -621,11 +292,11 @@ class Position(Effect):
 class Column(Effect):
     """Another numeric column of the log: a Coulomb-like and an additive term in its deviation."""
 
-    rivals = (("level",),)
+    rivals = ((N.LEVEL,),)
 
     def __init__(self, column: str):
         self.column = column
-        self.name = f"column:{column}"
+        self.name = f"{N.COLUMN_PREFIX}{column}"
         self.description = f"friction depending on the column {column!r}"
 
     def applicable(self, ctx):
@@ -664,12 +335,13 @@ def extra_columns(signals: dict[str, np.ndarray]) -> list[str]:
 
 
 def library(signals: dict[str, np.ndarray], only: list[str] | None = None) -> list[Effect]:
-    """All candidate effects for these signals (``only``: names to keep, ``column`` = all columns)."""
+    """All candidate effects for these signals (``only``: names to keep, ``column`` = all columns; an
+    earlier name, ``fricli.core.effectnames.ALIASES``, stands for its effect)."""
     out: list[Effect] = [cls() for cls in BUILTIN]
     out += [Column(c) for c in extra_columns(signals)]
     if only:
-        keep = set(only)
-        out = [e for e in out if e.name in keep or (e.name.startswith("column:") and "column" in keep)]
+        keep = {N.canonical(name) for name in only}
+        out = [e for e in out if e.name in keep or (e.name.startswith(N.COLUMN_PREFIX) and N.COLUMN in keep)]
     return out
 
 
@@ -680,7 +352,7 @@ class Coupling(Effect):
     log records a coupled transmission. A per-joint model cannot follow a motor that turns with
     two joints; the remedy is one model of the group."""
 
-    name = "coupling"
+    name = N.COUPLING
     description = "friction moving with the joints it shares motors with (their velocities, the shared motors' directions)"
 
     @staticmethod

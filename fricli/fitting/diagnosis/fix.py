@@ -23,14 +23,15 @@ import math
 
 import numpy as np
 
+from fricli.core import effectnames as N
 from fricli.core import logs, metrics
 from fricli.models import terms as T
 from fricli.fitting.diagnosis.driver import Diagnosis
 from fricli.models.augmented import AugmentedModel
 
 CARRY_TOLERANCE = 0.02
-CARRIABLE = ("level", "direction", "temperature")
-SHARING = {"drift", "velocity"}          # other effects whose groups include the level terms
+CARRIABLE = (N.LEVEL, N.DIRECTION, N.TEMPERATURE)
+SHARING = {N.DRIFT, N.VELOCITY}          # other effects whose groups include the level terms
 SCALE_RANGE = (0.25, 4.0)                # a carried level factor outside this is not the same joint
 SIGMA1_FLOOR = 1e-9                      # sigma1 >= sigma0 * floor on the log scale [s]
 LEVEL_NAMES = ("p", "qd")
@@ -58,9 +59,9 @@ def augment(model, diagnosis: Diagnosis, log: logs.Log, carry: bool = True) -> A
     return carried
 
 
-CARRIED_PARAMS = {"level": ("fc", "fs", "fv", "kc", "ks"),
-                  "direction": ("fc", "fc_neg", "fs", "fs_neg", "fv", "fv_neg"),
-                  "temperature": ("t_ref", "alpha_c", "alpha_v")}
+CARRIED_PARAMS = {N.LEVEL: ("fc", "fs", "fv", "kc", "ks"),
+                  N.DIRECTION: ("fc", "fc_neg", "fs", "fs_neg", "fv", "fv_neg"),
+                  N.TEMPERATURE: ("t_ref", "alpha_c", "alpha_v")}
 
 
 def _final_params(model: AugmentedModel, diagnosis: Diagnosis, log: logs.Log) -> dict:
@@ -94,13 +95,13 @@ def _carry_lugre(model, diagnosis: Diagnosis, log: logs.Log, params: dict) -> Au
     log together with the remaining terms, or None when the effects cannot be carried."""
     added = set(diagnosis.added)
     which = [e for e in CARRIABLE if e in added]
-    if "direction" in which and model.asymmetric:
-        which.remove("direction")
-    if "temperature" in which and model.thermal:
-        which.remove("temperature")
-    if added & SHARING or any(a.startswith("column:") for a in added):
+    if N.DIRECTION in which and model.asymmetric:
+        which.remove(N.DIRECTION)
+    if N.TEMPERATURE in which and model.thermal:
+        which.remove(N.TEMPERATURE)
+    if added & SHARING or any(a.startswith(N.COLUMN_PREFIX) for a in added):
         which = []          # their level terms cannot be told apart from a carried level
-    bristles = "acceleration" in added
+    bristles = N.ACCELERATION in added
     if not which and not bristles:
         return None
     c = diagnosis.coef
@@ -113,14 +114,14 @@ def _carry_lugre(model, diagnosis: Diagnosis, log: logs.Log, params: dict) -> Au
     if bristles:
         knobs["log_sigma0"] = math.log(model.sigma0)
         knobs["log_sigma1"] = math.log(max(model.sigma1, model.sigma0 * SIGMA1_FLOOR))
-    if "direction" in which:
+    if N.DIRECTION in which:
         knobs["s_neg"] = knobs["s_pos"]
         knobs["fv_neg"] = knobs["fv"]
         knobs["s_pos"] += c.get("p*pos", 0.0)
         knobs["fv"] += model.fv * c.get("p*pos", 0.0) + c.get("qd*pos", 0.0)
         absorbed |= set(DIRECTION_NAMES)
     t_ref = None
-    if "temperature" in which:
+    if N.TEMPERATURE in which:
         term = next(t for t in diagnosis.terms if t["name"] == "p*dtemp")
         t_ref = float(term["factors"][1]["center"])
         bpt, bvt = c.get("p*dtemp", 0.0), c.get("qd*dtemp", 0.0)
@@ -128,7 +129,7 @@ def _carry_lugre(model, diagnosis: Diagnosis, log: logs.Log, params: dict) -> Au
         knobs["alpha_c"] = -bpt / s_mean if s_mean > 0 else 0.0
         knobs["alpha_v"] = -(bpt * model.fv + bvt) / knobs["fv"] if knobs["fv"] > 0 else 0.0
         absorbed |= set(TEMPERATURE_NAMES)
-    scale_load = "level" in which
+    scale_load = N.LEVEL in which
 
     def build(values: dict):
         s_pos, s_neg = values["s_pos"], values.get("s_neg")

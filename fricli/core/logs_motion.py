@@ -1,0 +1,71 @@
+"""A log's motion columns filtered and differentiated: the zero-phase low-pass, qd and qdd derived
+where missing, and rate columns that cannot be measurements."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fricli.core.errors import DataError
+
+
+def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
+    """Whether ``lowpass`` filters at all: 16 samples or more and a cut-off below the Nyquist
+    frequency (by more than 1 ppm: a recorded sample rate carries rounding in its timestamps)."""
+    return len(t) >= 16 and cutoff_hz < 0.5 / float(np.median(np.diff(t))) * (1 - 1e-6)
+
+
+def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
+    if not lowpass_applies(t, cutoff_hz):
+        return x.copy()
+    fs = 1.0 / float(np.median(np.diff(t)))
+    from scipy import signal  # imported here: it costs about a second at start-up
+
+    sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
+    # padded by the ends' odd reflection over three periods of the cut-off (scipy's default pads a
+    # few samples, so a low cut-off left a transient in the first and last tenth of a second)
+    return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
+
+
+def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:
+    """Whether a rate column constant over the rows (``rate``) contradicts the signal ``x`` it is
+    the derivative of: x departs from x[0] + rate (t - t[0]) by more than a tenth of its range (a
+    constant-velocity sweep, or a constant-acceleration ramp, agrees with it)."""
+    if len(x) < 3 or np.ptp(rate) != 0 or not np.ptp(x) > 0:
+        return False
+    return bool(np.max(np.abs(x - x[0] - rate[0] * (t - t[0]))) > 0.1 * np.ptp(x))
+
+
+def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
+    """Motion columns that cannot be measurements, as (column, note): an acceleration ``qdd``
+    constant over a log whose velocity varies otherwise (a column of zeros a recorder filled in),
+    a velocity ``qd`` constant while the position moves otherwise. Such a column is unknown, not a
+    value: the caller drops it and it is derived like a missing one."""
+    out, t = [], sig["t"]
+    if "q" in sig and "qd" in sig and _contradicts(sig["q"], sig["qd"], t):
+        out.append(("qd", f"the velocity column qd is constant ({sig['qd'][0]:g}) while the position moves "
+                          "otherwise: not a measurement, derived from q instead"))
+    if "qdd" in sig and "qd" in sig and not out and _contradicts(sig["qd"], sig["qdd"], t):
+        out.append(("qdd", f"the acceleration column qdd is constant ({sig['qdd'][0]:g}) while the velocity "
+                           "varies otherwise: not a measurement, derived from the velocity instead"))
+    elif "qdd" in sig and out and np.ptp(sig["qdd"]) == 0:
+        out.append(("qdd", "the acceleration column qdd is constant too: derived with the velocity"))
+    return out
+
+
+def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
+    """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
+    derived = []
+    t = sig["t"]
+    if len(t) < 3 and ("qd" not in sig or "qdd" not in sig):
+        raise DataError("too few samples to derive velocity and acceleration")
+    if "qd" not in sig:
+        sig["qd"] = np.gradient(lowpass(sig["q"], t, cutoff_hz), t)
+        derived.append("qd")
+        if "qdd" not in sig:
+            sig["qdd"] = np.gradient(sig["qd"], t)
+            derived.append("qdd")
+    elif "qdd" not in sig:
+        sig["qdd"] = np.gradient(lowpass(sig["qd"], t, cutoff_hz), t)
+        derived.append("qdd")
+    return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
