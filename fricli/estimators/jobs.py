@@ -139,7 +139,12 @@ def _effects(value):
 
     if value is None:
         return None
-    names = [v.strip() for v in value.split(",")] if isinstance(value, str) else list(value)
+    if isinstance(value, str):
+        names = [v.strip() for v in value.split(",")]
+    elif isinstance(value, (list, tuple)):
+        names = list(value)
+    else:
+        raise ValueError(f"effects = {value!r}: expected effect names, a list or comma-separated")
     names = [n for n in names if n]
     bad = [n for n in names if not isinstance(n, str) or (n not in E.NAMES and n != "column"
                                                             and not n.startswith("column:"))]

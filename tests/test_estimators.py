@@ -1,0 +1,221 @@
+"""The estimator contract, checked on every estimator (as scikit-learn's parametrize_with_checks):
+parameters stored as given and checked against the option spec, fit returns self, fitted
+attributes end in _ and appear only with fit, unfitted use refused, the same seed gives the same
+model, a saved model loads and predicts the same, and save writes the bytes of the command's
+model file with the same options on the same log."""
+
+import hashlib
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import fricli
+from conftest import SAMPLE
+from fricli import GMS, Diagnosis, Linear, LuGre, Network, NotFittedError, OptionError, Residual
+from fricli.cli import cli
+
+BASE, ADAPT, EXTENDED = "joint2_base.parquet", "joint2_adapt.parquet", "joint2_extended_asym.parquet"
+UNTIL = "40%"   # a part of the long logs: the contract, not the fit, is under test
+
+
+def command(*args):
+    res = CliRunner().invoke(cli, [str(a) for a in args])
+    assert res.exit_code == 0, res.output
+    return res
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    out = tmp_path_factory.mktemp("estimators")
+    for name in (BASE, ADAPT, EXTENDED):
+        shutil.copy(SAMPLE / name, out / name)
+    command("identify", out / BASE, "--until", UNTIL, "-o", out / "lugre.npz", "-q")
+    return out
+
+
+# (id, estimator factory (folder -> estimator), the log and its reading keywords, the command's arguments
+# before -o; "{}" is the folder)
+CASES = [
+    ("lugre", lambda f: LuGre(hold=0.3), BASE, dict(time_until=UNTIL),
+     ["identify", "{}/" + BASE, "--hold", "0.3", "--until", UNTIL]),
+    ("linear", lambda f: Linear(asymmetric=True), BASE, dict(cutoff=40.0),
+     ["identify", "{}/" + BASE, "--kind", "linear-asymmetric", "--cutoff", "40"]),
+    ("gms", lambda f: GMS(), BASE, dict(time_until=UNTIL), ["identify", "{}/" + BASE, "--kind", "gms", "--until", UNTIL]),
+    ("network", lambda f: Network(steps=30, seed=3, hidden="8,8"), BASE, dict(time_until=UNTIL),
+     ["train-base", "{}/" + BASE, "--steps", "30", "--seed", "3", "--hidden", "8,8", "--until", UNTIL]),
+    ("residual", lambda f: Residual(str(f / "lugre.npz"), epochs=2, seed=1), ADAPT, {},
+     ["adapt", "{}/lugre.npz", "{}/" + ADAPT, "--epochs", "2", "--seed", "1"]),
+    ("diagnosis", lambda f: Diagnosis(str(f / "lugre.npz"), folds=5), EXTENDED, dict(time_until=UNTIL),
+     ["diagnose", "{}/lugre.npz", "{}/" + EXTENDED, "--fix", "--folds", "5", "--until", UNTIL]),
+]
+IDS = [c[0] for c in CASES]
+
+
+@pytest.fixture(scope="module", params=CASES, ids=IDS)
+def case(request, folder):
+    """(estimator unfitted, the same fitted, the log read, the command's model file)."""
+    _, make, log_name, reading, args = request.param
+    log = fricli.read_log(folder / log_name, **reading)
+    unfitted, fitted = make(folder), make(folder)
+    attributes_before = set(vars(fitted))
+    returned = fitted.fit(log)
+    out = folder / f"{request.param[0]}-command.npz"
+    command(*[a.replace("{}", str(folder)) for a in args], "-o", out, "-q")
+    return dict(unfitted=unfitted, fitted=fitted, returned=returned, before=attributes_before, log=log,
+                command_file=out, make=lambda: make(folder), folder=folder)
+
+
+def test_fit_returns_self(case):
+    assert case["returned"] is case["fitted"]
+
+
+def test_the_constructor_stores_the_parameters_unchanged(case):
+    est = case["unfitted"]
+    params = est.get_params()
+    again = type(est)(**params)
+    for name, value in params.items():
+        assert getattr(again, name) is value
+    # the values given, not checked or converted copies: "8,8" stays a text, 0.3 a float
+    if isinstance(est, Network):
+        assert params["hidden"] == "8,8" and params["steps"] == 30
+    if isinstance(est, LuGre):
+        assert params == {"hold": 0.3, "travel": 0.002, "samples": "auto", "settle": 0.01, "refine": False}
+
+
+def test_fitting_leaves_the_parameters_as_given(case):
+    assert case["fitted"].get_params() == case["unfitted"].get_params()
+
+
+def test_an_unknown_parameter_is_refused_by_name(case):
+    with pytest.raises(OptionError, match="unknown option 'sigma'") as err:
+        type(case["unfitted"])(**case["unfitted"].get_params(), sigma=1.0)
+    assert err.value.option == "sigma"
+
+
+def wrong(option):
+    """A value ``option`` must refuse."""
+    return {"flag": "yes", "choice": "no-such-choice", "int": 1.5, "float": "fast", "sizes": "0,x",
+            "text": object()}[option.type]
+
+
+def test_every_wrong_value_is_refused_naming_its_option(case):
+    est = case["unfitted"]
+    assert est._spec or isinstance(est, GMS)
+    for name, option in est._spec.items():
+        with pytest.raises(OptionError) as err:
+            type(est)(**{**est.get_params(), name: wrong(option)})
+        assert err.value.option == name and name in str(err.value), name
+
+
+def test_options_that_do_not_go_together_are_refused():
+    with pytest.raises(OptionError, match="velocity_input") as err:
+        Network(velocity_input="linear")
+    assert err.value.option == "velocity_input"
+    Network(arch="mlp", velocity_input="linear")
+
+
+def test_fitted_attributes_end_in_an_underscore_and_come_with_fit(case):
+    fitted, unfitted = case["fitted"], case["unfitted"]
+    added = set(vars(fitted)) - case["before"]
+    assert {"model_", "summary_", "meta_"} <= added
+    assert all(name.endswith("_") and not name.startswith("_") for name in added), added
+    assert not any(name.endswith("_") for name in vars(unfitted))
+    assert hasattr(fitted.model_, "predict") and isinstance(fitted.summary_, dict)
+
+
+def test_unfitted_use_is_refused(case, tmp_path):
+    est = case["unfitted"]
+    with pytest.raises(NotFittedError, match="not fitted"):
+        est.predict(case["log"])
+    with pytest.raises(NotFittedError):
+        est.save(tmp_path / "m.npz")
+    assert isinstance(NotFittedError("x"), fricli.FricliError)
+
+
+def test_predict_gives_the_friction_of_every_row(case):
+    pred = case["fitted"].predict(case["log"])
+    assert pred.shape == (len(case["log"]),) and pred.dtype == np.float64 and np.isfinite(pred).all()
+
+
+def test_the_same_seed_gives_the_same_predictions(case):
+    again = case["make"]().fit(case["log"])
+    np.testing.assert_array_equal(again.predict(case["log"]), case["fitted"].predict(case["log"]))
+
+
+def test_a_saved_model_loads_and_predicts_the_same(case, tmp_path):
+    path = tmp_path / "model.npz"
+    case["fitted"].save(path)
+    loaded = fricli.load_model(path)
+    np.testing.assert_array_equal(loaded.predict(case["log"]), case["fitted"].predict(case["log"]))
+    copy = tmp_path / "copy.npz"
+    loaded.save(copy)
+    assert copy.read_bytes() == path.read_bytes()
+
+
+def test_save_writes_the_commands_model_file(case, tmp_path):
+    path = tmp_path / "model.npz"
+    case["fitted"].save(path)
+    assert path.read_bytes() == case["command_file"].read_bytes()
+
+
+def test_a_log_path_is_read_as_the_command_reads_it(folder, tmp_path):
+    LuGre().fit(folder / BASE).save(tmp_path / "a.npz")
+    command("identify", folder / BASE, "-o", tmp_path / "b.npz", "-q")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+
+
+def test_another_seed_gives_another_network(folder):
+    log = fricli.read_log(folder / BASE, time_until=UNTIL)
+    a, b = (Network(steps=30, seed=s, hidden="8,8").fit(log).predict(log) for s in (0, 1))
+    assert not np.array_equal(a, b)
+
+
+def test_the_base_of_a_residual_may_be_a_path_a_loaded_model_or_a_fitted_estimator(folder):
+    log = fricli.read_log(folder / ADAPT)
+    path = folder / "lugre.npz"
+    by_path = Residual(str(path), epochs=2, seed=1).fit(log)
+    loaded = Residual(fricli.load_model(path), epochs=2, seed=1).fit(log)
+    assert loaded._model_bytes() == by_path._model_bytes()
+    estimator = LuGre().fit(fricli.read_log(folder / BASE, time_until=UNTIL))
+    in_memory = Residual(estimator, epochs=2, seed=1).fit(log)
+    np.testing.assert_array_equal(in_memory.predict(log), by_path.predict(log))
+    # the input model is recorded by the sha256 of its bytes, which are the file's
+    job = in_memory.meta_["provenance"]["job"]
+    assert job == by_path.meta_["provenance"]["job"]
+    assert job["inputs"]["base"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    with pytest.raises(NotFittedError):
+        Residual(LuGre()).fit(log)
+
+
+def test_a_diagnosis_says_what_diagnose_says(folder):
+    log = fricli.read_log(folder / EXTENDED, time_until=UNTIL)
+    est = Diagnosis(str(folder / "lugre.npz"), effects="offset,level", max_effects=1).fit(log)
+    res = CliRunner().invoke(cli, ["diagnose", str(folder / "lugre.npz"), str(folder / EXTENDED), "--until", UNTIL,
+                                   "--effects", "offset,level", "--max-effects", "1", "--json"])
+    assert res.exit_code == 0, res.output
+    import json
+
+    printed = json.loads(res.stdout)
+    assert printed["added"] == est.added_ == est.diagnosis_.to_json()["added"]
+    assert len(est.added_) <= 1
+    with pytest.raises(OptionError, match="effects") as err:
+        Diagnosis("m.npz", effects="gear")
+    assert err.value.option == "effects"
+
+
+def test_the_diagnosis_options_are_the_commands():
+    """Diagnosis's defaults and bounds are those of fricli diagnose's options."""
+    import click
+
+    diagnose = cli.get_command(click.Context(cli), "diagnose")
+    ctx = click.Context(diagnose)
+    command_params = {p.name: p for p in diagnose.params}
+    for name, option in Diagnosis._spec.items():
+        param = command_params["only" if name == "effects" else name]
+        default = param.get_default(ctx)
+        assert (bool(default) if option.type == "flag" else default) == option.default, name
+        low = getattr(param.type, "min", None)
+        high = getattr(param.type, "max", None)
+        assert (low, high) == (option.low, option.high), name
