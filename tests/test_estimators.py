@@ -219,3 +219,39 @@ def test_the_diagnosis_options_are_the_commands():
         low = getattr(param.type, "min", None)
         high = getattr(param.type, "max", None)
         assert (low, high) == (option.low, option.high), name
+
+
+def arm_files(folder):
+    """arm.urdf and arm.parquet in ``folder``: a four-joint arm's URDF and a whole-arm log of it,
+    simulated from masses off the URDF's (tests/test_calibrate.py)."""
+    pytest.importorskip("pinocchio")
+    from test_calibrate import URDF, harmonics, simulate, true_model, write_log
+
+    rng = np.random.default_rng(7)
+    model, _ = true_model(rng)
+    fit = harmonics(rng, 1500, (0.2, 0.45, 0.7, 1.1), 0.25)
+    (folder / "arm.urdf").write_text(URDF)
+    write_log(folder / "arm.parquet", *fit, simulate(model, *fit))
+    return folder / "arm.urdf", folder / "arm.parquet"
+
+
+def test_calibration_writes_the_commands_urdf(tmp_path):
+    from fricli import Calibration
+
+    urdf, log = arm_files(tmp_path)
+    est = Calibration(str(urdf), match="order", friction="stribeck", edge=0.2)
+    assert est.get_params()["urdf"] == str(urdf) and est.get_params()["edge"] == 0.2
+    with pytest.raises(NotFittedError):
+        est.save(tmp_path / "x.urdf")
+    assert est.fit(log) is est
+    assert not [name for name in vars(Calibration(str(urdf))) if name.endswith("_")]
+    est.save(tmp_path / "estimator.urdf")
+    command("calibrate", log, "--urdf", urdf, "--match", "order", "--friction", "stribeck", "--edge", "0.2", "-o",
+            tmp_path / "command.urdf", "-q")
+    assert (tmp_path / "estimator.urdf").read_bytes() == (tmp_path / "command.urdf").read_bytes()
+    assert set(est.friction_) == {"1", "2", "3", "4"} and est.report_["consistency"]["ok"]
+    for name, value in (("friction", "coulomb"), ("prior", "strong"), ("gravity", (0, 0)), ("edge", -1.0),
+                        ("urdf_joints", ["j1"])):
+        with pytest.raises(OptionError) as err:
+            Calibration(str(urdf), **{name: value})
+        assert err.value.option == name
