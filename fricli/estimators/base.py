@@ -115,8 +115,8 @@ def load_model(path) -> Model:
 
 
 def external_torque(model, log, lowpass_hz: float | None = None) -> np.ndarray:
-    """tau_ext = tau_g + tau_dyn + friction - tau_m [Nm or N] (n,) on ``log`` as ``fricli predict
-    --external`` gives it, with ``model`` a ``load_model`` result or a fitted estimator; optionally
+    """tau_ext = tau_g + tau_dyn + friction - tau_m [Nm or N] (n,) on ``log`` as ``fricli estimate-ext``
+    gives it, with ``model`` a ``load_model`` result or a fitted estimator; optionally
     low-passed at ``lowpass_hz`` [Hz] (zero-phase, as --lowpass)."""
     from fricli.applying.predicting import external_estimate
 
