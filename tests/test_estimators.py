@@ -239,19 +239,35 @@ def test_calibration_writes_the_commands_urdf(tmp_path):
     from fricli import Calibration
 
     urdf, log = arm_files(tmp_path)
-    est = Calibration(str(urdf), match="order", friction="stribeck", edge=0.2)
+    est = Calibration(str(urdf), match="order", friction="stribeck", edge=0.2, time_from="10%")
     assert est.get_params()["urdf"] == str(urdf) and est.get_params()["edge"] == 0.2
     with pytest.raises(NotFittedError):
         est.save(tmp_path / "x.urdf")
     assert est.fit(log) is est
     assert not [name for name in vars(Calibration(str(urdf))) if name.endswith("_")]
     est.save(tmp_path / "estimator.urdf")
-    command("calibrate", log, "--urdf", urdf, "--match", "order", "--friction", "stribeck", "--edge", "0.2", "-o",
+    command("calibrate", log, "--urdf", urdf, "--match", "order", "--friction", "stribeck", "--edge", "0.2",
+            "--from", "10%", "-o",
             tmp_path / "command.urdf", "-q")
     assert (tmp_path / "estimator.urdf").read_bytes() == (tmp_path / "command.urdf").read_bytes()
     assert set(est.friction_) == {"1", "2", "3", "4"} and est.report_["consistency"]["ok"]
     for name, value in (("friction", "coulomb"), ("prior", "strong"), ("gravity", (0, 0)), ("edge", -1.0),
-                        ("urdf_joints", ["j1"])):
+                        ("urdf_joints", ["j1"]), ("time_until", "120%")):
         with pytest.raises(OptionError) as err:
             Calibration(str(urdf), **{name: value})
         assert err.value.option == name
+
+
+def test_external_torque_is_estimate_exts(folder, tmp_path):
+    import pyarrow.parquet as pq
+
+    log = folder / EXTENDED
+    out = tmp_path / "ext.parquet"
+    command("estimate-ext", folder / "lugre.npz", log, "--lowpass", "5", "-o", out, "-q")
+    written = pq.read_table(out)
+    model = fricli.load_model(folder / "lugre.npz")
+    np.testing.assert_allclose(fricli.external_torque(model, log, lowpass_hz=5.0),
+                               written.column("tau_ext_pred").to_numpy(), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(model.predict(log), written.column("tau_f_pred").to_numpy(), rtol=1e-12, atol=1e-9)
+    with pytest.raises(NotFittedError):
+        fricli.external_torque(LuGre(), log)

@@ -6,7 +6,7 @@ import os
 
 import numpy as np
 
-from fricli.core import logs
+from fricli.core import logs, timewindow
 from fricli.estimators.base import NotFittedError, _Custom, _Params
 from fricli.fitting.optionspec import Option
 
@@ -36,6 +36,15 @@ def _urdf_joints(value):
     raise ValueError(f"urdf_joints = {value!r}: expected {{log joint: URDF joint name}}")
 
 
+def _bound(value):
+    if value is None:
+        return None
+    try:
+        return timewindow.Bound.parse(str(value))
+    except ValueError as exc:
+        raise ValueError(f"time window bound {value!r}: {exc}") from None
+
+
 def _calibrate_spec() -> dict:
     return {o.name: o for o in (
         Option("friction", "choice", "linear", "Each joint's friction fitted with the robot model.",
@@ -52,12 +61,16 @@ def _calibrate_spec() -> dict:
         _Custom("urdf_joints", "text", None, "{log joint: URDF joint name}.", validate=_urdf_joints),
         _Custom("gravity", "text", None, "Gravity (x, y, z) [m/s^2] in the URDF's base frame (default: the log's, "
                                          "else 0 0 -9.81).", validate=_gravity),
+        _Custom("time_from", "text", None, "Calibrate on the rows from this time: seconds of t, or a share of its "
+                                           "span (\"60%\").", validate=_bound),
+        _Custom("time_until", "text", None, "... and before this time.", validate=_bound),
     )}
 
 
 class Calibration(_Params):
     """The arm's inertial parameters, rotor inertias and each joint's friction from a whole-arm log
-    and ``urdf`` (``fricli calibrate``; needs pinocchio): ``report_`` (the command's report),
+    and ``urdf`` (``fricli calibrate``; needs pinocchio): ``report_`` (the figures of the command's
+    report),
     ``urdf_text_`` the calibrated URDF (``save``), ``friction_`` {joint: {Fv, Fc, offset, ...}}."""
 
     _positional = "urdf"
@@ -76,6 +89,7 @@ class Calibration(_Params):
         urdf = os.fspath(self.urdf)
         name = os.fspath(log)
         table, _ = logs.read_table(name)
+        table = timewindow.slice_table(table, timewindow.Window(_bound(self.time_from), _bound(self.time_until)), name)
         gravity = _gravity(self.gravity)
         robot = load_robot(urdf, Mapping(time=None, joints=[], gravity=logs.gravity_of(table.schema, gravity),
                                          held=logs.held_of(table.schema)))

@@ -186,7 +186,7 @@ class Diagnosis(_OnModel):
         opts = {**_checked(opts, self._spec, "Diagnosis"), "urdf": None, "calibrated": None,
                 "calibrate_friction": None}
         opts["only"] = opts.pop("effects")
-        reading = _checked(data.reading, READING, "Diagnosis")
+        reading = {**{n: o.default for n, o in READING.items()}, **_checked(data.reading, READING, "Diagnosis")}
         opts.update({k: reading[k] for k in ("joint", "kt", "cutoff", "drop_invalid")})
         opts.update({flag: True for flag in optionspec.ZERO_FLAGS if reading[flag]})
         return opts

@@ -7,6 +7,10 @@ fits, and saves the model with its job record (``jobs.job_record``) in the prove
 record holds every option that shapes the model (``fricli.fitting.optionspec``; diagnose: the options
 the command gives) and the joint the model is of, so a command and a fleet job on the same log
 with the same options write the same bytes.
+
+Fitting and saving are two steps: ``fit`` returns a ``Fitted`` (the model, its fit figures and
+what the file records), ``save`` writes it (``file_parts``: the file's meta and arrays). The
+estimators of ``fricli.estimators`` fit with ``fit`` and save the same bytes.
 """
 
 from __future__ import annotations
