@@ -271,3 +271,13 @@ def test_external_torque_is_estimate_exts(folder, tmp_path):
     np.testing.assert_allclose(model.predict(log), written.column("tau_f_pred").to_numpy(), rtol=1e-12, atol=1e-9)
     with pytest.raises(NotFittedError):
         fricli.external_torque(LuGre(), log)
+
+
+def test_read_log_refuses_a_wrong_reading_option_by_name(folder):
+    for name, value in (("cutoff", -1.0), ("drop_invalid", "no"), ("time_until", "150%"), ("time_from", "soon")):
+        with pytest.raises(OptionError) as err:
+            fricli.read_log(folder / BASE, **{name: value})
+        assert err.value.option == name and name in str(err.value)
+    log = fricli.read_log(folder / BASE, cutoff=30, time_from=12.5)
+    assert log.reading["cutoff"] == 30.0 and log.window == {"from": "12.5 s", "until": None}
+    assert log.signals["t"][0] >= 12.5

@@ -4,9 +4,8 @@ parameters checked against the option spec and stored as given."""
 from __future__ import annotations
 
 import dataclasses
-import os
-
 import inspect
+import os
 
 import numpy as np
 
@@ -185,9 +184,8 @@ class _Params:
         return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in given.items())})"
 
     def _options(self, params: dict) -> dict:
-        """The job's options from the parameters (and the log's reading options)."""
+        """The pipeline's options from the parameters; OptionError for options that do not go together."""
         return dict(params)
-
 
 
 class _Estimator(_Params):
