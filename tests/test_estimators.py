@@ -42,7 +42,8 @@ CASES = [
      ["identify", "{}/" + BASE, "--hold", "0.3", "--until", UNTIL]),
     ("linear", lambda f: Linear(asymmetric=True), BASE, dict(cutoff=40.0),
      ["identify", "{}/" + BASE, "--kind", "linear-asymmetric", "--cutoff", "40"]),
-    ("gms", lambda f: GMS(), BASE, dict(time_until=UNTIL), ["identify", "{}/" + BASE, "--kind", "gms", "--until", UNTIL]),
+    ("gms", lambda f: GMS(), BASE, dict(time_until=UNTIL),
+     ["identify", "{}/" + BASE, "--kind", "gms", "--until", UNTIL]),
     ("network", lambda f: Network(steps=30, seed=3, hidden="8,8"), BASE, dict(time_until=UNTIL),
      ["train-base", "{}/" + BASE, "--steps", "30", "--seed", "3", "--hidden", "8,8", "--until", UNTIL]),
     ("residual", lambda f: Residual(str(f / "lugre.npz"), epochs=2, seed=1), ADAPT, {},
@@ -281,3 +282,31 @@ def test_read_log_refuses_a_wrong_reading_option_by_name(folder):
     log = fricli.read_log(folder / BASE, cutoff=30, time_from=12.5)
     assert log.reading["cutoff"] == 30.0 and log.window == {"from": "12.5 s", "until": None}
     assert log.signals["t"][0] >= 12.5
+
+
+def test_a_coupled_groups_model_reads_the_other_joints_of_the_log(tmp_path):
+    """A model of a coupled group (identify --coupling) predicts and is adapted on one joint of a
+    whole-arm log as the commands do it: with the velocities of the group's other joints."""
+    import pyarrow.compute as pc
+    import pyarrow.parquet as pq
+
+    from fricli.core import logs
+    from fricli.core.errors import DataError
+    from fricli.sim.coupled import simulate_coupled
+
+    arm = tmp_path / "arm.parquet"
+    logs.write_table(simulate_coupled(duration=8.0, rate_hz=500.0, rng=np.random.default_rng(11)).table, str(arm))
+    group = tmp_path / "group.npz"
+    command("identify", arm, "--coupling", "--joint", 5, "-o", group, "-q")
+    command("predict", group, arm, "--joint", 5, "-o", tmp_path / "pred.parquet", "-q")
+    command("adapt", group, arm, "--joint", 5, "--epochs", 2, "-o", tmp_path / "adapted.npz", "-q")
+    log = fricli.read_log(arm, joint=5)
+    written = pq.read_table(tmp_path / "pred.parquet")
+    expected = written.filter(pc.equal(written.column("joint"), 5)).column("tau_f_pred").to_numpy()
+    np.testing.assert_array_equal(fricli.load_model(group).predict(log), expected)
+    Residual(str(group), epochs=2).fit(log).save(tmp_path / "estimator.npz")
+    assert (tmp_path / "estimator.npz").read_bytes() == (tmp_path / "adapted.npz").read_bytes()
+    table, digest = logs.read_table(str(arm))
+    alone = logs.from_table(table, name=str(arm), sha256=digest, joint=5)   # no other joint's rows kept
+    with pytest.raises(DataError, match="coupled group"):
+        fricli.load_model(group).predict(alone)

@@ -236,6 +236,8 @@ class Log:
     zero: tuple = ()               # robot-model columns the log lacks, declared zero (filled in signals)
     reading: dict = dataclasses.field(default_factory=dict)   # how it was read: the reading options
     window: dict | None = None     # the time window it was cut to (``Window.to_json``), when one was given
+    source: object = None          # the table of every joint's rows it was read from (for a coupled group's
+                                   # partners), when the caller keeps it
 
     @property
     def units(self) -> dict:

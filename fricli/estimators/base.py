@@ -11,7 +11,7 @@ import numpy as np
 
 from fricli import models
 from fricli.core import logs, modelfile, timewindow
-from fricli.core.errors import USAGE, FricliError
+from fricli.core.errors import USAGE, DataError, FricliError
 from fricli.fitting import optionspec, runs
 from fricli.fitting.optionspec import Option, OptionError
 
@@ -68,7 +68,27 @@ def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_i
     table = timewindow.slice_table(table, window, name, warn=warn)
     data = runs.read(table, digest, name, opts, warn=warn)
     data.window = window.to_json() if window else None
+    if len(logs.joints_of(table, name) or ()) > 1:
+        data.source = table   # the other joints' velocities a coupled group's model reads (``with_partners``)
     return data
+
+
+def with_partners(model, data: logs.Log):
+    """``model`` as it applies to ``data``'s joint (a coupled group's member, ``coupled.view``), with
+    the velocities of the group's other joints it reads added to ``data.signals`` from the log it
+    was read from, as the commands read them. DataError when ``data`` does not hold them."""
+    from fricli.models import coupled
+
+    model = coupled.view(model, data.joint)
+    missing = [p for p in coupled.partners_read(model) if coupled.partner_key(p) not in data.signals]
+    if missing and data.source is None:
+        raise DataError(f"{data.name}: the model is a coupled group's and reads the velocities of joints "
+                        f"{', '.join(missing)}: give the log as a path, or as read_log reads it")
+    if missing:
+        r = {**{name: o.default for name, o in READING.items()}, **data.reading}
+        coupled.add_partners(model, data, data.source, kt=r["kt"], cutoff_hz=r["cutoff"],
+                             drop_invalid=r["drop_invalid"], zero=runs.zero(r))
+    return model
 
 
 def _as_log(log, reading: dict | None = None) -> logs.Log:
@@ -81,7 +101,7 @@ def _as_log(log, reading: dict | None = None) -> logs.Log:
 
 
 def _friction(model, data: logs.Log) -> np.ndarray:
-    return np.asarray(model.predict(data.signals)[0], dtype=np.float64)
+    return np.asarray(with_partners(model, data).predict(data.signals)[0], dtype=np.float64)
 
 
 class Model:

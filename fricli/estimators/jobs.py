@@ -8,8 +8,7 @@ import os
 
 from fricli import models
 from fricli.core import logs
-from fricli.core.errors import DataError
-from fricli.estimators.base import READING, Model, _checked, _Custom, _as_log, _Estimator, base_bytes
+from fricli.estimators.base import READING, Model, _checked, _Custom, _as_log, _Estimator, base_bytes, with_partners
 from fricli.fitting import optionspec, runs
 from fricli.fitting.optionspec import Option
 
@@ -101,27 +100,22 @@ class _OnModel(_Job):
         return getattr(self, self._positional)
 
     def _base(self, data: logs.Log):
-        from fricli.models import coupled
-
         given = self._input()
         if isinstance(given, (str, os.PathLike)):
-            base, path = runs.load_base(os.fspath(given), data), os.fspath(given)
+            path = os.fspath(given)
+            model, meta, name = *models.load(path), os.path.basename(path)
         elif isinstance(given, Model):
             path = given.path if given.path and os.path.isfile(given.path) else None
-            base = runs.Base(coupled.view(given.model, data.joint), given.meta,
-                             os.path.basename(path) if path else None, given.path or "base")
+            model, meta, name = given.model, given.meta, os.path.basename(path) if path else None
         elif isinstance(given, _Estimator):
             given._check_fitted()
-            base, path = runs.Base(coupled.view(given.model_, data.joint), given.meta_, None), None
+            model, meta, name, path = given.model_, given.meta_, None, None
         else:
             raise TypeError(f"{type(self).__name__}: {self._positional} must be a model file's path, a "
                             f"fricli.load_model result or a fitted estimator, not {type(given).__name__}")
-        models.check_log(base.meta, data, base.source)
-        missing = [p for p in coupled.partners_read(base.model) if coupled.partner_key(p) not in data.signals]
-        if missing:
-            raise DataError(f"{data.name}: the {self._positional} model is a coupled group's and reads the velocities "
-                            f"of joints {', '.join(missing)}: use the command (fricli {self._pipeline}) on the whole log")
-        return base, path
+        source = path or getattr(given, "path", None) or self._positional
+        models.check_log(meta, data, source)
+        return runs.Base(with_partners(model, data), meta, name, source), path
 
 
 class Residual(_OnModel):
