@@ -310,3 +310,13 @@ def test_a_coupled_groups_model_reads_the_other_joints_of_the_log(tmp_path):
     alone = logs.from_table(table, name=str(arm), sha256=digest, joint=5)   # no other joint's rows kept
     with pytest.raises(DataError, match="coupled group"):
         fricli.load_model(group).predict(alone)
+
+
+def test_set_params_checks_as_the_constructor_does():
+    est = Network(steps=5)
+    assert est.set_params(seed=2) is est and est.seed == 2 and est.steps == 5
+    with pytest.raises(OptionError) as err:
+        est.set_params(steps=0)
+    assert err.value.option == "steps" and est.steps == 5
+    assert repr(est) == "Network(steps=5, seed=2)"
+    assert repr(Residual("base.npz", epochs=3)) == "Residual(base='base.npz', epochs=3)"
