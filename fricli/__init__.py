@@ -1,3 +1,28 @@
-"""fricli: friction models for robot joints."""
+"""fricli: friction models for robot joints.
+
+The library (docs/python-api.md): ``read_log`` reads a log as the commands do, the estimators
+(``LuGre``, ``Linear``, ``GMS``, ``Network``, ``Residual``, ``Diagnosis``, ``Calibration``) fit
+what the commands fit, ``load_model`` reads a model file. The names are imported on first use,
+so ``import fricli`` stays cheap.
+"""
 
 __version__ = "0.1.0"
+
+__all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
+           "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "__version__"]
+
+_FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec"}
+
+
+def __getattr__(name: str):
+    if name in __all__:
+        import importlib
+
+        value = getattr(importlib.import_module(_FROM.get(name, "fricli.estimators")), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'fricli' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -21,7 +21,7 @@ LAYERS = [
     ("fleet", {"fleet"}),
     ("export", {"export"}),
     ("simulation", {"sim"}),
-    ("cli", {"cli", "__main__", "demo"}),
+    ("cli", {"cli", "__main__", "demo", "estimators"}),
 ]
 RANK = {name: i for i, (_, names) in enumerate(LAYERS) for name in names}
 

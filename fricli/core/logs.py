@@ -130,6 +130,10 @@ class Log:
     name: str
     derived: dict                  # {"columns": [...], "cutoff_hz": float} when derived
     zero: tuple = ()               # robot-model columns the log lacks, declared zero (filled in signals)
+    reading: dict = dataclasses.field(default_factory=dict)   # how it was read: the reading options
+    window: dict | None = None     # the time window it was cut to (``Window.to_json``), when one was given
+    source: object = None          # the table of every joint's rows it was read from (for a coupled group's
+                                   # partners), when the caller keeps it
 
     @property
     def units(self) -> dict:
@@ -416,7 +420,9 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
                cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=()) -> Log:
     """Check ``table`` against the contract and build a ``Log`` for one joint. ``zero``: robot-model
     columns (tau_g, tau_dyn) declared zero when the log lacks them (``declared_zero``); they are
-    filled with zeros in ``signals``, with a note through ``warn``."""
+    filled with zeros in ``signals``, with a note through ``warn``. ``Log.reading`` keeps these
+    options (the names of the options of ``fricli.fitting.optionspec.READING``)."""
+    joint_given, declared = joint, tuple(zero)
     table, joint = select_joint(table, joint, name)
     axis = axis_of(table.schema, name)
     note = unitless_note(table.schema, name)
@@ -436,8 +442,10 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         sig[column] = np.zeros(len(sig["t"]))
     if zero and warn:
         warn(f"note: {name}: no {' and no '.join(zero)} column: taken as 0, as declared")
+    reading = {"joint": joint_given, "kt": kt, "cutoff": cutoff_hz, "drop_invalid": drop_invalid,
+               **{flag: column in declared for flag, column in (("no_gravity", "tau_g"), ("no_dynamics", "tau_dyn"))}}
     return Log(table=table, signals=sig, axis=axis, joint=joint, sha256=sha256, name=name, derived=derived,
-               zero=zero)
+               zero=zero, reading=reading)
 
 
 def load_log(path: str, **kwargs) -> Log:

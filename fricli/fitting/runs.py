@@ -7,6 +7,10 @@ fits, and saves the model with its job record (``jobs.job_record``) in the prove
 record holds every option that shapes the model (``fricli.fitting.optionspec``; diagnose: the options
 the command gives) and the joint the model is of, so a command and a fleet job on the same log
 with the same options write the same bytes.
+
+Fitting and saving are two steps: ``fit`` returns a ``Fitted`` (the model, its fit figures and
+what the file records), ``save`` writes it (``file_parts``: the file's meta and arrays). The
+estimators of ``fricli.estimators`` fit with ``fit`` and save the same bytes.
 """
 
 from __future__ import annotations
@@ -145,7 +149,7 @@ def run(pipeline: str, data: logs.Log, output: str, opts: dict, *, base: str | N
     ``if_changed`` and ``output`` is up to date (nothing touched). ``opts``: the pipeline's
     options (``options``); ``base``: the input model file of adapt and diagnose; ``on_eval``:
     the trainer's progress callback (train-base, adapt). LockedError when another job holds
-    ``output``."""
+    ``output``. The lock, ``fit`` and ``save``."""
     if pipeline not in PIPELINES:
         raise ValueError(f"unknown pipeline {pipeline!r}")
     opts = options(pipeline, opts)
@@ -154,7 +158,11 @@ def run(pipeline: str, data: logs.Log, output: str, opts: dict, *, base: str | N
         if if_changed and jobs.up_to_date(output, data.sha256, job):
             return None
         start = time.perf_counter()
-        made = _FIT[pipeline](data, output, opts, job, base, on_eval)
+        fitted = fit(pipeline, data, opts, base=load_base(base, data) if base is not None else None,
+                     on_eval=on_eval)
+        save(output, fitted, data, job)
+        made = Made(pipeline, output, data, fitted.model, fitted.summary, base=base,
+                    base_meta=fitted.base.meta if fitted.base else None, diagnosis=fitted.diagnosis)
         made.seconds = time.perf_counter() - start
     return made
 
@@ -209,34 +217,95 @@ def moving_errors(made: Made) -> dict:
     return metrics.errors(logs.friction_target(sig)[moving], np.asarray(pred)[moving])
 
 
-def _identify(data, output, opts, job, _base, _on_eval) -> Made:
+@dataclasses.dataclass
+class Base:
+    """The input model of adapt and diagnose: ``model`` as it applies to the log's joint (a coupled
+    group's member, ``coupled.view``), its file's ``meta`` and ``name`` (the file's base name, None
+    for a model not read from a file); ``source`` names it in messages."""
+
+    model: object
+    meta: dict
+    name: str | None
+    source: str = "base"
+
+
+@dataclasses.dataclass
+class Fitted:
+    """What one pipeline's fit made and what ``save`` needs: the model, its fit figures
+    (``summary``, saved as the model's ``fit``), the rows it used, the seed, the training
+    envelope (None: the log's over the model's inputs) and the base record of the provenance."""
+
+    model: object
+    summary: dict
+    rows_used: int
+    seed: int | None = None
+    envelope: dict | None = None
+    base_record: dict | None = None
+    base: Base | None = None
+    diagnosis: object = None
+
+
+def load_base(path: str, data) -> Base:
+    """The input model file ``path`` as it applies to ``data``'s joint, checked against the log."""
+    from fricli.models import coupled
+
+    model, meta = models.load(path)
+    models.check_log(meta, data, path)
+    return Base(coupled.view(model, data.joint), meta, os.path.basename(path), path)
+
+
+def fit(pipeline: str, data: logs.Log, opts: dict, *, base: Base | None = None,
+        on_eval: Callable | None = None) -> Fitted:
+    """Fit ``pipeline`` on ``data`` with its options ``opts`` (``options``); ``base``: the
+    input model of adapt and diagnose (``load_base``). Nothing is written (``save``)."""
+    if pipeline not in PIPELINES:
+        raise ValueError(f"unknown pipeline {pipeline!r}")
+    if (base is None) != (pipeline not in INPUT_NAME):
+        raise ValueError(f"{pipeline} {'needs' if base is None else 'takes no'} input model")
+    return _FIT[pipeline](data, opts, base, on_eval)
+
+
+def file_parts(fitted: Fitted, data: logs.Log, job: dict | None) -> tuple[dict, dict]:
+    """(meta, arrays) of the model file of ``fitted`` (fitted on ``data``) with the job record ``job``."""
+    extra = {"job": job} if job is not None else {}
+    if fitted.base_record is not None:
+        extra["base"] = fitted.base_record
+    return models.parts_for_log(fitted.model, data, rows_used=fitted.rows_used, seed=fitted.seed,
+                                fit=fitted.summary, envelope=fitted.envelope, **extra)
+
+
+def save(output: str, fitted: Fitted, data: logs.Log, job: dict | None) -> dict:
+    """Write the model file of ``fitted`` to ``output`` ("-": stdout); returns its meta."""
+    from fricli.core import modelfile
+
+    meta, arrays = file_parts(fitted, data, job)
+    modelfile.write(output, meta, arrays)
+    return meta
+
+
+def _identify(data, opts, _base, _on_eval) -> Fitted:
     if opts["kind"] == "gms":
         from fricli.fitting import hysteresis
 
-        model, fit = hysteresis.fit(data.signals, axis=data.axis)
-        models.save_for_log(output, model, data, rows_used=len(data), fit=fit, job=job)
-        return Made("identify", output, data, model, fit)
+        model, fit_ = hysteresis.fit(data.signals, axis=data.axis)
+        return Fitted(model, fit_, rows_used=len(data))
     if opts["kind"] != "lugre":
         from fricli.models import linear
 
-        model, fit = linear.fit(data.signals, asymmetric=opts["kind"] == "linear-asymmetric", axis=data.axis)
-        models.save_for_log(output, model, data, rows_used=fit["moving"]["n"], fit=fit, job=job)
-        return Made("identify", output, data, model, fit)
+        model, fit_ = linear.fit(data.signals, asymmetric=opts["kind"] == "linear-asymmetric", axis=data.axis)
+        return Fitted(model, fit_, rows_used=fit_["moving"]["n"])
     from fricli.fitting.identify import LuGreIdentifier
 
     idf = LuGreIdentifier(hold=opts["hold"], travel=opts["travel"], refine=opts["refine"], samples=opts["samples"],
                           settle=opts["settle"]).fit(data.signals, units=data.units, axis=data.axis)
-    models.save_for_log(output, idf.model_, data, rows_used=len(data), fit=idf.fit_, job=job)
-    return Made("identify", output, data, idf.model_, idf.fit_)
+    return Fitted(idf.model_, idf.fit_, rows_used=len(data))
 
 
-def _train_base(data, output, opts, job, _base, on_eval) -> Made:
+def _train_base(data, opts, _base, on_eval) -> Fitted:
     from fricli.fitting import learning
 
     model, summary = learning.train_base(data, on_eval=on_eval, **_train_options(opts))
-    models.save_for_log(output, model, data, rows_used=summary["train_rows"] + summary["val_rows"],
-                        seed=opts["seed"], fit=summary, job=job)
-    return Made("train-base", output, data, model, summary)
+    return Fitted(model, summary, rows_used=summary["train_rows"] + summary["val_rows"], seed=opts["seed"])
 
 
 def _train_options(opts: dict) -> dict:
@@ -249,59 +318,55 @@ def _train_options(opts: dict) -> dict:
                 prior=not opts["no_prior"])
 
 
-def _load_base(base: str, data) -> tuple:
-    """The input model as it applies to ``data``'s joint (a coupled group's member) and its meta."""
-    from fricli.models import coupled
-
-    model, meta = models.load(base)
-    models.check_log(meta, data, base)
-    return coupled.view(model, data.joint), meta
-
-
-def _adapt(data, output, opts, job, base, on_eval) -> Made:
+def _adapt(data, opts, base: Base, on_eval) -> Fitted:
     from fricli.fitting import learning
 
-    base_model, base_meta = _load_base(base, data)
     model, summary = learning.adapt(
-        base_model, data, hidden=opts["hidden"], epochs=opts["epochs"], batch_size=opts["batch_size"],
+        base.model, data, hidden=opts["hidden"], epochs=opts["epochs"], batch_size=opts["batch_size"],
         lr=opts["lr"], seed=opts["seed"], val_fraction=opts["val_fraction"], max_seconds=opts["max_seconds"],
-        min_speed=opts["min_speed"], on_eval=on_eval, base_envelope=models.envelope(base_meta, base))
-    models.save_for_log(output, model, data, rows_used=summary["rows_used"], seed=opts["seed"], fit=summary, job=job,
-                        envelope=base_meta.get("envelope"),
-                        base={"name": os.path.basename(base), "kind": base_meta.get("kind"),
-                              "provenance": base_meta.get("provenance", {})})
-    return Made("adapt", output, data, model, summary, base=base, base_meta=base_meta)
+        min_speed=opts["min_speed"], on_eval=on_eval, base_envelope=models.envelope(base.meta, base.source))
+    return Fitted(model, summary, rows_used=summary["rows_used"], seed=opts["seed"],
+                  envelope=base.meta.get("envelope"),
+                  base_record={"name": base.name, "kind": base.meta.get("kind"),
+                               "provenance": base.meta.get("provenance", {})}, base=base)
 
 
-def _diagnose(data, output, opts, job, base, _on_eval) -> Made:
+def _diagnose(data, opts, base: Base, _on_eval) -> Fitted:
     """diagnose --fix: the base model augmented with the effects it misses on ``data``."""
-    base_model, base_meta = _load_base(base, data)
-    return fix_model(base_model, data, output, opts, job, base, base_meta)
+    return fit_fix(base, data, opts)
+
+
+def fit_fix(base: Base, data, opts: dict, **base_record) -> Fitted:
+    """``base.model`` augmented with the effects it misses on ``data`` (diagnose --fix);
+    ``base_record``: more about the base for the model's provenance."""
+    from fricli.fitting.diagnosis import driver
+    from fricli.fitting.diagnosis.fix import augment
+
+    base_model, base_meta = base.model, base.meta
+    result = driver.diagnose(base_model, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
+                             only=opts["only"], max_effects=opts["max_effects"],
+                             accept_implausible=opts["accept_implausible"])
+    fixed = augment(base_model, result, data, carry=not opts["no_carry"])
+    summary = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
+    summary.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
+                   carried=fixed.carried, refitted=fixed.refitted)
+    # nothing added or refitted: the model is the base, known where the base was fitted (not a base
+    # refitted here on a recomputed log: that log is where it is known)
+    same = (not (result.added or fixed.carried or fixed.refitted) and not base_record.get("refitted_on_calibrated_log")
+            and base_meta.get("envelope") is not None)
+    return Fitted(fixed, summary, rows_used=len(data), envelope=base_meta["envelope"] if same else None,
+                  base_record={"name": base.name, "kind": base_model.kind, **base_record}, base=base,
+                  diagnosis=result)
 
 
 def fix_model(base_model, data, output: str, opts: dict, job: dict, base: str, base_meta: dict,
               **base_record) -> Made:
     """``base_model`` augmented with the effects it misses on ``data``, saved to ``output`` with
     ``job``; ``base_record``: more about the base for the model's provenance."""
-    from fricli.fitting.diagnosis import driver
-    from fricli.fitting.diagnosis.fix import augment
-
-    result = driver.diagnose(base_model, data, folds=opts["folds"], min_gain=opts["min_gain"], alpha=opts["alpha"],
-                             only=opts["only"], max_effects=opts["max_effects"],
-                             accept_implausible=opts["accept_implausible"])
-    fixed = augment(base_model, result, data, carry=not opts["no_carry"])
-    fit = metrics.errors(logs.friction_target(data.signals), fixed.predict(data.signals)[0])
-    fit.update(heldout_mae_before=result.mae_before, heldout_mae_after=result.mae_after, added=result.added,
-               carried=fixed.carried, refitted=fixed.refitted)
-    # nothing added or refitted: the model is the base, known where the base was fitted (not a base
-    # refitted here on a recomputed log: that log is where it is known)
-    same = (not (result.added or fixed.carried or fixed.refitted) and not base_record.get("refitted_on_calibrated_log")
-            and base_meta.get("envelope") is not None)
-    models.save_for_log(output, fixed, data, rows_used=len(data), fit=fit, job=job,
-                        envelope=base_meta["envelope"] if same else None,
-                        base={"name": os.path.basename(base), "kind": base_model.kind, **base_record})
-    return Made("diagnose", output, data, fixed, fit, base=base, base_meta=base_meta, diagnosis=result)
+    fitted = fit_fix(Base(base_model, base_meta, os.path.basename(base), base), data, opts, **base_record)
+    save(output, fitted, data, job)
+    return Made("diagnose", output, data, fitted.model, fitted.summary, base=base, base_meta=base_meta,
+                diagnosis=fitted.diagnosis)
 
 
 _FIT = {"identify": _identify, "train-base": _train_base, "adapt": _adapt, "diagnose": _diagnose}
-

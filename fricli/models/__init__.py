@@ -83,16 +83,24 @@ def from_parts(spec: dict, arrays: dict[str, np.ndarray], prefix: str = "", name
         raise ModelFileError(f"{name}: damaged {spec['kind']} model ({first})") from None
 
 
-def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,
-         fit: dict | None = None, envelope: dict | None = None) -> dict:
-    """Write ``model`` with its meta (``envelope``: the training envelope, ``Envelope.to_meta``);
-    returns the meta."""
+def parts(model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict, fit: dict | None = None,
+          envelope: dict | None = None) -> tuple[dict, dict[str, np.ndarray]]:
+    """(meta, arrays) of the model file of ``model`` (``save`` writes them)."""
     spec, arrays = to_parts(model)
     meta = modelfile.base_meta()
     meta.update(kind=model.kind, model=spec, joint=joint, axis=axis, units=units,
                 inputs=sorted(model.required_inputs()), provenance=provenance, fit=fit or {})
     if envelope is not None:
         meta["envelope"] = envelope
+    return meta, arrays
+
+
+def save(path: str, model: FrictionModel, *, joint, axis: str, units: dict, provenance: dict,
+         fit: dict | None = None, envelope: dict | None = None) -> dict:
+    """Write ``model`` with its meta (``envelope``: the training envelope, ``Envelope.to_meta``);
+    returns the meta."""
+    meta, arrays = parts(model, joint=joint, axis=axis, units=units, provenance=provenance, fit=fit,
+                         envelope=envelope)
     modelfile.write(path, meta, arrays)
     return meta
 
@@ -168,13 +176,22 @@ def envelope(meta: dict, name: str = "model"):
         raise ModelFileError(f"{name}: {exc}") from None
 
 
-def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: int | None = None,
-                 fit: dict | None = None, envelope: dict | None = None, **extra) -> dict:
-    """``save`` with joint, units and provenance taken from the log the model was fitted on; the
+def parts_for_log(model: FrictionModel, log, *, rows_used: int, seed: int | None = None, fit: dict | None = None,
+                  envelope: dict | None = None, **extra) -> tuple[dict, dict[str, np.ndarray]]:
+    """``parts`` with joint, units and provenance taken from the log the model was fitted on; the
     training envelope is the log's over the model's inputs unless ``envelope`` is given."""
     from fricli.core.envelope import Envelope
 
     if envelope is None:
         envelope = Envelope.fit(log.signals, model.required_inputs()).to_meta()
-    return save(path, model, joint=log.joint, axis=log.axis, units=log.units,
-                provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit, envelope=envelope)
+    return parts(model, joint=log.joint, axis=log.axis, units=log.units,
+                 provenance=provenance(log, rows_used=rows_used, seed=seed, **extra), fit=fit, envelope=envelope)
+
+
+def save_for_log(path: str, model: FrictionModel, log, *, rows_used: int, seed: int | None = None,
+                 fit: dict | None = None, envelope: dict | None = None, **extra) -> dict:
+    """``save`` with joint, units and provenance taken from the log the model was fitted on; the
+    training envelope is the log's over the model's inputs unless ``envelope`` is given."""
+    meta, arrays = parts_for_log(model, log, rows_used=rows_used, seed=seed, fit=fit, envelope=envelope, **extra)
+    modelfile.write(path, meta, arrays)
+    return meta

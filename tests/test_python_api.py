@@ -1,0 +1,80 @@
+"""docs/python-api.md: every python example runs, in order, on the files a user has (the bundled
+sample logs, a whole-arm log and its URDF), and imports only names of ``fricli.__all__``."""
+
+import ast
+import re
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+import fricli
+from conftest import ROOT, SAMPLE
+
+PAGE = ROOT / "docs" / "python-api.md"
+BLOCKS = re.findall(r"```python\n(.*?)```", PAGE.read_text(), re.S)
+HEAVY = ("numpy", "pyarrow", "scipy", "pinocchio", "dask", "click", "fricli.core", "fricli.fitting", "fricli.models")
+
+
+def fricli_imports(source: str) -> list[tuple[str, str | None]]:
+    """(module, name) of every import of fricli in ``source``."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(a.name, None) for a in node.names if a.name.split(".")[0] == "fricli"]
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "fricli":
+            found += [(node.module, a.name) for a in node.names]
+    return found
+
+
+def test_the_page_has_the_examples():
+    text = "\n".join(BLOCKS)
+    for name in ("LuGre", "Network", "load_model", "external_torque", "Residual", "Diagnosis", "Calibration"):
+        assert name in text, name
+    assert all(len(block.strip().splitlines()) <= 10 for block in BLOCKS)
+
+
+@pytest.mark.parametrize("block", BLOCKS, ids=[f"example{i + 1}" for i in range(len(BLOCKS))])
+def test_an_example_imports_only_the_public_names(block):
+    imports = fricli_imports(block)
+    assert imports
+    for module, name in imports:
+        assert module == "fricli" and name in fricli.__all__, (module, name)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    out = tmp_path_factory.mktemp("python-api")
+    (out / "sample_data").mkdir()
+    for name in ("joint2_base", "joint2_adapt", "joint2_extended_asym"):
+        shutil.copy(SAMPLE / f"{name}.parquet", out / "sample_data" / f"{name}.parquet")
+    return out
+
+
+@pytest.mark.parametrize("index", range(len(BLOCKS)), ids=[f"example{i + 1}" for i in range(len(BLOCKS))])
+def test_an_example_runs(index, folder, monkeypatch):
+    block = BLOCKS[index]
+    if "Calibration" in block and not (folder / "arm.urdf").exists():
+        from test_estimators import arm_files
+
+        arm_files(folder)
+    monkeypatch.chdir(folder)
+    exec(compile(block, f"{PAGE.name} example {index + 1}", "exec"), {"__name__": "__example__"})
+
+
+def test_import_fricli_is_cheap():
+    """``import fricli`` loads none of the numerical libraries; the first public name loads them."""
+    code = ("import sys, fricli; before = set(sys.modules); fricli.read_log; "
+            "print(sorted(m for m in before if m.startswith({0!r}))); "
+            "print('pinocchio' in sys.modules or 'dask' in sys.modules)").format(HEAVY)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
+    assert out.stdout.splitlines() == ["[]", "False"], out.stdout
+
+
+def test_every_public_name_is_there():
+    for name in fricli.__all__:
+        assert getattr(fricli, name) is not None, name
+    assert set(fricli.__all__) <= set(dir(fricli))
+    with pytest.raises(AttributeError):
+        fricli.train_base
