@@ -15,6 +15,37 @@ def rng():
     return np.random.default_rng(1234)
 
 
+def invoke(*args, **kwargs):
+    """``fricli ARGS`` run in this process through click's CliRunner (arguments turned into strings;
+    ``kwargs`` go to ``CliRunner.invoke``, e.g. ``input=``, ``catch_exceptions=False``)."""
+    from click.testing import CliRunner
+
+    from fricli.cli import cli
+
+    return CliRunner().invoke(cli, [str(a) for a in args], **kwargs)
+
+
+# ---------------------------------------------------------------- trained once per test run
+# Model files and logs that several test files need with the same data and the same options.
+# Tests read them and write their outputs elsewhere (their own tmp_path).
+
+
+@pytest.fixture(scope="session")
+def coupled_arm_logs(tmp_path_factory):
+    """The simulated coupled-wrist arm (fricli.sim.coupled, default arm), 20 s at 1 kHz: a training
+    run (seed 11) and a held-out run (seed 12), as (folder holding train.parquet and test.parquet,
+    {"train": run, "test": run})."""
+    from fricli.core import logs
+    from fricli.sim.coupled import simulate_coupled
+
+    folder = tmp_path_factory.mktemp("coupled_arm")
+    runs = {}
+    for name, seed in (("train", 11), ("test", 12)):
+        runs[name] = simulate_coupled(duration=20.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
+        logs.write_table(runs[name].table, str(folder / f"{name}.parquet"))
+    return folder, runs
+
+
 def declare_zero(table, *columns):
     """``table`` with the schema metadata key fricli.zero_columns: the robot-model columns (tau_g,
     tau_dyn; default tau_dyn) it lacks are zero, as for a log with no inertia torque in tau_m."""

@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import invoke as run_in_process
 from fricli import models
 from fricli.core import errors, logs, metrics
 from fricli.fleet import history, manifest, trend
@@ -33,14 +34,10 @@ def fricli(*args, cwd):
 
 def invoke(*args, cwd):
     """The command in this process (commands that start no cluster): (exit code, stdout, stderr)."""
-    from click.testing import CliRunner
-
-    from fricli.cli import cli
-
     old = os.getcwd()
     os.chdir(cwd)
     try:
-        res = CliRunner().invoke(cli, [str(a) for a in args])
+        res = run_in_process(*args)
     finally:
         os.chdir(old)
     assert res.exception is None or isinstance(res.exception, SystemExit), res.exception

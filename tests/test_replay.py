@@ -1,6 +1,7 @@
 """fricli thresholds, fricli replay and the arm header of fricli export --observer: the replay is
 causal, its C code gives the same numbers, and the URDF form's rigid-body terms are the log's."""
 
+import functools
 import shutil
 import subprocess
 import sys
@@ -8,12 +9,10 @@ import sys
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import ROOT, shared_data
+from conftest import ROOT, invoke, shared_data
 from fricli import models
 from fricli.applying import observer
-from fricli.cli import cli
 from fricli.core import logs
 from fricli.models.lugre import LuGreModel
 from fricli.robot import replay
@@ -35,8 +34,7 @@ def folder(tmp_path_factory):
     return out
 
 
-def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+invoke = functools.partial(invoke, catch_exceptions=False)   # an exception fails the test with its traceback
 
 
 def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
