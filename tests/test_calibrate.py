@@ -486,6 +486,7 @@ def test_from_and_until_calibrate_on_part_of_the_log(arm, tmp_path):
     assert "calibrating 4 joints on 750 samples" in res.stderr
 
 
+@pytest.mark.slow
 def test_the_gravity_recorded_with_the_log_is_used(arm, tmp_path):
     """A tilted base: the gravity given to dynamics (or import) is the one calibrate and a later
     dynamics use unless told otherwise."""

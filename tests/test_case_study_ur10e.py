@@ -18,6 +18,7 @@ from conftest import ROOT, shared_data
 SCRIPT = ROOT / "docs" / "ur10e" / "run_case_study.py"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("pinocchio") is None, reason="needs the robot extra (pin)")
 @pytest.mark.skipif(importlib.util.find_spec("fricli.robot") is None, reason="needs fricli import (fricli/robot)")
 def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):

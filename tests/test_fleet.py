@@ -75,6 +75,7 @@ def test_simulated_fleet_layout(fleet_dir):
     assert len(set(fcs.values())) == 4  # every joint its own friction
 
 
+@pytest.mark.slow
 @needs_dask
 def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
     folder = copy_of(fleet_dir, tmp_path)
@@ -172,6 +173,7 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 @needs_dask
 def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
     local = copy_of(fleet_dir, tmp_path, "local")
@@ -205,6 +207,7 @@ def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
     assert history_rows(remote) == history_rows(local)
 
 
+@pytest.mark.slow
 @needs_dask
 def test_unreachable_scheduler(fleet_dir, tmp_path):
     folder = copy_of(fleet_dir, tmp_path)

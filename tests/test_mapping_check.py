@@ -139,6 +139,7 @@ def wrong_zero(tr: Transmission) -> Transmission:
     return Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)
 
 
+@pytest.mark.slow
 def test_calibrate_checks_the_log_it_is_given(folder):
     """calibrate's check of a log (no mapping at hand: the log's joint-side signals, its transmission)."""
     import pyarrow.parquet as pq

@@ -62,6 +62,7 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     assert missing.exit_code == 3 and missing.output.count("\n") == 1 and "Traceback" not in missing.output
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
 def test_the_exported_arm_header_equals_replay(folder, tmp_path):
     thr = tmp_path / "t.json"

@@ -381,6 +381,7 @@ def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
     assert not (tmp_path / "x.parquet").exists()
 
 
+@pytest.mark.slow
 def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path):
     """A four-joint arm at 1 kHz whose recording gives positions in encoder steps (2^16 per turn) and
     motor torques, no velocity: differentiating the steps twice swamps tau_dyn unless the low-pass
