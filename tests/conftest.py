@@ -25,6 +25,24 @@ def invoke(*args, **kwargs):
     return CliRunner().invoke(cli, [str(a) for a in args], **kwargs)
 
 
+def run_in(cwd, *args, **kwargs):
+    """``fricli ARGS`` run in this process with ``cwd`` as the working directory, for tests of what a
+    command does rather than of the process: a ``subprocess.CompletedProcess`` (returncode, stdout and
+    stderr as text). An exception other than the command's exit is raised."""
+    import os
+    import subprocess
+
+    old = os.getcwd()
+    os.chdir(cwd)
+    try:
+        res = invoke(*args, **kwargs)
+    finally:
+        os.chdir(old)
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    return subprocess.CompletedProcess(list(args), res.exit_code, res.stdout, res.stderr)
+
+
 # ---------------------------------------------------------------- trained once per test run
 # Model files and logs that several test files need with the same data and the same options.
 # Tests read them and write their outputs elsewhere (their own tmp_path).

@@ -2,13 +2,11 @@
 from a model whose masses and centres of mass differ from the URDF's CAD values by up to 20 %."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import run_in
 from fricli.core import errors, logs
 from fricli.core.errors import DataError
 
@@ -108,8 +106,7 @@ def motion(t, q, qd, qdd, tau):
 
 
 def fricli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return run_in(cwd, *args)
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import invoke as run_in_process
+from conftest import run_in
 from fricli import models
 from fricli.core import errors, logs, metrics
 from fricli.fleet import history, manifest, trend
@@ -34,14 +34,7 @@ def fricli(*args, cwd):
 
 def invoke(*args, cwd):
     """The command in this process (commands that start no cluster): (exit code, stdout, stderr)."""
-    old = os.getcwd()
-    os.chdir(cwd)
-    try:
-        res = run_in_process(*args)
-    finally:
-        os.chdir(old)
-    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
-    return subprocess.CompletedProcess(args, res.exit_code, res.stdout, res.stderr)
+    return run_in(cwd, *args)
 
 
 @pytest.fixture(scope="module")
