@@ -1,4 +1,5 @@
 import pathlib
+import sys
 
 import numpy as np
 import pytest
@@ -28,19 +29,39 @@ def invoke(*args, **kwargs):
 def run_in(cwd, *args, **kwargs):
     """``fricli ARGS`` run in this process with ``cwd`` as the working directory, for tests of what a
     command does rather than of the process: a ``subprocess.CompletedProcess`` (returncode, stdout and
-    stderr as text). An exception other than the command's exit is raised."""
+    stderr as text). stderr holds what a process would print there: the command's text, warnings
+    under Python's default filters, and what libraries write to file descriptor 2 (e.g. a C++ parser's
+    complaint). An exception other than the command's exit is raised."""
     import os
     import subprocess
+    import tempfile
+    import warnings
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
     old = os.getcwd()
-    os.chdir(cwd)
-    try:
-        res = invoke(*args, **kwargs)
-    finally:
-        os.chdir(old)
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as fd2, warnings.catch_warnings():
+        warnings.resetwarnings()
+        warnings.simplefilter("default")
+        for category in (DeprecationWarning, PendingDeprecationWarning, ImportWarning, ResourceWarning):
+            warnings.simplefilter("ignore", category)
+        warnings.showwarning = show
+        os.chdir(cwd)
+        sys.stderr.flush()
+        os.dup2(fd2.fileno(), 2)
+        try:
+            res = invoke(*args, **kwargs)
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.chdir(old)
+        fd2.seek(0)
+        native = fd2.read().decode(errors="replace")
     if res.exception is not None and not isinstance(res.exception, SystemExit):
         raise res.exception
-    return subprocess.CompletedProcess(list(args), res.exit_code, res.stdout, res.stderr)
+    return subprocess.CompletedProcess(list(args), res.exit_code, res.stdout, res.stderr + native)
 
 
 # ---------------------------------------------------------------- trained once per test run
