@@ -64,6 +64,29 @@ def run_in(cwd, *args, **kwargs):
     return subprocess.CompletedProcess(list(args), res.exit_code, res.stdout, res.stderr + native)
 
 
+@pytest.fixture
+def fricli_in_process(monkeypatch):
+    """During the test, ``subprocess.run([sys.executable, "-m", "fricli", ...])`` (as the scripts in
+    benchmarks/ and docs/ run a command) runs the command in this process through ``run_in``:
+    for tests of a script's results, not of its processes. Other commands run as before."""
+    import os
+    import subprocess
+
+    real = subprocess.run
+
+    def run(cmd, *args, **kwargs):
+        if args or not (isinstance(cmd, (list, tuple)) and list(cmd[:3]) == [sys.executable, "-m", "fricli"]):
+            return real(cmd, *args, **kwargs)
+        done = run_in(kwargs.get("cwd") or os.getcwd(), *cmd[3:], **({"input": kwargs["input"]} if "input" in kwargs else {}))
+        if not (kwargs.get("text") or kwargs.get("universal_newlines") or kwargs.get("encoding")):
+            done = subprocess.CompletedProcess(done.args, done.returncode, done.stdout.encode(), done.stderr.encode())
+        if kwargs.get("check") and done.returncode:
+            raise subprocess.CalledProcessError(done.returncode, cmd, done.stdout, done.stderr)
+        return done
+
+    monkeypatch.setattr(subprocess, "run", run)
+
+
 # ---------------------------------------------------------------- trained once per test run
 # Model files and logs that several test files need with the same data and the same options.
 # Tests read them and write their outputs elsewhere (their own tmp_path).

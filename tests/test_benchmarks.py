@@ -88,7 +88,7 @@ def test_predict_pairs_runs_end_to_end():
 
 
 @pytest.mark.slow
-def test_the_closed_loop_default_calibrates_a_stribeck_arm_better(tmp_path):
+def test_the_closed_loop_default_calibrates_a_stribeck_arm_better(tmp_path, fricli_in_process):
     """benchmarks/arm7_closed_loop.py on 20 s runs: with Stribeck friction in the arm, the closed
     loop's default calibration (the bump fitted with the rigid body) gives a rigid body closer to
     the true one on every joint, and a smaller friction error on average, than a linear one."""
