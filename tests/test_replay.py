@@ -94,8 +94,9 @@ def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
     data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
     urdf = shared_data("ur10e/ur10e.urdf")
     log = tmp_path / "j2.parquet"
-    subprocess.run([sys.executable, "-m", "fricli", "import", str(data), "--mapping", f"{ROOT}/docs/ur10e-mapping.toml",
-                    "--urdf", str(urdf), "--cutoff", "10", "-o", str(log), "-q"], check=True)
+    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
+                  "-o", log, "-q")
+    assert done.exit_code == 0, done.stderr
     table = pq.read_table(log)
     sig = {j: logs.from_table(table, name="x", joint=j).signals for j in range(1, 7)}
     p, w = replay.momentum_terms(str(urdf), table.schema, list(range(1, 7)), sig, "x")
