@@ -28,6 +28,7 @@ def quick_run():
     return proc
 
 
+@pytest.mark.slow
 def test_quick_run_prints_every_measurement(quick_run):
     res = json.loads(quick_run.stdout)
     names = [r["name"] for r in res["rows"]]
@@ -86,7 +87,8 @@ def test_predict_pairs_runs_end_to_end():
     assert lines[2].startswith("mlp estimate-ext / plain pyarrow over 2 pairs, 2,000 rows: median")
 
 
-def test_the_closed_loop_default_calibrates_a_stribeck_arm_better(tmp_path):
+@pytest.mark.slow
+def test_the_closed_loop_default_calibrates_a_stribeck_arm_better(tmp_path, fricli_in_process):
     """benchmarks/arm7_closed_loop.py on 20 s runs: with Stribeck friction in the arm, the closed
     loop's default calibration (the bump fitted with the rigid body) gives a rigid body closer to
     the true one on every joint, and a smaller friction error on average, than a linear one."""

@@ -2,13 +2,11 @@
 from a model whose masses and centres of mass differ from the URDF's CAD values by up to 20 %."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import run_in
 from fricli.core import errors, logs
 from fricli.core.errors import DataError
 
@@ -108,8 +106,7 @@ def motion(t, q, qd, qdd, tau):
 
 
 def fricli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return run_in(cwd, *args)
 
 
 @pytest.fixture(scope="module")
@@ -486,6 +483,7 @@ def test_from_and_until_calibrate_on_part_of_the_log(arm, tmp_path):
     assert "calibrating 4 joints on 750 samples" in res.stderr
 
 
+@pytest.mark.slow
 def test_the_gravity_recorded_with_the_log_is_used(arm, tmp_path):
     """A tilted base: the gravity given to dynamics (or import) is the one calibrate and a later
     dynamics use unless told otherwise."""

@@ -194,6 +194,7 @@ def _transmission_log(path, run, tau, tr):
     return str(path)
 
 
+@pytest.mark.slow
 def test_cli_writes_the_motors_that_dynamics_import_and_diagnose_calibrate_use(arm, tmp_path):
     _, fit, held, inertial = arm
     (tmp_path / "cad.urdf").write_text(URDF)

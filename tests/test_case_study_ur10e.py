@@ -9,7 +9,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
-import subprocess
 import sys
 
 import pytest
@@ -18,13 +17,17 @@ from conftest import ROOT, shared_data
 SCRIPT = ROOT / "docs" / "ur10e" / "run_case_study.py"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(importlib.util.find_spec("pinocchio") is None, reason="needs the robot extra (pin)")
 @pytest.mark.skipif(importlib.util.find_spec("fricli.robot") is None, reason="needs fricli import (fricli/robot)")
-def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path):
+def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path, monkeypatch, fricli_in_process):
     data = shared_data("ur10e")
-    done = subprocess.run([sys.executable, str(SCRIPT), "--data", str(data), "--joints", "3", "--runs", "1",
-                           "--out", str(tmp_path)], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
+    # the script's main in this process, as ``python SCRIPT ...`` runs it (its folder first on sys.path)
+    monkeypatch.syspath_prepend(str(SCRIPT.parent))
+    spec = importlib.util.spec_from_file_location("run_case_study", SCRIPT)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    script.main(["--data", str(data), "--joints", "3", "--runs", "1", "--out", str(tmp_path)])
     text = (tmp_path / "docs" / "case-study-ur10e.md").read_text()
     results = json.loads((tmp_path / "docs" / "ur10e-results.json").read_text())
     row = results["joints"]["3"]

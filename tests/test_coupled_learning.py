@@ -7,30 +7,21 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
+from conftest import invoke as run
 from fricli import models
-from fricli.cli import cli
-from fricli.core import logs, modelfile
+from fricli.core import modelfile
 from fricli.models.coupled import CoupledModel, motor_signals
-from fricli.sim.coupled import simulate_coupled
 
 STEPS = 300   # Adam steps per network: the tests check structure, not the last digit of accuracy
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
 @pytest.fixture(scope="module")
-def arm(tmp_path_factory):
-    """The simulated arm's training and held-out logs, and the wrist's group model trained on the first."""
-    folder = tmp_path_factory.mktemp("arm")
-    for name, seed in (("train", 11), ("test", 12)):
-        r = simulate_coupled(duration=20.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
-        logs.write_table(r.table, str(folder / f"{name}.parquet"))
-    out = folder / "nn"
-    out.mkdir()   # an existing folder: the group's file in it
+def arm(coupled_arm_logs, tmp_path_factory):
+    """The simulated arm's training and held-out logs (conftest), and the wrist's group model trained
+    on the first."""
+    folder, _ = coupled_arm_logs
+    out = tmp_path_factory.mktemp("nn")   # an existing folder: the group's file in it
     res = run("train-base", folder / "train.parquet", "--coupling", "--joint", 5, "--steps", STEPS, "-o", out, "-q")
     assert res.exit_code == 0, res.output
     return folder, out / "joints_5_6.npz"

@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
+from conftest import invoke as run
 from fricli import models
 from fricli.core import logs
-from fricli.cli import cli
 from fricli.models.coupled import CoupledModel, fit_group, group_rows
 from fricli.core.transmission import Transmission, of_schema
 from fricli.sim.coupled import default_arm, simulate_coupled
@@ -17,20 +16,10 @@ from fricli.sim.coupled import default_arm, simulate_coupled
 WRIST = [4, 5]   # indices of joints 5 and 6
 
 
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
-
-
 @pytest.fixture(scope="module")
-def arm_logs(tmp_path_factory):
-    """Two runs of the simulated arm (different trajectories): training and held-out."""
-    folder = tmp_path_factory.mktemp("arm")
-    runs = {}
-    for name, seed in (("train", 11), ("test", 12)):
-        r = simulate_coupled(duration=20.0, rate_hz=1000.0, rng=np.random.default_rng(seed))
-        logs.write_table(r.table, str(folder / f"{name}.parquet"))
-        runs[name] = r
-    return folder, runs
+def arm_logs(coupled_arm_logs):
+    """Two runs of the simulated arm (different trajectories): training and held-out (conftest)."""
+    return coupled_arm_logs
 
 
 # --------------------------------------------------------------------------- transmission

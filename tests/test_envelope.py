@@ -6,12 +6,10 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import no_inertia, write
+from conftest import invoke as run, no_inertia, write
 from fricli import models
 from fricli.core import logs, modelfile
-from fricli.cli import cli
 from fricli.core.envelope import Envelope
 from fricli.core.logs import table_from_arrays
 
@@ -28,10 +26,6 @@ def uniform_log(seed=0, n=20000, speed=1.0):
     cols = {"t": t, "q": np.cumsum(qd) * 0.01, "qd": qd, "tau_m": g + f + rng.normal(0, 0.1, n), "tau_g": g,
             "tau_ext": np.zeros(n)}
     return no_inertia(table_from_arrays(cols, UNITS))   # no inertia torque in tau_m
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def test_outside_is_the_cell_rule():

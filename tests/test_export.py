@@ -13,14 +13,12 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
-from conftest import SAMPLE, shared_data
 
 import export_check as check
 
+from conftest import SAMPLE, invoke, shared_data
 from fricli import models
 from fricli.core import logs
-from fricli.cli import cli
 from fricli.export import c, network
 from fricli.models import terms as T
 from fricli.models.augmented import AugmentedModel
@@ -32,10 +30,6 @@ from fricli.models.residual import ResidualFriction
 ABS, REL = 1e-9, 1e-9
 needs_cc = pytest.mark.skipif(check.compiler() is None, reason="no C compiler")
 needs_cxx = pytest.mark.skipif(check.compiler(cxx=True) is None, reason="no C++ compiler")
-
-
-def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:

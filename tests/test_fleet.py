@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import run_in
 from fricli import models
 from fricli.core import errors, logs, metrics
 from fricli.fleet import history, manifest, trend
@@ -33,18 +34,7 @@ def fricli(*args, cwd):
 
 def invoke(*args, cwd):
     """The command in this process (commands that start no cluster): (exit code, stdout, stderr)."""
-    from click.testing import CliRunner
-
-    from fricli.cli import cli
-
-    old = os.getcwd()
-    os.chdir(cwd)
-    try:
-        res = CliRunner().invoke(cli, [str(a) for a in args])
-    finally:
-        os.chdir(old)
-    assert res.exception is None or isinstance(res.exception, SystemExit), res.exception
-    return subprocess.CompletedProcess(args, res.exit_code, res.stdout, res.stderr)
+    return run_in(cwd, *args)
 
 
 @pytest.fixture(scope="module")
@@ -78,6 +68,7 @@ def test_simulated_fleet_layout(fleet_dir):
     assert len(set(fcs.values())) == 4  # every joint its own friction
 
 
+@pytest.mark.slow
 @needs_dask
 def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
     folder = copy_of(fleet_dir, tmp_path)
@@ -175,6 +166,7 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.slow
 @needs_dask
 def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
     local = copy_of(fleet_dir, tmp_path, "local")
@@ -208,6 +200,7 @@ def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
     assert history_rows(remote) == history_rows(local)
 
 
+@pytest.mark.slow
 @needs_dask
 def test_unreachable_scheduler(fleet_dir, tmp_path):
     folder = copy_of(fleet_dir, tmp_path)

@@ -10,20 +10,15 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
+from conftest import invoke as run
 from fricli import models
-from fricli.cli import cli
 from fricli.core import logs, metrics
 from fricli.models import coupled
 from fricli.sim.coupled import simulate_coupled
 
 GROUP = [5, 6]
 SHIFT = 0.4      # [Nm] added to the wrist joints' motor torque while they move forwards (a direction asymmetry)
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def _shifted(table: pa.Table) -> pa.Table:

@@ -2,13 +2,11 @@
 their zero position: import/dynamics --hold, robot.hold in a mapping, and calibrate on such a log."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import run_in
 from fricli.core import errors, logs
 
 pin = pytest.importorskip("pinocchio")
@@ -34,8 +32,7 @@ FIXED = GRIPPER.replace('name="finger_l" type="prismatic"', 'name="finger_l" typ
 
 
 def fricli(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "fricli", *map(str, args)], cwd=cwd, capture_output=True, text=True,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return run_in(cwd, *args)
 
 
 def write_log(path, t, q, qd, qdd, tau):

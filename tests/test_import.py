@@ -2,14 +2,12 @@
 
 import json
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from conftest import ROOT, shared_data
+from conftest import ROOT, run_in, shared_data
 from fricli.core import errors
 from fricli.core.errors import DataError
 from fricli.core.logs import friction_target, from_table
@@ -59,8 +57,7 @@ def parse(lines, text=MAPPING, end="\n", **kw):
 
 
 def run(*args, cwd, stdin=None):
-    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
-                          input=stdin, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return run_in(cwd, *args, input=stdin)
 
 
 def test_clean_recording_becomes_a_long_log_in_the_contract():

@@ -7,12 +7,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import no_inertia
+from conftest import invoke as run, no_inertia
 from fricli import models
 from fricli.core import errors, logs, modelset
-from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
 
 PARAMS = {2: dict(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, kc=0.03, ks=0.04, sigma0=1e4, sigma1=5.0),
@@ -73,10 +71,6 @@ def files(tmp_path_factory):
             "m2": save_lugre(d / "m2.npz", 2), "m4": save_lugre(d / "m4.npz", 4), "anon": save_lugre(d / "anon.npz", None),
             "set": str(d / "set"), "set2": save_lugre(d / "set" / "joint_2.npz", 2),
             "set4": save_lugre(d / "set" / "joint_4.npz", 4)}
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def one_error_line(res, code):

@@ -6,20 +6,14 @@ import json
 
 import numpy as np
 import pytest
-from click.testing import CliRunner
-from conftest import SAMPLE, no_inertia, write
 
+from conftest import SAMPLE, invoke, no_inertia, write
 from fricli import models
 from fricli.core import logs
-from fricli.cli import cli
 from fricli.models.linear import LinearFriction, fit
 
 SYM = {"fv": 10.5, "fc": 7.25, "offset": -0.4}
 ASYM = {"fv": 12.0, "fc": 6.5, "fv_neg": 9.0, "fc_neg": 8.0}
-
-
-def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def synthetic(params: dict, tmp_path, *, rest_torque: float = 3.0) -> str:

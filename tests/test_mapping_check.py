@@ -82,14 +82,29 @@ def folder(tmp_path_factory):
     return path
 
 
+def wrong_zero(tr: Transmission) -> Transmission:
+    return Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)
+
+
+@pytest.fixture(scope="module")
+def wrong_zero_folder(folder, tmp_path_factory):
+    """The recording imported once with joint 2's offset left out of the mapping (a zero a quarter turn
+    off), in a folder of its own: (folder, the import's lines on the mapping)."""
+    import shutil
+
+    path = tmp_path_factory.mktemp("wrong_zero")
+    for name in ("positions.csv", "torques.csv", "arm6.urdf"):
+        shutil.copy(folder / name, path / name)
+    return path, import_with(path, wrong_zero(true_transmission()))
+
+
 def test_the_right_mapping_passes_without_a_word(folder):
     assert import_with(folder, true_transmission()) == []
 
 
-def test_a_zero_a_quarter_turn_off_is_flagged(folder):
+def test_a_zero_a_quarter_turn_off_is_flagged(wrong_zero_folder):
     tr = true_transmission()
-    wrong = Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)   # joint 2's offset left out
-    lines = import_with(folder, wrong)
+    _, lines = wrong_zero_folder
     assert len(lines) == 1, lines
     assert "joint 2: its zero is +pi/2 away from the URDF's" in lines[0], lines
     new = [float(x) for x in lines[0].split("[transmission] offset = [")[1].split("]")[0].split(",")]
@@ -135,11 +150,9 @@ def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
     assert res.exit_code == 2 and "--template needs --urdf" in res.stderr
 
 
-def wrong_zero(tr: Transmission) -> Transmission:
-    return Transmission(tr.joints, tr.ratio, offset=tr.offset + tr.ratio[:, 1] * math.pi / 2)
 
-
-def test_calibrate_checks_the_log_it_is_given(folder):
+@pytest.mark.slow
+def test_calibrate_checks_the_log_it_is_given(wrong_zero_folder):
     """calibrate's check of a log (no mapping at hand: the log's joint-side signals, its transmission)."""
     import pyarrow.parquet as pq
 
@@ -147,17 +160,16 @@ def test_calibrate_checks_the_log_it_is_given(folder):
     from fricli.robot.calibration import motion_check_ratio
     from fricli.robot.dynamics import RobotModel
 
-    import_with(folder, wrong_zero(true_transmission()))
     robot = RobotModel(urdf_text(), "arm6.urdf")
-    motion = calibration.read_motion(pq.read_table(folder / "log.parquet"), "log", robot, match=None)
+    motion = calibration.read_motion(pq.read_table(wrong_zero_folder[0] / "log.parquet"), "log", robot, match=None)
     found = sanity.check_motion(robot, motion, motion_check_ratio(robot, motion))["findings"]
     assert [(f["joint"], f["cause"]) for f in found] == [("2", "offset")], found
     assert "joint 2's zero moved by +1.5708 rad ([transmission] offset)" in found[0]["message"]
 
 
 @pytest.mark.slow
-def test_calibrate_warns_of_a_wrong_zero(folder):
-    import_with(folder, wrong_zero(true_transmission()))
+def test_calibrate_warns_of_a_wrong_zero(wrong_zero_folder):
+    folder, _ = wrong_zero_folder
     res = CliRunner().invoke(cli, ["calibrate", str(folder / "log.parquet"), "--urdf", str(folder / "arm6.urdf"), "-o",
                                    str(folder / "cal.urdf")])
     assert res.exit_code == 0, res.stderr

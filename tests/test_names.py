@@ -4,14 +4,11 @@ import click
 import pytest
 from click.testing import CliRunner
 
+from conftest import invoke
 from fricli import models, sim
 from fricli.cli import COMMANDS, cli
 from fricli.fitting.diagnosis import effects as diagnosis_effects
 from fricli.sim import effects as sim_effects
-
-
-def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from conftest import SAMPLE, no_inertia, shared_data, write
+from conftest import SAMPLE, invoke as run, no_inertia, shared_data, write
 from fricli import models
 from fricli.core import logs, metrics, modelfile
 from fricli.fitting import learning, training_data
@@ -58,11 +58,6 @@ def files(tmp_path_factory):
         "shifted": write(motion_log(LEVELS, seed=4, shift=True), d / "shifted.parquet"),
         "dir": d,
     }
-
-
-def run(*args):
-    result = CliRunner().invoke(cli, [str(a) for a in args])
-    return result
 
 
 def load(path):

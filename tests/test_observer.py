@@ -60,6 +60,7 @@ def test_replay_is_causal():
     assert not np.array_equal(a.tau_ext[2000:], b.tau_ext[2000:])
 
 
+@pytest.mark.slow
 def test_adaptation_finds_the_days_friction_level_within_its_bounds():
     t, f0, tau_m, p, w, qd, _, _ = joint(seconds=60.0, scale=1.3, offset=0.2)
     thr = thresholds(value=5.0)

@@ -9,13 +9,11 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import ROOT, make_table
+from conftest import ROOT, invoke, make_table
 from fricli import models
 from fricli.applying import predicting
 from fricli.core import errors, logs, metrics
-from fricli.cli import cli
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.lugre import LuGreModel
@@ -82,10 +80,6 @@ def model_file(tmp_path):
     models.save(path, LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"],
                 provenance={})
     return path
-
-
-def invoke(*args, **kwargs):
-    return CliRunner().invoke(cli, [str(a) for a in args], **kwargs)
 
 
 def read(path_or_bytes):

@@ -13,16 +13,14 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
-from conftest import declare_zero, write
 from test_export import ABS, REL, _train, needs_cc
 
 import export_check as check
 
+from conftest import declare_zero, invoke as run, write
 from fricli import models, sim
 from fricli.applying import evaluation, report
 from fricli.core import errors, logs, metrics, modelfile
-from fricli.cli import cli
 from fricli.fitting.diagnosis import effects as E
 from fricli.fitting.diagnosis.driver import residual
 from fricli.export import c
@@ -32,10 +30,6 @@ from fricli.models.lugre import LuGreModel
 
 REFERENCES = ["tau_ext", "tau_f_true"]
 LUGRE = LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, kc=0.04, ks=0.05, sigma0=1.7e4, sigma1=0.002)
-
-
-def run(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args])
 
 
 def _without_references(table):

@@ -15,12 +15,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import no_inertia
+from conftest import invoke as run, no_inertia
 from fricli import models
 from fricli.core import errors, jobs, logs, modelfile
-from fricli.cli import cli
 from fricli.models.lugre import LuGreModel
 
 PARAMS = dict(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, kc=0.03, ks=0.04, sigma0=1e4, sigma1=5.0)
@@ -172,10 +170,6 @@ def previous_outputs(folder):
 
 def listing(folder):
     return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
-
-
-def run(*args, **kwargs):
-    return CliRunner().invoke(cli, [str(a) for a in args], **kwargs)
 
 
 def assert_clean_error(res, code, needle):

@@ -1,6 +1,7 @@
 """fricli thresholds, fricli replay and the arm header of fricli export --observer: the replay is
 causal, its C code gives the same numbers, and the URDF form's rigid-body terms are the log's."""
 
+import functools
 import shutil
 import subprocess
 import sys
@@ -8,12 +9,10 @@ import sys
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
 
-from conftest import ROOT, shared_data
+from conftest import ROOT, invoke, shared_data
 from fricli import models
 from fricli.applying import observer
-from fricli.cli import cli
 from fricli.core import logs
 from fricli.models.lugre import LuGreModel
 from fricli.robot import replay
@@ -35,8 +34,7 @@ def folder(tmp_path_factory):
     return out
 
 
-def invoke(*args):
-    return CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+invoke = functools.partial(invoke, catch_exceptions=False)   # an exception fails the test with its traceback
 
 
 def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
@@ -64,6 +62,7 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     assert missing.exit_code == 3 and missing.output.count("\n") == 1 and "Traceback" not in missing.output
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("cc") is None or shutil.which("g++") is None, reason="no C and C++ compiler")
 def test_the_exported_arm_header_equals_replay(folder, tmp_path):
     thr = tmp_path / "t.json"
@@ -95,8 +94,9 @@ def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
     data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
     urdf = shared_data("ur10e/ur10e.urdf")
     log = tmp_path / "j2.parquet"
-    subprocess.run([sys.executable, "-m", "fricli", "import", str(data), "--mapping", f"{ROOT}/docs/ur10e-mapping.toml",
-                    "--urdf", str(urdf), "--cutoff", "10", "-o", str(log), "-q"], check=True)
+    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
+                  "-o", log, "-q")
+    assert done.exit_code == 0, done.stderr
     table = pq.read_table(log)
     sig = {j: logs.from_table(table, name="x", joint=j).signals for j in range(1, 7)}
     p, w = replay.momentum_terms(str(urdf), table.schema, list(range(1, 7)), sig, "x")

@@ -2,7 +2,6 @@
 
 import json
 import re
-import subprocess
 import sys
 import tomllib
 
@@ -16,7 +15,7 @@ from rosbags.rosbag1 import Writer as Writer1  # noqa: E402
 from rosbags.rosbag2 import StoragePlugin, Writer as Writer2  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
-from conftest import ROOT  # noqa: E402
+from conftest import run_in  # noqa: E402
 from fricli.core import errors  # noqa: E402
 from fricli.core.errors import LogError  # noqa: E402
 from fricli.robot.importing import build_log, import_recording  # noqa: E402
@@ -95,8 +94,7 @@ def test_a_bag_imports_like_the_same_data_as_csv(tmp_path, kind):
 
 def test_the_command_reads_a_bag_and_records_it(tmp_path):
     write_bag(tmp_path / "run", states())
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "-o", "out.parquet"], cwd=tmp_path,
-                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "-o", "out.parquet")
     assert res.returncode == 0, res.stderr
     assert res.stderr == "imported 120 messages x 6 joints from /joint_states in run -> out.parquet\n"
     meta = json.loads(pq.read_table(tmp_path / "out.parquet").schema.metadata[b"fricli.import"])
@@ -146,9 +144,7 @@ def test_each_defect_of_a_bag_is_reported_by_message(tmp_path):
     q = log.table.column("q").to_numpy().reshape(6, -1)
     kept = [k for k in range(100) if k not in (11, 20, 30)]
     np.testing.assert_array_equal(q, np.array([clean[k][2] for k in kept]).T)   # reordered back by name
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--drop-backward", "-o", "out.parquet"],
-                         cwd=tmp_path, capture_output=True, text=True,
-                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "--drop-backward", "-o", "out.parquet")
     assert res.returncode == 0, res.stderr
     assert res.stderr.splitlines() == [
         "warning: run: dropped 1 message with joints missing (message 21: no 'joint_6' among joint_1, joint_2, joint_3, "
@@ -197,8 +193,7 @@ def test_messages_the_metadata_lists_but_cannot_be_read_are_counted(tmp_path):
     meta = path / "metadata.yaml"
     meta.write_text(meta.read_text().replace("message_count: 40", "message_count: 45"))
     assert read_bag(str(path)).unread == 5
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "-o", "out.parquet"], cwd=tmp_path,
-                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "-o", "out.parquet")
     assert res.returncode == 0 and res.stderr.startswith(
         "warning: run: 5 of the messages the bag's metadata lists on /joint_states could not be read"), res.stderr
 
@@ -232,8 +227,7 @@ def test_a_recording_without_metadata_reads_its_storage_files(tmp_path, kind):
     (whole / "metadata.yaml").unlink()
     read, log = bag_log(single)
     assert read.standalone == [single.name] and log.table.equals(bag_log(whole)[1].table)
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "cut", "-o", "out.parquet"], cwd=tmp_path,
-                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "cut", "-o", "out.parquet")
     assert res.returncode == 0 and res.stderr.startswith(
         f"note: cut: no rosbag2 metadata.yaml (a recording that did not end cleanly?): read run_9{suffix}, "
         f"run_10{suffix} as they are"), res.stderr
@@ -272,8 +266,7 @@ def test_a_velocity_empty_in_some_messages_is_left_out_with_a_warning(tmp_path):
     msgs = states(40)
     msgs[10][3] = []
     write_bag(tmp_path / "run", msgs)
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "-o", "out.parquet"], cwd=tmp_path,
-                         capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "-o", "out.parquet")
     assert res.returncode == 0, res.stderr
     assert res.stderr.splitlines()[0] == (
         "warning: run: 1 message on /joint_states holds no velocity (first at message 11): the velocity of every "
@@ -324,8 +317,7 @@ kt = 8.0
     np.testing.assert_array_equal(log.table.column("tau_m").to_numpy(),
                                   np.concatenate([4.0 * effort[:, 1], 100.0 * effort[:, 2]]))
     (tmp_path / "mixed.toml").write_text(mixed)
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--mapping", "mixed.toml", "-o", "m.parquet"],
-                         cwd=tmp_path, capture_output=True, text=True, env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "--mapping", "mixed.toml", "-o", "m.parquet")
     assert res.returncode == 0 and res.stderr.startswith("note: run: the effort of joint joint_2 is a current and of "
                                                          "the others not"), res.stderr
     with pytest.raises(errors.LogError, match="kt applies to effort"):
@@ -353,9 +345,7 @@ def test_urdf_terms_of_a_bag_match_joints_by_their_names(tmp_path):
     msgs = [[START_NS + k * STEP_NS, ["elbow", "shoulder"], q[k, ::-1], [], rng.normal(size=2)] for k in range(n)]
     write_bag(tmp_path / "run", msgs)
     (tmp_path / "two_link.urdf").write_text(URDF)
-    res = subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--urdf", "two_link.urdf", "-o",
-                          "out.parquet"], cwd=tmp_path, capture_output=True, text=True,
-                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run_in(tmp_path, "import", "run", "--urdf", "two_link.urdf", "-o", "out.parquet")
     assert res.returncode == 0, res.stderr
     assert "joints matched by name, derived qd and qdd" in res.stderr
     table = pq.read_table(tmp_path / "out.parquet")
@@ -385,9 +375,7 @@ def test_a_bag_leaves_the_joints_the_urdf_holds_out(tmp_path):
     msgs = [[START_NS + k * STEP_NS, ["shoulder", "elbow", "finger", "finger2"], np.r_[q[k], 0.02, 0.02], [],
              rng.normal(size=4)] for k in range(n)]
     write_bag(tmp_path / "run", msgs)
-    run = lambda *a: subprocess.run([sys.executable, "-m", "fricli", "import", "run", "--urdf", "grip.urdf",  # noqa: E731
-                                     *a, "-o", "out.parquet"], cwd=tmp_path, capture_output=True, text=True,
-                                    env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    run = lambda *a: run_in(tmp_path, "import", "run", "--urdf", "grip.urdf", *a, "-o", "out.parquet")  # noqa: E731
     res = run()
     assert res.returncode == errors.MODEL and "--hold finger" in res.stderr, res.stderr
     res = run("--hold", "finger")

@@ -99,6 +99,7 @@ def test_every_command_is_in_the_readme_table(command):
     assert re.search(rf"^\| `fricli {re.escape(command)}[ `]", readme, re.M), command
 
 
+@pytest.mark.slow
 def test_every_command_in_a_process(tmp_path):
     base, adapt, ext = SAMPLE / "joint2_base.parquet", SAMPLE / "joint2_adapt.parquet", \
         SAMPLE / "joint2_extended_asym.parquet"

@@ -10,7 +10,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from conftest import ROOT, shared_data
+from conftest import ROOT, run_in, shared_data
 from fricli.core import errors, logs
 from fricli.robot.mapping import Payload, parse_mapping
 
@@ -237,8 +237,7 @@ def write_case(tmp_path, rng, n=300, match="order", qdd=True):
 
 
 def run(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "fricli", *args], cwd=cwd, capture_output=True, text=True,
-                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    return run_in(cwd, *args)
 
 
 def test_import_with_urdf_writes_the_analytic_terms(tmp_path, rng):
@@ -339,8 +338,7 @@ def test_ur10e_import_with_urdf_as_documented(tmp_path):
     args, expected = doc_example()
     out = str(tmp_path / "run.parquet")
     args[args.index("run.parquet")] = out
-    res = subprocess.run([sys.executable, "-m", "fricli", *args], cwd=ROOT, capture_output=True, text=True,
-                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    res = run(*args, cwd=ROOT)
     assert res.returncode == 0, res.stderr
     assert res.stderr == expected.replace("-> run.parquet", f"-> {out}")
     table = pq.read_table(out)
@@ -381,6 +379,7 @@ def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
     assert not (tmp_path / "x.parquet").exists()
 
 
+@pytest.mark.slow
 def test_the_cutoff_of_derived_accelerations_is_chosen_from_the_torque(tmp_path):
     """A four-joint arm at 1 kHz whose recording gives positions in encoder steps (2^16 per turn) and
     motor torques, no velocity: differentiating the steps twice swamps tau_dyn unless the low-pass

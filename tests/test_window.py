@@ -7,18 +7,12 @@ import json
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from click.testing import CliRunner
-from conftest import SAMPLE, make_table, write
 
+from conftest import SAMPLE, invoke, make_table, write
 from fricli import models
 from fricli.core import errors, logs, timewindow
-from fricli.cli import cli
 
 BASE = str(SAMPLE / "joint2_base.parquet")
-
-
-def invoke(*args, **kw):
-    return CliRunner().invoke(cli, [str(a) for a in args], **kw)
 
 
 def test_fit_on_the_first_60_percent_and_evaluate_on_the_rest(tmp_path):
