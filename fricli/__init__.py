@@ -1,3 +1,3 @@
 """fricli: friction models for robot joints."""
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
