@@ -5,7 +5,7 @@
     python benchmarks/run.py --quick           tiny sizes, about 15 s (what the tests run)
     python benchmarks/run.py --json            the figures as JSON on stdout
     python benchmarks/run.py --only identify   only identify on 100,000 rows (library and command)
-    python benchmarks/run.py --plot docs/img/performance-scaling.png
+    python benchmarks/run.py --plot docs/studies/img/performance-scaling.png
                                                also measure how cost grows with log length and
                                                network size, and plot it
 

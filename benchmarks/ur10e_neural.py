@@ -11,7 +11,7 @@ days, and adapt on one run of a day scored on another run of the same day.
 Every model comes from the fricli command line (the commands are printed on stderr and listed
 at the end); the script only scores: the RMS over the rows in motion (``metrics.in_motion``) of
 the friction target tau_m - tau_g - tau_dyn minus the model's prediction, pooled over the runs
-scored. Runs are imported as in docs/case-study-ur10e.md (--cutoff 10). The base table adds, when
+scored. Runs are imported as in docs/studies/case-study-ur10e.md (--cutoff 10). The base table adds, when
 train-base reports it, the held-out RMS on the training log without and with the pre-sliding
 state and the bristle stiffness sigma0 of the model written, and the network's share lambda of
 the blend with the LuGre static curve with the held-out RMS of network, prior and blend; a second table splits the errors

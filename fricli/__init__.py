@@ -6,7 +6,7 @@ what the commands fit, ``load_model`` reads a model file. The names are imported
 so ``import fricli`` stays cheap.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
            "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "__version__"]

@@ -1,5 +1,5 @@
 """Compile an arm header of ``fricli export --observer`` with a small driver and run it over a
-replayed log (``fricli.robot.replay.Arm``): what the tests and docs/ur10e/run_contact_detection.py use to
+replayed log (``fricli.robot.replay.Arm``): what the tests and studies/ur10e/run_contact_detection.py use to
 compare the C code with ``fricli replay`` and to time its step. Not part of the installed package.
 
 Input rows (native doubles): t, each joint's friction signals in its step function's order, then

@@ -1,4 +1,4 @@
-"""The UR10e case study script (docs/ur10e/run_case_study.py) on a small part of the data.
+"""The UR10e case study script (studies/ur10e/run_case_study.py) on a small part of the data.
 
 Skips when ../shared/data/ur10e is absent, and when the robot extra (Pinocchio) or
 ``fricli import`` is not there: the script imports the CSV recordings with ``fricli import --urdf``.
@@ -14,7 +14,7 @@ import sys
 import pytest
 from conftest import ROOT, shared_data
 
-SCRIPT = ROOT / "docs" / "ur10e" / "run_case_study.py"
+SCRIPT = ROOT / "studies" / "ur10e" / "run_case_study.py"
 
 
 @pytest.mark.slow
@@ -28,8 +28,8 @@ def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path, mo
     script = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(script)
     script.main(["--data", str(data), "--joints", "3", "--runs", "1", "--out", str(tmp_path)])
-    text = (tmp_path / "docs" / "case-study-ur10e.md").read_text()
-    results = json.loads((tmp_path / "docs" / "ur10e-results.json").read_text())
+    text = (tmp_path / "docs" / "studies" / "case-study-ur10e.md").read_text()
+    results = json.loads((tmp_path / "docs" / "studies" / "ur10e-results.json").read_text())
     row = results["joints"]["3"]
     for key in ("linear", "published", "lugre", "fixed_cad", "idim", "lugre_cal", "fixed"):
         assert math.isfinite(row[key]["moving"]) and row[key]["moving"] > 0
@@ -47,11 +47,11 @@ def test_case_study_script_runs_on_one_joint_and_one_validation_run(tmp_path, mo
     assert fit["rms_after"] < fit["rms_before"]
     assert row["payload"]["fixed"] > 0 and row["payload"]["idim"] > 0
     assert "fricli import" in text and "--calibrate" in text and "ur10e-cal.urdf" in text
-    assert (tmp_path / "docs" / "img" / "ur10e-friction-ratio.png").stat().st_size > 0
+    assert (tmp_path / "docs" / "studies" / "img" / "ur10e-friction-ratio.png").stat().st_size > 0
 
 
 def test_level_table_orders_a_days_runs_by_the_controller_clock():
-    sys.path.insert(0, str(ROOT / "docs" / "ur10e"))
+    sys.path.insert(0, str(ROOT / "studies" / "ur10e"))
     import case_study_text
 
     def level(start, fv):

@@ -7,7 +7,7 @@ import click
 from conftest import ROOT
 from fricli.cli import cli
 
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 # a command and what follows it up to the end of its code span, table cell, quote or line
 USE = re.compile(r"fricli ([a-z][a-z-]*)([^`|'\"\n]*)")
 OPTION = re.compile(r"(?<![\w-])(--?[a-zA-Z][\w-]*)(?![\w*-])")

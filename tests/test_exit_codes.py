@@ -16,7 +16,7 @@ from fricli.core import errors
 from fricli.cli import COMMANDS, cli
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-DOCS = sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]
+DOCS = sorted((ROOT / "docs").rglob("*.md")) + [ROOT / "README.md"]
 
 # "exit 3", "exits with 11", "exit code 4", "exit codes 3 and 4", "with code 7", "code 8", and the
 # numbers listed after one of them ("0, 5 or 6").
@@ -114,13 +114,13 @@ def test_the_table_names_its_constants_and_docs_exit_codes_md_is_current():
     assert len(errors.BY_CODE) == len(errors.BY_NAME) == len(errors.TABLE)
     for row in errors.TABLE:
         assert getattr(errors, row.name) == row.code
-    sys.path.insert(0, str(ROOT / "docs"))
+    sys.path.insert(0, str(ROOT / "tools" / "docs"))
     try:
         import make_exit_codes
     finally:
-        sys.path.remove(str(ROOT / "docs"))
+        sys.path.remove(str(ROOT / "tools" / "docs"))
     text = make_exit_codes.DOC.read_text(encoding="utf-8")
-    assert make_exit_codes.render(text) == text, "docs/exit-codes.md is stale: run python docs/make_exit_codes.py"
+    assert make_exit_codes.render(text) == text, "docs/exit-codes.md is stale: run python tools/docs/make_exit_codes.py"
     assert make_exit_codes.table() in text
 
 

@@ -391,10 +391,10 @@ def test_sample_data_regenerates_identically(tmp_path):
 
 
 def test_the_sample_figures_in_the_docs_are_current():
-    """docs/simulator.md's table and figures of sample_data/ are what docs/make_sample_figures.py writes."""
+    """docs/simulator.md's table and figures of sample_data/ are what tools/docs/make_sample_figures.py writes."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("make_sample_figures", ROOT / "docs" / "make_sample_figures.py")
+    spec = importlib.util.spec_from_file_location("make_sample_figures", ROOT / "tools" / "docs" / "make_sample_figures.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.section() in (ROOT / "docs" / "simulator.md").read_text()

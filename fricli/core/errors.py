@@ -2,7 +2,7 @@
 
 Library code raises a ``FricliError`` subclass; the CLI turns it into one line on
 stderr and its exit code. ``TABLE`` is the one list of exit codes (code, name, meaning): the
-``--help`` texts and docs/exit-codes.md (written by docs/make_exit_codes.py) come from it, and
+``--help`` texts and docs/exit-codes.md (written by tools/docs/make_exit_codes.py) come from it, and
 tests/test_exit_codes.py checks every code the docs and ``--help`` texts mention against it, and
 each row against the constant of its name.
 """

@@ -1,9 +1,9 @@
 """Rerun the Franka case study: friction of joint 2 of a Franka Emika arm on continuous motion at
 three speeds (../shared/data/franka, see ../shared/data/README.md), fricli's model kinds beside
-the models published with the data; writes docs/case-study-franka.md.
+the models published with the data; writes docs/studies/case-study-franka.md.
 
-    python docs/franka/run_case_study.py                 # about 30 s on 2 cores
-    python docs/franka/run_case_study.py --out /tmp/x.md --data DIR
+    python studies/franka/run_case_study.py                 # about 30 s on 2 cores
+    python studies/franka/run_case_study.py --out /tmp/x.md --data DIR
 
 Protocol: per file, every model is fitted on the first 60 % of the file's time span and scored
 (RMS error against the friction target) on the last 40 %, its state carried over from the fitted
@@ -78,7 +78,7 @@ def score(model, before: dict, after: dict) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA)
-    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "case-study-franka.md"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "studies", "case-study-franka.md"))
     args = ap.parse_args(argv)
     per_file, models = [], {}
     for speed in FILES:
@@ -117,7 +117,7 @@ def main(argv=None) -> int:
 def render(per_file, across, across_pub, models, across_models) -> str:
     f3 = lambda x: "—" if not np.isfinite(x) else f"{x:.3f}"  # noqa: E731
     lines = ["# Case study: friction with memory on a Franka Emika joint", "",
-             "Written by `python docs/franka/run_case_study.py` (data: `../shared/data/franka`, joint 2 of a",
+             "Written by `python studies/franka/run_case_study.py` (data: `../shared/data/franka`, joint 2 of a",
              "Franka Emika arm on one continuous Cartesian trajectory at three speeds, 60 s each at about",
              "500 Hz, no constant-velocity holds; the friction target is the authors' extracted joint",
              "friction). Do not edit by hand.", "",

@@ -1,31 +1,10 @@
-"""The words of docs/contact-detection.md around the figures of run_contact_detection.py."""
+"""The words of docs/studies/contact-detection.md around the figures of run_contact_detection.py."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
-
-
-EXAMPLE = """
-```c
-#include "arm.h"   /* fricli export models/ --observer --thresholds t.json --adapt --prefix arm -o arm.h */
-
-static arm_arm_state arm;   /* arm_arm_init(&arm) at start-up */
-
-void cycle(double t, const double *const *signals, const double *tau_m, const double *qd,
-           const double *momentum, const double *w, double *command, int *stop)
-{
-    double tau_f[ARM_ARM_JOINTS], tau_ext[ARM_ARM_JOINTS];
-    int contact[ARM_ARM_JOINTS], j;
-    arm_arm_step(&arm, t, signals, tau_m, qd, momentum, w, tau_f, tau_ext, contact);
-    for (j = 0; j < ARM_ARM_JOINTS; ++j) {
-        command[j] += tau_f[j];                /* friction compensation at the adapted level */
-        if (contact[j]) *stop = 1;             /* a contact: the reaction is the controller's */
-    }
-}
-```
-"""
 
 
 def _short(name: str) -> str:
@@ -39,72 +18,27 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
     rs = [a / b for a, b in zip(static, base)]
     ra = [a / b for a, b in zip(adapt, base)]
     mean_s, mean_a = float(np.mean(rs)), float(np.mean(ra))
-    out = ["# Contact detection and online friction adaptation: what the controller runs",
+    out = ["# Contact detection and online friction adaptation: measured on the UR10e",
            "",
-           "This document is written by `PYTHONPATH=. python docs/ur10e/run_contact_detection.py --work W` "
+           "This document is written by `PYTHONPATH=. python studies/ur10e/run_contact_detection.py --work W` "
            f"(about {r['seconds'] / 60:.0f} min on 2 shared cores with W holding the UR10e case study's work; the script "
-           "runs `docs/ur10e/run_case_study.py` into W first when it does not, about 2 min more). WORK below is W, DATA "
+           "runs `studies/ur10e/run_case_study.py` into W first when it does not, about 2 min more). WORK below is W, DATA "
            "the recordings (../shared/data/ur10e). Every figure below comes "
-           "from that run; the numbers are also in `docs/contact-detection-results.json`, the fricli commands it "
-           "ran are listed at the end.",
-           "",
-           "## What runs in the controller",
-           "",
-           "`fricli replay MODEL LOG -o OUT [--urdf U] [--adapt] [--thresholds T.json]` runs a log row by row "
-           "through what the controller runs, and `fricli export MODELS --observer [--thresholds T.json] [--adapt]` "
-           "writes it as C (`PREFIX_arm_init`, `PREFIX_arm_step`). Row k uses rows up to k only.",
-           "",
-           "- **Momentum observer** (De Luca et al.): with p = M(q) qd, the residual "
-           "r = K (p(t) - p(0) - ∫(tau_m - tau_f_pred + C(q, qd)^T qd - g(q) + r) dt) follows "
-           "dr/dt = K (tau_ext + tau_f - tau_f_pred - r): the external torque, in fricli's sign convention "
-           "(`tau_ext = tau_g + tau_dyn + tau_f - tau_m`, docs/log-format.md), low-passed with the time constant 1/K "
-           "and without any acceleration. Discretised by the backward Euler rule over each sample's own interval "
-           "(stable for any K dt; uneven samples are fine). `--urdf`: M(q) qd, C(q, qd)^T qd and g(q) come from the "
-           "URDF through Pinocchio (RNEA without gravity for M(q) qd with the armature, `computeCoriolisMatrix`, RNEA "
-           "for g), with the gravity, payload, rotor inertias and joint names the log's import recorded. Without "
-           "`--urdf`, the per-joint form filters tau_g + tau_dyn + tau_f_pred - tau_m of the log's columns (it needs "
-           "the acceleration inside tau_dyn). In C the rigid-body terms are inputs: per joint p = M(q) qd and "
-           "w = g(q) - C(q, qd)^T qd from the controller's own dynamics library (or p = 0, w = tau_g + tau_dyn).",
-           f"- **Default gain** K = {thr['gain']:g} 1/s (time constant {1000 / thr['gain']:g} ms): a contact of twice "
-           "the threshold crosses it within about 14 ms of continuous time (ln 2 / K).",
-           "- **Contact detection**: a joint is flagged while |tau_ext_pred| exceeds its threshold and released "
-           f"below {thr['release']:g} times it (hysteresis). At rest (|qd| at most {thr['moving_speed']:g} rad/s) the "
-           "friction is statically indeterminate: a held joint keeps whatever friction it came to rest with, "
-           "anywhere within its static band [-F_s, F_s], and a push within that band does not reach the motor. "
-           "There the estimate is the measured torque outside the band (`clip(y, -F_s, F_s) - y`, y the observer's "
-           "filtered measured friction), F_s the largest friction the model gives moving just above the moving speed "
-           "(up to 5 times it) on the calibration logs.",
-           "- **Thresholds**: `fricli thresholds MODEL LOG... -o T.json`: per joint, margin × quantile of "
-           f"|tau_ext_pred| of the static observer over every row of the collision-free LOGs (defaults: quantile "
-           f"{thr['quantile']:g}, margin {thr['margin']:g}), and the friction scale S (RMS of the model's friction in "
-           "motion).",
-           "- **Online adaptation** (`--adapt`, needs thresholds): per joint the scale a of the model's friction "
-           "(tau_f_pred = a × model), by recursive least squares with exponential forgetting on the observer's "
-           "filtered quantities (the a-priori error is the residual itself), forgetting exp(-dt / T) with the time "
-           "constant T = 30 s (`--time-constant`), a bounded to [0.5, 2], the covariance capped at its initial value. "
-           "No update while the joint is at rest, while |tau_ext_pred| exceeds half the threshold, or within 1 s of a "
-           "contact flag (a push is never learned as friction, even where its residual dips for a moment). `--adapt-offset` adapts an offset too (bounded to half "
-           "of S); it is not the default: an offset also absorbs any torque error that depends on the position (a "
-           "gravity error, gear ripple), which it then tracks with the memory's lag (figures below). Row k's friction "
-           "uses the level learned from rows before k.",
-           "",
-           "### The call from a control cycle",
-           "",
-           "`tests/test_replay.py` compiles this example against an exported header.",
-           "",
-           *EXAMPLE.strip("\n").splitlines(),
+           "from that run; the numbers are also in `docs/studies/contact-detection-results.json`, the fricli commands it "
+           "ran are listed at the end. What runs in the controller, and how a control cycle calls it: "
+           "[contact-detection.md](../contact-detection.md).",
            "",
            "## Protocol",
            "",
            "- Models: the case study's (`fricli identify` and `fricli diagnose --fix --calibrate` on the fitting run "
-           "`ur-20_02_19_14harm50sec`, docs/case-study-ur10e.md), the calibrated URDF for every import and replay.",
+           "`ur-20_02_19_14harm50sec`, docs/studies/case-study-ur10e.md), the calibrated URDF for every import and replay.",
            "- Thresholds: calibrated on the fitting run only, with the defaults; nothing of the other runs enters them.",
            "- Scored: the identification runs of other days (the case study's validation runs); false alarms on every "
            "other collision-free shared run (those, the payload run of the fitting day imported with its payload "
            "declared, and the six jointwise runs); the two collision runs.",
            "- The defaults (gain, quantile, margin, release, moving speed, time constant, bounds) were set before the "
            "figures below were computed, with three changes made after seeing false alarms and errors on these runs, "
-           "each for a reason stated above: the static friction band at rest (before it, held joints raised most "
+           "each for a reason stated in [contact-detection.md](../contact-detection.md): the static friction band at rest (before it, held joints raised most "
            "false alarms), the scale alone as the default adaptation (the offset made joint 5 worse than the static "
            "model), and the hold-off after a flag (before it, a contact held for 10 s moved the scale by up to 10.6 % "
            "where its residual dipped below the release for a moment).",
@@ -250,5 +184,5 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
         out += ["No C compiler on the machine that wrote this document: not checked here (tests/test_replay.py does).", ""]
     out += ["## Commands", "",
             "The replays and exports of this run (imports already in WORK, and the case study's own commands, "
-            "listed in docs/case-study-ur10e.md, are not repeated):", "", "```sh"] + [f"fricli {cmd}" for cmd in r["commands"]] + ["```", ""]
+            "listed in docs/studies/case-study-ur10e.md, are not repeated):", "", "```sh"] + [f"fricli {cmd}" for cmd in r["commands"]] + ["```", ""]
     return "\n".join(out)

@@ -5,7 +5,7 @@ and a held-out run; on the wrist joints 5 and 6, the coupled model (identify --c
 per-joint LuGre and linear model each (identify --joint J [--kind linear]), scored on the held-out run against the friction
 target tau_m - tau_g - tau_dyn and the simulation's noise floor. Run from the repository root:
 
-    python docs/img/make_drives_figure.py
+    python tools/docs/make_drives_figure.py
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """Rerun the UR10e case study: CSV recordings + URDF -> fricli models for the six joints,
-validated on runs of other days; writes docs/case-study-ur10e.md and docs/img/ur10e-*.png.
+validated on runs of other days; writes docs/studies/case-study-ur10e.md and docs/studies/img/ur10e-*.png.
 
-    python docs/ur10e/run_case_study.py                      # the whole study (about 70 s on 2 cores)
-    python docs/ur10e/run_case_study.py --joints 6 --runs 1 --out /tmp/x   # a small part
+    python studies/ur10e/run_case_study.py                      # the whole study (about 70 s on 2 cores)
+    python studies/ur10e/run_case_study.py --joints 6 --runs 1 --out /tmp/x   # a small part
 
 Every model comes from the fricli command line, run as a user would (the commands are
 printed and listed in the document). The script itself only computes what fricli has no
@@ -545,7 +545,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA, help="folder of the UR10e recordings")
     ap.add_argument("--work", default=None, help="folder for the imported logs and models (default: temporary)")
-    ap.add_argument("--out", default=ROOT, help="where docs/case-study-ur10e.md and docs/img/ go (default: this clone)")
+    ap.add_argument("--out", default=ROOT, help="where docs/studies/case-study-ur10e.md and docs/studies/img/ go (default: this clone)")
     ap.add_argument("--joints", default="1,2,3,4,5,6", help="joints to study, e.g. 6")
     ap.add_argument("--runs", type=int, default=None, help="use only the first N validation runs")
     ap.add_argument("--keep-imports", action="store_true", help="reuse the logs already imported into --work")
@@ -561,7 +561,7 @@ def main(argv=None) -> None:
     if args.cutoff is not None:
         CUTOFF_HZ = args.cutoff
     joints = [int(j) for j in args.joints.split(",")]
-    docs, img = os.path.join(args.out, "docs"), os.path.join(args.out, "docs", "img")
+    docs, img = os.path.join(args.out, "docs", "studies"), os.path.join(args.out, "docs", "studies", "img")
     os.makedirs(img, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         work = args.work or tmp
@@ -575,7 +575,7 @@ def main(argv=None) -> None:
                         calibrate_friction=args.calibrate_friction)
             atomic_write_bytes(saved, json.dumps({"result": res, "commands": COMMANDS}, default=_to_list).encode())
     pictures = figures(res, img)
-    import case_study_text  # docs/ur10e/case_study_text.py: the words around the figures
+    import case_study_text  # studies/ur10e/case_study_text.py: the words around the figures
 
     def paths(text: str) -> str:
         return text.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA") \

@@ -1,6 +1,6 @@
 """The measured figures of the sample data in docs/simulator.md, written from the files.
 
-    python docs/make_sample_figures.py docs/simulator.md      # rewrites the marked section
+    python tools/docs/make_sample_figures.py docs/simulator.md      # rewrites the marked section
 
 Reads every log of sample_data/, identifies the LuGre model on joint 2's and joint 4's base log
 (as ``fricli identify`` does) and scores it and the simulator's true base-state model.
@@ -12,7 +12,7 @@ import os
 import re
 import sys
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
@@ -24,7 +24,7 @@ from fricli.sim.simulator import true_params  # noqa: E402
 
 SAMPLE = os.path.join(ROOT, "sample_data")
 KINDS = ("base", "extended_none", "extended_sym", "extended_asym", "adapt")
-BEGIN = "<!-- sample figures: written by docs/make_sample_figures.py -->"
+BEGIN = "<!-- sample figures: written by tools/docs/make_sample_figures.py -->"
 END = "<!-- end of sample figures -->"
 
 

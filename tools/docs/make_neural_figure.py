@@ -9,7 +9,7 @@ same ratio for the exact steady-state friction of the simulator (the best any mo
 bristle state can do), and violations of tau_f qd >= 0. Run from the repository root
 (a few minutes on two cores; --steps 2000 for a quick look):
 
-    python docs/img/make_neural_figure.py [--steps N]
+    python tools/docs/make_neural_figure.py [--steps N]
 """
 
 from __future__ import annotations

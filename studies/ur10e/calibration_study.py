@@ -2,8 +2,8 @@
 identified together on one run, validated on the runs of other days, against the URDF's CAD model
 with linear friction fitted on the same run; and the external torque of the 2.805 kg payload run.
 
-    python docs/ur10e/calibration_study.py --work /tmp/cal-study        # about a minute on 2 cores
-    python docs/ur10e/calibration_study.py --work /tmp/cal-study --keep # reuse imported logs
+    python studies/ur10e/calibration_study.py --work /tmp/cal-study        # about a minute on 2 cores
+    python studies/ur10e/calibration_study.py --work /tmp/cal-study --keep # reuse imported logs
 
 Prints the tables of docs/calibration.md and writes WORK/calibration-study.json. Every log, URDF
 and friction set comes from the fricli command line (the commands are printed); the script only
@@ -35,7 +35,7 @@ TWIN_RUN = "ur-20_02_19_14harm50sec"         # the payload run's unloaded twin (
 LOAD_RUN = "ur-20_02_19_14harm50secLoad"
 PAYLOAD = {"mass": 2.805, "com": (0.0, 0.0, 0.0), "frame": "tool0"}
 FLOOR_HZ = 2.0
-# per joint, in motion: the ratios of fricli's per-joint models (docs/case-study-ur10e.md) and the floor
+# per joint, in motion: the ratios of fricli's per-joint models (docs/studies/case-study-ur10e.md) and the floor
 PATCHED = (0.68, 0.62, 0.66, 0.82, 0.86, 0.93)
 FLOOR = (0.50, 0.37, 0.61, 0.56, 0.80, 0.89)
 

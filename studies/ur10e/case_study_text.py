@@ -1,4 +1,4 @@
-"""The words of docs/case-study-ur10e.md around the figures that run_case_study.py computes."""
+"""The words of docs/studies/case-study-ur10e.md around the figures that run_case_study.py computes."""
 
 from __future__ import annotations
 
@@ -218,10 +218,10 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
     return "\n".join(head + [
         "# Case study: the robot model and the friction of a UR10e arm from its own recordings",
         "",
-        "This document is written by `python docs/ur10e/run_case_study.py` (about 70 s on 2 cores; data at",
+        "This document is written by `python studies/ur10e/run_case_study.py` (about 70 s on 2 cores; data at",
         "`../shared/data/ur10e`, see `../shared/data/README.md`). Every figure below comes from that run;",
         "the full list of fricli commands it ran is at the end, the numbers are also in",
-        "`docs/ur10e-results.json`.",
+        "`docs/studies/ur10e-results.json`.",
         "",
         "The recordings: a Universal Robots UR10e in velocity control along optimised excitation",
         "trajectories (sums of harmonics below 1 Hz), about 100 Hz, joint positions, velocities and motor",
@@ -231,7 +231,7 @@ def render(res: dict, tab: dict, commands: list[str], full: bool) -> str:
         "",
         "On a real arm the largest error is often not friction but the robot model: CAD masses and centres",
         "of mass, and rotor inertia the URDF does not hold. fricli corrects it where it lives, in the URDF",
-        "([calibration.md](calibration.md)), and then models each joint's friction on the corrected",
+        "([calibration.md](../calibration.md)), and then models each joint's friction on the corrected",
         "torques.",
         "",
         "## Protocol",
@@ -407,10 +407,10 @@ def _prior_lines(cal: dict) -> list[str]:
     """How strong the calibration's prior at CAD was and how it was chosen ([calibration.md])."""
     choice = cal.get("prior_choice")
     if not choice:
-        return [f"Prior: {cal['prior']:g} times each parameter's scale ([calibration.md](calibration.md)).", ""]
+        return [f"Prior: {cal['prior']:g} times each parameter's scale ([calibration.md](../calibration.md)).", ""]
     held = ", ".join(f"{k}: {v:.4f}" for k, v in sorted(choice["held_out_rms"].items(), key=lambda kv: float(kv[0])))
     lines = [f"Prior: chosen by {choice['folds']}-fold cross-validation over blocks of time of the fitting run",
-             "(`--prior auto`, [calibration.md](calibration.md)); nothing of the validation runs enters it. One",
+             "(`--prior auto`, [calibration.md](../calibration.md)); nothing of the validation runs enters it. One",
              f"strength for all parameters: **{choice['chosen']:g}** times each parameter's scale (held-out",
              f"weighted RMS per strength, 1 = the noise level: {held})."]
     if choice.get("per_group"):

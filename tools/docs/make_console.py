@@ -1,6 +1,6 @@
 """Rerun the commands of the ```console blocks in Markdown files and write their output back.
 
-    python docs/make_console.py README.md docs/tutorial.md
+    python tools/docs/make_console.py README.md docs/tutorial.md
 
 Each block holds commands (lines starting with ``$ ``, continued with a trailing ``\\``), each
 followed by its output (stdout and stderr as a terminal shows them). The commands run in order,
@@ -17,7 +17,7 @@ import subprocess
 import sys
 import tempfile
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
+ROOT = pathlib.Path(__file__).resolve().parents[2]
 BLOCK = re.compile(r"```console\n(.*?)```", re.S)
 
 

@@ -1,10 +1,10 @@
 """Contact detection and online friction adaptation on the UR10e recordings: writes
-docs/contact-detection.md, docs/img/contact-*.png and docs/contact-detection-results.json.
+docs/studies/contact-detection.md, docs/studies/img/contact-*.png and docs/studies/contact-detection-results.json.
 
-    PYTHONPATH=. python docs/ur10e/run_contact_detection.py --work W
+    PYTHONPATH=. python studies/ur10e/run_contact_detection.py --work W
 
-The models are the UR10e case study's (docs/case-study-ur10e.md: the fitting run, imported with the
-CAD URDF, identify, diagnose --fix --calibrate): the script runs docs/ur10e/run_case_study.py into
+The models are the UR10e case study's (docs/studies/case-study-ur10e.md: the fitting run, imported with the
+CAD URDF, identify, diagnose --fix --calibrate): the script runs studies/ur10e/run_case_study.py into
 W first unless W holds its results (study.json). Every replay is a fricli command, run as a user
 would (listed at the end of the document); the script itself computes the figures from their
 outputs: errors, false alarms, the pushes of the collision runs, and the contacts it adds to
@@ -62,8 +62,8 @@ def case_study(work: str, data: str) -> dict:
     saved = os.path.join(work, "study.json")
     if not os.path.exists(saved):
         out = tempfile.mkdtemp()
-        print("running docs/ur10e/run_case_study.py (the models) ...", file=sys.stderr, flush=True)
-        subprocess.run([sys.executable, os.path.join(ROOT, "docs", "ur10e", "run_case_study.py"), "--work", work,
+        print("running studies/ur10e/run_case_study.py (the models) ...", file=sys.stderr, flush=True)
+        subprocess.run([sys.executable, os.path.join(ROOT, "studies", "ur10e", "run_case_study.py"), "--work", work,
                         "--out", out, "--data", data, "--no-adapt"], check=True,
                        env=dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", "")))
     with open(saved) as fh:
@@ -322,7 +322,7 @@ def main(argv=None) -> None:
                     for k in range(len(JOINTS))}
             push_rows.append({"run": name.removesuffix("-cal"), **{k: v for k, v in p.items() if k != "rows"},
                               "flagged": flagged, "peak": peak})
-    img = os.path.join(args.out, "docs", "img")
+    img = os.path.join(args.out, "docs", "studies", "img")
     os.makedirs(img, exist_ok=True)
     plot_pushes(push_runs, thr, os.path.join(img, "contact-collision-runs.png"))
     # added contacts (known time, joint, size) on the collision-free runs of other days
@@ -347,11 +347,11 @@ def main(argv=None) -> None:
                                for n, modes in replays.items() if "push_pose" not in n},
               "pushes": push_rows, "added": added, "held": held, "c": c_figures,
               "commands": [shown(c) for c in COMMANDS], "seconds": time.time() - started}
-    atomic_write_bytes(os.path.join(args.out, "docs", "contact-detection-results.json"),
+    atomic_write_bytes(os.path.join(args.out, "docs", "studies", "contact-detection-results.json"),
                        json.dumps(result, indent=1, default=float).encode())
     text = document(result, names)
-    atomic_write_bytes(os.path.join(args.out, "docs", "contact-detection.md"), text.encode())
-    print(f"wrote {os.path.join(args.out, 'docs', 'contact-detection.md')} ({time.time() - started:.0f} s)",
+    atomic_write_bytes(os.path.join(args.out, "docs", "studies", "contact-detection.md"), text.encode())
+    print(f"wrote {os.path.join(args.out, 'docs', 'studies', 'contact-detection.md')} ({time.time() - started:.0f} s)",
           file=sys.stderr)
 
 

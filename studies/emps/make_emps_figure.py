@@ -1,9 +1,9 @@
-"""Make docs/img/emps-diagnose.png and print the figures of docs/case-study-emps.md.
+"""Make docs/studies/img/emps-diagnose.png and print the figures of docs/studies/case-study-emps.md.
 
 Needs the EMPS data at ../shared/data/emps/emps.parquet (relative to the repository root;
 not part of the repository). Run from the repository root:
 
-    python docs/img/make_emps_figure.py
+    python studies/emps/make_emps_figure.py
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from fricli.fitting.diagnosis.fix import augment  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 DATA = ROOT.parent / "shared" / "data" / "emps" / "emps.parquet"
-OUT = ROOT / "docs" / "img" / "emps-diagnose.png"
+OUT = ROOT / "docs" / "studies" / "img" / "emps-diagnose.png"
 
 
 def run(*args) -> str:
