@@ -21,7 +21,8 @@ LAYERS = [
     ("fleet", {"fleet"}),
     ("export", {"export"}),
     ("simulation", {"sim"}),
-    ("cli", {"cli", "__main__", "demo", "estimators"}),
+    ("library and runs", {"estimators", "arm", "demo"}),
+    ("cli", {"cli", "__main__"}),
 ]
 RANK = {name: i for i, (_, names) in enumerate(LAYERS) for name in names}
 

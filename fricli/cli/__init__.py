@@ -27,6 +27,7 @@ COMMANDS = {
     "estimate-ext": "fricli.cli.predict:estimate_ext_cmd",
     "evaluate": "fricli.cli.evaluate:evaluate_cmd",
     "export": "fricli.cli.export:export_cmd",
+    "fit-arm": "fricli.cli.arm:fit_arm_cmd",
     "fleet": "fricli.cli.fleet:fleet_cmd",
     "identify": "fricli.cli.lugre:identify_cmd",
     "import": "fricli.cli.robot:import_cmd",

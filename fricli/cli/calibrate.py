@@ -11,12 +11,6 @@ import click
 from fricli.cli.options import Number, common, emit_json, output_option, read_log, say, warn, window_options
 
 
-def report_path(output: str) -> str:
-    """The report written beside OUT.urdf: OUT.calibration.json."""
-    stem = output[:-5] if output.lower().endswith(".urdf") else output
-    return stem + ".calibration.json"
-
-
 class PriorStrength(click.ParamType):
     """--prior: "auto" or a positive number."""
 
@@ -83,10 +77,6 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
       fricli calibrate run.parquet --urdf ur10e.urdf -o ur10e-cal.urdf
       fricli import other.csv --mapping docs/ur10e-mapping.toml --urdf ur10e-cal.urdf -o other.parquet
     """
-    import json
-
-    from fricli.core.atomic import atomic_write_bytes
-    from fricli.cli.options import json_safe
     from fricli.cli.robot import urdf_joint_names
     from fricli.core.logs import DEFAULT_CUTOFF_HZ, gravity_of, held_of
     from fricli.robot import calibration as cb
@@ -121,12 +111,7 @@ def calibrate_cmd(log, urdf, match, urdf_pairs, gravity, friction, prior, consis
     cb.refuse_inconsistent(cal)
     with open(urdf, encoding="utf-8") as fh:
         text = cb.calibrated_urdf(fh.read(), urdf, cal)
-    where = report_file or (None if output == "-" else report_path(output))
-    report["report"] = where
-    atomic_write_bytes(output, text.encode())
-    if where:
-        body = json.dumps(json_safe(report), indent=2, sort_keys=True, allow_nan=False) + "\n"
-        atomic_write_bytes(where, body.encode())
+    where = cb.write(text, report, output, report_file)
     say(f"calibrated {len(cal.joints)} joints of {urdf} on {report['rows']:,} rows of {name} -> {output} "
         f"(report: {where or 'none'})", quiet)
     if as_json:

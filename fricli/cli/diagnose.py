@@ -290,22 +290,13 @@ def _urdf_of(table, urdf: str | None) -> str | None:
 
 def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool, friction: str):
     """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
-    import json
-
-    from fricli.core.atomic import atomic_write_bytes
-    from fricli.cli.calibrate import report_path
-    from fricli.cli.options import json_safe
-
     path = _urdf_of(table, urdf)
     if path is None:
         raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
     say(f"calibrating the robot model of {path} on {name} ...", quiet)
     cal, text, new = cb.recalibrate(table, name, path, friction=friction,
                                     cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
-    report = {"log": name, "urdf": path, "output": output, **cal.report, "report": report_path(output)}
-    atomic_write_bytes(report["report"], (json.dumps(json_safe(report), indent=2, sort_keys=True, allow_nan=False)
-                                          + "\n").encode())
-    atomic_write_bytes(output, text.encode())
+    cb.write(text, {"log": name, "urdf": path, "output": output, **cal.report}, output)
     for line in cb.warnings(cal.report):
         warn(f"warning: {line}")
     say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import functools
-import json
 import math
 import os
 import sys
 
 import click
 
-from fricli.core import errors, timewindow
+from fricli.core import errors, jsontext, timewindow
 
 
 class Number(click.FloatRange):
@@ -216,19 +215,8 @@ def extrapolation_line(extrapolation: dict | None, joint=None) -> str | None:
             f"{extrapolation['of']:,}) lie outside the model's training envelope")
 
 
-def json_safe(obj):
-    """``obj`` with NaN and infinite floats as None (JSON null): e.g. the MAE over no rows."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [json_safe(v) for v in obj]
-    return obj
-
-
 def emit_json(obj) -> None:
-    sys.stdout.write(json.dumps(json_safe(obj), indent=2, sort_keys=True, allow_nan=False) + "\n")
+    sys.stdout.write(jsontext.dumps(obj))
 
 
 def progress_enabled(quiet: bool) -> bool:

@@ -165,6 +165,20 @@ def _diagnose_spec() -> dict:
     )}
 
 
+def diagnose_options(given: dict | None = None, reading: dict | None = None, **extra) -> dict:
+    """The options the diagnose command records (``fricli.cli.options.command_options``), in its
+    terms: ``given`` over the defaults (checked), the log's ``reading`` options (``read_log``),
+    and ``extra`` (e.g. --calibrate's ``urdf_sha256``)."""
+    spec = _diagnose_spec()
+    opts = {**_checked({n: o.default for n, o in spec.items()} | (given or {}), spec, "Diagnosis"),
+            "urdf": None, "calibrated": None, "calibrate_friction": None}
+    opts["only"] = opts.pop("effects")
+    read = {**{n: o.default for n, o in READING.items()}, **_checked(reading or {}, READING, "Diagnosis")}
+    opts.update({k: read[k] for k in ("joint", "kt", "cutoff", "drop_invalid")})
+    opts.update({flag: True for flag in optionspec.ZERO_FLAGS if read[flag]})
+    return {**opts, **extra}
+
+
 class Diagnosis(_OnModel):
     """Which physical effects ``model`` misses on ``log``, and the model with them (``fricli diagnose
     --fix``): ``diagnosis_`` the ranked effects (``.to_json()``: what diagnose --json prints),
@@ -175,15 +189,7 @@ class Diagnosis(_OnModel):
     _spec = _diagnose_spec()
 
     def _job_options(self, data: logs.Log) -> dict:
-        # the options the diagnose command records (fricli.cli.options.command_options), in its terms
-        opts = {name: getattr(self, name) for name in self._spec}
-        opts = {**_checked(opts, self._spec, "Diagnosis"), "urdf": None, "calibrated": None,
-                "calibrate_friction": None}
-        opts["only"] = opts.pop("effects")
-        reading = {**{n: o.default for n, o in READING.items()}, **_checked(data.reading, READING, "Diagnosis")}
-        opts.update({k: reading[k] for k in ("joint", "kt", "cutoff", "drop_invalid")})
-        opts.update({flag: True for flag in optionspec.ZERO_FLAGS if reading[flag]})
-        return opts
+        return diagnose_options({name: getattr(self, name) for name in self._spec}, data.reading)
 
     def _fitted(self, fitted) -> None:
         self.diagnosis_ = fitted.diagnosis

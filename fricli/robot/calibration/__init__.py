@@ -59,7 +59,7 @@ from fricli.robot.calibration.report import (OTHER_CAUSES, SUSPICIOUS, TOLERANCE
                                              _physical, refuse_inconsistent, _scale, suspicious, warnings,
                                              whole_bodies)
 from fricli.robot.calibration.result import Calibration  # noqa: F401
-from fricli.robot.calibration.urdf import calibrated_urdf, _set_inertial  # noqa: F401
+from fricli.robot.calibration.urdf import calibrated_urdf, report_path, write, _set_inertial  # noqa: F401
 
 #: the friction fitted with the robot model by diagnose --calibrate, which refits each joint's friction
 #: model afterwards: the calibration's friction only has to keep friction out of the inertial

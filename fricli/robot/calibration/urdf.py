@@ -76,3 +76,24 @@ def _set_inertial(link, inertia) -> None:
     ET.SubElement(inertial, "origin", {"xyz": " ".join(repr(float(v)) for v in c), "rpy": "0 0 0"}).tail = "\n      "
     ET.SubElement(inertial, "inertia", {k: repr(float(tensor[a, b])) for k, (a, b) in (
         ("ixx", (0, 0)), ("ixy", (0, 1)), ("ixz", (0, 2)), ("iyy", (1, 1)), ("iyz", (1, 2)), ("izz", (2, 2)))}).tail = "\n    "
+
+
+def report_path(output: str) -> str:
+    """The report written beside OUT.urdf: OUT.calibration.json."""
+    stem = output[:-5] if output.lower().endswith(".urdf") else output
+    return stem + ".calibration.json"
+
+
+def write(text: str, report: dict, output: str, report_file: str | None = None) -> str | None:
+    """Write the calibrated URDF ``text`` to ``output`` ("-": stdout) and ``report`` (with
+    its own path as "report") to ``report_file`` (default ``report_path(output)``; none for "-");
+    the report's path."""
+    from fricli.core import jsontext
+    from fricli.core.atomic import atomic_write_bytes
+
+    where = report_file or (None if output == "-" else report_path(output))
+    report["report"] = where
+    atomic_write_bytes(output, text.encode())
+    if where:
+        atomic_write_bytes(where, jsontext.dumps(report).encode())
+    return where

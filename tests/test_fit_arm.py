@@ -1,0 +1,69 @@
+"""fricli fit-arm (fricli/arm.py): a whole arm in one command on the UR10e fitting run, every
+step's output kept, the score against the linear baseline on held-out time, --if-changed."""
+
+import importlib.util
+import json
+import os
+
+import numpy as np
+import pytest
+from conftest import ROOT, invoke, shared_data
+
+from fricli.core import errors
+
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("pinocchio") is None, reason="needs the robot extra (pin)")
+MAPPING = ROOT / "docs" / "ur10e-mapping.toml"
+FIT_RUN = "ur-20_02_19_14harm50sec.csv"
+
+
+@pytest.fixture(scope="module")
+def arm(tmp_path_factory):
+    data = shared_data("ur10e")
+    out = tmp_path_factory.mktemp("arm") / "arm"
+    args = (data / "identification" / FIT_RUN, "--mapping", MAPPING, "--urdf", data / "ur10e.urdf", "-o", out)
+    done = invoke("fit-arm", *args, "--json")
+    assert done.exit_code == 0, done.output
+    return out, args, json.loads(done.stdout)
+
+
+@pytest.mark.slow
+def test_every_step_is_kept_and_the_models_beat_the_linear_baseline_on_held_out_time(arm):
+    out, _, result = arm
+    for name in ("fit-cad.parquet", "fit.parquet", "robot.urdf", "robot.calibration.json", "friction.h",
+                 "report.md", "report.json", "fit-arm.json"):
+        assert (out / name).is_file(), name
+    for folder in ("lugre", "fixed"):
+        assert sorted(os.listdir(out / folder)) == [f"joint_{j}.npz" for j in range(1, 7)]
+    assert result["held_out"] == "the last 25% of the recording's time"
+    scores = result["scores"]
+    assert sorted(scores) == [str(j) for j in range(1, 7)]
+    ratios = [s["ratio"] for s in scores.values()]
+    assert result["mean_ratio"] == pytest.approx(np.mean(ratios))
+    assert result["mean_ratio"] < 1.0          # better than the standard model where it was not fitted
+    assert all(s["rows"] > 500 for s in scores.values())
+    assert "| 2 |" in (out / "report.md").read_text()
+
+
+@pytest.mark.slow
+def test_a_second_run_with_if_changed_touches_nothing(arm):
+    out, args, _ = arm
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in out.rglob("*") if p.is_file()}
+    done = invoke("fit-arm", *args, "--if-changed")
+    assert done.exit_code == errors.UNCHANGED, done.output
+    assert "is up to date" in done.stderr
+    after = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in out.rglob("*") if p.is_file()}
+    assert after == before
+
+
+def test_holdout_and_validation_recordings_do_not_go_together(tmp_path):
+    done = invoke("fit-arm", "run.csv", "--mapping", MAPPING, "--urdf", "r.urdf", "-o", tmp_path / "o",
+                  "--validate", "day2.csv", "--holdout", "0.3")
+    assert done.exit_code == errors.USAGE
+    assert "--holdout applies without --validate" in done.stderr
+
+
+def test_a_missing_recording_is_one_line(tmp_path):
+    done = invoke("fit-arm", tmp_path / "nothing.csv", "--mapping", MAPPING, "--urdf", MAPPING, "-o", tmp_path / "o")
+    assert done.exit_code == errors.INPUT
+    assert done.stderr.strip().count("\n") == 0 and "nothing.csv" in done.stderr
+    assert not (tmp_path / "o").exists()
