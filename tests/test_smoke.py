@@ -52,7 +52,7 @@ def check(name, proc, code=0):
         assert sign not in err, f"{name}: {sign!r} on stderr\n{err}"
 
 
-COMMANDS = ["adapt", "calibrate", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fleet", "identify",
+COMMANDS = ["adapt", "calibrate", "demo", "diagnose", "dynamics", "estimate-ext", "evaluate", "export", "fit-arm", "fleet", "identify",
             "import", "inspect", "payload", "predict", "replay", "report", "simulate", "thresholds", "train-base", "trend"]
 
 

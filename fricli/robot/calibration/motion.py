@@ -10,6 +10,7 @@ import numpy as np
 
 from fricli.core import logs, transmission
 from fricli.core.errors import LogError
+from fricli.numerics.threads import pinned
 
 
 @dataclasses.dataclass
@@ -26,6 +27,7 @@ class Motion:
     transmission: object = None  # the log's Transmission over URDF joint names, or None
 
 
+@pinned
 def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[str, str] | None = None,
                 cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ) -> Motion:
     """The log's joints matched to ``robot`` (a ``RobotModel``): ``match`` "name"/"order", or None for
@@ -149,6 +151,7 @@ def recorded_urdf(table) -> str | None:
     return given
 
 
+@pinned
 def recorded_motion(table, name: str, urdf: str | None = None, *, cutoff_hz: float = logs.DEFAULT_CUTOFF_HZ):
     """(record, robot, motion) of a whole-arm log imported with a URDF: what ``import``/``dynamics``
     recorded, the robot model of ``urdf`` (default: the recorded URDF) with the recorded gravity and
