@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from fricli.core.errors import FitError
-from fricli.robot.calibration.parameters import _from_pseudo, _random_regressor, pseudo_inertia
+from fricli.robot.calibration.parameters import _from_pseudo, _from_pseudos, _random_regressor, pseudo_inertia
 
 
 PRIOR_GRID = (0.01, 0.03, 0.1, 0.2, 0.5, 1.0, 3.0, 10.0)   # the prior strengths "auto" chooses from
@@ -146,14 +146,14 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
 
     def dparams(th):   # d x / d theta: block diagonal
         out = np.zeros((len(th), len(th)))
+        rows, cols = np.arange(10), _TRIL
         for k in range(nj):
             low = np.zeros((4, 4))
             low[_TRIL] = th[10 * k:10 * k + 10]
-            for e, (a, b) in enumerate(zip(*_TRIL)):
-                d = np.zeros((4, 4))
-                d[a] = low[:, b]          # E_ab L^T + L E_ba: row a and column a of L's column b
-                d = d + d.T
-                out[10 * k:10 * k + 10, 10 * k + e] = _from_pseudo(d)
+            d = np.zeros((10, 4, 4))
+            d[rows, cols[0]] = low[:, cols[1]].T     # E_ab L^T + L E_ba: row a and column a of L's column b
+            d = d + d.transpose(0, 2, 1)
+            out[10 * k:10 * k + 10, 10 * k:10 * k + 10] = _from_pseudos(d).T
         idx = np.arange(10 * nj, 11 * nj)
         out[idx, idx] = 2 * th[idx]
         idx = np.arange(11 * nj, len(th))
