@@ -204,7 +204,8 @@ def test_distributed_cluster_gives_the_local_history(fleet_dir, tmp_path):
 @needs_dask
 def test_unreachable_scheduler(fleet_dir, tmp_path):
     folder = copy_of(fleet_dir, tmp_path)
-    res = invoke("fleet", "fleet.toml", "--scheduler", f"tcp://127.0.0.1:{_free_port()}", cwd=folder)
+    res = invoke("fleet", "fleet.toml", "--scheduler", f"tcp://127.0.0.1:{_free_port()}", "--connect-timeout", "1",
+                 cwd=folder)
     assert res.returncode == errors.NOTHING_RAN
     assert "cannot reach the Dask scheduler" in res.stderr and len(res.stderr.splitlines()) == 1
 

@@ -14,6 +14,8 @@ from fricli.cli.options import Number, common, emit_json, json_flag, progress_en
 @click.argument("manifest", type=click.Path(dir_okay=False))
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Dask scheduler to run on (e.g. tcp://10.0.0.5:8786); default a local cluster.")
+@click.option("--connect-timeout", type=Number(min=0, min_open=True), default=10.0, show_default=True,
+              metavar="SECONDS", help="How long to wait for the --scheduler before giving up.")
 @click.option("--workers", type=click.IntRange(min=1), default=None,
               help="Worker processes of the local cluster [default: one per core].")
 @click.option("--force", is_flag=True, help="Run every job, even when its model is up to date.")
@@ -23,7 +25,7 @@ from fricli.cli.options import Number, common, emit_json, json_flag, progress_en
 @json_flag
 @common
 @errors.cite_codes
-def fleet_cmd(manifest, scheduler, workers, force, list_only, allow_outside, as_json, quiet):
+def fleet_cmd(manifest, scheduler, connect_timeout, workers, force, list_only, allow_outside, as_json, quiet):
     """Run every job of MANIFEST (robots, logs, joints, pipeline: see docs/fleet.md) on Dask.
 
     A job is one (robot, joint, log): its model is refreshed unless it was made from the same log
@@ -63,7 +65,8 @@ def fleet_cmd(manifest, scheduler, workers, force, list_only, allow_outside, as_
             bar.update(done - bar.n)
 
     try:
-        outcome = run.run(m, scheduler=scheduler, workers=workers, if_changed=not force, on_done=on_done)
+        outcome = run.run(m, scheduler=scheduler, workers=workers, if_changed=not force, on_done=on_done,
+                          connect_timeout=connect_timeout)
     finally:
         if bar is not None:
             bar.close()

@@ -58,14 +58,18 @@ def _distributed():
     return distributed
 
 
+CONNECT_TIMEOUT = 10.0   # s: how long a run waits for a scheduler it is given
+
+
 @contextlib.contextmanager
-def client(scheduler: str | None = None, workers: int | None = None) -> Iterator:
-    """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://10.0.0.5:8786) or on a
-    local cluster of ``workers`` single-threaded processes (default: one per core)."""
+def client(scheduler: str | None = None, workers: int | None = None, timeout: float = CONNECT_TIMEOUT) -> Iterator:
+    """A ``distributed.Client``: on ``scheduler`` (an address such as tcp://10.0.0.5:8786, waited for
+    ``timeout`` seconds) or on a local cluster of ``workers`` single-threaded processes (default: one
+    per core)."""
     distributed = _distributed()
     if scheduler:
         try:
-            c = distributed.Client(scheduler, timeout="10s")
+            c = distributed.Client(scheduler, timeout=f"{timeout:g}s")
         except (OSError, TimeoutError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler {scheduler}: {errors.one_line(str(exc))}") from None
         with c:
@@ -106,12 +110,14 @@ def run_id(now: dt.datetime) -> str:
 
 
 def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None = None,
-        if_changed: bool = True, on_done: Callable[[int, int], None] | None = None) -> Outcome:
+        if_changed: bool = True, on_done: Callable[[int, int], None] | None = None,
+        connect_timeout: float = CONNECT_TIMEOUT) -> Outcome:
     """Run every job of ``manifest`` and append the rows of the jobs that ran to its history.
     A job whose model is up to date but whose history row is missing (an interrupted run, a
     history that could not be written) runs again, so the history catches up.
 
-    ``on_done(done, total)`` is called as jobs finish (for a progress bar). One run of a manifest
+    ``on_done(done, total)`` is called as jobs finish (for a progress bar); ``connect_timeout``:
+    the seconds to wait for ``scheduler``. One run of a manifest
     at a time: the run holds the lock on the manifest (``.NAME.lock`` beside it) from its start to
     its end; a second run of the same manifest raises LockedError at once and touches nothing."""
     from fricli.core import jobs as joblock
@@ -123,7 +129,8 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
         raise errors.LockedError(f"{manifest.path} is being run by another fricli fleet job; this run did "
                                  "nothing") from None
     try:
-        return _run(manifest, scheduler=scheduler, workers=workers, if_changed=if_changed, on_done=on_done)
+        return _run(manifest, scheduler=scheduler, workers=workers, if_changed=if_changed, on_done=on_done,
+                    timeout=connect_timeout)
     except BaseException:
         lock.__exit__(*sys.exc_info())
         raise
@@ -131,14 +138,14 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
         lock.__exit__(None, None, None)
 
 
-def _run(manifest: Manifest, *, scheduler, workers, if_changed: bool, on_done) -> Outcome:
+def _run(manifest: Manifest, *, scheduler, workers, if_changed: bool, on_done, timeout: float) -> Outcome:
     now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
     run = run_id(now)
     jobs = list(manifest.jobs)
     results: list = [None] * len(jobs)
     warnings = []
     if jobs:
-        with client(scheduler, workers) as c:
+        with client(scheduler, workers, timeout) as c:
             _run_jobs(c, jobs, range(len(jobs)), results, if_changed, on_done)
             try:
                 recorded = _recorded(manifest.history)
