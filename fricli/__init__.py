@@ -2,16 +2,17 @@
 
 The library (docs/python-api.md): ``read_log`` reads a log as the commands do, the estimators
 (``LuGre``, ``Linear``, ``GMS``, ``Network``, ``Residual``, ``Diagnosis``, ``Calibration``) fit
-what the commands fit, ``load_model`` reads a model file. The names are imported on first use,
-so ``import fricli`` stays cheap.
+what the commands fit, ``load_model`` reads a model file, ``fit_arm`` runs ``fricli fit-arm``.
+The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
 __version__ = "0.2.0"
 
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
-           "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "__version__"]
+           "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "fit_arm",
+           "__version__"]
 
-_FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec"}
+_FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm"}
 
 
 def __getattr__(name: str):
