@@ -9,12 +9,15 @@ import click
 from fricli import models
 from fricli.core import errors, logs, modelset
 from fricli.cli import cli
-from fricli.cli.options import (Number, common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
-                                log_reading, read_log, reading_kwargs, say, warn)
+from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
+                                log_reading, read_log, reading_kwargs, say, spec_option, warn)
 from fricli.fitting.diagnosis import driver
 from fricli.robot import calibration as cb
 from fricli.fitting.diagnosis import effects as E
 from fricli.core.errors import FricliError, ModelFileError, OutputError
+from fricli.fitting import optionspec
+
+_SPEC = {o.name: o for o in optionspec.diagnose_options()}
 
 
 def _effect_names(ctx, param, value):
@@ -94,20 +97,14 @@ def table(d: driver.Diagnosis, v_unit: str = "rad/s", q_unit: str = "rad", joint
 @click.option("--fix", is_flag=True, help="Write the model augmented with the added effects (needs -o).")
 @click.option("-o", "--output", default=None,
               help="Augmented model file to write with --fix (.npz), or a folder for one per joint.")
-@click.option("--folds", type=click.IntRange(min=3, max=100), default=driver.DEFAULT_FOLDS, show_default=True,
-              help="Contiguous folds over time for the held-out scores.")
-@click.option("--min-gain", type=Number(min=0, max=1, min_open=True), default=driver.DEFAULT_MIN_GAIN,
-              show_default=True, help="Share of the remaining held-out squared residual an effect must remove.")
-@click.option("--alpha", type=Number(min=0, max=0.5, min_open=True), default=driver.DEFAULT_ALPHA,
-              show_default=True, help="Significance level of the held-out improvement.")
-@click.option("--effects", "only", default=None, callback=_effect_names, metavar="NAMES",
-              help="Comma-separated candidate effects to test (default: all).")
-@click.option("--max-effects", type=click.IntRange(min=0), default=None, help="Add at most this many effects.")
-@click.option("--no-carry", is_flag=True,
-              help="With --fix, keep every effect as an added term even when a LuGre base could carry it.")
-@click.option("--accept-implausible", is_flag=True,
-              help="Add effects whose fitted parameters are out of plausible range (e.g. a gravity scale "
-                   "beyond +-30 %) instead of reporting them as suspicious.")
+@spec_option(_SPEC["folds"])
+@spec_option(_SPEC["min_gain"])
+@spec_option(_SPEC["alpha"])
+@click.option("--effects", "only", default=None, callback=_effect_names, metavar=_SPEC["effects"].metavar,
+              help=_SPEC["effects"].help)
+@spec_option(_SPEC["max_effects"])
+@spec_option(_SPEC["no_carry"])
+@spec_option(_SPEC["accept_implausible"])
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="The URDF LOG's tau_g and tau_dyn came from (default: the one its import recorded), for the "
                    "robot-model check of a whole-arm log and --calibrate.")

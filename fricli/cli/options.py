@@ -271,6 +271,11 @@ def _click_option(opt):
     return click.option(opt.flag, default=opt.default, show_default=opt.default is not None, **kwargs)
 
 
+def spec_option(opt):
+    """The click option of one ``fricli.fitting.optionspec.Option``."""
+    return _click_option(opt)
+
+
 def spec_options(pipeline: str):
     """The click options of ``pipeline``'s model-shaping options (``fricli.fitting.optionspec.PIPELINES``)."""
     from fricli.fitting import optionspec

@@ -148,21 +148,13 @@ def _effects(value):
 
 
 def _diagnose_spec() -> dict:
-    from fricli.fitting.diagnosis import driver
+    """diagnose's options (``optionspec.diagnose_options``), effects checked by name."""
+    import dataclasses
 
-    return {o.name: o for o in (
-        Option("folds", "int", driver.DEFAULT_FOLDS, "Contiguous folds over time for the held-out scores.",
-               low=3, high=100),
-        Option("min_gain", "float", driver.DEFAULT_MIN_GAIN, "Share of the remaining held-out squared residual "
-                                                             "an effect must remove.", low=0, low_open=True, high=1),
-        Option("alpha", "float", driver.DEFAULT_ALPHA, "Significance level of the held-out improvement.",
-               low=0, low_open=True, high=0.5),
-        _Custom("effects", "text", None, "Candidate effects to test, names or comma-separated (default: all).",
-                validate=_effects),
-        Option("max_effects", "int", None, "Add at most this many effects.", low=0),
-        Option("no_carry", "flag", False, "Keep every effect as an added term even when a LuGre base could carry it."),
-        Option("accept_implausible", "flag", False, "Add effects whose fitted parameters are out of plausible range."),
-    )}
+    spec = {o.name: o for o in optionspec.diagnose_options()}
+    given = {f.name: getattr(spec["effects"], f.name) for f in dataclasses.fields(spec["effects"])}
+    spec["effects"] = _Custom(**given, validate=_effects)
+    return spec
 
 
 def diagnose_options(given: dict | None = None, reading: dict | None = None, **extra) -> dict:

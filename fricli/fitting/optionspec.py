@@ -225,6 +225,28 @@ ADAPT = (
 PIPELINES = {"identify": IDENTIFY, "train-base": TRAIN_BASE, "adapt": ADAPT}
 
 
+def diagnose_options() -> tuple[Option, ...]:
+    """diagnose's options that shape what it finds and what --fix adds (its reading options are
+    ``READING``): those of ``fricli diagnose`` and of ``fricli.Diagnosis``."""
+    from fricli.fitting.diagnosis import driver
+
+    return (
+        Option("folds", "int", driver.DEFAULT_FOLDS, "Contiguous folds over time for the held-out scores.",
+               low=3, high=100),
+        Option("min_gain", "float", driver.DEFAULT_MIN_GAIN,
+               "Share of the remaining held-out squared residual an effect must remove.", low=0, low_open=True, high=1),
+        Option("alpha", "float", driver.DEFAULT_ALPHA, "Significance level of the held-out improvement.",
+               low=0, low_open=True, high=0.5),
+        Option("effects", "text", None, "Comma-separated candidate effects to test (default: all).", metavar="NAMES"),
+        Option("max_effects", "int", None, "Add at most this many effects.", low=0),
+        Option("no_carry", "flag", False,
+               "With --fix, keep every effect as an added term even when a LuGre base could carry it."),
+        Option("accept_implausible", "flag", False,
+               "Add effects whose fitted parameters are out of plausible range (e.g. a gravity scale beyond +-30 %) "
+               "instead of reporting them as suspicious."),
+    )
+
+
 def options_of(pipeline: str) -> dict[str, Option]:
     """{name: Option} of a pipeline, the reading options included."""
     return {o.name: o for o in (*READING, *PIPELINES[pipeline])}
