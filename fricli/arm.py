@@ -80,6 +80,8 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
         raise ValueError(f"holdout {share}: expected a share in [0, 1)")
     if share and validate:
         raise ValueError("give validation recordings or a held-out share of the recording, not both")
+    if not share and not validate:
+        raise ValueError("nothing held out: give validation recordings or a held-out share above 0")
     os.makedirs(out, exist_ok=True)
     run = _Steps(out, if_changed, say)
     with jobs.output_lock(os.path.join(out, STEPS_FILE)):
@@ -90,9 +92,9 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
         fit = run.imported("fit.parquet", recordings, mapping, cal_urdf, cutoff_hz)
         fixed = run.models("fixed", "diagnose", fit, window, inputs=lugre, urdf=cal_urdf)
         if validate:
-            pairs = [(run.imported(f"validate/{_stem(v)}-cad.parquet", [v], mapping, urdf, cutoff_hz),
-                      run.imported(f"validate/{_stem(v)}.parquet", [v], mapping, cal_urdf, cutoff_hz))
-                     for v in validate]
+            pairs = [(run.imported(f"validate/{name}-cad.parquet", [v], mapping, urdf, cutoff_hz),
+                      run.imported(f"validate/{name}.parquet", [v], mapping, cal_urdf, cutoff_hz))
+                     for v, name in zip(validate, _names(validate))]
             held = f"{len(validate)} validation recording{'s' if len(validate) > 1 else ''}"
         else:
             pairs = [(fit_cad, fit)]
@@ -113,9 +115,18 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
     return report
 
 
-def _stem(path: str) -> str:
-    name = os.path.basename(os.path.normpath(path))
-    return name.rsplit(".", 1)[0] if "." in name else name
+def _names(paths: list[str]) -> list[str]:
+    """Each recording's file name without its extension; -2, -3, ... added to a name taken before."""
+    out = []
+    for path in paths:
+        name = os.path.basename(os.path.normpath(path))
+        stem = name.rsplit(".", 1)[0] if "." in name else name
+        k, unique = 1, stem
+        while unique in out:
+            k += 1
+            unique = f"{stem}-{k}"
+        out.append(unique)
+    return out
 
 
 class _Steps:
@@ -260,7 +271,8 @@ def score(fit_cad: str, window, lugre: str, fixed: str, pairs: list, holdout: fl
         until = None if window is None else str(window.stop)
         sig = read_log(fit_cad, joint=key, time_until=until).signals
         coef = np.linalg.lstsq(linear_columns(sig), logs.friction_target(sig), rcond=None)[0]
-        models = {"lugre": load_model(modelset.path_for(lugre, joint)), "fixed": load_model(modelset.path_for(fixed, joint))}
+        models = {name: load_model(modelset.path_for(folder, joint))
+                  for name, folder in (("lugre", lugre), ("fixed", fixed))}
         errors = {"linear": [], "lugre": [], "fixed": []}
         for cad, cal in pairs:
             since = None if not holdout else f"{100 * (1 - holdout):g}%"

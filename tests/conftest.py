@@ -156,3 +156,34 @@ def shared_data(name):
     if not path.exists():
         pytest.skip(f"{path} is absent")
     return path
+
+
+def imported_modules(source: str, package: str, top_level: bool = False) -> set[str]:
+    """Every name ``source`` (a module of ``package``) imports, absolute (relative imports
+    resolved): ``import a.b`` gives a.b, ``from P import X`` gives P.X. ``top_level``: only the
+    imports run when the module is imported (at module level and in its if/try/with blocks), else
+    those in functions and classes too."""
+    import ast
+
+    found = set()
+
+    def visit(nodes):
+        for node in nodes:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                if not top_level:
+                    visit(node.body)
+                continue
+            if isinstance(node, ast.Import):
+                found.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(parts + ([base] if base else []))
+                found.update(f"{base}.{alias.name}" for alias in node.names)
+            for field in ("body", "orelse", "finalbody", "handlers"):
+                if isinstance(getattr(node, field, None), list):
+                    visit(getattr(node, field))
+
+    visit(ast.parse(source).body)
+    return found

@@ -67,3 +67,14 @@ def test_a_missing_recording_is_one_line(tmp_path):
     assert done.exit_code == errors.INPUT
     assert done.stderr.strip().count("\n") == 0 and "nothing.csv" in done.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_nothing_held_out_is_refused(tmp_path):
+    done = invoke("fit-arm", "run.csv", "--mapping", MAPPING, "--urdf", "r.urdf", "-o", tmp_path / "o", "--holdout", "0")
+    assert done.exit_code == errors.USAGE
+
+
+def test_validation_recordings_of_one_name_get_files_of_their_own():
+    from fricli.arm import _names
+
+    assert _names(["a/run.csv", "b/run.csv", "c/other.csv", "d/run.csv"]) == ["run", "run-2", "other", "run-3"]

@@ -2,10 +2,9 @@
 layers below it, and only the command line (fricli/cli/ and fricli/__main__.py) imports
 fricli.cli (the library never reads the command line)."""
 
-import ast
 from pathlib import Path
 
-from conftest import ROOT
+from conftest import ROOT, imported_modules
 
 PACKAGE = Path(ROOT) / "fricli"
 
@@ -34,23 +33,6 @@ def layer_of(dotted: str) -> int | None:
         if ".".join(parts[:k]) in RANK:
             return RANK[".".join(parts[:k])]
     return None
-
-
-def imported_modules(source: str, package: str) -> set[str]:
-    """Every module ``source`` (a module of ``package``) imports: absolute names, relative
-    imports resolved, imports inside functions included."""
-    tree = ast.parse(source)
-    found = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join(parts + ([base] if base else []))
-            found.update(f"{base}.{alias.name}" for alias in node.names)
-    return found
 
 
 def cli_importers() -> list[str]:

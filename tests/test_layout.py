@@ -2,13 +2,12 @@
 imports among fricli's modules, and one registered name per effect in every layer that knows
 effects (``fricli.core.effectnames``)."""
 
-import ast
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from conftest import ROOT, imported_modules
 from fricli.core import effectnames
 from fricli.fitting.diagnosis import driver, fix
 from fricli.fitting.diagnosis import effects as diagnosis_effects
@@ -38,27 +37,7 @@ def imports_of(name: str, path: Path, top_level: bool) -> set[str]:
     if/try blocks too), or anywhere, in functions as well. ``from P import X`` counts as P.X when
     that is a module, else as P; a module's own packages (imported with it anyway) do not count."""
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-
-    def visit(nodes):
-        for node in nodes:
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
-                if not top_level:
-                    visit(node.body)
-                continue
-            if isinstance(node, ast.Import):
-                found.update(alias.name for alias in node.names)
-            elif isinstance(node, ast.ImportFrom):
-                base = node.module or ""
-                if node.level:
-                    parts = package.split(".")[: len(package.split(".")) - node.level + 1]
-                    base = ".".join(parts + ([base] if base else []))
-                found.update(f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base for a in node.names)
-            for field in ("body", "orelse", "finalbody", "handlers"):
-                if isinstance(getattr(node, field, None), list):
-                    visit(getattr(node, field))
-
-    visit(ast.parse(path.read_text()).body)
+    found = {m if m in MODULES else m.rpartition(".")[0] for m in imported_modules(path.read_text(), package, top_level)}
     return {m for m in found if m in MODULES and m != name and not name.startswith(m + ".")}
 
 

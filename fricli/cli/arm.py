@@ -18,7 +18,7 @@ from fricli.core import errors
 @click.option("-o", "--output", required=True, type=Folder(), help="Folder for every step's output.")
 @click.option("--validate", multiple=True, metavar="RECORDING",
               help="A held-out recording of the same robot (e.g. of another day) to score on. Repeatable.")
-@click.option("--holdout", type=Number(min=0, max=1, max_open=True), default=None, metavar="SHARE",
+@click.option("--holdout", type=Number(min=0, max=1, min_open=True, max_open=True), default=None, metavar="SHARE",
               help="Without --validate: the share of the recording's time held out and scored on [default: 0.25].")
 @click.option("--cutoff", type=Cutoff(), default=10.0, show_default=True,
               help="Low-pass cut-off [Hz] of the qd and qdd derived at import (or auto).")

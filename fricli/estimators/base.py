@@ -35,17 +35,6 @@ class _Custom(Option):
         return self.validate(value)
 
 
-def _checked(given: dict, spec: dict, who: str) -> dict:
-    """``given`` checked against ``spec`` ({name: Option}); OptionError naming the option."""
-    out = {}
-    for name, value in given.items():
-        if name not in spec:
-            raise OptionError(f"{who}: unknown option {name!r} (known: {', '.join(sorted(spec))})", name)
-        try:
-            out[name] = spec[name].check(value)
-        except ValueError as exc:
-            raise OptionError(f"{who} option {exc}", name) from None
-    return out
 
 
 def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_invalid=False, no_gravity=False,
@@ -54,8 +43,9 @@ def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_i
     with --joint, --kt [Nm/A], --cutoff [Hz], --drop-invalid, --no-gravity, --no-dynamics, --from
     and --until (``time_from``, ``time_until``: seconds of ``t``, or a share of its span: "60%").
     ``warn(line)`` gets the notes the commands print. ``Log.signals``: float64 arrays (n,)."""
-    opts = _checked(dict(joint=joint, kt=kt, cutoff=cutoff, drop_invalid=drop_invalid, no_gravity=no_gravity,
-                         no_dynamics=no_dynamics), READING, "read_log")
+    given = dict(joint=joint, kt=kt, cutoff=cutoff, drop_invalid=drop_invalid, no_gravity=no_gravity,
+                 no_dynamics=no_dynamics)
+    opts = optionspec.check_values(given, READING, "read_log")
     bounds = []
     for option, bound in (("time_from", time_from), ("time_until", time_until)):
         try:
@@ -180,7 +170,7 @@ class _Params:
             setattr(self, self._positional, params.pop(self._positional))
         elif args:
             raise TypeError(f"{who} takes keyword arguments only")
-        _checked(params, self._spec, who)
+        optionspec.check_values(params, self._spec, who)
         self._options(params)   # options that do not go together
         for name, option in self._spec.items():
             setattr(self, name, params.get(name, option.default))

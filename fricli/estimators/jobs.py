@@ -8,7 +8,7 @@ import os
 
 from fricli import models
 from fricli.core import logs
-from fricli.estimators.base import READING, Model, _checked, _Custom, _as_log, _Estimator, base_bytes, with_partners
+from fricli.estimators.base import READING, Model, _Custom, _as_log, _Estimator, base_bytes, with_partners
 from fricli.fitting import optionspec, runs
 from fricli.fitting.optionspec import Option
 
@@ -162,10 +162,10 @@ def diagnose_options(given: dict | None = None, reading: dict | None = None, **e
     terms: ``given`` over the defaults (checked), the log's ``reading`` options (``read_log``),
     and ``extra`` (e.g. --calibrate's ``urdf_sha256``)."""
     spec = _diagnose_spec()
-    opts = {**_checked({n: o.default for n, o in spec.items()} | (given or {}), spec, "Diagnosis"),
+    opts = {**optionspec.check_values({n: o.default for n, o in spec.items()} | (given or {}), spec, "Diagnosis"),
             "urdf": None, "calibrated": None, "calibrate_friction": None}
     opts["only"] = opts.pop("effects")
-    read = {**{n: o.default for n, o in READING.items()}, **_checked(reading or {}, READING, "Diagnosis")}
+    read = {n: o.default for n, o in READING.items()} | optionspec.check_values(reading or {}, READING, "Diagnosis")
     opts.update({k: read[k] for k in ("joint", "kt", "cutoff", "drop_invalid")})
     opts.update({flag: True for flag in optionspec.ZERO_FLAGS if read[flag]})
     return {**opts, **extra}

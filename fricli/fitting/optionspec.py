@@ -260,14 +260,20 @@ def defaults(pipeline: str) -> dict:
 def check(pipeline: str, given: dict) -> dict:
     """``given`` (names with - or _) over the defaults, each value checked; OptionError naming
     the first unknown option or wrong value and what it expects."""
-    spec = options_of(pipeline)
-    out = defaults(pipeline)
+    return defaults(pipeline) | check_values(given, options_of(pipeline), pipeline)
+
+
+def check_values(given: dict, spec: dict[str, Option], who: str) -> dict:
+    """``given`` ({name: value}, names with - or _) with each value checked against ``spec``
+    ({name: Option}); OptionError naming the first unknown option or wrong value, as an option of
+    ``who`` (a pipeline, an estimator)."""
+    out = {}
     for key, value in given.items():
         name = key.replace("-", "_")
         if name not in spec:
-            raise OptionError(f"unknown {pipeline} option {key!r} (known: {', '.join(sorted(spec))})", name)
+            raise OptionError(f"unknown {who} option {key!r} (known: {', '.join(sorted(spec))})", name)
         try:
             out[name] = spec[name].check(value)
         except ValueError as exc:
-            raise OptionError(f"{pipeline} option {exc}", name) from None
+            raise OptionError(f"{who} option {exc}", name) from None
     return out
