@@ -14,10 +14,12 @@ friction explain. ``check`` scores the mapping as it is and under each such chan
 
 A change whose gain is at least ``GAIN_MIN`` explains the torques much better than the mapping:
 it is reported with the joint, the likely mistake, the mapping line that makes it, and the RMS
-before and after. The changes are tried on ``ROWS`` rows evenly spaced over the recording; the
+before and after. The changes are scored on ``ROWS`` rows evenly spaced over the recording; the
 robot model's terms are recomputed for each (positions, velocities and accelerations change with
-a zero, a sign or a ratio). Up to ``MAX_FINDINGS`` changes are found one after the other (each
-applied before the next is looked for).
+a zero, a sign or a ratio). Every change is first screened on ``SCREEN_ROWS`` of those rows; those
+whose gain there is at least ``GAIN_MIN / 2`` are scored (and a ratio's factor refined) on all of
+them. Up to ``MAX_FINDINGS`` changes are found one after the other (each applied before the next is
+looked for).
 
 Alongside, per joint: the correlation and the least-squares scale of tau_m against the model's
 torque tau_g + tau_dyn, the figures a user checks first.
@@ -30,6 +32,7 @@ import math
 import numpy as np
 
 ROWS = 2000
+SCREEN_ROWS = 400
 GAIN_MIN = 0.5
 MAX_FINDINGS = 3
 QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/2
@@ -38,11 +41,17 @@ FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then
 
 
 class _Case:
-    """Joint-side samples (n, k) in the mapping's order, the ratio R and what the model gives."""
+    """Joint-side samples (n, k) in the mapping's order, the ratio R and what the model gives
+    (``terms``, or ``given``: its (tau_g, tau_dyn) when the samples' motion is that of a case's)."""
 
-    def __init__(self, q, qd, qdd, tau, ratio, terms):
+    def __init__(self, q, qd, qdd, tau, ratio, terms, given=None):
         self.q, self.qd, self.qdd, self.tau, self.ratio = q, qd, qdd, tau, ratio
-        self.g, self.d = terms(q, qd, qdd)
+        self.g, self.d = terms(q, qd, qdd) if given is None else given
+
+    def take(self, rows: np.ndarray) -> "_Case":
+        """The same case on ``rows`` only."""
+        return _Case(self.q[rows], self.qd[rows], self.qdd[rows], self.tau[rows], self.ratio, None,
+                     (self.g[rows], self.d[rows]))
 
     def residual_ss(self) -> np.ndarray:
         """The score of every motor (k,) and the residuals (n, k) [Nm, motor side]."""
@@ -110,10 +119,13 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     given = getattr(transmission, "offset", None)
     offset = None if transmission is not None and given is None else \
         np.array(given, dtype=float) if transmission is not None else np.zeros(k)
+    screen_rows = np.unique(np.linspace(0, len(rows) - 1, SCREEN_ROWS).astype(int)) \
+        if len(rows) > SCREEN_ROWS else None
     for _ in range(MAX_FINDINGS):
         ss0, _ = case.residual_ss()
+        screen = case if screen_rows is None else case.take(screen_rows)
         best = None
-        for hyp in _hypotheses(case, terms, transmission is not None):
+        for hyp in _hypotheses(screen, case, terms):
             ss1, _ = hyp["case"].residual_ss()
             gain = _gain(ss0, ss1)
             if best is None or gain > best["gain"]:
@@ -131,64 +143,74 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     return {"joints": figures, "findings": findings}
 
 
-def _hypotheses(case: _Case, terms, motor_side: bool):
-    """Every change tried: zeros, directions, torque signs, ratio terms."""
+def _hypotheses(screen: _Case, case: _Case, terms):
+    """Every change tried (zeros, directions, torque signs, ratio terms), screened on ``screen``
+    (some of ``case``'s rows, or ``case``): those that come near a finding there, made on ``case``."""
     k = case.q.shape[1]
+    ss0, _ = screen.residual_ss()
+    near = lambda c: _gain(ss0, c.residual_ss()[0]) >= GAIN_MIN / 2    # noqa: E731
     for i in range(k):
         for quarter in QUARTERS:
-            q = case.q.copy()
-            q[:, i] += quarter * math.pi / 2
-            yield {"kind": "offset", "joint": i, "delta": quarter * math.pi / 2,
-                   "case": _Case(q, case.qd, case.qdd, case.tau, case.ratio, terms)}
+            def moved(c, i=i, quarter=quarter):
+                q = c.q.copy()
+                q[:, i] += quarter * math.pi / 2
+                return _Case(q, c.qd, c.qdd, c.tau, c.ratio, terms)
+            if near(moved(screen)):
+                yield {"kind": "offset", "joint": i, "delta": quarter * math.pi / 2, "case": moved(case)}
         flip = case.ratio.copy()
         flip[:, i] = -flip[:, i]
-        yield {"kind": "direction", "joint": i, "case": _with_ratio(case, flip, terms)}
+        if near(_with_ratio(screen, flip, terms)):
+            yield {"kind": "direction", "joint": i, "case": _with_ratio(case, flip, terms)}
         d = np.eye(k)
         d[i, i] = -1.0
         sign = case.ratio.T @ d @ np.linalg.inv(case.ratio).T     # motor i's torque reversed
-        yield {"kind": "torque-sign", "joint": i, "motor": i,
-               "case": _Case(case.q, case.qd, case.qdd, case.tau @ sign.T, case.ratio, terms)}
-    ss0, _ = case.residual_ss()
+        reversed_ = lambda c, sign=sign: _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))  # noqa: E731
+        if near(reversed_(screen)):
+            yield {"kind": "torque-sign", "joint": i, "motor": i, "case": reversed_(case)}
     for m in range(k):
         for j in range(k):
             if case.ratio[m, j] == 0.0:
                 continue
-            hyp = _best_factor(case, terms, m, j, ss0)
+            hyp = _best_factor(screen, case, terms, m, j)
             if hyp is not None:
                 yield hyp
 
 
-def _best_factor(case: _Case, terms, m: int, j: int, ss0: np.ndarray):
-    """The ratio term R[m, j] times the factor that explains the torques best (a grid, refined when
-    it comes near ``GAIN_MIN``), or None for a diagonal term within ``GROSS`` (a gear ratio is a small
-    integer's ratio off, not a few percent: those are the robot model's own errors)."""
+def _best_factor(screen: _Case, case: _Case, terms, m: int, j: int):
+    """The ratio term R[m, j] times the factor that explains the torques best (a grid on ``screen``,
+    refined on ``case`` when it comes near ``GAIN_MIN``), or None for a diagonal term within ``GROSS``
+    (a gear ratio is a small integer's ratio off, not a few percent: those are the robot model's own
+    errors)."""
 
-    def scaled(f):
-        new = case.ratio.copy()
+    def scaled(c, f):
+        new = c.ratio.copy()
         new[m, j] *= f
         try:
-            return _with_ratio(case, new, terms)
+            return _with_ratio(c, new, terms)
         except np.linalg.LinAlgError:
             return None
 
-    def cost(f):
-        c = scaled(f)
-        return -math.inf if c is None else _gain(ss0, c.residual_ss()[0])
+    def cost(c, ss0, f):
+        s = scaled(c, f)
+        return -math.inf if s is None else _gain(ss0, s.residual_ss()[0])
 
     grid = FACTORS[(FACTORS < GROSS[0]) | (FACTORS > GROSS[1])] if m == j else FACTORS
-    gains = [cost(f) for f in grid]
+    ss0 = screen.residual_ss()[0]
+    gains = [cost(screen, ss0, f) for f in grid]
     i = int(np.argmax(gains))
     if gains[i] < GAIN_MIN / 2:
         return None                                  # nowhere near a finding: no need to refine
+    ss0 = case.residual_ss()[0]
+    at_grid = gains[i] if screen is case else cost(case, ss0, grid[i])
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     from scipy.optimize import minimize_scalar
 
-    res = minimize_scalar(lambda x: -cost(math.exp(x)), bounds=(math.log(lo), math.log(hi)), method="bounded",
-                          options={"xatol": 1e-4})
-    f = math.exp(res.x) if -res.fun >= gains[i] else float(grid[i])
+    res = minimize_scalar(lambda x: -cost(case, ss0, math.exp(x)), bounds=(math.log(lo), math.log(hi)),
+                          method="bounded", options={"xatol": 1e-4})
+    f = math.exp(res.x) if -res.fun >= at_grid else float(grid[i])
     if m == j and GROSS[0] <= f <= GROSS[1]:
         return None
-    c = scaled(f)
+    c = scaled(case, f)
     return None if c is None else {"kind": "ratio", "motor": m, "joint": j, "factor": f, "case": c}
 
 
