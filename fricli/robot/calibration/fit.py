@@ -92,11 +92,15 @@ def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts):
     """Maximum a posteriori estimate, rows weighted by each joint's residual std, re-estimated until
     the weights settle: (x, sigma (joints,), residuals (n, joints), iterations). Rows not used are
     zero in ``Phi`` and ``y``; ``counts`` (joints,): each joint's rows used."""
-    nj = len(sigma)
+    nj, p = len(sigma), Phi.shape[1]
+    # each joint's rows as the R factor of [Phi_j | y_j - Phi_j x0]: the same weighted least squares
+    # (an orthogonal transform of each joint's rows) on p + 1 rows a joint
+    r0 = y - Phi @ x0
+    blocks = [np.linalg.qr(np.column_stack([Phi[rows_of == j], r0[rows_of == j]]), mode="r") for j in range(nj)]
     for iteration in range(1, MAX_ITERATIONS + 1):
-        A = (Phi / sigma[rows_of, None]) * s
-        z = np.linalg.lstsq(np.vstack([A, np.eye(len(s))]),
-                            np.concatenate([(y - Phi @ x0) / sigma[rows_of], np.zeros(len(s))]), rcond=None)[0]
+        A = np.vstack([blk[:, :p] / sigma[j] for j, blk in enumerate(blocks)]) * s
+        b = np.concatenate([blk[:, p] / sigma[j] for j, blk in enumerate(blocks)])
+        z = np.linalg.lstsq(np.vstack([A, np.eye(len(s))]), np.concatenate([b, np.zeros(len(s))]), rcond=None)[0]
         x = x0 + s * z
         resid = (y - Phi @ x).reshape(-1, nj)
         new = np.maximum(np.sqrt(np.sum(resid ** 2, axis=0) / counts), 1e-9 * tau_rms + 1e-300)
