@@ -116,13 +116,22 @@ def test_stdin_from_a_device_stops_at_the_limit(tmp_path):
                                 "input to a file and give its path"]
 
 
-def test_sigterm_is_honoured_while_stdin_is_read(tmp_path):
-    proc = fricli(["identify", "-", "-o", "m.npz"], tmp_path, stdin=subprocess.PIPE)
-    proc.stdin.write("x" * 100_000)
-    proc.stdin.flush()
-    time.sleep(3)   # the interpreter is up and reading
-    proc.send_signal(signal.SIGTERM)
-    err = finish(proc, 30, "SIGTERM was not honoured while stdin was read")
+def _bytes_read(pid: int) -> int:
+    with open(f"/proc/{pid}/io") as fh:
+        return next(int(line.split()[1]) for line in fh if line.startswith("rchar:"))
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/io"), reason="reads /proc/PID/io (Linux)")
+def test_sigterm_is_honoured_while_an_endless_stdin_is_read(tmp_path):
+    """stdin is /dev/urandom, which never blocks: a read of the whole stream in one call runs no
+    signal handler until it returns, which it never does. SIGTERM once the read is under way."""
+    with open("/dev/urandom", "rb") as endless:
+        proc = fricli(["identify", "-", "-o", "m.npz"], tmp_path, stdin=endless)
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and _bytes_read(proc.pid) < 64 << 20 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGTERM)
+        err = finish(proc, 10, "SIGTERM was not honoured while stdin was read")
     assert proc.returncode == errors.TERMINATED, err
     assert err.splitlines() == ["fricli: terminated"]
 
