@@ -2,14 +2,12 @@
 identify's memory, decompression bombs, model files with parameters of the wrong type or range,
 negative URDF inertias. Each is one line on stderr with its documented exit code, no traceback."""
 
-import io
 import os
 import re
 import signal
 import subprocess
 import sys
 import time
-import zipfile
 
 import numpy as np
 import pyarrow as pa
