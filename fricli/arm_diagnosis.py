@@ -76,12 +76,14 @@ class ArmDiagnosis:
         """What ``fricli diagnose --json`` prints: the one joint's result, or {"joints": {joint:
         result}} (with "robot_model" when there is one); None when nothing was diagnosed."""
         results = self.results
+        if not results:
+            return None
         if self.folder:
             out = {"joints": {str(j): r for j, r in results.items()}}
             if self.robot_model is not None:
                 out["robot_model"] = self.robot_model
             return out
-        return next(iter(results.values()), None)
+        return next(iter(results.values()))
 
 
 def diagnose_arm(models, log, output=None, *, calibrate=None, urdf=None, friction=None, if_changed: bool = False,
