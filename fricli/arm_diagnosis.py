@@ -211,6 +211,8 @@ def _options(options: dict, output, calibrate, urdf, friction, if_changed: bool)
         raise OptionError("friction applies to calibrate", "friction")
     if friction not in (None, "linear", "stribeck"):
         raise OptionError(f"diagnose_arm option friction = {friction!r}: expected linear or stribeck", "friction")
+    if output is not None and os.fspath(output) == "-":
+        raise OptionError("output: a fix writes model files: give a .npz file or a folder, not -", "output")
     if if_changed and output is None:
         raise OptionError("if_changed applies to a fix (the models it writes): give output", "if_changed")
     given = {k.replace("-", "_"): v for k, v in options.items()}

@@ -226,7 +226,8 @@ def test_diagnose_arm_refuses_options_that_do_not_go_together(cad_arm):
     for given, option in (({"calibrate": "c.urdf"}, "calibrate"), ({"friction": "linear"}, "friction"),
                           ({"if_changed": True}, "if_changed"), ({"folds": 1}, "folds"), ({"kt": "x"}, "kt"),
                           ({"time_until": "120%"}, "time_until"), ({"fix": True}, "fix"),
-                          ({"output": "f", "calibrate": "c.urdf", "friction": "coulomb"}, "friction")):
+                          ({"output": "f", "calibrate": "c.urdf", "friction": "coulomb"}, "friction"),
+                          ({"output": "-"}, "output")):
         with pytest.raises(OptionError) as err:
             fricli.diagnose_arm(str(root / "linear"), log, **given)
         assert err.value.option == option, given
