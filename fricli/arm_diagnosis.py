@@ -131,9 +131,9 @@ def diagnose_arm(models, log, output=None, *, calibrate=None, urdf=None, frictio
             done(item)
 
     def made(outcome, refitted: bool = False) -> None:
-        m = outcome.made
-        finished(JointDiagnosis(outcome.label, m.base if m else outcome.base, m and m.diagnosis, m and m.data,
-                                outcome.output, m, outcome.digest, refitted and m is not None))
+        m = outcome.made    # None: up to date, untouched
+        finished(JointDiagnosis(outcome.label, m.base if m else outcome.base, m.diagnosis if m else None,
+                                m.data if m else None, outcome.output, m, outcome.digest, refitted and m is not None))
 
     if calibrate is not None:
         if not several:
@@ -202,7 +202,7 @@ def _bound(option: str, value):
 def _options(options: dict, output, calibrate, urdf, friction, if_changed: bool) -> tuple[dict, dict, object]:
     """(the options diagnose records, the reading of each joint's log, the time window), checked."""
     from fricli.estimators.base import READING
-    from fricli.estimators.jobs import _diagnose_spec, diagnose_options
+    from fricli.estimators.jobs import diagnose_spec, diagnose_options
 
     if calibrate is not None and output is None:
         raise OptionError("calibrate applies to a fix (it recomputes the log before fixing the friction): give output",
@@ -217,7 +217,7 @@ def _options(options: dict, output, calibrate, urdf, friction, if_changed: bool)
         raise OptionError("if_changed applies to a fix (the models it writes): give output", "if_changed")
     given = {k.replace("-", "_"): v for k, v in options.items()}
     window = timewindow.Window(*(_bound(k, given.pop(k, None)) for k in WINDOW))
-    spec = _diagnose_spec()
+    spec = diagnose_spec()
     known = {**spec, **READING, **{k: None for k in WINDOW}}
     unknown = [k for k in given if k not in known]
     if unknown:
@@ -227,7 +227,7 @@ def _options(options: dict, output, calibrate, urdf, friction, if_changed: bool)
     opts = diagnose_options(diag, read, urdf=None if urdf is None else os.fspath(urdf),
                             calibrated=None if calibrate is None else os.fspath(calibrate), calibrate_friction=friction)
     r = {n: o.default for n, o in READING.items()} | read
-    zero = tuple(column for flag, column in (("no_gravity", "tau_g"), ("no_dynamics", "tau_dyn")) if r[flag])
+    zero = tuple(column for flag, column in optionspec.ZERO_FLAGS.items() if r[flag])
     reading = {"kt": r["kt"], "cutoff_hz": r["cutoff"], "drop_invalid": r["drop_invalid"], "zero": zero}
     return opts, reading, window
 
@@ -339,8 +339,8 @@ def _robot_model_check(results: dict, table, name: str, log: str, urdf, cutoff, 
         return out
     out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
     out["suspicious"] = cal.report["suspicious"]
-    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and {cb.LOOP_FRICTION} friction on this "
-                      "log, CAD -> "
+    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and {cb.LOOP_FRICTION} friction on "
+                      "this log, CAD -> "
                       f"calibrated: {_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction "
                       "on it")
     return out
