@@ -765,22 +765,13 @@ def test_no_payload_on_a_joint_that_gravity_does_not_load(rng):
 def arm_with_cad_errors(tmp_path_factory):
     """A four-joint arm simulated with masses and centres of mass up to 30 % off the URDF's, imported
     with the CAD URDF (``fricli dynamics``), and a linear friction model per joint fitted on it."""
-    pytest.importorskip("pinocchio")
-    import test_calibrate as arm
+    from test_estimators import cad_arm_files
 
     root = tmp_path_factory.mktemp("arm")
-    rng = np.random.default_rng(11)
-    model, _ = arm.true_model(rng, scale=0.3)
-    t, q, qd, qdd = arm.harmonics(rng, 2000, (0.2, 0.45, 0.7, 1.1), 0.25)
-    raw = arm.write_log(root / "raw.parquet", t, q, qd, qdd, arm.simulate(model, t, q, qd, qdd, rng, noise=0.05))
-    (root / "cad.urdf").write_text(arm.URDF)
-    runner = CliRunner()
-    log = str(root / "arm.parquet")
-    for args in (["dynamics", raw, "--urdf", str(root / "cad.urdf"), "--match", "order", "-o", log, "-q"],
-                 ["identify", log, "--kind", "linear", "-o", str(root / "linear"), "-q"]):
-        done = runner.invoke(cli, args)
-        assert done.exit_code == 0, done.output
-    return root, log
+    _, log = cad_arm_files(root)
+    done = CliRunner().invoke(cli, ["identify", str(log), "--kind", "linear", "-o", str(root / "linear"), "-q"])
+    assert done.exit_code == 0, done.output
+    return root, str(log)
 
 
 def test_whole_arm_robot_model_errors_point_to_calibration(arm_with_cad_errors):

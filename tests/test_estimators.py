@@ -236,6 +236,22 @@ def arm_files(folder):
     return folder / "arm.urdf", folder / "arm.parquet"
 
 
+def cad_arm_files(folder, urdf: str = "cad.urdf", raw: str = "raw.parquet", log: str = "arm.parquet"):
+    """A four-joint arm simulated with masses and centres of mass up to 30 % off the URDF's and
+    noise (``raw``), the URDF (``urdf``) and the log with tau_g and tau_dyn computed from it
+    (``log``, ``fricli dynamics``), in ``folder``: (URDF, log)."""
+    pytest.importorskip("pinocchio")
+    import test_calibrate as sim_arm
+
+    rng = np.random.default_rng(11)
+    model, _ = sim_arm.true_model(rng, scale=0.3)
+    t, q, qd, qdd = sim_arm.harmonics(rng, 2000, (0.2, 0.45, 0.7, 1.1), 0.25)
+    sim_arm.write_log(folder / raw, t, q, qd, qdd, sim_arm.simulate(model, t, q, qd, qdd, rng, noise=0.05))
+    (folder / urdf).write_text(sim_arm.URDF)
+    command("dynamics", folder / raw, "--urdf", folder / urdf, "--match", "order", "-o", folder / log, "-q")
+    return folder / urdf, folder / log
+
+
 def test_calibration_writes_the_commands_urdf(tmp_path):
     from fricli import Calibration
 

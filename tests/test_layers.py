@@ -20,7 +20,7 @@ LAYERS = [
     ("fleet", {"fleet"}),
     ("export", {"export"}),
     ("simulation", {"sim"}),
-    ("library and runs", {"estimators", "arm", "demo"}),
+    ("library and runs", {"estimators", "arm", "arm_diagnosis", "demo"}),
     ("cli", {"cli", "__main__"}),
 ]
 RANK = {name: i for i, (_, names) in enumerate(LAYERS) for name in names}

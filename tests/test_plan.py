@@ -139,21 +139,12 @@ def test_the_demo_writes_what_the_commands_write(tmp_path):
 @pytest.fixture(scope="module")
 def cad_arm(tmp_path_factory):
     """A four-joint arm whose CAD masses are off, imported with the CAD URDF, and a linear model per joint."""
-    pytest.importorskip("pinocchio")
-    import test_calibrate as sim_arm
+    from test_estimators import cad_arm_files
 
     root = tmp_path_factory.mktemp("cad")
-    rng = np.random.default_rng(11)
-    model, _ = sim_arm.true_model(rng, scale=0.3)
-    t, q, qd, qdd = sim_arm.harmonics(rng, 2000, (0.2, 0.45, 0.7, 1.1), 0.25)
-    raw = sim_arm.write_log(root / "raw.parquet", t, q, qd, qdd,
-                            sim_arm.simulate(model, t, q, qd, qdd, rng, noise=0.05))
-    (root / "cad.urdf").write_text(sim_arm.URDF)
-    log = str(root / "arm.parquet")
-    for args in (["dynamics", raw, "--urdf", root / "cad.urdf", "--match", "order", "-o", log, "-q"],
-                 ["identify", log, "--kind", "linear", "-o", root / "linear", "-q"]):
-        assert invoke(*args).exit_code == 0
-    return root, log
+    _, log = cad_arm_files(root)
+    assert invoke("identify", log, "--kind", "linear", "-o", root / "linear", "-q").exit_code == 0
+    return root, str(log)
 
 
 def test_diagnose_fix_calibrate_honours_if_changed(cad_arm, tmp_path):
@@ -191,6 +182,59 @@ def test_diagnose_fix_calibrate_honours_if_changed(cad_arm, tmp_path):
         assert all(files(fixed)[n][0] != written[n][0] for n in written)
     finally:
         (root / "cad.urdf").write_text((root / "cad.urdf").read_text()[:-1])
+
+
+def test_diagnose_arm_writes_what_diagnose_fix_calibrate_writes(cad_arm, tmp_path, monkeypatch):
+    """fricli.diagnose_arm(..., calibrate=) is diagnose --fix --calibrate: the same model files,
+    calibrated URDF and report, and JSON; with if_changed it calibrates nothing and touches nothing."""
+    import fricli
+    from fricli.core import jsontext
+
+    root, log = cad_arm
+    for where in ("cmd", "lib"):
+        (tmp_path / where).mkdir()
+    monkeypatch.chdir(tmp_path / "cmd")      # the paths as given are recorded: the same in both
+    res = invoke("diagnose", root / "linear", log, "--fix", "--calibrate", "cal.urdf", "-o", "fixed", "--json")
+    assert res.exit_code == 0, res.stderr
+    monkeypatch.chdir(tmp_path / "lib")
+    seen = []
+    run = fricli.diagnose_arm(str(root / "linear"), log, "fixed", calibrate="cal.urdf", done=seen.append)
+    assert jsontext.dumps(run.to_json()) == res.stdout
+    every = {where: {p.relative_to(tmp_path / where).as_posix(): p.read_bytes()
+                     for p in sorted((tmp_path / where).rglob("*")) if p.is_file()} for where in ("cmd", "lib")}
+    assert sorted(every["lib"]) == ["cal.calibration.json", "cal.urdf"] + [f"fixed/joint_{j}.npz" for j in (1, 2, 3, 4)]
+    assert every["lib"] == every["cmd"]
+    assert [s.joint for s in seen] == list(run.joints) == [1, 2, 3, 4]
+    assert all(s.refitted and s.made is not None and not s.unchanged for s in seen)
+    assert run.calibrated_urdf == run.robot_model["calibrated_urdf"] == "cal.urdf" and not run.unchanged
+    assert run.notices[0] == ("note", f"calibrating the robot model of {root / 'cad.urdf'} on {log} ...")
+    assert [line for _, line in run.notices] == res.stderr.splitlines()[:len(run.notices)]
+
+    written = {**files(tmp_path / "lib"), **files(tmp_path / "lib" / "fixed")}
+    again = fricli.diagnose_arm(str(root / "linear"), log, "fixed", calibrate="cal.urdf", if_changed=True)
+    assert again.unchanged and again.notices == [] and again.robot_model is None and again.to_json() is None
+    assert [(j, s.unchanged, s.output) for j, s in again.joints.items()] == [
+        (j, True, f"fixed/joint_{j}.npz") for j in (1, 2, 3, 4)]
+    assert {**files(tmp_path / "lib"), **files(tmp_path / "lib" / "fixed")} == written
+
+
+def test_diagnose_arm_refuses_options_that_do_not_go_together(cad_arm):
+    import fricli
+    from fricli.fitting.optionspec import OptionError
+
+    root, log = cad_arm
+    for given, option in (({"calibrate": "c.urdf"}, "calibrate"), ({"friction": "linear"}, "friction"),
+                          ({"if_changed": True}, "if_changed"), ({"folds": 1}, "folds"), ({"kt": "x"}, "kt"),
+                          ({"time_until": "120%"}, "time_until"), ({"fix": True}, "fix"),
+                          ({"output": "f", "calibrate": "c.urdf", "friction": "coulomb"}, "friction"),
+                          ({"output": "-"}, "output")):
+        with pytest.raises(OptionError) as err:
+            fricli.diagnose_arm(str(root / "linear"), log, **given)
+        assert err.value.option == option, given
+    with pytest.raises(OptionError, match="whole-arm log") as err:     # one joint's model: nothing to calibrate
+        fricli.diagnose_arm(str(root / "linear" / "joint_2.npz"), log, str(root / "j2.npz"), calibrate="c.urdf",
+                            joint="2")
+    assert err.value.option == "calibrate" and not (root / "c.urdf").exists() and not (root / "j2.npz").exists()
 
 
 def test_a_time_window_is_recorded_and_read(arm, tmp_path):

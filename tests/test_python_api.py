@@ -30,7 +30,8 @@ def fricli_imports(source: str) -> list[tuple[str, str | None]]:
 
 def test_the_page_has_the_examples():
     text = "\n".join(BLOCKS)
-    for name in ("LuGre", "Network", "load_model", "external_torque", "Residual", "Diagnosis", "Calibration"):
+    for name in ("LuGre", "Network", "load_model", "external_torque", "Residual", "Diagnosis", "Calibration",
+                 "diagnose_arm"):
         assert name in text, name
     assert all(len(block.strip().splitlines()) <= 10 for block in BLOCKS)
 
@@ -59,6 +60,10 @@ def test_an_example_runs(index, folder, monkeypatch):
         from test_estimators import arm_files
 
         arm_files(folder)
+    if "diagnose_arm" in block and not (folder / "arm-cad.parquet").exists():
+        from test_estimators import cad_arm_files
+
+        cad_arm_files(folder, "arm-cad.urdf", "arm-raw.parquet", "arm-cad.parquet")
     monkeypatch.chdir(folder)
     exec(compile(block, f"{PAGE.name} example {index + 1}", "exec"), {"__name__": "__example__"})
 

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import os
-
 import click
 
-from fricli import models
-from fricli.core import errors, logs, modelset
 from fricli.cli import cli
-from fricli.cli.options import (common, emit_json, emit_results, fit_joints, if_changed_option, json_flag,
-                                log_reading, read_log, reading_kwargs, say, spec_option, warn)
-from fricli.fitting.diagnosis import driver
-from fricli.robot import calibration as cb
-from fricli.fitting.diagnosis import effects as E
-from fricli.core.errors import FricliError, ModelFileError, OutputError
+from fricli.cli.options import (common, emit_json, if_changed_option, json_flag, log_reading, say, spec_option,
+                                up_to_date_line, warn)
+from fricli.core import errors
 from fricli.fitting import optionspec
+from fricli.fitting.diagnosis import driver
+from fricli.fitting.diagnosis import effects as E
+from fricli.fitting.optionspec import OptionError
+from fricli.robot import calibration as cb
 
 _SPEC = {o.name: o for o in optionspec.diagnose_options()}
 
@@ -156,6 +153,8 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
       fricli diagnose lugre.npz warm.parquet --fix -o lugre-fixed.npz --json
       fricli diagnose emps.npz emps.parquet --cutoff 100 --fix -o emps-fixed.npz
     """
+    from fricli.arm_diagnosis import diagnose_arm
+
     if fix and not output:
         raise click.UsageError("--fix needs -o FILE.npz for the augmented model")
     if output and not fix:
@@ -168,195 +167,45 @@ def diagnose_cmd(model, log, fix, output, folds, min_gain, alpha, only, max_effe
         raise click.UsageError("--calibrate applies to --fix (it recomputes the log before fixing the friction)")
     if calibrate_friction is not None and not calibrated:
         raise click.UsageError("--calibrate-friction applies to --calibrate")
-    if output:
-        folder = os.path.dirname(os.path.abspath(output))
-        if not os.path.isdir(folder):
-            raise OutputError(f"cannot write {output}: folder {folder} does not exist")
-    source = modelset.source(model)
-    reading = reading_kwargs(None, kt, cutoff, drop_invalid, zero)
-    del reading["joint"]
-    table_, digest = read_log(log, window)
-    name = "stdin" if log == "-" else log
-    pairs = modelset.paired(source, table_, name, joint)
-    several = len(pairs) > 1
 
-    if calibrated and not several:
-        raise click.UsageError("--calibrate needs a whole-arm log and a model folder (one model per joint)")
-    shared = [j for j, path in pairs.items() if list(pairs.values()).count(path) > 1]
-    if calibrated and shared:
-        raise ModelFileError(f"{model}: --calibrate refits each joint's model on the recomputed log, but joints "
-                             f"{', '.join(map(str, shared))} share the model of their coupled group, which it does not "
-                             "refit: leave --calibrate out, or give models of one joint each")
-
-    def show(result, data, model_path) -> None:
+    def show(item) -> None:
+        if item.unchanged:
+            say(up_to_date_line(item.output, item.digest, True), quiet)
+            return
         if not as_json:
-            if several:
-                click.echo(errors.one_line(f"joint {data.joint} ({model_path}):"))
-            click.echo(table(result, data.units["qd"], data.units["q"], data.joint if several else None)
-                       + ("\n" if several else ""))
+            units = item.data.units
+            if item.several:
+                click.echo(errors.one_line(f"joint {item.data.joint} ({item.model}"
+                                           f"{', refitted on the recomputed log' if item.refitted else ''}):"))
+            click.echo(table(item.diagnosis, units["qd"], units["q"], item.data.joint if item.several else None)
+                       + ("\n" if item.several else ""))
+        if item.made is not None:
+            _say_fixed(item.made, quiet, item.refitted)
 
-    def report(made, refitted: bool = False):
-        show(made.diagnosis, made.data, made.base + (", refitted on the recomputed log" if refitted else ""))
-        _say_fixed(made, quiet, refitted)
-        return made.diagnosis.to_json()
-
-    def diagnose_all(table, echo: bool = True) -> dict:
-        from fricli.models import coupled
-
-        found = {}
-
-        def work(j):
-            data = logs.from_table(table, name=name, sha256=digest, joint=j, **reading)
-            base, meta = models.load(pairs[j])
-            base = coupled.view(base, j)
-            coupled.add_partners(base, data, table, **reading)   # what the model reads (a group's member)
-            data.signals.update(coupled.partner_signals(table, j, name, **reading))   # the coupling effect's
-            models.check_log(meta, data, pairs[j])
-            note = models.robot_model_note(meta, data, pairs[j])
-            if note and echo:
-                warn(note)
-            result = driver.diagnose(base, data, folds=folds, min_gain=min_gain, alpha=alpha, only=only,
-                                     max_effects=max_effects, accept_implausible=accept_implausible)
-            if echo:
-                show(result, data, pairs[j])
-            found[j] = result.to_json()
-
-        modelset.each_joint(list(pairs), work, what="results")
-        return found
-
-    robot = None
-    if calibrated:
-        opts = _calibrate_options(table_, urdf)
-        if if_changed:
-            _exit_if_up_to_date(log, output, opts, (table_, digest), source, window, quiet)
-        before = diagnose_all(table_, echo=False)   # the tables printed are those after the calibration
-        cal, table_ = _calibrate(table_, name, urdf, calibrated, cutoff, quiet,
-                                 calibrate_friction or cb.LOOP_FRICTION)
-        results, folder_run = fit_joints("diagnose", log, output, lambda made: report(made, refitted=True),
-                                         window=window, if_changed=if_changed, quiet=quiet, source=source,
-                                         read=(table_, digest), refit=True, opts=opts)
-        robot = _calibrated_record(before, results, cal, calibrated)
-    elif fix:
-        results, folder_run = fit_joints("diagnose", log, output, report, window=window, if_changed=if_changed,
-                                         quiet=quiet, source=source, read=(table_, digest))
-    else:
-        results, folder_run = diagnose_all(table_), several
-    if several and robot is None:
-        robot = _robot_model_check(results, table_, name, log, urdf, cutoff, quiet)
-    if robot is not None and not as_json:
-        click.echo(robot["summary"])
-    if as_json:
-        if robot is not None and folder_run:
-            emit_json({"joints": {str(j): r for j, r in results.items()}, "robot_model": robot})
-        else:
-            emit_results(results, folder_run)
-
-
-def _calibrate_options(table, urdf: str | None) -> dict:
-    """diagnose's options for --fix --calibrate, with the sha256 of the URDF the robot model is
-    calibrated from (an input of the models written, for --if-changed) when it is there."""
-    from fricli.core import jobs
-    from fricli.cli.options import command_options
-
-    opts = command_options("diagnose")
-    path = _urdf_of(table, urdf)
-    if path is not None and os.path.isfile(path):
-        opts["urdf_sha256"] = jobs.file_sha256(path)
-    return opts
-
-
-def _exit_if_up_to_date(log: str, output: str, opts: dict, read: tuple, source, window, quiet: bool) -> None:
-    """--calibrate --if-changed: exit UNCHANGED before calibrating when every fixed model is up to date."""
-    from fricli.cli.options import up_to_date_line
-    from fricli.fitting import plan
-
-    fresh = plan.up_to_date("diagnose", log, output, opts, read=read, inputs=source, window=window)
-    if fresh is not None:
-        for outcome in fresh.outcomes:
-            say(up_to_date_line(outcome.output, outcome.digest, True), quiet)
-        click.get_current_context().exit(errors.UNCHANGED)
-
-
-def _urdf_of(table, urdf: str | None) -> str | None:
-    """The URDF given, or the one the log's import recorded when it is still there."""
-    if urdf:
-        return urdf
-    recorded = cb.recorded_urdf(table)
-    return recorded if recorded and os.path.isfile(recorded) else None
-
-
-def _calibrate(table, name: str, urdf: str | None, output: str, cutoff, quiet: bool, friction: str):
-    """Calibrate the log's robot model, write OUTPUT and its report; the table recomputed from it."""
-    path = _urdf_of(table, urdf)
-    if path is None:
-        raise click.UsageError("--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf")
-    say(f"calibrating the robot model of {path} on {name} ...", quiet)
-    cal, text, new = cb.recalibrate(table, name, path, friction=friction,
-                                    cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
-    cb.write(text, {"log": name, "urdf": path, "output": output, **cal.report}, output)
-    for line in cb.warnings(cal.report):
-        warn(f"warning: {line}")
-    say(f"calibrated the robot model of {name} ({path}) -> {output}; tau_g and tau_dyn recomputed from it", quiet)
-    return cal, new
-
-
-def _fit_lines(cal, joints_: list) -> str:
-    fit = cal.report["fit"]
-    return ", ".join(f"joint {j} {fit[str(j)]['rms_before']:.3g} -> {fit[str(j)]['rms_after']:.3g} Nm"
-                     for j in joints_ if str(j) in fit)
-
-
-def _robot_model_check(results: dict, table, name: str, log: str, urdf: str | None, cutoff,
-                       quiet: bool = False) -> dict | None:
-    """Once per whole-arm log imported with a URDF: gravity or acceleration errors on several joints are the
-    robot model's; the calibration that fixes them and, when the URDF is at hand, what it changes."""
-    if cb.recorded_urdf(table) is None and urdf is None:
-        return None
-    flagged = driver.robot_model_joints(results)
-    if len(flagged) < 2:
-        return None
-    path = _urdf_of(table, urdf)
-    who = ", ".join(str(j) for j in flagged)
-    command = f"fricli calibrate {log} --urdf {path or 'ROBOT.urdf'} --friction {cb.LOOP_FRICTION} -o CAL.urdf"
-    out = {"joints": [str(j) for j in flagged], "command": command, "fit": None}
-    summary = f"robot-model errors on joints {who}: calibrate the robot model: `{command}`"
-    if path is None:
-        summary += " (give --urdf to see what it changes)"
-        out["summary"] = summary
-        return out
-    say(f"robot-model errors on joints {who}: calibrating the robot model on {name} to show what it changes ...",
-        quiet)
     try:
-        cal, _, _ = cb.recalibrate(table, name, path, friction=cb.LOOP_FRICTION,
-                                   cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff is None else cutoff)
-    except FricliError as exc:       # the check is advice: the diagnosis stands without it
-        out["summary"] = f"{summary} (the calibration on this log fails: {exc})"
-        return out
-    out["fit"] = {j: cal.report["fit"][j] for j in out["joints"] if j in cal.report["fit"]}
-    out["suspicious"] = cal.report["suspicious"]
-    out["summary"] = (f"{summary}; RMS in motion of tau_m minus the robot model and {cb.LOOP_FRICTION} friction on this "
-                      "log, CAD -> "
-                      f"calibrated: {_fit_lines(cal, flagged)}; then --fix --calibrate CAL.urdf refits the friction "
-                      "on it")
-    return out
+        run = diagnose_arm(model, log, output, calibrate=calibrated, urdf=urdf, friction=calibrate_friction,
+                         if_changed=if_changed, folds=folds, min_gain=min_gain, alpha=alpha, effects=only,
+                         max_effects=max_effects, no_carry=no_carry, accept_implausible=accept_implausible,
+                         joint=joint, kt=kt, cutoff=cutoff, drop_invalid=drop_invalid,
+                         no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero, time_from=window.start,
+                         time_until=window.stop, say=lambda line: say(line, quiet), warn=warn, done=show)
+    except OptionError as exc:
+        if exc.option in _USAGE:
+            raise click.UsageError(_USAGE[exc.option]) from None
+        raise
+    if run.unchanged:
+        click.get_current_context().exit(errors.UNCHANGED)
+    if as_json:
+        printed = run.to_json()
+        if printed is not None:
+            emit_json(printed)
+    elif run.robot_model is not None:
+        click.echo(run.robot_model["summary"])
 
 
-def _calibrated_record(before: dict, after: dict, cal, output: str) -> dict:
-    """What --calibrate changed: per joint the held-out MAE with the CAD robot model and the friction model
-    given -> with the calibrated robot model, its refitted friction and the added effects."""
-    flagged = driver.robot_model_joints(before)
-    rows = {str(j): {"mae_before": before[j]["mae_before"], "mae_after": after[j]["mae_after"],
-                     "model_errors_before": before[j].get("model_errors", []),
-                     "model_errors_after": after[j].get("model_errors", [])} for j in after}
-    change = ", ".join(f"joint {j} {r['mae_before']:.3g} -> {r['mae_after']:.3g}" for j, r in rows.items())
-    fit = ", ".join(f"joint {j} {f['rms_before']:.3g} -> {f['rms_after']:.3g} Nm" for j, f in cal.report["fit"].items())
-    summary = (f"robot-model errors on joints {', '.join(str(j) for j in flagged) or 'none'}: calibrated the robot "
-               f"model -> {output} (RMS in motion of tau_m minus the robot model and {cal.report['friction']['kind']} "
-               f"friction, CAD -> calibrated: {fit})\n"
-               f"held-out MAE, CAD robot model + friction model -> calibrated robot model + refitted and fixed "
-               f"friction: {change}")
-    return {"joints": [str(j) for j in flagged], "calibrated_urdf": output, "fit": cal.report["fit"],
-            "suspicious": cal.report["suspicious"], "mae": rows, "summary": summary}
+# what diagnose_arm refuses, by the option it names, in the command's words
+_USAGE = {"calibrate": "--calibrate needs a whole-arm log and a model folder (one model per joint)",
+          "urdf": "--calibrate needs the URDF the log was imported with: give --urdf ROBOT.urdf"}
 
 
 def _say_fixed(made, quiet: bool, refitted: bool = False) -> None:

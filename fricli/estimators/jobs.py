@@ -147,7 +147,7 @@ def _effects(value):
     return names or None
 
 
-def _diagnose_spec() -> dict:
+def diagnose_spec() -> dict:
     """diagnose's options (``optionspec.diagnose_options``), effects checked by name."""
     import dataclasses
 
@@ -161,7 +161,7 @@ def diagnose_options(given: dict | None = None, reading: dict | None = None, **e
     """The options the diagnose command records (``fricli.cli.options.command_options``), in its
     terms: ``given`` over the defaults (checked), the log's ``reading`` options (``read_log``),
     and ``extra`` (e.g. --calibrate's ``urdf_sha256``)."""
-    spec = _diagnose_spec()
+    spec = diagnose_spec()
     opts = {**optionspec.check_values({n: o.default for n, o in spec.items()} | (given or {}), spec, "Diagnosis"),
             "urdf": None, "calibrated": None, "calibrate_friction": None}
     opts["only"] = opts.pop("effects")
@@ -178,7 +178,7 @@ class Diagnosis(_OnModel):
 
     _pipeline = "diagnose"
     _positional = "model"
-    _spec = _diagnose_spec()
+    _spec = diagnose_spec()
 
     def _job_options(self, data: logs.Log) -> dict:
         return diagnose_options({name: getattr(self, name) for name in self._spec}, data.reading)
