@@ -34,6 +34,7 @@ FILES = ("slow", "middle", "high")
 CLASSICAL = ("CV", "Dahl", "Stribeck", "LuGre")
 LEARNED = ("SVM", "Light_Transformer", "PINN")
 FIT_SHARE = 0.6
+GAP_S = 10.0     # the time between the two recordings joined for the across-speeds fit
 
 
 def read(data: str, speed: str) -> tuple[dict, dict]:
@@ -97,10 +98,10 @@ def main(argv=None) -> int:
                          "learned": min(published[c] for c in LEARNED), "nnfm": published["NNFM"],
                          "published": published})
         print(speed, {k: round(v, 3) for k, v in per_file[-1]["fricli"].items()}, file=sys.stderr)
-    # across speeds: fit on slow + middle (one log, the middle run after the slow one), score high
+    # across speeds: fit on slow + middle (one log, the middle recording 10 s after the end of the slow one)
     both = [read(args.data, s)[0] for s in ("slow", "middle")]
     train = {k: np.concatenate([b[k] for b in both]) for k in both[0]}
-    train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + 0.002])
+    train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + GAP_S])
     high, pub_high = read(args.data, "high")
     kinds = fit_kinds(train)
     kinds["vmax_high"] = float(np.abs(high["qd"]).max())
