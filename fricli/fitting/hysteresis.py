@@ -19,6 +19,14 @@ element states run over the whole log (they are causal and read only the positio
 is scored with the memory its past gives it, as in use. The Stribeck velocity is
 chosen first the same way, among the ``VS_QUANTILES`` percentiles of the speeds in motion, on the
 largest candidate with one Coulomb level.
+
+A log may join several recordings (``recordings``: a pause of more than ``GAP`` sample periods
+starts one). Each recording's elements start afresh at its first row (the joint moved unseen during
+the pause), and each has an offset of its own in the robot-model error: a torque sensor's or the
+rigid-body model's bias changes from one recording to the next, and with one offset for all the
+difference would be taken up by the position terms, the elements and the sliding curve, which then
+mispredict other motion. The model keeps the mean of the recordings' offsets (a new log is a
+recording of its own); the fit record lists them.
 """
 
 from __future__ import annotations
@@ -206,6 +214,10 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     pred = model.predict(signals)[0]
     if not np.isfinite(pred).all():
         raise FitError("the GMS fit gave a model with non-finite predictions")
+    if len(starts) > 1 and ke >= 0:
+        notes.append(f"the log joins {len(starts)} recordings (a pause of over {GAP} sample periods before each): "
+                     "offsets " + ", ".join(f"{c:.4g}" for c in coef[at:at + len(starts)])
+                     + " (robot-model error, one per recording); the model keeps their mean")
     record = metrics.errors(y, pred)
     record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
                   elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, recordings=len(starts),
