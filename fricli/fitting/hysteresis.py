@@ -19,6 +19,14 @@ element states run over the whole log (they are causal and read only the positio
 is scored with the memory its past gives it, as in use. The Stribeck velocity is
 chosen first the same way, among the ``VS_QUANTILES`` percentiles of the speeds in motion, on the
 largest candidate with one Coulomb level.
+
+A log may join several recordings (``recordings``: a pause of more than ``GAP`` sample periods
+starts one). Each recording's elements start afresh at its first row (the joint moved unseen during
+the pause), and each has an offset of its own in the robot-model error: a torque sensor's or the
+rigid-body model's bias changes from one recording to the next, and with one offset for all the
+difference would be taken up by the position terms, the elements and the sliding curve, which then
+mispredict other motion. The model keeps the mean of the recordings' offsets (a new log is a
+recording of its own); the fit record lists them.
 """
 
 from __future__ import annotations
@@ -41,6 +49,35 @@ BLOCKS = 5
 TOLERANCE = 0.01       # a smaller model within 1 % of the best held-out error is preferred
 D_LO = 1e-3            # the smallest element deflection, share of the mean travel between reversals
 D_HI = 0.5             # the largest, share of the same travel
+GAP = 10               # a step in time above GAP median sample periods starts a new recording
+
+
+def recordings(t: np.ndarray) -> np.ndarray:
+    """Start rows (r,) of the recordings a log joins: row 0 and every row after a step in time
+    longer than ``GAP`` median sample periods (the joint moved unseen there)."""
+    t = np.asarray(t, dtype=np.float64)
+    if len(t) < 3:
+        return np.zeros(1, dtype=int)
+    dt = np.diff(t)
+    return np.concatenate([[0], np.flatnonzero(dt > GAP * float(np.median(dt))) + 1]).astype(int)
+
+
+def _regressor(signals, d, vs, load, q_range, ks, ke_max, starts) -> np.ndarray:
+    """``columns`` of each recording (its elements starting afresh at its first row), stacked; with
+    more than one recording and ``ke_max`` >= 0, the offset column replaced by one per recording."""
+    if len(starts) == 1:
+        return columns(signals, d, vs, load, q_range, ks, ke_max)[0]
+    n = len(signals["qd"])
+    ends = np.append(starts[1:], n)
+    x = np.vstack([columns({k: v[a:b] for k, v in signals.items() if np.ndim(v) and len(v) == n},
+                           d, vs, load, q_range, ks, ke_max)[0] for a, b in zip(starts, ends)])
+    if ke_max < 0:
+        return x
+    off = x.shape[1] - 1 - 2 * ke_max
+    own = np.zeros((n, len(starts)))
+    for j, (a, b) in enumerate(zip(starts, ends)):
+        own[a:b, j] = 1.0
+    return np.hstack([x[:, :off], own, x[:, off + 1:]])
 
 
 def travel_between_reversals(q: np.ndarray, qd: np.ndarray) -> float:
@@ -81,9 +118,10 @@ def _solve(gram: np.ndarray, xy: np.ndarray, lower: np.ndarray) -> np.ndarray:
     return res.x / scale
 
 
-def _layout(n_el: int, load: bool, kc_: int, ke: int, coulomb_ks, ke_max: int) -> tuple[np.ndarray, np.ndarray]:
+def _layout(n_el: int, load: bool, kc_: int, ke: int, coulomb_ks, ke_max: int,
+            offsets: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Columns (indices into the full regressor of ``columns`` with ``coulomb_ks``, ke_max) of a
-    candidate, and their lower bounds."""
+    candidate (``offsets`` offset columns: one per recording), and their lower bounds."""
     base = n_el + 3 + int(load)
     idx = [i for i in range(base) if not (kc_ and i == n_el)]     # the hats replace the constant level
     at = base
@@ -93,7 +131,7 @@ def _layout(n_el: int, load: bool, kc_: int, ke: int, coulomb_ks, ke_max: int) -
         at += k + 1
     n_friction = len(idx)
     if ke >= 0:
-        idx += list(range(at, at + 1 + 2 * ke))
+        idx += list(range(at, at + offsets + 2 * ke))
     lower = np.full(len(idx), -np.inf)
     lower[:n_friction] = 0.0                          # every friction coefficient >= 0: passive
     return np.array(idx), lower
@@ -119,11 +157,12 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     blocks = max(2, min(blocks, n // 50))
     edges = np.linspace(0, n, blocks + 1).astype(int)
     ks = tuple(k for k in coulomb_k if k)
+    starts = recordings(signals["t"]) if "t" in signals else np.zeros(1, dtype=int)
     ke_max = max(error_k)
 
     def normal(n_el, vs_):
         d = grid(n_el, q, qd)
-        x, _ = columns(signals, d, vs_, load, q_range, ks, ke_max)
+        x = _regressor(signals, d, vs_, load, q_range, ks, ke_max, starts)
         parts = [(x[a:b].T @ x[a:b], x[a:b].T @ y[a:b], float(y[a:b] @ y[a:b])) for a, b in zip(edges[:-1], edges[1:])]
         return d, parts, sum(p[0] for p in parts), sum(p[1] for p in parts)
 
@@ -140,14 +179,14 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     for quantile in VS_QUANTILES:
         vs_ = max(float(np.percentile(speeds, quantile)), 1e-9)
         _, parts, gram, xy = normal(max(elements), vs_)
-        vs_scores.append((heldout(parts, gram, xy, *_layout(max(elements), load, 0, ke_max, ks, ke_max)), vs_))
+        vs_scores.append((heldout(parts, gram, xy, *_layout(max(elements), load, 0, ke_max, ks, ke_max, len(starts))), vs_))
     vs = min(vs_scores)[1]
     candidates = []
     for n_el in elements:
         d, parts, gram, xy = normal(n_el, vs)
         for kc_ in coulomb_k:
             for ke in error_k:
-                idx, lower = _layout(n_el, load, kc_, ke, ks, ke_max)
+                idx, lower = _layout(n_el, load, kc_, ke, ks, ke_max, len(starts))
                 candidates.append({"elements": int(n_el), "coulomb_k": kc_, "error_k": ke, "size": len(idx),
                                    "heldout_rmse": heldout(parts, gram, xy, idx, lower), "_d": d, "_idx": idx,
                                    "_lower": lower, "_g": gram, "_xy": xy})
@@ -164,18 +203,25 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     levels = coef[at:at + kc_ + 1] if kc_ else np.zeros(0)
     at += kc_ + 1 if kc_ else 0
     pos = np.maximum   # bvls keeps the bounds; rounding may leave -0.0
+    # a new log is a recording of its own: its offset is the mean of the recordings' offsets
+    error = np.concatenate([[coef[at:at + len(starts)].mean()], coef[at + len(starts):]]) if ke >= 0 else coef[at:]
     try:
         model = GMSModel(chosen["_d"], pos(coef[:n_el], 0.0), fc=max(coef[n_el], 0.0), fst=max(coef[n_el + 1], 0.0),
                          vs=vs, fv=max(coef[n_el + 2], 0.0), kc=max(kc, 0.0), q_lo=q_range[0], q_hi=q_range[1],
-                         coulomb_pos=pos(levels, 0.0), error=coef[at:], axis=axis)
+                         coulomb_pos=pos(levels, 0.0), error=error, axis=axis)
     except ValueError as exc:
         raise FitError(f"the GMS fit gave unusable parameters ({exc})") from None
     pred = model.predict(signals)[0]
     if not np.isfinite(pred).all():
         raise FitError("the GMS fit gave a model with non-finite predictions")
+    if len(starts) > 1 and ke >= 0:
+        notes.append(f"the log joins {len(starts)} recordings (a pause of over {GAP} sample periods before each): "
+                     "offsets " + ", ".join(f"{c:.4g}" for c in coef[at:at + len(starts)])
+                     + " (robot-model error, one per recording); the model keeps their mean")
     record = metrics.errors(y, pred)
     record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
-                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, heldout_best=best,
+                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, recordings=len(starts),
+                  recording_offsets=[float(c) for c in coef[at:at + len(starts)]] if ke >= 0 else [], heldout_best=best,
                   vs_candidates=[{"vs": v, "heldout_rmse": e} for e, v in vs_scores], notes=notes,
                   candidates=[{k: v for k, v in c.items() if not k.startswith("_")} for c in candidates])
     return model, record
