@@ -346,6 +346,53 @@ def test_the_consistent_fit_is_not_stuck_where_an_estimate_was_clipped():
         assert cost(x) <= cost(x_true) * (1 + 1e-6)
 
 
+def test_the_consistent_fit_reaches_the_optimum_it_certifies():
+    """The barrier method's result is strictly consistent and within its reported gap of the optimum:
+    no consistent point costs less than its cost minus the gap (checked at the true parameters and
+    at the end of Levenberg-Marquardt run from the result over each body's Cholesky factor), and the
+    gap is within ``GAP`` of the cost."""
+    from scipy import optimize
+
+    from fricli.robot.calibration import fit
+
+    tril = np.tril_indices(4)
+    for seed in range(3):
+        rng = np.random.default_rng(10 + seed)
+        bodies = [pin.Inertia(rng.uniform(0.5, 3), rng.uniform(-0.1, 0.1, 3), np.diag(rng.uniform(0.005, 0.05, 3)))
+                  for _ in range(2)]
+        x_true = np.concatenate([b.toDynamicParameters() for b in bodies] + [rng.uniform(0.1, 1, 2), rng.uniform(0, 2, 6)])
+        A = rng.normal(size=(400, 28))
+        b = A @ x_true + rng.normal(0, 0.01, 400)
+        x0 = x_true * rng.uniform(0.7, 1.3, len(x_true))
+        s = (np.abs(x0) + 1e-3) * 0.5
+        estimate = x_true.copy()
+        estimate[10:20] *= -1          # far outside consistency
+        info = {}
+        x = cb.consistent_fit(A, b, estimate, x0, s, 2, info=info)
+
+        def cost(x):
+            return np.sum((A @ x - b) ** 2) + np.sum(((x - x0) / s) ** 2)
+
+        assert all(np.linalg.eigvalsh(cb.pseudo_inertia(x[k:k + 10])).min() > 0 for k in (0, 10))
+        assert np.all(x[20:22] > 0)
+        assert 0 <= info["gap"] <= fit.GAP * cost(x)
+
+        def params(th):
+            pis = []
+            for k in range(2):
+                low = np.zeros((4, 4))
+                low[tril] = th[10 * k:10 * k + 10]
+                pis.append(cb._from_pseudo(low @ low.T))
+            return np.concatenate(pis + [th[20:22] ** 2, th[22:]])
+
+        start = np.concatenate([np.linalg.cholesky(cb.pseudo_inertia(x[k:k + 10]))[tril] for k in (0, 10)]
+                               + [np.sqrt(x[20:22]), x[22:]])
+        polished = optimize.least_squares(lambda th: np.concatenate([A @ params(th) - b, (params(th) - x0) / s]),
+                                          start, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=20000)
+        bound = cost(x) - info["gap"] - 1e-12 * cost(x)
+        assert cost(params(polished.x)) >= bound and cost(x_true) >= bound
+
+
 def test_a_urdf_link_of_negative_mass_is_refused(tmp_path):
     """Pinocchio merges a link of negative mass into its body without a word, into nonsense."""
     with pytest.raises(errors.ModelFileError, match="link 'flange': mass -0.3 kg"):

@@ -52,7 +52,7 @@ from fricli.robot.calibration.parameters import (FRICTION, MIN_LENGTH, PARAMS, a
                                                  parameter_names, _pin, prior_scales, pseudo_inertia,
                                                  _random_regressor, regressor, stribeck_columns)
 from fricli.robot.calibration.fit import (MAX_ITERATIONS, NUMERIC_ZERO, PRIOR_FOLDS, PRIOR_GRID,  # noqa: F401
-                                          PRIOR_START, _TRIL, UNDETERMINED, choose_prior, consistent_fit,
+                                          PRIOR_START, UNDETERMINED, choose_prior, consistent_fit,
                                           _excitation, _map_fit, _stribeck_rss, _with_prior)
 from fricli.robot.calibration.report import (OTHER_CAUSES, SUSPICIOUS, TOLERANCE, body_inertias,  # noqa: F401
                                              consistency, _friction_report, link_table, _motor_report,
@@ -181,10 +181,12 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     broken = consistency(linear)["problems"]
     enforced = None
     if broken and enforce:
-        x = consistent_fit(Phi / sigma[rows_of, None], y / sigma[rows_of], x, x0, s, nj, payload)
+        solved = {}
+        x = consistent_fit(Phi / sigma[rows_of, None], y / sigma[rows_of], x, x0, s, nj, payload, solved)
         resid = (y - Phi @ x).reshape(n, nj)
         enforced = {"inconsistent_before": broken, "rms_linear": {str(motion.names[j]): float(sigma[j])
-                                                                  for j in range(nj)}}
+                                                                  for j in range(nj)},
+                    "optimality_gap": solved["gap"], "newton_steps": solved["newton_steps"]}
     report = {
         "rows": int(n), "rows_dropped_at_ends": int((~keep).sum()), "edge_s": edge_s,
         "prior": float(prior), "prior_choice": prior_choice, "iterations": iteration,

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from fricli.core.errors import FitError
-from fricli.robot.calibration.parameters import _from_pseudo, _from_pseudos, _random_regressor, pseudo_inertia
+from fricli.robot.calibration.parameters import _from_pseudo, _random_regressor, pseudo_inertia
 
 
 PRIOR_GRID = (0.01, 0.03, 0.1, 0.2, 0.5, 1.0, 3.0, 10.0)   # the prior strengths "auto" chooses from
@@ -117,63 +117,104 @@ def _stribeck_rss(qd: np.ndarray, target: np.ndarray, vs: float) -> float:
     return float(np.sum(np.square(target - cols @ coef)))
 
 
-_TRIL = np.tril_indices(4)
+_BASIS = np.array([pseudo_inertia(e) for e in np.eye(10)])   # (10, 4, 4): pseudo_inertia(pi) = sum_i pi_i E_i
+GAP = 1e-9           # the consistent fit ends within this share of its cost (at least 1) above the optimum
+GROWTH = 100.0       # the barrier's weight t grows by this factor once its centre is reached ...
+CENTRED = 1e-2       # ... i.e. once Newton's decrement^2 is below this
+MAX_NEWTON = 400
 
 
 def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.ndarray, s: np.ndarray,
-                   nj: int, fixed: np.ndarray | None = None) -> np.ndarray:
-    """The same weighted least squares with the same prior (``A`` (rows, 14 nj) and ``b`` weighted),
-    over physically consistent parameters only: each body (less ``fixed`` (10 nj,), a declared
-    payload) as a pseudo-inertia L L^T (L lower triangular), each armature as u^2. From ``x_start``
-    with eigenvalues clipped and from ``x0``: the better; returns x."""
-    from scipy import linalg, optimize
+                   nj: int, fixed: np.ndarray | None = None, info: dict | None = None) -> np.ndarray:
+    """The same weighted least squares with the same prior (``A`` (rows, p) and ``b`` weighted, prior
+    centre ``x0`` and std ``s`` (p,)), over physically consistent parameters only: each body's
+    pseudo-inertia J (less ``fixed`` (10 nj,), a declared payload) positive semidefinite, each armature
+    a not negative. F(x) = |A x - b|^2 + |(x - x0) / s|^2 is convex and the constraints are cones: a
+    barrier method, damped Newton steps on t F(x) - sum log det J - sum log a, t grown by ``GROWTH``
+    at each centre, from ``x_start`` or ``x0`` (the lower F) with each body's eigenvalues clipped. A
+    dual point from each step bounds the optimum F* from below; ends when F(x) - F* <= ``GAP``
+    max(F(x), 1), or after ``MAX_NEWTON`` steps. ``info`` (optional) gets ``gap`` (F(x) - F* at most)
+    and ``newton_steps``. Returns x (p,): each body strictly consistent."""
+    from scipy import linalg
 
     fixed = np.zeros(10 * nj) if fixed is None else fixed
-    q, r = linalg.qr(A, mode="economic")
-    c = q.T @ b            # |A x - b|^2 = |r x - c|^2 + a constant
-    def start(x):        # theta of x, each pseudo-inertia's eigenvalues clipped to be positive
-        theta = []
-        for k in range(nj):
-            w, v = np.linalg.eigh(pseudo_inertia(x[10 * k:10 * k + 10] - fixed[10 * k:10 * k + 10]))
-            w = np.maximum(w, 1e-6 * max(w.max(), 1e-12))
-            theta.append(np.linalg.cholesky((v * w) @ v.T)[_TRIL])
-        arm = x[10 * nj:11 * nj]
-        return np.concatenate(theta + [np.sqrt(np.maximum(arm, 1e-6 * s[10 * nj:11 * nj])), x[11 * nj:]])
+    p = A.shape[1]
+    rc = linalg.qr(np.column_stack([A, b]), mode="r")[0][:p]          # |A x - b|^2 = |r x - c|^2 + a constant
+    top = linalg.qr(np.block([[rc], [np.diag(1.0 / s), (x0 / s)[:, None]]]), mode="r")[0][:p + 1]
+    rh = top[:p, :p]                         # F(xu + d) = F(xu) + |rh d|^2: no round-off of F itself
+    xu = linalg.solve_triangular(rh, top[:p, p])                         # the unconstrained minimum
+    fu = float(top[p, p]) ** 2                                           # F(xu) less the constant
+    arm, m = slice(10 * nj, 11 * nj), 5 * nj                               # m: the barrier's degree
 
-    def params(th):
-        pis = []
-        for k in range(nj):
-            low = np.zeros((4, 4))
-            low[_TRIL] = th[10 * k:10 * k + 10]
-            pis.append(_from_pseudo(low @ low.T))
-        return np.concatenate([np.concatenate(pis) + fixed, th[10 * nj:11 * nj] ** 2, th[11 * nj:]])
+    def excess(d):          # F(xu + d) - F(xu)
+        return float(np.sum(np.square(rh @ d)))
 
-    def dparams(th):   # d x / d theta: block diagonal
-        out = np.zeros((len(th), len(th)))
-        rows, cols = np.arange(10), _TRIL
-        for k in range(nj):
-            low = np.zeros((4, 4))
-            low[_TRIL] = th[10 * k:10 * k + 10]
-            d = np.zeros((10, 4, 4))
-            d[rows, cols[0]] = low[:, cols[1]].T     # E_ab L^T + L E_ba: row a and column a of L's column b
-            d = d + d.transpose(0, 2, 1)
-            out[10 * k:10 * k + 10, 10 * k:10 * k + 10] = _from_pseudos(d).T
-        idx = np.arange(10 * nj, 11 * nj)
-        out[idx, idx] = 2 * th[idx]
-        idx = np.arange(11 * nj, len(th))
-        out[idx, idx] = 1.0
-        return out
+    def pseudo(d):          # (nj, 4, 4) at x = xu + d
+        return np.einsum("ki,iab->kab", (xu[:10 * nj] + d[:10 * nj] - fixed).reshape(nj, 10), _BASIS)
 
-    stacked = np.vstack([r, np.diag(1.0 / s)])
-    # convex in x, not in the factors: from a clipped estimate a body can sit where L is nearly singular
-    # and the steps vanish, so the fit also starts from the prior's centre (CAD), and the lower cost wins
-    fits = [optimize.least_squares(lambda th: np.concatenate([r @ params(th) - c, (params(th) - x0) / s]), start(x),
-                                   jac=lambda th: stacked @ dparams(th), x_scale="jac", method="lm",
-                                   xtol=1e-8, ftol=1e-6, max_nfev=2000) for x in (x_start, x0)]
-    fits = [f for f in fits if np.all(np.isfinite(f.x))]
-    if not fits:
+    def inside(d):          # every J positive definite in floating point, every armature positive
+        try:
+            np.linalg.cholesky(pseudo(d))
+        except np.linalg.LinAlgError:
+            return False
+        return bool(np.all(xu[arm] + d[arm] > 0))
+
+    def clipped(x):         # d of a strictly consistent point: each body's eigenvalues clipped
+        d = np.array(x, dtype=float) - xu
+        for k in range(nj):
+            w, v = np.linalg.eigh(pseudo(d)[k])
+            floor = 1e-3 * max(float(np.abs(w).max()), 1e-12)
+            d[10 * k:10 * k + 10] = _from_pseudo((v * np.maximum(w, floor)) @ v.T) + fixed[10 * k:10 * k + 10] \
+                - xu[10 * k:10 * k + 10]
+        d[arm] = np.maximum(xu[arm] + d[arm], 1e-3 * s[arm]) - xu[arm]
+        return d
+
+    d = min((clipped(x) for x in (x_start, x0)), key=excess)
+    t = m / max(excess(d), 1e-300)      # the barrier's share m / t about the start's excess
+    lower, centred, step = -math.inf, False, 0     # lower: a bound on F* - F(xu)
+    while step < MAX_NEWTON and excess(d) - lower > GAP * max(excess(d) + fu, 1.0):
+        step += 1
+        if centred:
+            t, centred = t * GROWTH, False
+        low = np.linalg.cholesky(pseudo(d))                                   # J = L L^T
+        li = np.linalg.inv(low)
+        gi = np.einsum("kab,ibc,kdc->kiad", li, _BASIS, li)     # (nj, 10, 4, 4): L^-1 E_i L^-T
+        grad = 2.0 * t * (rh.T @ (rh @ d))
+        grad[:10 * nj] -= np.einsum("kiaa->ki", gi).ravel()     # d(-log det J)/d pi_i = -tr(J^-1 E_i)
+        grad[arm] -= 1.0 / (xu[arm] + d[arm])
+        # Newton's system as least squares, the square roots of its terms stacked: t F's, the barrier's
+        # (tr(J^-1 E_i J^-1 E_j) = <L^-1 E_i L^-T, L^-1 E_j L^-T>) and the armatures'
+        root = np.zeros((17 * nj, p))
+        for k in range(nj):
+            root[16 * k:16 * k + 16, 10 * k:10 * k + 10] = gi[k].reshape(10, 16).T
+        root[16 * nj + np.arange(nj), np.arange(10 * nj, 11 * nj)] = 1.0 / (xu[arm] + d[arm])
+        newton = linalg.qr(np.vstack([math.sqrt(2.0 * t) * rh, root]), mode="r")[0][:p]
+        dd = -linalg.solve_triangular(newton, linalg.solve_triangular(newton, grad, trans="T"))
+        # mu: the eigenvalues of L^-1 dJ L^-T and da / a along dd
+        half = np.linalg.solve(low, np.einsum("ki,iab->kab", dd[:10 * nj].reshape(nj, 10), _BASIS))
+        mu = np.concatenate([np.linalg.eigvalsh(np.linalg.solve(low, half.transpose(0, 2, 1))).ravel(),
+                             dd[arm] / (xu[arm] + d[arm])])
+        if mu.max() <= 1.0:
+            # the duals (J^-1 - J^-1 dJ J^-1) / t and (1 - da / a) / (t a) are PSD, and xu + d + dd
+            # minimises the Lagrangian with them: F* >= F(xu + d + dd) - (m - |mu|^2) / t
+            lower = max(lower, excess(d + dd) - (m - float(mu @ mu)) / t)
+        # along dd: t F and the barrier change by t (2 a (rh d).(rh dd) + a^2 |rh dd|^2) - sum log(1 + a mu)
+        linear, square = 2.0 * t * float((rh @ d) @ (rh @ dd)), t * excess(dd)
+        slope = linear - float(np.sum(mu))            # -(Newton's decrement^2)
+        alpha = min(1.0, 0.99 / max(float(-mu.min()), 1e-300))
+        while alpha > 1e-12 and not (alpha * linear + alpha ** 2 * square - float(np.sum(np.log1p(alpha * mu)))
+                                     <= 0.25 * alpha * slope and inside(d + alpha * dd)):
+            alpha *= 0.5
+        if alpha <= 1e-12:
+            break
+        d = d + alpha * dd
+        centred = -slope <= CENTRED
+    x = xu + d
+    if not np.all(np.isfinite(x)):
         raise FitError("the physically consistent fit did not converge")
-    return params(min(fits, key=lambda f: f.cost).x)
+    if info is not None:
+        info.update(gap=float(excess(d) - lower), newton_steps=step)
+    return x
 
 
 def _excitation(robot, A: np.ndarray, Phi: np.ndarray, s: np.ndarray, names: list[str], seed: int,

@@ -151,15 +151,6 @@ def _from_pseudo(j: np.ndarray) -> np.ndarray:
     return np.array([j[3, 3], *j[:3, 3], i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2], i_o[2, 2]])
 
 
-def _from_pseudos(j: np.ndarray) -> np.ndarray:
-    """``_from_pseudo`` of each of ``j`` (k, 4, 4), with the same arithmetic: (k, 10)."""
-    sigma = j[:, :3, :3]
-    trace = sigma[:, 0, 0] + sigma[:, 1, 1] + sigma[:, 2, 2]
-    i_o = trace[:, None, None] * np.eye(3) - sigma
-    return np.column_stack([j[:, 3, 3], j[:, 0, 3], j[:, 1, 3], j[:, 2, 3], i_o[:, 0, 0], i_o[:, 0, 1], i_o[:, 1, 1],
-                            i_o[:, 0, 2], i_o[:, 1, 2], i_o[:, 2, 2]])
-
-
 def _random_regressor(robot, seed: int, vs: np.ndarray | None = None, ratio: np.ndarray | None = None) -> np.ndarray:
     """The regressor at random states (positions uniform in [-pi, pi], standard normal velocities
     and accelerations): enough rows to show every structural dependency."""
