@@ -322,20 +322,26 @@ def test_a_tool_the_arm_does_not_carry_is_not_written_as_a_negative_link(arm, tm
     assert np.linalg.norm(tau_g + tau_dyn - truth) < 1e-6 * np.linalg.norm(truth)
 
 
+def _two_body_problem(seed: int):
+    """A consistent fit's problem with two random bodies: (A (400, 28), b, x_true, x0 (the prior's
+    centre, 30 % off), s (its std))."""
+    rng = np.random.default_rng(seed)
+    bodies = [pin.Inertia(rng.uniform(0.5, 3), rng.uniform(-0.1, 0.1, 3), np.diag(rng.uniform(0.005, 0.05, 3)))
+              for _ in range(2)]
+    x_true = np.concatenate([b.toDynamicParameters() for b in bodies] + [rng.uniform(0.1, 1, 2), rng.uniform(0, 2, 6)])
+    A = rng.normal(size=(400, 28))
+    b = A @ x_true + rng.normal(0, 0.01, 400)
+    x0 = x_true * rng.uniform(0.7, 1.3, len(x_true))
+    return A, b, x_true, x0, (np.abs(x0) + 1e-3) * 0.5
+
+
 def test_the_consistent_fit_is_not_stuck_where_an_estimate_was_clipped():
     """The consistent fit is convex in the parameters but not in the Cholesky factors it runs on: from
     an estimate of a body far outside consistency (here the true body mirrored), clipped to a nearly
     singular factor, its steps vanish. The true parameters are consistent, so the fit must reach a
     cost no higher than theirs (from the clipped estimate alone: 100 to 1,000 times higher)."""
     for seed in range(3):
-        rng = np.random.default_rng(seed)
-        bodies = [pin.Inertia(rng.uniform(0.5, 3), rng.uniform(-0.1, 0.1, 3), np.diag(rng.uniform(0.005, 0.05, 3)))
-                  for _ in range(2)]
-        x_true = np.concatenate([b.toDynamicParameters() for b in bodies] + [rng.uniform(0.1, 1, 2), rng.uniform(0, 2, 6)])
-        A = rng.normal(size=(400, 28))
-        b = A @ x_true + rng.normal(0, 0.01, 400)
-        x0 = x_true * rng.uniform(0.7, 1.3, len(x_true))
-        s = (np.abs(x0) + 1e-3) * 0.5
+        A, b, x_true, x0, s = _two_body_problem(seed)
         mirrored = x_true.copy()
         mirrored[:10] *= -1
         x = cb.consistent_fit(A, b, mirrored, x0, s, 2)
@@ -357,14 +363,7 @@ def test_the_consistent_fit_reaches_the_optimum_it_certifies():
 
     tril = np.tril_indices(4)
     for seed in range(3):
-        rng = np.random.default_rng(10 + seed)
-        bodies = [pin.Inertia(rng.uniform(0.5, 3), rng.uniform(-0.1, 0.1, 3), np.diag(rng.uniform(0.005, 0.05, 3)))
-                  for _ in range(2)]
-        x_true = np.concatenate([b.toDynamicParameters() for b in bodies] + [rng.uniform(0.1, 1, 2), rng.uniform(0, 2, 6)])
-        A = rng.normal(size=(400, 28))
-        b = A @ x_true + rng.normal(0, 0.01, 400)
-        x0 = x_true * rng.uniform(0.7, 1.3, len(x_true))
-        s = (np.abs(x0) + 1e-3) * 0.5
+        A, b, x_true, x0, s = _two_body_problem(10 + seed)
         estimate = x_true.copy()
         estimate[10:20] *= -1          # far outside consistency
         info = {}
