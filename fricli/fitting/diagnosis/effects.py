@@ -291,18 +291,20 @@ class Position(Effect):
 
 class Hysteresis(Effect):
     """Friction with memory: Maxwell-slip elements (``T.slip_``), each a spring that deflects with the
-    position and slips at its limit d, with the level terms. Its force follows the position since the
+    position and slips at its limit d, added to the model. Its force follows the position since the
     last reversal rather than the velocity, as a smooth sign of motion would; a model without memory
-    misses it at every reversal.
+    misses it at every reversal. It rivals ``level`` (a wide element is a Coulomb level) and
+    ``velocity`` (a smooth sign of motion after each reversal).
 
     The limits are ``elements`` values log-spaced from ``low_steps`` times the log's median
     position step in motion (an element that slips within fewer steps is the sign of motion, which
     the level has) up to ``high_share`` of the position range (wider elements never slip in the
     log's reversals); both are the log's own, so a coarser or shorter log gets its own grid. Each
     element's coefficient is its break-away force. One element may come out slightly negative
-    where its neighbours carry the force; what is not physical is elements that together give
-    energy back over some closed cycle of the position (``loop_energy`` < 0 at some amplitude),
-    and the effect is then ``implausible``."""
+    where its neighbours or the model's own Coulomb level carry the force; what is not physical
+    is friction that gives energy back over a slow closed cycle of the position: the elements
+    with the model's equivalent Coulomb level Fc (an element of limit 0) must dissipate
+    ``loop_energy`` >= 0 at every amplitude, else the effect is ``implausible``."""
 
     name = N.HYSTERESIS
     rivals = ((N.LEVEL,), (N.VELOCITY,))
@@ -333,7 +335,7 @@ class Hysteresis(Effect):
         return None
 
     def terms(self, ctx, residual):
-        return LEVEL_TERMS + [T.term(f"slip@{d:.6g}", T.slip_(float(f"{d:.6g}"))) for d in self.limits(ctx)]
+        return [T.term(f"slip@{d:.6g}", T.slip_(float(f"{d:.6g}"))) for d in self.limits(ctx)]
 
     def params(self, coef, ctx):
         out = {}
@@ -342,7 +344,8 @@ class Hysteresis(Effect):
             out[f"d{i}"] = _par(d, ctx.q_unit)
             out[f"F{i}"] = _par(forces[d], ctx.tau_unit)
         out["F"] = _par(sum(forces.values()), ctx.tau_unit)
-        out["scale"] = _par(1.0 + coef.get("p", 0.0), "")
+        fc = equivalent_levels(ctx.p, ctx.signals["qd"])["Fc"]
+        out["Fc model"] = _par(fc if np.isfinite(fc) else 0.0, ctx.tau_unit)
         return out
 
     @staticmethod
@@ -354,23 +357,27 @@ class Hysteresis(Effect):
 
     def implausible(self, params, ctx):
         n = sum(1 for k in params if k.startswith("d"))
-        d = np.array([params[f"d{i}"]["value"] for i in range(1, n + 1)], dtype=np.float64)
-        force = np.array([params[f"F{i}"]["value"] or 0.0 for i in range(1, n + 1)], dtype=np.float64)
+        # the model's Coulomb level is one more element, of limit 0: the sum must not give energy back
+        d = np.array([0.0] + [params[f"d{i}"]["value"] for i in range(1, n + 1)], dtype=np.float64)
+        force = np.array([params["Fc model"]["value"] or 0.0] + [params[f"F{i}"]["value"] or 0.0
+                                                                 for i in range(1, n + 1)], dtype=np.float64)
         # piecewise linear in A: negative somewhere only at a limit or, with a negative total, beyond the last
-        knots = np.append(d, 2 * d[-1]) if n else d
+        knots = np.append(d[1:], 2 * d[-1])
         energy = self.loop_energy(d, force, knots)
         bad = np.flatnonzero(energy < 0)
         if len(bad):
-            return (f"the elements give energy back over a cycle of amplitude {_fmt(float(knots[bad[0]]))} "
-                    f"{params['d1']['unit']} (a negative break-away force): that is no friction; a smooth sign "
-                    "of motion (velocity) may describe the shape")
+            return (f"with the model's Coulomb level the elements give energy back over a cycle of amplitude "
+                    f"{_fmt(float(knots[bad[0]]))} {params['d1']['unit']} (negative break-away forces): that is no "
+                    "friction; a smooth sign of motion (velocity) or a torque along the travel (position) may "
+                    "describe the shape")
         return None
 
     def summary(self, params):
         n = sum(1 for k in params if k.startswith("d"))
         forces = ", ".join(f"{_fmt(params[f'F{i}']['value'])} at {_fmt(params[f'd{i}']['value'])}" for i in range(1, n + 1))
         return (f"break-away force {_fmt(params['F']['value'])} {params['F']['unit']} in {n} elements "
-                f"({forces} {params['d1']['unit'] if n else ''}), model x{_fmt(params['scale']['value'])}")
+                f"({forces} {params['d1']['unit'] if n else ''}) over the model's Fc "
+                f"{_fmt(params['Fc model']['value'])} {params['F']['unit']}")
 
 
 class Column(Effect):
