@@ -335,7 +335,7 @@ class Hysteresis(Effect):
         return None
 
     def terms(self, ctx, residual):
-        return [T.term(f"slip@{d:.6g}", T.slip_(float(f"{d:.6g}"))) for d in self.limits(ctx)]
+        return LEVEL_TERMS + [T.term(f"slip@{d:.6g}", T.slip_(float(f"{d:.6g}"))) for d in self.limits(ctx)]
 
     def params(self, coef, ctx):
         out = {}
@@ -344,8 +344,10 @@ class Hysteresis(Effect):
             out[f"d{i}"] = _par(d, ctx.q_unit)
             out[f"F{i}"] = _par(forces[d], ctx.tau_unit)
         out["F"] = _par(sum(forces.values()), ctx.tau_unit)
-        fc = equivalent_levels(ctx.p, ctx.signals["qd"])["Fc"]
-        out["Fc model"] = _par(fc if np.isfinite(fc) else 0.0, ctx.tau_unit)
+        bp, bv = _level_coefs(coef)
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        out["Fc model"] = _par((1.0 + bp) * lv["Fc"] if np.isfinite(lv["Fc"]) else 0.0, ctx.tau_unit)
+        out["Fv model"] = _par((1.0 + bp) * lv["Fv"] + bv if np.isfinite(lv["Fv"]) else bv, ctx.fv_unit)
         return out
 
     @staticmethod
@@ -362,12 +364,13 @@ class Hysteresis(Effect):
         force = np.array([params["Fc model"]["value"] or 0.0] + [params[f"F{i}"]["value"] or 0.0
                                                                  for i in range(1, n + 1)], dtype=np.float64)
         # piecewise linear in A: negative somewhere only at a limit or, with a negative total, beyond the last
-        knots = np.append(d[1:], 2 * d[-1])
-        energy = self.loop_energy(d, force, knots)
+        energy = self.loop_energy(d, force, d[1:])
         bad = np.flatnonzero(energy < 0)
-        if len(bad):
-            return (f"with the model's Coulomb level the elements give energy back over a cycle of amplitude "
-                    f"{_fmt(float(knots[bad[0]]))} {params['d1']['unit']} (negative break-away forces): that is no "
+        if len(bad) or force.sum() < 0:
+            where = (f"of amplitude {_fmt(float(d[1:][bad[0]]))} {params['d1']['unit']}" if len(bad) else
+                     f"wider than {_fmt(float(d[-1]))} {params['d1']['unit']}")
+            return (f"with the model's Coulomb level the elements give energy back over a cycle {where} "
+                    "(negative break-away forces): that is no "
                     "friction; a smooth sign of motion (velocity) or a torque along the travel (position) may "
                     "describe the shape")
         return None
