@@ -8,9 +8,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
+import export_check as check
 from conftest import invoke, shared_data
 from fricli import models
 from fricli.core import logs, metrics
+from fricli.export import c
 from fricli.fitting.diagnosis import diagnose
 from fricli.fitting.diagnosis import effects as E
 from fricli.models import terms as T
@@ -148,10 +150,16 @@ def test_fixed_hysteresis_model_is_read_by_every_command(tmp_path):
                  ("estimate-ext", tmp_path / "fixed.npz", h3, "-o", tmp_path / "e.parquet"),
                  ("evaluate", "--model", tmp_path / "fixed.npz", "--log", h3),
                  ("report", tmp_path / "fixed.npz", h3, "-o", tmp_path / "report"),
-                 ("export", tmp_path / "fixed.npz", "-o", tmp_path / "fixed.h"),
+                 ("export", tmp_path / "fixed.npz", "-o", tmp_path / "fixed.h", "--prefix", "fr"),
                  ("inspect", tmp_path / "fixed.npz")):
         res = run(*args)
         assert res.exit_code == 0, (args[0], res.output)
     log = logs.load_log(str(h3))
+    if check.compiler() is not None:   # the exported C equals predict --precision double
+        exe = str(tmp_path / "driver")
+        assert check.build(str(tmp_path / "fixed.h"), "fr", exe) == ""
+        got = check.run(exe, check.signal_matrix(log.signals, c.signals_of(model)))
+        ref = pq.read_table(tmp_path / "p.parquet").column("tau_f_pred").to_numpy()
+        assert np.max(np.abs(got - ref) / (1e-9 + 1e-9 * np.abs(ref))) <= 1.0
     batched = pq.read_table(tmp_path / "p.parquet").column("tau_f_pred").to_numpy()   # in batches of 700 rows
     np.testing.assert_allclose(batched, model.predict(log.signals)[0], rtol=1e-12, atol=1e-12)

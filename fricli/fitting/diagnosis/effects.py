@@ -291,10 +291,11 @@ class Position(Effect):
 
 class Hysteresis(Effect):
     """Friction with memory: Maxwell-slip elements (``T.slip_``), each a spring that deflects with the
-    position and slips at its limit d, added to the model. Its force follows the position since the
+    position and slips at its limit d, with the level terms (the elements take over part of the
+    model's Coulomb level, so the effect nests ``level``). Its force follows the position since the
     last reversal rather than the velocity, as a smooth sign of motion would; a model without memory
-    misses it at every reversal. It rivals ``level`` (a wide element is a Coulomb level) and
-    ``velocity`` (a smooth sign of motion after each reversal).
+    misses it at every reversal. It must beat ``level`` and ``velocity`` (a smooth sign of motion
+    after each reversal) on held-out data.
 
     The limits are ``elements`` values log-spaced from ``low_steps`` times the log's median
     position step in motion (an element that slips within fewer steps is the sign of motion, which
@@ -303,7 +304,7 @@ class Hysteresis(Effect):
     element's coefficient is its break-away force. One element may come out slightly negative
     where its neighbours or the model's own Coulomb level carry the force; what is not physical
     is friction that gives energy back over a slow closed cycle of the position: the elements
-    with the model's equivalent Coulomb level Fc (an element of limit 0) must dissipate
+    with the model's equivalent Coulomb level Fc, as rescaled (an element of limit 0), must dissipate
     ``loop_energy`` >= 0 at every amplitude, else the effect is ``implausible``."""
 
     name = N.HYSTERESIS
