@@ -23,7 +23,7 @@ from fricli.fitting.identify import identify
 
 CASES = [("ripple",), ("temperature",), ("drift",), ("asymmetry",), ("inertia",), ("load",), ("velocity",),
          ("level",), ("offset",), ("column",), ("gravity",), ("quadrant",), ("temperature", "ripple"),
-         ("disturbance",), ()]
+         ("hysteresis",), ("disturbance",), ()]
 
 
 def _log(seed, effects, **kw):

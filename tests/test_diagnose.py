@@ -318,7 +318,7 @@ def test_lugre_base_carries_direction_as_its_own_parameters(rng):
 SIM_EFFECTS = {  # simulator effect -> the name diagnose must give it
     "position": "position", "temperature": "temperature", "drift": "drift", "direction": "direction",
     "inertia": "acceleration", "load": "load", "velocity": "velocity", "level": "level", "offset": "offset",
-    "column": "column:humidity",
+    "column": "column:humidity", "hysteresis": "hysteresis",
 }
 
 

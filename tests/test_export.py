@@ -56,6 +56,10 @@ def _train(log, rng, *, lugre: LuGreModel, terms: list[dict]) -> dict:
                                              error_coef=rng.normal(size=len(ERROR_TERMS)),
                                              effects=["a", "gravity", "offset", "acceleration"],
                                              errors=["gravity", "offset", "acceleration"])
+    # Maxwell-slip elements (the hysteresis effect): their deflections are state across batches
+    out["augmented-hysteresis"] = AugmentedModel(lugre, [T.term("slip@0.004", T.slip_(0.004)),
+                                                         T.term("slip@0.03", T.slip_(0.03)), T.term("p", T.P)],
+                                                 [0.4, 0.6, -0.1], effects=["hysteresis"])
     out["augmented-gravity"] = AugmentedModel(lugre, [T.term("sign", T.SIGN)], [0.5], error_terms=ERROR_TERMS[:1],
                                               error_coef=[0.03], effects=["quadrant", "gravity"], errors=["gravity"])
     # NN_add over a model with robot-model errors: the errors pass by the dissipative combination
@@ -155,7 +159,7 @@ def _compare(model_path: str, log_path: str, tmp_path, *, cutoff: float = 50.0, 
 
 KINDS = ["lugre-plain", "lugre-loaded", "lugre-asym-thermal", "mlp", "selmic", "nnacm", "dissipative", "residual",
          "residual-mlp", "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
-         "augmented-errors", "augmented-dissipative", "residual-errors", "gms"]
+         "augmented-errors", "augmented-dissipative", "augmented-hysteresis", "residual-errors", "gms"]
 
 
 @needs_cc

@@ -75,6 +75,10 @@ def augmented(model, name: str, ctx: Context) -> Part:
     fields = ([f"{base.name}_state base"] if base.stateful else [])
     fields += ["double dir  /* direction of the last motion, 0 before any */"] if held_dir else []
     fields += ["double gear  /* tau_g at the last moving sample [Nm] */"] if held_gear else []
+    limits = T.slip_limits(every)
+    if limits:
+        fields += ["double slip_q  /* position at the last row [rad or m] */", "int slip_started"]
+        fields += [f"double {T.slip_name(d)}  /* deflection of the slip element of limit {num(d)} */" for d in limits]
     stateful = bool(fields)
     code = [base.code]
     if base.parts:   # the base's own robot-model error stays apart from its friction
@@ -90,13 +94,21 @@ def augmented(model, name: str, ctx: Context) -> Part:
         body.append(f"    if ({qd} != 0.0) {{ {' '.join(updates)} }}")
         body += ["    const double dir = s->dir;"] if held_dir else []
         body += ["    const double gear = s->gear;"] if held_gear else []
+    if limits:
+        q = ctx.signal("q")
+        body.append(f"    {{ const double dq = s->slip_started ? {q} - s->slip_q : 0.0; s->slip_q = {q}; "
+                    "s->slip_started = 1;")
+        body += [f"      s->{T.slip_name(d)} = fmin(fmax(s->{T.slip_name(d)} + dq, -{num(d)}), {num(d)});" for d in limits]
+        body.append("    }")
     for terms, coef, sum_ in ((model.terms, model.coef, "acc"), (model.error_terms, model.error_coef, "err")):
         for spec, c in zip(terms, coef):
             body += [f"    /* {comment(spec['name'])} */", f"    {T.term(spec, ctx)}", f"    {sum_} += {num(c)} * v;"]
     body += ["    (void)v;", "    *error = err;", "    return pf + acc;"]
     if stateful:
         inits = ([base.init("&s->base")] if base.stateful else []) + (["s->dir = 0.0;"] if held_dir else []) + (
-            ["s->gear = 0.0;"] if held_gear else [])
+            ["s->gear = 0.0;"] if held_gear else []) + (
+            (["s->slip_q = 0.0;", "s->slip_started = 0;"] + [f"s->{T.slip_name(d)} = 0.0;" for d in limits]
+             if limits else []))
         code += _state(name, fields)
         code += [f"static inline void {name}_init({name}_state *s) {{ {' '.join(inits)} }}", ""]
     part = Part(name, "", stateful=stateful, parts=True)

@@ -3,11 +3,14 @@
 A term is a product of factors; ``FACTORS`` maps each factor kind to a function
 (factor, context) -> C expression. The held direction of motion is the variable ``dir``
 (updated before the terms, as ``Columns.direction``), the held gear torque ``gear`` (as
-``Columns.held_gravity``, held tau_g) and the base prediction ``p``.
-A new factor kind needs one entry here.
+``Columns.held_gravity``, held tau_g) and the base prediction ``p``; a slip element of limit d
+reads its deflection ``slip_name(d)`` (a state field, moved on before the terms as
+``Columns.deflection``). A new factor kind needs one entry here.
 """
 
 from __future__ import annotations
+
+import struct
 
 from fricli.core.errors import ModelFileError
 from fricli.export.c import Context, num
@@ -31,6 +34,7 @@ FACTORS = {
     "pos": lambda f, ctx: "(dir > 0.0 ? 1.0 : 0.0)",
     "sat": lambda f, ctx: (f"({ctx.sgn}({ctx.signal('qd')}) * -expm1(-fabs({ctx.signal('qd')}) / "
                            f"{num(f['scale'])}))"),
+    "slip": lambda f, ctx: f"(s->{slip_name(f['d'])} / {num(f['d'])})",
     "sin": lambda f, ctx: f"sin({num(f['w'])} * {ctx.signal(f['name'])})",
     "cos": lambda f, ctx: f"cos({num(f['w'])} * {ctx.signal(f['name'])})",
 }
@@ -39,6 +43,21 @@ HELD_DIRECTION = ("sign", "moving", "pos")   # factors that read the held direct
 
 def uses_direction(terms: list[dict]) -> bool:
     return any(f["f"] in HELD_DIRECTION for term in terms for f in term["factors"])
+
+
+def slip_name(d: float) -> str:
+    """The state field of the slip element of limit d: named by the bits of d (one field per limit)."""
+    return "z_" + format(struct.unpack("<Q", struct.pack("<d", float(d)))[0], "016x")
+
+
+def slip_limits(terms: list[dict]) -> list[float]:
+    """The distinct limits d of the slip elements the terms read, in first use order."""
+    out: list[float] = []
+    for term in terms:
+        for f in term["factors"]:
+            if f["f"] == "slip" and float(f["d"]) not in out:
+                out.append(float(f["d"]))
+    return out
 
 
 def uses_held_gear(terms: list[dict]) -> bool:

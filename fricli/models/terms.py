@@ -21,12 +21,17 @@ any later log from the constants it carries. Factors:
                                                    its value when the motion stopped
     {"f": "sat", "scale": s}                       sign(qd) * (1 - exp(-|qd| / s))
     {"f": "sin" | "cos", "name": S, "w": w}        sin(w S), cos(w S)
+    {"f": "slip", "d": d}                          z / d, z the deflection [rad or m] of a Maxwell-slip element
+                                                   of deflection limit d (the stop operator of q):
+                                                   z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), z = 0
+                                                   before the first row (an element at rest); in [-1, 1],
+                                                   its coefficient is the element's break-away force
 
 The direction is sign(qd), held through samples at rest at the sign of the last motion: a
 joint at rest holds the friction of the direction it last moved in (the bristles stay
 deflected); a friction term in the gear torque is held the same way (0 before the first
 motion); so is the gravity torque of ``heldgravity``. Both carry over from one batch of rows to
-the next as the terms' state.
+the next as the terms' state, and so do the slip elements' deflections (with the last position).
 
 The load the gear holds is what the motor puts in minus what the motor-side friction and the
 inertia take: tau_l = tau_m - tau_dyn - p, with the base model's friction p; that is gravity plus
@@ -55,6 +60,8 @@ def factor_inputs(factor: dict) -> set[str]:
         return {"qd", "tau_g"}
     if f in ("sign", "moving", "pos", "sat"):
         return {"qd"}
+    if f == "slip":
+        return {"q"}
     return {factor["name"]}
 
 
@@ -103,19 +110,47 @@ def hold(x: np.ndarray, last: np.ndarray | None, x0: float) -> np.ndarray:
     return x if last is None else np.where(last >= 0, x[np.maximum(last, 0)], x0)
 
 
+def slip(q: np.ndarray, d: float, z0: float = 0.0, q0: float | None = None) -> np.ndarray:
+    """Deflection z (n,) of a Maxwell-slip element of limit d > 0 [rad or m] over positions q (n,):
+    z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 at position q0 (None: q[0], no step)."""
+    q = np.asarray(q, dtype=np.float64)
+    out = np.empty(len(q))
+    if not len(q):
+        return out
+    dq = np.diff(q, prepend=q[0] if q0 is None else float(q0)).tolist()
+    z, hi, lo = float(z0), float(d), -float(d)
+    for k, step in enumerate(dq):
+        z = min(max(z + step, lo), hi)
+        out[k] = z
+    return out
+
+
 class Columns:
     """Evaluates terms on one batch of signals (n,) with the base prediction p (n,).
 
-    ``state`` is what is held from the previous batch: (direction, gravity torque) or a direction
-    alone (None: no motion seen yet).
+    ``state`` is what is held from the previous batch: (direction, gravity torque[, slip]) or a
+    direction alone (None: no motion seen yet); slip = (last position, {limit d: deflection z})
+    of the slip elements (None: no row seen yet).
     """
 
     def __init__(self, sig: dict, p: np.ndarray | None = None, state=None):
         self.sig, self.p = sig, p
         self._dir = self._gear = self._last = None
-        s0, g0 = (state, 0.0) if state is None or np.isscalar(state) else state
+        if state is None or np.isscalar(state):
+            s0, g0, slip0 = state, 0.0, None
+        else:
+            s0, g0, slip0 = (tuple(state) + (None,))[:3]
         self._s0 = 0.0 if s0 is None else float(s0)
         self._g0 = float(g0)
+        self._q0, self._z0 = (None, {}) if slip0 is None else (float(slip0[0]), dict(slip0[1]))
+        self._z: dict[float, np.ndarray] = {}
+
+    def deflection(self, d: float) -> np.ndarray:
+        """z (n,) of the slip element of limit d, from the previous batch's state."""
+        d = float(d)
+        if d not in self._z:
+            self._z[d] = slip(_signal(self.sig, "q"), d, self._z0.get(d, 0.0), self._q0)
+        return self._z[d]
 
     def _held(self, x: np.ndarray, x0: float) -> np.ndarray:
         """``held(x, qd, x0)``, with the rows' last moving samples found once."""
@@ -143,13 +178,16 @@ class Columns:
         return self._gear
 
     @property
-    def state(self) -> tuple[float, float]:
-        """(held direction, held gravity torque) after the last row; the gravity torque only moves
-        on when a term read it."""
+    def state(self) -> tuple:
+        """(held direction, held gravity torque, slip) after the last row; the gravity torque and
+        the slip elements only move on when a term read them."""
         d = self.direction
+        zs = {**self._z0, **{k: float(z[-1]) for k, z in self._z.items() if len(z)}}
+        q_last = float(self.sig["q"][-1]) if self._z and len(d) else self._q0
+        slip_state = None if q_last is None else (q_last, zs)
         if not len(d):
-            return self._s0, self._g0
-        return float(d[-1]), (self._g0 if self._gear is None else float(self._gear[-1]))
+            return self._s0, self._g0, slip_state
+        return float(d[-1]), (self._g0 if self._gear is None else float(self._gear[-1])), slip_state
 
     def factor(self, factor: dict) -> np.ndarray | float:
         f = factor["f"]
@@ -182,6 +220,8 @@ class Columns:
         if f == "sat":
             v = sig["qd"]
             return np.sign(v) * -np.expm1(-np.abs(v) / float(factor["scale"]))
+        if f == "slip":
+            return self.deflection(factor["d"]) / float(factor["d"])
         if f == "sin":
             return np.sin(float(factor["w"]) * _signal(sig, factor["name"]))
         if f == "cos":
@@ -238,13 +278,15 @@ def check(term: dict) -> None:
         missing = [k for k in need if k not in factor]
         if missing:
             raise ValueError(f"term {term['name']!r}: factor {factor['f']!r} lacks {', '.join(missing)}")
+        if factor["f"] == "slip" and not (isinstance(factor["d"], (int, float)) and 0 < factor["d"] < np.inf):
+            raise ValueError(f"term {term['name']!r}: a slip element's limit d must be a number > 0")
 
 
 # factors of older model files that read the reference tau_ext (the gear torque as tau_g - tau_ext)
 READS_REFERENCE = ("gear", "absgear", "payloadgear", "heldgear")
 _KNOWN = {"one": (), "p": (), "signal": ("name",), "dev": ("name", "center"), "abs": ("name",),
           "overload": (), "sign": (), "moving": (), "pos": (), "heldgravity": (),
-          "sat": ("scale",),
+          "sat": ("scale",), "slip": ("d",),
           "sin": ("name", "w"), "cos": ("name", "w")}
 
 
@@ -260,6 +302,11 @@ MOVING = {"f": "moving"}
 POS = {"f": "pos"}
 HELDGRAVITY = {"f": "heldgravity"}
 OVERLOAD = {"f": "overload"}
+
+
+def slip_(d: float) -> dict:
+    """A Maxwell-slip element of deflection limit d > 0 [rad or m]."""
+    return {"f": "slip", "d": float(d)}
 
 
 def sig_(name: str) -> dict:

@@ -289,6 +289,101 @@ class Position(Effect):
         return out
 
 
+class Hysteresis(Effect):
+    """Friction with memory: Maxwell-slip elements (``T.slip_``), each a spring that deflects with the
+    position and slips at its limit d, with the level terms (the elements take over part of the
+    model's Coulomb level, so the effect nests ``level``). Its force follows the position since the
+    last reversal rather than the velocity, as a smooth sign of motion would; a model without memory
+    misses it at every reversal. It must beat ``level`` and ``velocity`` (a smooth sign of motion
+    after each reversal) on held-out data.
+
+    The limits are ``elements`` values log-spaced from ``low_steps`` times the log's median
+    position step in motion (an element that slips within fewer steps is the sign of motion, which
+    the level has) up to ``high_share`` of the position range (wider elements never slip in the
+    log's reversals); both are the log's own, so a coarser or shorter log gets its own grid. Each
+    element's coefficient is its break-away force. One element may come out slightly negative
+    where its neighbours or the model's own Coulomb level carry the force; what is not physical
+    is friction that gives energy back over a slow closed cycle of the position: the elements
+    with the model's equivalent Coulomb level Fc, as rescaled (an element of limit 0), must dissipate
+    ``loop_energy`` >= 0 at every amplitude, else the effect is ``implausible``."""
+
+    name = N.HYSTERESIS
+    rivals = ((N.LEVEL,), (N.VELOCITY,))
+    description = "friction with memory: Maxwell-slip elements on the position since the last reversal"
+    elements = 4
+    low_steps = 2.0
+    high_share = 0.05
+    min_reversals = 4
+
+    def limits(self, ctx) -> np.ndarray:
+        """The elements' deflection limits (elements,) [rad or m], smallest first (empty: none fit)."""
+        lo = self.low_steps * Position().step(ctx)
+        hi = self.high_share * float(np.ptp(ctx.signals["q"]))
+        if lo <= 0 or hi <= 2 * lo:
+            return np.zeros(0)
+        return np.geomspace(lo, hi, self.elements)
+
+    def applicable(self, ctx):
+        q = ctx.signals.get("q")
+        if q is None or _constant(q):
+            return "the log has no position range"
+        if not len(self.limits(ctx)):
+            return "the position range is under 80 position steps: no element both deflects and slips"
+        direction = T.held_sign(ctx.signals["qd"])
+        reversals = int(np.count_nonzero(direction[1:] * direction[:-1] < 0))
+        if reversals < self.min_reversals:
+            return f"the joint reverses {reversals} times (fewer than {self.min_reversals})"
+        return None
+
+    def terms(self, ctx, residual):
+        return LEVEL_TERMS + [T.term(f"slip@{d:.6g}", T.slip_(float(f"{d:.6g}"))) for d in self.limits(ctx)]
+
+    def params(self, coef, ctx):
+        out = {}
+        forces = {float(k.split("@", 1)[1]): v for k, v in coef.items() if k.startswith("slip@")}
+        for i, d in enumerate(sorted(forces), 1):
+            out[f"d{i}"] = _par(d, ctx.q_unit)
+            out[f"F{i}"] = _par(forces[d], ctx.tau_unit)
+        out["F"] = _par(sum(forces.values()), ctx.tau_unit)
+        bp, bv = _level_coefs(coef)
+        lv = equivalent_levels(ctx.p, ctx.signals["qd"])
+        out["Fc model"] = _par((1.0 + bp) * lv["Fc"] if np.isfinite(lv["Fc"]) else 0.0, ctx.tau_unit)
+        out["Fv model"] = _par((1.0 + bp) * lv["Fv"] + bv if np.isfinite(lv["Fv"]) else bv, ctx.fv_unit)
+        return out
+
+    @staticmethod
+    def loop_energy(d: np.ndarray, force: np.ndarray, amplitude: np.ndarray) -> np.ndarray:
+        """Energy (len(amplitude),) [Nm rad or N m] the elements of limits d (k,) and break-away
+        forces force (k,) dissipate over one symmetric cycle of each amplitude: an element slips
+        2 (A - d) each way once A > d, so sum_i 4 F_i max(A - d_i, 0)."""
+        return 4.0 * np.maximum(amplitude[:, None] - d[None, :], 0.0) @ force
+
+    def implausible(self, params, ctx):
+        n = sum(1 for k in params if k.startswith("d"))
+        # the model's Coulomb level is one more element, of limit 0: the sum must not give energy back
+        d = np.array([0.0] + [params[f"d{i}"]["value"] for i in range(1, n + 1)], dtype=np.float64)
+        force = np.array([params["Fc model"]["value"] or 0.0] + [params[f"F{i}"]["value"] or 0.0
+                                                                 for i in range(1, n + 1)], dtype=np.float64)
+        # piecewise linear in A: negative somewhere only at a limit or, with a negative total, beyond the last
+        energy = self.loop_energy(d, force, d[1:])
+        bad = np.flatnonzero(energy < 0)
+        if len(bad) or force.sum() < 0:
+            where = (f"of amplitude {_fmt(float(d[1:][bad[0]]))} {params['d1']['unit']}" if len(bad) else
+                     f"wider than {_fmt(float(d[-1]))} {params['d1']['unit']}")
+            return (f"with the model's Coulomb level the elements give energy back over a cycle {where} "
+                    "(negative break-away forces): that is no "
+                    "friction; a smooth sign of motion (velocity) or a torque along the travel (position) may "
+                    "describe the shape")
+        return None
+
+    def summary(self, params):
+        n = sum(1 for k in params if k.startswith("d"))
+        forces = ", ".join(f"{_fmt(params[f'F{i}']['value'])} at {_fmt(params[f'd{i}']['value'])}" for i in range(1, n + 1))
+        return (f"break-away force {_fmt(params['F']['value'])} {params['F']['unit']} in {n} elements "
+                f"({forces} {params['d1']['unit'] if n else ''}) over the model's Fc "
+                f"{_fmt(params['Fc model']['value'])} {params['F']['unit']}")
+
+
 class Column(Effect):
     """Another numeric column of the log: a Coulomb-like and an additive term in its deviation."""
 
@@ -324,8 +419,8 @@ class Column(Effect):
                 f"dtau/d{self.column}": _par(coef.get(f"d{self.column}", 0.0), f"{u}/{cu}")}
 
 
-BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Gravity, Load, Payload, Quadrant, Velocity, Level,
-           Offset)
+BUILTIN = (Position, Temperature, Drift, Direction, Acceleration, Gravity, Load, Payload, Quadrant, Velocity,
+           Hysteresis, Level, Offset)
 NAMES = tuple(cls.name for cls in BUILTIN)
 
 
