@@ -73,6 +73,8 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
         changed = False
         for b in range(2 * nj):
             for g in weak_first:
+                if g == per[b]:
+                    continue             # the current strength: its score is ``best``
                 trial = per.copy()
                 trial[b] = g
                 cols = np.concatenate([np.repeat(trial[:nj], 10), trial[nj:]])
