@@ -223,6 +223,8 @@ class Observer:
         self.t_adapt = t
         self.suspected = np.where(self.contact, t, self.suspected)
         go = moves & (mag <= ad.freeze * self.threshold) & (t - self.suspected >= ad.holdoff)
+        if not go.any():
+            return                                     # every update below is for the joints that go
         x1 = self.f / self.scale                       # regressor (f / S, x2), target y / S
         x2 = 1.0 if ad.offset else 0.0                 # without the offset: scalar least squares on a
         e = -r / self.scale                            # a-priori error y/S - (a f/S + b)
@@ -231,8 +233,8 @@ class Observer:
         g2 = P12 * x1 + P22 * x2
         den = lam + x1 * g1 + x2 * g2
         k1, k2 = g1 / den, g2 / den
-        a = np.clip(self.a + k1 * e, self.lo, self.hi)
-        b = np.clip(self.b + k2 * e, -self.b_bound, self.b_bound)
+        a = np.minimum(np.maximum(self.a + k1 * e, self.lo), self.hi)     # np.clip, without its overhead
+        b = np.minimum(np.maximum(self.b + k2 * e, -self.b_bound), self.b_bound)
         n11 = (P11 - k1 * g1) / lam
         n12 = (P12 - k1 * g2) / lam
         n22 = (P22 - k2 * g2) / lam if ad.offset else P22
