@@ -54,12 +54,15 @@ def choose_prior(Phi, y, x0, s1, sigma, rows_of, tau_rms, counts, *, per_group: 
     p = Phi.shape[1]
     tie = 1e-9 * float(np.sum(np.square(Wr[:, -1])))     # round-off of the scores below
 
+    prior_rows = np.hstack([np.eye(p), np.zeros((p, 1))])
+
     def score(strengths):
         s = _with_prior(s1, nj, strengths)
+        scaled = np.append(s, 1.0)
         total = 0.0
         for Rk, Ro in zip(blocks, others):    # the fit without block k (ridge in z = d / s), scored on block k
-            q, r = np.linalg.qr(np.vstack([Ro[:, :p] * s, np.eye(p)]))
-            d = s * solve_triangular(r, q[:len(Ro)].T @ Ro[:, p])
+            r = np.linalg.qr(np.vstack([Ro * scaled, prior_rows]), mode="r")    # [R | Q^T rhs]: Q not formed
+            d = s * solve_triangular(r[:p, :p], r[:p, p])
             total += float(np.sum(np.square(Rk[:, :p] @ d - Rk[:, p])))
         return total
 
