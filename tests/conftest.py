@@ -187,11 +187,3 @@ def imported_modules(source: str, package: str, top_level: bool = False) -> set[
 
     visit(ast.parse(source).body)
     return found
-
-
-def pytest_collection_modifyitems(config, items):
-    """The files that hold a slow test first, each file's tests in their own order. With the README's
-    ``-n 2 --dist loadfile --no-loadscope-reorder`` the two processes start on the long files and end
-    together (longest first), instead of one running a long file alone at the end."""
-    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.path not in slow_files)
