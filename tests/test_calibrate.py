@@ -555,3 +555,23 @@ def test_the_gravity_recorded_with_the_log_is_used(arm, tmp_path):
         assert res.returncode == 0, res.stderr
         reports.append(json.loads(res.stdout)["fit"])
     assert reports[0] == reports[1]
+
+
+def test_a_consistent_fit_stopped_short_of_its_optimum_is_a_warning(monkeypatch):
+    """Cut to two Newton steps, the fit says it has not converged, and the report's warnings say so."""
+    from fricli.robot.calibration import fit, report
+
+    A, b, x_true, x0, s = _two_body_problem(0)
+    estimate = x_true.copy()
+    estimate[:10] *= -1
+    info = {}
+    monkeypatch.setattr(fit, "MAX_NEWTON", 2)
+    cb.consistent_fit(A, b, estimate, x0, s, 2, info=info)
+    assert info["newton_steps"] == 2 and not info["converged"]
+    rep = {"consistency_enforced": {"converged": False, "newton_steps": 2, "optimality_gap": info["gap"]},
+           "consistency": {"warnings": []}, "suspicious": []}
+    (line,) = report.warnings(rep)
+    assert line.startswith("the physically consistent fit stopped after 2 Newton steps")
+    monkeypatch.undo()
+    cb.consistent_fit(A, b, estimate, x0, s, 2, info=info)
+    assert info["converged"]

@@ -125,7 +125,7 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         ss0, _ = case.residual_ss()
         screen = case if screen_rows is None else case.take(screen_rows)
         best = None
-        for hyp in _hypotheses(screen, case, terms):
+        for hyp in _hypotheses(screen, case, terms, ss0):
             ss1, _ = hyp["case"].residual_ss()
             gain = _gain(ss0, ss1)
             if best is None or gain > best["gain"]:
@@ -143,12 +143,13 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     return {"joints": figures, "findings": findings}
 
 
-def _hypotheses(screen: _Case, case: _Case, terms):
+def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray):
     """Every change tried (zeros, directions, torque signs, ratio terms), screened on ``screen``
-    (some of ``case``'s rows, or ``case``): those that come near a finding there, made on ``case``."""
+    (some of ``case``'s rows, or ``case``): those that come near a finding there, made on ``case``
+    (whose scores are ``ss_case``)."""
     k = case.q.shape[1]
-    ss0, _ = screen.residual_ss()
-    near = lambda c: _gain(ss0, c.residual_ss()[0]) >= GAIN_MIN / 2    # noqa: E731
+    ss_screen, _ = screen.residual_ss()
+    near = lambda c: _gain(ss_screen, c.residual_ss()[0]) >= GAIN_MIN / 2    # noqa: E731
     for i in range(k):
         for quarter in QUARTERS:
             def moved(c, i=i, quarter=quarter):
@@ -164,19 +165,20 @@ def _hypotheses(screen: _Case, case: _Case, terms):
         d = np.eye(k)
         d[i, i] = -1.0
         sign = case.ratio.T @ d @ np.linalg.inv(case.ratio).T     # motor i's torque reversed
-        reversed_ = lambda c, sign=sign: _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))  # noqa: E731
+        def reversed_(c, sign=sign):      # the same motion: the model's terms are the case's
+            return _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))
         if near(reversed_(screen)):
             yield {"kind": "torque-sign", "joint": i, "motor": i, "case": reversed_(case)}
     for m in range(k):
         for j in range(k):
             if case.ratio[m, j] == 0.0:
                 continue
-            hyp = _best_factor(screen, case, terms, m, j)
+            hyp = _best_factor(screen, case, terms, m, j, ss_screen, ss_case)
             if hyp is not None:
                 yield hyp
 
 
-def _best_factor(screen: _Case, case: _Case, terms, m: int, j: int):
+def _best_factor(screen: _Case, case: _Case, terms, m: int, j: int, ss_screen: np.ndarray, ss_case: np.ndarray):
     """The ratio term R[m, j] times the factor that explains the torques best (a grid on ``screen``,
     refined on ``case`` when it comes near ``GAIN_MIN``), or None for a diagonal term within ``GROSS``
     (a gear ratio is a small integer's ratio off, not a few percent: those are the robot model's own
@@ -195,17 +197,15 @@ def _best_factor(screen: _Case, case: _Case, terms, m: int, j: int):
         return -math.inf if s is None else _gain(ss0, s.residual_ss()[0])
 
     grid = FACTORS[(FACTORS < GROSS[0]) | (FACTORS > GROSS[1])] if m == j else FACTORS
-    ss0 = screen.residual_ss()[0]
-    gains = [cost(screen, ss0, f) for f in grid]
+    gains = [cost(screen, ss_screen, f) for f in grid]
     i = int(np.argmax(gains))
     if gains[i] < GAIN_MIN / 2:
         return None                                  # nowhere near a finding: no need to refine
-    ss0 = case.residual_ss()[0]
-    at_grid = gains[i] if screen is case else cost(case, ss0, grid[i])
+    at_grid = gains[i] if screen is case else cost(case, ss_case, grid[i])
     lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
     from scipy.optimize import minimize_scalar
 
-    res = minimize_scalar(lambda x: -cost(case, ss0, math.exp(x)), bounds=(math.log(lo), math.log(hi)),
+    res = minimize_scalar(lambda x: -cost(case, ss_case, math.exp(x)), bounds=(math.log(lo), math.log(hi)),
                           method="bounded", options={"xatol": 1e-4})
     f = math.exp(res.x) if -res.fun >= at_grid else float(grid[i])
     if m == j and GROSS[0] <= f <= GROSS[1]:

@@ -186,7 +186,8 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
         resid = (y - Phi @ x).reshape(n, nj)
         enforced = {"inconsistent_before": broken, "rms_linear": {str(motion.names[j]): float(sigma[j])
                                                                   for j in range(nj)},
-                    "optimality_gap": solved["gap"], "newton_steps": solved["newton_steps"]}
+                    "optimality_gap": solved["gap"], "newton_steps": solved["newton_steps"],
+                    "converged": solved["converged"]}
     report = {
         "rows": int(n), "rows_dropped_at_ends": int((~keep).sum()), "edge_s": edge_s,
         "prior": float(prior), "prior_choice": prior_choice, "iterations": iteration,

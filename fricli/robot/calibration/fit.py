@@ -138,8 +138,8 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
     barrier method, damped Newton steps on t F(x) - sum log det J - sum log a, t grown by ``GROWTH``
     at each centre, from ``x_start`` or ``x0`` (the lower F) with each body's eigenvalues clipped. A
     dual point from each step bounds the optimum F* from below; ends when F(x) - F* <= ``GAP``
-    max(F(x), 1), or after ``MAX_NEWTON`` steps. ``info`` (optional) gets ``gap`` (F(x) - F* at most)
-    and ``newton_steps``. Returns x (p,): each body strictly consistent."""
+    max(F(x), 1), or after ``MAX_NEWTON`` steps. ``info`` (optional) gets ``gap`` (F(x) - F* at most),
+    ``newton_steps`` and ``converged`` (the gap within the tolerance). Returns x (p,): each body strictly consistent."""
     from scipy import linalg
 
     fixed = np.zeros(10 * nj) if fixed is None else fixed
@@ -218,7 +218,8 @@ def consistent_fit(A: np.ndarray, b: np.ndarray, x_start: np.ndarray, x0: np.nda
     if not np.all(np.isfinite(x)):
         raise FitError("the physically consistent fit did not converge")
     if info is not None:
-        info.update(gap=float(excess(d) - lower), newton_steps=step)
+        gap = excess(d) - lower
+        info.update(gap=float(gap), newton_steps=step, converged=bool(gap <= GAP * max(excess(d) + fu, 1.0)))
     return x
 
 

@@ -177,8 +177,14 @@ def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
 
 
 def warnings(report: dict) -> list[str]:
-    """The lines a calibration's report warns of: consistency warnings, then suspicious parameters."""
-    return report["consistency"]["warnings"] + report["suspicious"]
+    """The lines a calibration's report warns of: a consistent fit stopped short of its optimum,
+    consistency warnings, then suspicious parameters."""
+    enforced = report.get("consistency_enforced") or {}
+    short = [] if enforced.get("converged", True) else [
+        f"the physically consistent fit stopped after {enforced['newton_steps']} Newton steps, up to "
+        f"{enforced['optimality_gap']:.3g} (weighted cost) above its optimum: the calibrated parameters may "
+        "still move; excite the arm more or tighten the prior (--prior)"]
+    return short + report["consistency"]["warnings"] + report["suspicious"]
 
 
 def refuse_inconsistent(cal: Calibration) -> None:
