@@ -152,8 +152,7 @@ class Thresholds:
 class Observer:
     """The state of one arm's observer, adaptation and detection over J joints (module docstring).
     ``step`` takes one sample; the arrays are (J,). The joints do not interact: each is stepped in
-    plain floats (the same IEEE operations, in the same order, as on arrays; a few times faster at
-    a handful of joints than numpy's per-call cost)."""
+    plain floats (at a handful of joints numpy's cost per call would outweigh the arithmetic)."""
 
     def __init__(self, joints: int, gain: float = DEFAULT_GAIN, thresholds: Thresholds | None = None,
                  adaptation: Adaptation | None = None):

@@ -40,7 +40,7 @@ import numpy as np
 
 from fricli.models import register
 from fricli.models.base import FrictionModel, parameter_info
-from fricli.models.terms import held_sign
+from fricli.models.terms import held_sign, stop
 
 # name -> (unit on a rotary axis, unit on a linear axis, meaning)
 PARAM_INFO = parameter_info("fc", "fst", "vs", "fv", "kc", "q_lo", "q_hi",
@@ -57,24 +57,14 @@ def element_states(q: np.ndarray, qd: np.ndarray, deflection: np.ndarray, state:
     positions q (n,) and velocities qd (n,) (the direction of the first row's start), and the
     state after the last row: (z (N,), q_prev, started)."""
     d = np.asarray(deflection, dtype=np.float64)
-    n = len(q)
-    out = np.empty((n, len(d)))
-    if n == 0:
-        return out, state
+    if len(q) == 0:
+        return np.empty((0, len(d))), state
     if state is None:
-        z = np.sign(qd[0]) * d
-        q_prev = float(q[0])
+        z, q_prev = np.sign(qd[0]) * d, float(q[0])
     else:
         z, q_prev, _ = state
-        z = np.array(z, dtype=np.float64)
-    dq = np.diff(np.concatenate([[q_prev], np.asarray(q, dtype=np.float64)]))
-    lo = -d
-    for k in range(n):
-        z += dq[k]
-        np.minimum(z, d, out=z)
-        np.maximum(z, lo, out=z)
-        out[k] = z
-    return out, (z.copy(), float(q[-1]), True)
+    out = stop(q, d, z, q_prev)
+    return out, (out[-1].copy(), float(q[-1]), True)
 
 
 def position_basis(q: np.ndarray, q_lo: float, q_hi: float, k: int) -> np.ndarray:

@@ -110,18 +110,24 @@ def hold(x: np.ndarray, last: np.ndarray | None, x0: float) -> np.ndarray:
     return x if last is None else np.where(last >= 0, x[np.maximum(last, 0)], x0)
 
 
-def slip(q: np.ndarray, d: float, z0: float = 0.0, q0: float | None = None) -> np.ndarray:
-    """Deflection z (n,) of a Maxwell-slip element of limit d > 0 [rad or m] over positions q (n,):
-    z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 at position q0 (None: q[0], no step)."""
+def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
+    """Deflections z (n, N) [rad or m] of Maxwell-slip elements of limits d (N,) > 0 over positions
+    q (n,) (the stop operator): z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 (N,) at
+    position q0. Stepped in plain floats, element by element (a row-by-row loop over arrays of a few
+    elements would pay numpy's cost per call)."""
     q = np.asarray(q, dtype=np.float64)
-    out = np.empty(len(q))
+    d = np.atleast_1d(np.asarray(d, dtype=np.float64))
+    out = np.empty((len(q), len(d)))
     if not len(q):
         return out
-    dq = np.diff(q, prepend=q[0] if q0 is None else float(q0)).tolist()
-    z, hi, lo = float(z0), float(d), -float(d)
-    for k, step in enumerate(dq):
-        z = min(max(z + step, lo), hi)
-        out[k] = z
+    dq = np.diff(q, prepend=float(q0)).tolist()
+    starts = np.broadcast_to(np.asarray(z0, dtype=np.float64), d.shape).tolist()
+    for i, (limit, z) in enumerate(zip(d.tolist(), starts)):
+        column = []
+        for step in dq:
+            z = min(max(z + step, -limit), limit)
+            column.append(z)
+        out[:, i] = column
     return out
 
 
@@ -149,7 +155,8 @@ class Columns:
         """z (n,) of the slip element of limit d, from the previous batch's state."""
         d = float(d)
         if d not in self._z:
-            self._z[d] = slip(_signal(self.sig, "q"), d, self._z0.get(d, 0.0), self._q0)
+            q = _signal(self.sig, "q")
+            self._z[d] = stop(q, d, self._z0.get(d, 0.0), q[0] if self._q0 is None and len(q) else self._q0)[:, 0]
         return self._z[d]
 
     def _held(self, x: np.ndarray, x0: float) -> np.ndarray:
