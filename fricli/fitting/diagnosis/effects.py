@@ -328,7 +328,8 @@ class Hysteresis(Effect):
         if q is None or _constant(q):
             return "the log has no position range"
         if not len(self.limits(ctx)):
-            return "the position range is under 80 position steps: no element both deflects and slips"
+            return (f"the position range is under {2 * self.low_steps / self.high_share:g} position steps: no element "
+                    "both deflects and slips")
         direction = T.held_sign(ctx.signals["qd"])
         reversals = int(np.count_nonzero(direction[1:] * direction[:-1] < 0))
         if reversals < self.min_reversals:
