@@ -641,6 +641,42 @@ def test_train_base_on_continuous_excitation_trains_one_network_at_the_held_out_
     assert np.isfinite(model.predict(sig)[0]).all()
 
 
+def test_the_probe_in_a_child_process_gives_the_network_of_the_probe_in_a_thread(harmonic, monkeypatch):
+    """The probe trains in a forked process where fricli can fork, else in a thread: the same
+    bytes either way, the prior's share and the pre-sliding choice included."""
+    from fricli.numerics import forked
+
+    log = load(harmonic["log"])
+    results = []
+    for apart in (True, False):
+        monkeypatch.setattr(forked, "AVAILABLE", apart and forked.AVAILABLE)
+        results.append(learning.train_base(log, steps=300, seed=0))
+    (a, sa), (b, sb) = results
+    np.testing.assert_array_equal(a.net_.theta, b.net_.theta)
+    np.testing.assert_array_equal(a.history_val_, b.history_val_)
+    assert sa["held_out_choice"] == sb["held_out_choice"] and sa["prior"] == sb["prior"]
+    assert sa["bristles"] == sb["bristles"] and sa["steps"] == sb["steps"]
+
+
+def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(harmonic):
+    """The probe ends once its held-out loss has not improved by 0.1 % over its patience (given,
+    else PATIENCE_SHARE of the steps); the model trains on past the probe's best record and
+    keeps that record's weights."""
+    steps = 2000
+    model, summary = learning.train_base(load(harmonic["log"]), steps=steps, seed=0, patience=40)
+    history = model.history_val_                     # the probe's held-out curve, one loss per record
+    patience = 40 // model.eval_every_
+    best = int(np.argmin(history))
+    assert history.size < steps // model.eval_every_   # stopped early
+    level, since = np.inf, 0   # the trainer's plateau rule over the recorded losses
+    for k, loss in enumerate(history):
+        if loss < level * (1 - 1e-3):
+            level, since = loss, k
+    assert history.size - 1 - since == patience
+    assert summary["best_step"] == (best + 1) * model.eval_every_
+    assert best * model.eval_every_ < summary["steps"] <= steps
+
+
 def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):
     """Ten minutes of velocity steps lie too close together for the level histogram (no levels):
     train-base then trains on the steady rows, not on the ramps between them, and stays as good
