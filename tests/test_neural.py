@@ -677,6 +677,22 @@ def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(har
     assert best * model.eval_every_ < summary["steps"] <= steps
 
 
+def test_a_best_step_early_in_the_planned_steps_is_a_warning_when_training_stopped_early(tmp_path):
+    """The Franka joint's slow file (first 60 %): the probe's held-out loss is least within the first
+    1 % of the 7,000 steps, and the probe stops a quarter of them later; the warning counts the
+    steps planned, not the steps run."""
+    d = np.genfromtxt(shared_data("franka") / "joint2_slow.csv", delimiter=",", names=True, usecols=(0, 1, 2, 4))
+    keep = d["time"] < d["time"][0] + 0.6 * (d["time"][-1] - d["time"][0])
+    cols = {"t": d["time"][keep], "q": d["q2"][keep], "qd": d["dq2"][keep], "tau_m": d["q2_tau_J_compensate"][keep]}
+    log = write(table_from_arrays(cols, {k: UNITS[k] for k in cols}), tmp_path / "slow.parquet")
+    res = CliRunner().invoke(cli, ["train-base", log, "-o", str(tmp_path / "nn.npz"), "--no-gravity",
+                                   "--no-dynamics", "--json", "-q"])
+    assert res.exit_code == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["steps"] < out["max_steps"] == 7000 and out["best_step"] <= 70
+    assert f"least at step {out['best_step']} of 7000: training learned nothing" in res.stderr
+
+
 def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):
     """Ten minutes of velocity steps lie too close together for the level histogram (no levels):
     train-base then trains on the steady rows, not on the ramps between them, and stays as good
