@@ -1,6 +1,7 @@
 """Neural friction models, train-base and adapt, on synthetic logs (and the sample/real data when present)."""
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -586,7 +587,10 @@ def test_trainings_side_by_side_stop_together_when_one_fails():
     assert stop.is_set() and len(records) < 10 ** 6 and time.perf_counter() - start < 60
 
 
-def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds():
+def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds(monkeypatch):
+    from fricli.numerics import forked
+
+    monkeypatch.setattr(forked, "AVAILABLE", False)   # the stand-ins, in this process
     _Curve.made.clear()
     n = 1000
     sig = {"t": np.arange(n, dtype=float)}
@@ -619,10 +623,17 @@ def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves
     assert cv["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
     # every selected row served for training (in four folds of five) and none is set apart
     assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]
-    # the same seed gives the same networks, whichever thread trained which fold
-    again, _ = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
+    # the same seed gives the same networks, whichever thread or process trained which fold
+    from fricli.numerics import forked
+
+    forked_before, forked.AVAILABLE = forked.AVAILABLE, not forked.AVAILABLE and sys.platform.startswith("linux")
+    try:
+        again, again_summary = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
+    finally:
+        forked.AVAILABLE = forked_before
     for a, b in zip(model.nets_, again.nets_):
         np.testing.assert_array_equal(a.theta, b.theta)
+    assert again_summary["cross_validation"] == cv and again_summary["prior"] == summary["prior"]
 
 
 def test_train_base_on_continuous_excitation_trains_one_network_at_the_held_out_step(harmonic):
