@@ -40,7 +40,7 @@ import numpy as np  # noqa: E402
 
 from fricli.core import logs
 from fricli.fitting import learning
-from fricli.numerics import physics  # noqa: E402
+from fricli.numerics import forked, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.numerics.nn import activations as acts  # noqa: E402
 from fricli.numerics.threads import blas_threads, single_threaded  # noqa: E402
@@ -397,14 +397,14 @@ def training_rows(log: logs.Log, arch: str, steps: int) -> tuple[np.ndarray, ...
     def net_input(x):
         return np.ascontiguousarray(x, dtype=np.float32)
 
-    original = Trainer.fit
-    Trainer.fit = catch
+    original, apart = Trainer.fit, forked.AVAILABLE
+    Trainer.fit, forked.AVAILABLE = catch, False   # both trainers in this process, where the catch is
     try:
         learning.train_base(log, arch=arch, steps=steps)
     except Caught:
         pass
     finally:
-        Trainer.fit = original
+        Trainer.fit, forked.AVAILABLE = original, apart
     return caught["x"], caught["t"], caught.get("xv"), caught.get("tv")
 
 

@@ -20,6 +20,7 @@ from click.testing import CliRunner
 from conftest import ROOT, make_table, write
 from fricli import models
 from fricli.core import errors
+from fricli.numerics import forked
 from fricli.cli import cli
 
 
@@ -51,6 +52,24 @@ def setup(tmp_path):
     return log, model, model.read_bytes()
 
 
+def children_of(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux; [] elsewhere)."""
+    try:
+        with open(f"/proc/{pid}/task/{pid}/children") as f:
+            return [int(p) for p in f.read().split()]
+    except OSError:
+        return []
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, ended but not reaped, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def names(folder):
     return sorted(p.name for p in folder.iterdir())
 
@@ -63,8 +82,15 @@ def test_sigkill_during_training_keeps_the_previous_model(tmp_path):
     time.sleep(0.3)
     other = CliRunner().invoke(cli, ["train-base", log, "-o", str(model), "--steps", "5", "-q"])
     assert other.exit_code == errors.LOCKED, other.stderr  # a second job is refused meanwhile
+    if forked.AVAILABLE:   # the held-out probe trains in a child process
+        wait_until(lambda: children_of(proc.pid), proc)
+    children = children_of(proc.pid)
     proc.send_signal(signal.SIGKILL)
     assert proc.wait(timeout=30) == -signal.SIGKILL
+    end = time.monotonic() + 10   # ... which stops at its next step once its parent is gone
+    while any(alive(pid) for pid in children):
+        assert time.monotonic() < end, "the child process outlived its killed parent"
+        time.sleep(0.05)
     assert model.read_bytes() == previous
     assert models.load(str(model))
     assert names(tmp_path) == [".model.npz.lock", "log.parquet", "model.npz"]  # no temporary file

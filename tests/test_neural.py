@@ -1,6 +1,7 @@
 """Neural friction models, train-base and adapt, on synthetic logs (and the sample/real data when present)."""
 
 import json
+import sys
 
 import numpy as np
 import pytest
@@ -586,7 +587,10 @@ def test_trainings_side_by_side_stop_together_when_one_fails():
     assert stop.is_set() and len(records) < 10 ** 6 and time.perf_counter() - start < 60
 
 
-def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds():
+def test_cross_validated_steps_come_from_the_mean_validation_curve_of_the_folds(monkeypatch):
+    from fricli.numerics import forked
+
+    monkeypatch.setattr(forked, "AVAILABLE", False)   # the stand-ins, in this process
     _Curve.made.clear()
     n = 1000
     sig = {"t": np.arange(n, dtype=float)}
@@ -619,10 +623,17 @@ def test_train_base_on_continuous_excitation_stops_every_fold_at_the_mean_curves
     assert cv["held_out_rmse"] == pytest.approx(model.y_scale_ * np.sqrt(model.history_val_.min()))
     # every selected row served for training (in four folds of five) and none is set apart
     assert summary["val_rows"] == 0 and model.n_train_ == summary["train_rows"]
-    # the same seed gives the same networks, whichever thread trained which fold
-    again, _ = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
+    # the same seed gives the same networks, whichever thread or process trained which fold
+    from fricli.numerics import forked
+
+    forked_before, forked.AVAILABLE = forked.AVAILABLE, not forked.AVAILABLE and sys.platform.startswith("linux")
+    try:
+        again, again_summary = learning.train_base(load(harmonic["log"]), steps=300, seed=0, ensemble=5)
+    finally:
+        forked.AVAILABLE = forked_before
     for a, b in zip(model.nets_, again.nets_):
         np.testing.assert_array_equal(a.theta, b.theta)
+    assert again_summary["cross_validation"] == cv and again_summary["prior"] == summary["prior"]
 
 
 def test_train_base_on_continuous_excitation_trains_one_network_at_the_held_out_step(harmonic):
@@ -639,6 +650,58 @@ def test_train_base_on_continuous_excitation_trains_one_network_at_the_held_out_
     np.testing.assert_array_equal(last.net_.theta, model.net_.theta)   # the same seed, the same network
     assert "prior" in summary and 0.0 <= summary["prior"]["blend"] <= 1.0
     assert np.isfinite(model.predict(sig)[0]).all()
+
+
+def test_the_probe_in_a_child_process_gives_the_network_of_the_probe_in_a_thread(harmonic, monkeypatch):
+    """The probe trains in a forked process where fricli can fork, else in a thread: the same
+    bytes either way, the prior's share and the pre-sliding choice included."""
+    from fricli.numerics import forked
+
+    log = load(harmonic["log"])
+    results = []
+    for apart in (True, False):
+        monkeypatch.setattr(forked, "AVAILABLE", apart and forked.AVAILABLE)
+        results.append(learning.train_base(log, steps=300, seed=0))
+    (a, sa), (b, sb) = results
+    np.testing.assert_array_equal(a.net_.theta, b.net_.theta)
+    np.testing.assert_array_equal(a.history_val_, b.history_val_)
+    assert sa["held_out_choice"] == sb["held_out_choice"] and sa["prior"] == sb["prior"]
+    assert sa["bristles"] == sb["bristles"] and sa["steps"] == sb["steps"]
+
+
+def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(harmonic):
+    """The probe ends once its held-out loss has not improved by 0.1 % over its patience (given,
+    else PATIENCE_SHARE of the steps); the model trains on past the probe's best record and
+    keeps that record's weights."""
+    steps = 2000
+    model, summary = learning.train_base(load(harmonic["log"]), steps=steps, seed=0, patience=40)
+    history = model.history_val_                     # the probe's held-out curve, one loss per record
+    patience = 40 // model.eval_every_
+    best = int(np.argmin(history))
+    assert history.size < steps // model.eval_every_   # stopped early
+    level, since = np.inf, 0   # the trainer's plateau rule over the recorded losses
+    for k, loss in enumerate(history):
+        if loss < level * (1 - 1e-3):
+            level, since = loss, k
+    assert history.size - 1 - since == patience
+    assert summary["best_step"] == (best + 1) * model.eval_every_
+    assert best * model.eval_every_ < summary["steps"] <= steps
+
+
+def test_a_best_step_early_in_the_planned_steps_is_a_warning_when_training_stopped_early(tmp_path):
+    """The Franka joint's slow file (first 60 %): the probe's held-out loss is least within the first
+    1 % of the 7,000 steps, and the probe stops a quarter of them later; the warning counts the
+    steps planned, not the steps run."""
+    d = np.genfromtxt(shared_data("franka") / "joint2_slow.csv", delimiter=",", names=True, usecols=(0, 1, 2, 4))
+    keep = d["time"] < d["time"][0] + 0.6 * (d["time"][-1] - d["time"][0])
+    cols = {"t": d["time"][keep], "q": d["q2"][keep], "qd": d["dq2"][keep], "tau_m": d["q2_tau_J_compensate"][keep]}
+    log = write(table_from_arrays(cols, {k: UNITS[k] for k in cols}), tmp_path / "slow.parquet")
+    res = CliRunner().invoke(cli, ["train-base", log, "-o", str(tmp_path / "nn.npz"), "--no-gravity",
+                                   "--no-dynamics", "--json", "-q"])
+    assert res.exit_code == 0, res.stderr
+    out = json.loads(res.stdout)
+    assert out["steps"] < out["max_steps"] == 7000 and out["best_step"] <= 70
+    assert f"least at step {out['best_step']} of 7000: training learned nothing" in res.stderr
 
 
 def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):

@@ -415,6 +415,33 @@ def test_patience_stops_training_and_keeps_the_best_weights(rng):
     assert sse(net, xv, tv) / 100 == pytest.approx(tr.history_val_.min(), rel=1e-6)
 
 
+def test_a_progress_report_returning_true_ends_training_there(rng):
+    x, t = toy(rng, 200)
+    net = small_net(rng)
+    tr = Trainer(steps=1000, eval_every=10, on_eval=lambda step, *_: step >= 300).fit(net, x, t, rng=rng)
+    assert tr.steps_ == 300 and tr.history_train_.size == 30
+
+
+def test_without_keep_best_the_last_weights_stay_and_no_loss_is_evaluated(rng, monkeypatch):
+    from fricli.numerics.nn import training
+
+    x, t = toy(rng, 200)
+    kept, last = small_net(rng), small_net(rng)
+    last.theta[...] = kept.theta
+    Trainer(steps=200, lr=0.05, eval_every=10).fit(kept, x, t, rng=np.random.default_rng(1))
+
+    def no_evaluation(self):
+        raise AssertionError("the loss was evaluated")
+
+    monkeypatch.setattr(training.Evaluator, "sse", no_evaluation)
+    thetas = []
+    tr = Trainer(steps=200, lr=0.05, eval_every=10, keep_best=False,
+                 on_eval=lambda *_: thetas.append(last.theta.copy())).fit(last, x, t, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(last.theta, thetas[-1])   # the weights of the last step
+    assert tr.history_train_.size == 20 and tr.steps_ == 200
+    assert any(np.array_equal(kept.theta, th) for th in thetas)   # the same run, which kept its best
+
+
 def test_unknown_schedule_refused():
     with pytest.raises(ValueError, match="schedule"):
         Trainer(steps=10, schedule="linear")

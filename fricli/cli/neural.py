@@ -153,9 +153,9 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
                  "friction at those speeds only (below the slowest a dissipative network holds its level, above the "
                  "fastest it grows by its slope: fricli inspect); log constant-velocity motion at "
                  f"{learning.MIN_VELOCITY_LEVELS // 2} speeds or more each way for its velocity dependence")
-        if summary["steps"] >= 100 and summary["best_step"] <= summary["steps"] // 100:
+        if summary["max_steps"] >= 100 and summary["best_step"] <= summary["max_steps"] // 100:
             warn(f"warning: {the_log.name}{where}: the validation error was least at step {summary['best_step']} "
-                 f"of {summary['steps']}: training learned nothing the held-out rows confirm; the target may hold "
+                 f"of {summary['max_steps']}: training learned nothing the held-out rows confirm; the target may hold "
                  "what no friction of velocity and load gives (fricli diagnose says what)")
         say(wrote(out), quiet)
         return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}

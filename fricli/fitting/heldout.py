@@ -4,8 +4,10 @@ NN_add helps on held-out halves of the log (``cross_validate``)."""
 
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from typing import Callable
 
 import numpy as np
@@ -14,6 +16,7 @@ from fricli.core.errors import DataError
 from fricli.fitting import training_data
 from fricli.models.base import FrictionModel
 from fricli.numerics.nn.training import Stopped
+from fricli.numerics import forked
 from fricli.numerics.threads import single_threaded
 
 # adapt keeps NN_add only when, trained on one half of the log's pieces and scored on the other
@@ -31,6 +34,9 @@ from fricli.numerics.threads import single_threaded
 MIN_GAIN = 0.01
 SIGNIFICANCE = 2.0
 FOLDS = 2
+# chosen_on_held_out's probe stops after this share of its steps without a better held-out loss
+PATIENCE_SHARE = 0.25
+_SNAPSHOTS = "__snapshots__"
 WORKERS = 2   # trainings run side by side (numpy releases the GIL; each trains on one BLAS thread)
 
 
@@ -45,27 +51,51 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     [Nm]) stopped at the step that a probe network, trained on ``train`` alone, shows best on
     the held-out rows ``val``.
 
-    Both train at once (``WORKERS`` threads), with the same scales (those of every row), the
-    same steps and learning-rate schedule and the same initial weights (generators of one seed
-    drawn from ``rng``): the model is the probe's network trained on more rows, so the probe's
-    best step carries over to it, early steps included. The full model
-    records its weights at every loss record and keeps those of the probe's best record.
+    Both train at once (the probe in a child process where ``forked`` can fork, else on
+    ``WORKERS`` threads), with the same scales (those of every row), the same learning-rate
+    schedule over ``steps`` and the same initial weights (generators of one seed drawn from
+    ``rng``): the model is the probe's network trained on more rows, so the probe's best step
+    carries over to it, early steps included. The probe stops once its held-out loss has not
+    improved by 0.1 % for its patience (the model's, else PATIENCE_SHARE of ``steps``); the
+    model records its weights at every loss record, trains on until it has passed the probe's
+    best record and keeps the weights of that record. Which weights are kept depends on the
+    probe's losses alone, not on which training runs ahead.
     Returns (model, probe, summary): the probe stays fitted for the choices made on its
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
     chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
     """
     rows = np.union1d(train, val)
     model, probe = new_model(steps), new_model(steps)
+    probe.patience = probe.patience or max(1, round(PATIENCE_SHARE * steps))
+    model.patience = None
     model.set_scales(subset(sig, rows), target[rows])
     seed = int(rng.integers(2 ** 63))
     seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
     stop = threading.Event()
-    progress = shared_progress(on_eval, 2 * steps, 2, stop)
-    jobs = ((probe, (subset(sig, train), target[train], subset(sig, val), target[val]),
-             dict(rng=seeds[0], scales_from=model, on_eval=progress[0], stop=stop)),
-            (model, (subset(sig, rows), target[rows]),
-             dict(rng=seeds[1], scales_from=model, on_eval=progress[1], snapshots=True, stop=stop)))
-    run_parallel([lambda m=m, a=a, k=k: m.fit(*a, **k) for m, a, k in jobs], stop)
+    apart = forked.AVAILABLE
+    progress = shared_progress(on_eval, steps if apart else 2 * steps, 1 if apart else 2, stop)
+    board = forked.shared_int64(2)   # [1 once the probe has finished, its best record]
+    probe_args = (subset(sig, train), target[train], subset(sig, val), target[val])
+
+    def fit_probe(report: Callable | None, halt):
+        probe.fit(*probe_args, rng=seeds[0], scales_from=model, on_eval=report, stop=halt)
+        board[1] = int(np.argmin(probe.history_val_))
+        board[0] = 1
+        return _packed(probe)
+
+    def model_report(*args) -> bool:
+        progress[-1](*args)
+        return bool(board[0] and len(model.snapshots_) > board[1])
+
+    fit_model = partial(model.fit, subset(sig, rows), target[rows], rng=seeds[1], scales_from=model,
+                        on_eval=model_report, snapshots=True, stop=stop)
+    if apart:
+        # the probe in a child process (see fricli.numerics.forked: threads would share one lock)
+        with single_threaded():
+            parcel, _ = forked.beside(partial(fit_probe, None, forked.Orphaned(os.getpid())), fit_model)
+        probe = _unpacked(type(probe), parcel)
+    else:
+        run_parallel([partial(fit_probe, progress[0], stop), fit_model], stop)
     record = min(int(np.argmin(probe.history_val_)), len(model.snapshots_) - 1)
     model.net_.theta[...] = model.snapshots_[record]
     model.snapshots_ = None
@@ -75,6 +105,45 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     model.n_val_ = 0
     return model, probe, {"step": int(model.best_step_), "val_rows": val,
                           "held_out_rmse": float(np.sqrt(probe.history_val_[record])) * probe.y_scale_}
+
+
+def _packed(model: FrictionModel) -> tuple[dict, dict[str, np.ndarray]]:
+    """A fitted model as (params, arrays) for ``forked.beside``, its weight snapshots included."""
+    arrays = dict(model.get_arrays())
+    if getattr(model, "snapshots_", None):
+        arrays[_SNAPSHOTS] = np.stack(model.snapshots_)
+    return model.get_params(), arrays
+
+
+def _unpacked(cls, parcel: tuple[dict, dict[str, np.ndarray]]) -> FrictionModel:
+    params, arrays = parcel
+    snapshots = arrays.pop(_SNAPSHOTS, None)
+    model = cls.from_parts(params, arrays, {})
+    model.snapshots_ = [] if snapshots is None else list(snapshots)
+    return model
+
+
+def fitted_side_by_side(fits: list[Callable[[bool], FrictionModel]], stop: threading.Event) -> list[FrictionModel]:
+    """Run the calls ``fits`` (``fit(here)`` fits a model and returns it; ``here`` False: in a
+    forked child, which has no progress display and stops once its parent is gone: see
+    ``apart``), two at a time: the first of each pair in a child process and the second in this
+    one where ``forked`` can fork, else all on ``run_parallel``'s threads. The models, in order
+    (those fitted in a child rebuilt from their parameters)."""
+    if not forked.AVAILABLE:
+        return run_parallel([partial(fit, True) for fit in fits], stop)
+    done = []
+    with single_threaded():
+        for k in range(0, len(fits) - 1, 2):
+            parcel, here = forked.beside(lambda f=fits[k]: _packed(f(False)), partial(fits[k + 1], True))
+            done += [_unpacked(type(here), parcel), here]
+        if len(fits) % 2:
+            done.append(fits[-1](True))
+    return done
+
+
+def apart(k: int, n: int) -> bool:
+    """Whether ``fitted_side_by_side`` runs the k-th of n fits in a child process."""
+    return forked.AVAILABLE and k % 2 == 0 and k < n - 1
 
 
 def run_parallel(tasks: list[Callable[[], object]], stop: threading.Event | None = None) -> list:
@@ -141,12 +210,17 @@ def cross_validated_steps(new_model: Callable[[int], FrictionModel], steps: int,
             splits.append((held, train, val))
     seeds = rng.spawn(len(splits))
     stop = threading.Event()
-    progress = shared_progress(on_eval, len(splits) * steps, len(splits), stop)
-    fitted = [new_model(steps) for _ in splits]
-    run_parallel([lambda m=m, tv=tv, r=r, p=p: m.fit(subset(sig, tv[1]), target[tv[1]], subset(sig, tv[2]),
-                                                     target[tv[2]], rng=r, on_eval=p, stop=stop,
-                                                     **fit_kwargs)
-                  for m, tv, r, p in zip(fitted, splits, seeds, progress)], stop)
+    n, parent = len(splits), os.getpid()
+    here = sum(not apart(k, n) for k in range(n))
+    progress = iter(shared_progress(on_eval, here * steps, here, stop))
+
+    def fit(k: int, in_this_process: bool) -> FrictionModel:
+        _, train, val = splits[k]
+        return new_model(steps).fit(subset(sig, train), target[train], subset(sig, val), target[val], rng=seeds[k],
+                                    on_eval=next(progress) if in_this_process else None,
+                                    stop=stop if in_this_process else forked.Orphaned(parent), **fit_kwargs)
+
+    fitted = fitted_side_by_side([partial(fit, k) for k in range(n)], stop)
     curves = [np.asarray(model.history_val_) * model.y_scale_ ** 2 for model in fitted]
     weights = [val.size for _, _, val in splits]
     held_out = [held for held, _, _ in splits]

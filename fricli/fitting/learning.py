@@ -11,7 +11,8 @@ import numpy as np
 from fricli.core import logs, metrics
 from fricli.fitting import training_data
 # held-out scoring, importable from here as before
-from fricli.fitting.heldout import (FOLDS, MIN_GAIN, SIGNIFICANCE, WORKERS, chosen_on_held_out,  # noqa: F401
+from fricli.fitting.heldout import (FOLDS, MIN_GAIN, PATIENCE_SHARE, SIGNIFICANCE, WORKERS,  # noqa: F401
+                                    chosen_on_held_out,
                                     cross_validate, cross_validated_steps, rms_ratio, run_parallel,
                                     shared_progress, subset)
 from fricli.fitting.steady import steady_state_mask

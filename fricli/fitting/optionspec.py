@@ -168,7 +168,8 @@ TRAIN_BASE = (
            f"Adam steps [default: cosine {learning.COSINE_STEPS['dissipative']:,} for dissipative, "
            f"{learning.SCHEDULES['cosine'][1]:,} for the others; paper {learning.SCHEDULES['paper'][1]:,}].", low=1),
     Option("patience", "int", None,
-           "Stop early when the validation loss has not improved by 0.1 % for STEPS steps.", low=1, metavar="STEPS"),
+           "Stop early when the validation loss has not improved by 0.1 % for STEPS steps [a log without levels: "
+           "the held-out probe's, by default after a quarter of --steps].", low=1, metavar="STEPS"),
     Option("lr", "float", 0.01, "Adam learning rate.", low=0, low_open=True),
     Option("batch_size", "int", 0, "Samples per step; 0 = full batch.", low=0),
     Option("seed", "int", 0, "Seed for the row selection, the initial weights and the batches."),

@@ -176,7 +176,9 @@ class DissipativeFriction(FrictionModel):
 
         ``scales_from``: a model whose scales (``set_scales``) to take instead of fitting them
         on ``sig``; ``snapshots``: keep the weights at every loss record in ``snapshots_``
-        (one theta per record of ``history_val_``).
+        (one theta per record of ``history_val_``) and, without validation rows, leave the
+        choice of weights to the caller (the last step's stay). ``on_eval`` returning True ends
+        training there.
         """
         target = np.asarray(target, dtype=np.float64)
         if target.size == 0:
@@ -199,11 +201,10 @@ class DissipativeFriction(FrictionModel):
         if snapshots:
             def record(*args):
                 self.snapshots_.append(net.theta.copy())
-                if on_eval is not None:
-                    on_eval(*args)
+                return None if on_eval is None else on_eval(*args)
         trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
                           batch_size=self.batch_size, eval_every=self.eval_every, on_eval=record,
-                          schedule=self.schedule, patience=self.patience, stop=stop)
+                          schedule=self.schedule, patience=self.patience, stop=stop, keep_best=not snapshots)
         trainer.fit(net, x, y, xv, tv, rng=rng)
         self.net_ = net
         record_training(self, trainer, x.shape[1], 0 if xv is None else xv.shape[1])

@@ -187,7 +187,10 @@ class Trainer:
     batch_size  0 = full batch
     eval_every  steps between loss records and best-weight checks (default: once per epoch,
                 or so that a run has about 2000 records)
-    on_eval     called as on_eval(step, total_steps, train_loss, val_loss) at every record
+    on_eval     called as on_eval(step, total_steps, train_loss, val_loss) at every record;
+                when it returns True, training ends there
+    keep_best   False: without a validation set, the loss is not evaluated at records and the
+                last weights stay (for a caller that keeps weights of its own choosing)
     patience    early stopping: after this many steps without the monitored loss (validation,
                 else training) falling below (1 - min_delta) times its best, the learning rate
                 is multiplied by ``lr_factor``, from the best weights so far, up to ``lr_drops``
@@ -202,7 +205,7 @@ class Trainer:
                  batch_size: int = 0, eval_every: int | None = None,
                  on_eval: Callable[[int, int, float, float | None], None] | None = None,
                  patience: int | None = None, min_delta: float = 1e-3, lr_drops: int = 0, lr_factor: float = 0.3,
-                 schedule: str = "constant", lr_final: float = 0.0, stop=None):
+                 schedule: str = "constant", lr_final: float = 0.0, stop=None, keep_best: bool = True):
         if steps is None and epochs is None:
             raise ValueError("give steps or epochs")
         if epochs is not None and batch_size <= 0:
@@ -213,7 +216,7 @@ class Trainer:
         self.batch_size, self.eval_every, self.on_eval = int(batch_size), eval_every, on_eval
         self.patience, self.min_delta, self.lr_drops, self.lr_factor = patience, min_delta, lr_drops, lr_factor
         self.schedule, self.lr_final = schedule, lr_final
-        self.stop = stop
+        self.stop, self.keep_best = stop, keep_best
 
     def fit(self, net: Network, x: np.ndarray, t: np.ndarray, x_val: np.ndarray | None = None,
             t_val: np.ndarray | None = None, rng: np.random.Generator | None = None) -> "Trainer":
@@ -244,12 +247,13 @@ class Trainer:
         hist_train, hist_val = [], []
         plateau = {"since": 0, "level": math.inf, "drops": 0, "stop": False}
 
-        checker = Evaluator(net, x_val, t_val) if has_val else Evaluator(net, x, t)
+        checking = has_val or self.keep_best
+        checker = Evaluator(net, x_val, t_val) if has_val else Evaluator(net, x, t) if checking else None
         n_check = (x_val.shape[1] if has_val else n) * n_out
 
         def record(step: int, train_loss: float) -> None:
             nonlocal best_loss, best_step
-            pick = checker.sse() / n_check
+            pick = checker.sse() / n_check if checking else train_loss
             val_loss = pick if has_val else None
             if not math.isfinite(pick):
                 raise FitError(f"training diverged at step {step}: the loss is not finite (try a smaller --lr)")
@@ -258,9 +262,10 @@ class Trainer:
                 hist_val.append(val_loss)
             if pick < best_loss:
                 best_loss, best_step = pick, step
-                np.copyto(best, net.theta)
-            if self.on_eval:
-                self.on_eval(step, total, train_loss, val_loss)
+                if checking:
+                    np.copyto(best, net.theta)
+            if self.on_eval and self.on_eval(step, total, train_loss, val_loss) is True:
+                plateau["stop"] = True
             if self.patience is not None:
                 watch(step, pick)
 
@@ -274,7 +279,8 @@ class Trainer:
                 plateau["drops"] += 1
                 plateau["since"] = step
                 opt.lr *= self.lr_factor
-                np.copyto(net.theta, best)
+                if checking:
+                    np.copyto(net.theta, best)
 
         acc = [0.0, 0]  # training loss summed since the last record, steps
 
@@ -305,7 +311,8 @@ class Trainer:
                 self._mini_batch(net, x, t, batch, per_epoch, total, rng, step_done)
             else:
                 self._full_batch(net, x, t, total, step_done)
-        np.copyto(net.theta, best)
+        if checking:
+            np.copyto(net.theta, best)
         self.history_train_ = np.asarray(hist_train, dtype=np.float64)
         self.history_val_ = np.asarray(hist_val, dtype=np.float64)
         self.best_step_, self.best_loss_, self.steps_, self.eval_every_ = best_step, best_loss, ran[0], every
