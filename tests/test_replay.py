@@ -126,8 +126,12 @@ def test_simulated_contacts_at_twice_the_threshold_are_flagged_within_20_ms(tmp_
     thr_path = tmp_path / "t.json"
     assert invoke("thresholds", folder, free, "-o", thr_path, "-q").exit_code == 0
     thr = observer.Thresholds.read(str(thr_path))
-    size = 2.0 * float(thr.threshold[0])
+    assert thr.persistence == observer.DEFAULT_PERSISTENCE and thr.shares[0] > 0
     probe = simulator.simulate("adapt", 2, seed=2, rate=1000.0, friction_state="base")
+    simulator.write(probe, str(tmp_path / "probe.parquet"))
+    f0 = replay.read_arm(str(folder), str(tmp_path / "probe.parquet")).f0
+    # twice the largest threshold in force in motion on the probe: base + share x |the model's friction|
+    size = 2.0 * float(thr.threshold[0] + thr.shares[0] * np.max(np.abs(f0)))
     t, qd = probe.column("t").to_numpy(), probe.column("qd").to_numpy()
     moving = np.flatnonzero((np.abs(qd) > 0.1) & (t > 5.0))
     starts = [float(t[moving[i]]) for i in np.linspace(0, len(moving) - 1, 4, endpoint=False).astype(int)]
