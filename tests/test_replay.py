@@ -54,6 +54,15 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     static = replay.run(arm, observer.DEFAULT_GAIN, None, None)
     direct = logs.external_torque(arm.signals[0], arm.f0[:, 0])
     assert np.corrcoef(static.tau_ext[100:, 0], direct[100:])[0, 1] > 0.9
+    # the constant thresholds of before: no share of the friction, a flag on the first sample beyond
+    settings = observer.Thresholds.read(str(thr))
+    assert settings.persistence == observer.DEFAULT_PERSISTENCE and settings.shares[0] > 0
+    before = tmp_path / "before.json"
+    done = invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", before, "--persistence", "1", "--no-level-share", "-q")
+    assert done.exit_code == 0, done.output
+    old = observer.Thresholds.read(str(before))
+    assert old.persistence == 1 and old.shares[0] == 0.0 and old.threshold[0] == settings.threshold[0]
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", before, "--persistence", "0").exit_code == 2
     # bad input: one line and the exit code
     assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
     thr.write_text("[1]")

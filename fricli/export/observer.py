@@ -38,7 +38,8 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
     a = f"{prefix}_arm"
     table = lambda xs: "{" + ", ".join(c.num(x) for x in xs) + "}"   # noqa: E731
     huge = "{" + ", ".join(["HUGE_VAL"] * n) + "}"
-    detection = (f"thresholds of fricli thresholds on {', '.join(thresholds.logs) or 'its logs'}" if thresholds
+    detection = (f"thresholds of fricli thresholds on {', '.join(thresholds.logs) or 'its logs'} (in motion plus a "
+                 f"share of the predicted friction), flagged after {persist} samples in a row beyond" if thresholds
                  else "detection off (no thresholds)")
     adapting = "off"
     if adaptation is not None:

@@ -254,6 +254,19 @@ def c_check(work: str, fixed: str, thresholds: str, runs: list) -> dict:
     return out
 
 
+def halves(replayed: tuple) -> dict:
+    """Rows flagged per joint and events in the first and the second half (in time) of a replay
+    (its output path and --json figures)."""
+    c = columns(replayed[0])
+    middle = 0.5 * (c["t"][0] + c["t"][-1])
+    first = c["t"] < middle
+    out = {}
+    for part, rows in (("first", first), ("second", ~first)):
+        out[part] = {"rows": {str(j): int(c["contact"][rows, k].sum()) for k, j in enumerate(JOINTS)},
+                     "events": int(sum(bool(e["start"] < middle) == (part == "first") for e in replayed[1]["events"]))}
+    return out
+
+
 def plot_pushes(runs: dict, thr: observer.Thresholds, path: str) -> None:
     from matplotlib.figure import Figure
 
@@ -294,6 +307,9 @@ def main(argv=None) -> None:
     fit = os.path.join(work, f"{FIT_RUN}-cal.parquet")
     validation = [os.path.join(work, f"{n}-cal.parquet") for n in study["validation_runs"]]
     load = os.path.join(work, f"{LOAD_RUN}-cal-payload.parquet")
+    # the payload run with the payload the joints carry, identified on its first half (the case study's)
+    seen = os.path.join(work, f"{LOAD_RUN}-cal-seen.parquet")
+    loads = [load] + ([seen] if os.path.exists(seen) else [])
     jointwise = [imported(args.data, work, "jointwise_motion", f"ur-20_01_22-joint_{j}", cal) for j in JOINTS]
     collision = [imported(args.data, work, "collision", f"ur-20_01_22-push_pose_{k}", cal) for k in (1, 2)]
     thresholds = os.path.join(work, "thresholds.json")
@@ -303,7 +319,7 @@ def main(argv=None) -> None:
     constant = os.path.join(work, "thresholds-constant.json")
     fricli("thresholds", fixed, fit, "--urdf", cal, "--persistence", "1", "--no-level-share", "-o", constant, "-q")
     replays: dict[str, dict] = {}
-    for path in validation + [load] + jointwise + collision:
+    for path in validation + loads + jointwise + collision:
         name = os.path.basename(path).removesuffix(".parquet")
         replays[name] = {}
         modes = [("static", thresholds, []), ("adapt", thresholds, ["--adapt"])]
@@ -357,7 +373,8 @@ def main(argv=None) -> None:
               "fixed_case_study": [study["joints"][str(j)]["fixed"]["moving"] for j in JOINTS],
               "false_alarms": {n: {m: {"rows": {j: v["contact_rows"] for j, v in r[1]["joints"].items()},
                                        "events": len(r[1]["events"])} for m, r in modes.items()}
-                               for n, modes in replays.items() if "push_pose" not in n},
+                               for n, modes in replays.items() if "push_pose" not in n and LOAD_RUN not in n},
+              "payload": {n: {m: halves(r) for m, r in modes.items()} for n, modes in replays.items() if LOAD_RUN in n},
               "pushes": push_rows, "added": added, "held": held, "c": c_figures,
               "commands": [shown(c) for c in COMMANDS], "seconds": time.time() - started}
     atomic_write_bytes(os.path.join(args.out, "docs", "studies", "contact-detection-results.json"),
