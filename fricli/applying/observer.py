@@ -39,8 +39,11 @@ learned then); a and b are clipped to
 their bounds after every update and the covariance's trace is capped at its initial value
 (no wind-up while a direction is not excited). The friction of row k uses the level of rows < k.
 
-Contact: a joint is flagged when |r| exceeds its threshold and released when |r| falls below
-``release`` times it (hysteresis). At rest (|qd| at most ``moving_speed``) the friction is statically
+Contact: a joint is flagged once r has stayed beyond its threshold, with one sign, for
+``persistence`` samples in a row (a single wrong sample of tau_m or qd is not a contact), and
+released when |r| falls below ``release`` times the threshold (hysteresis). In motion the threshold
+is base + share x |a f_k + b|: a change of the friction level leaves an error proportional to the
+friction itself (``level_share`` calibrates the share); at rest it is base. At rest (|qd| at most ``moving_speed``) the friction is statically
 indeterminate: a held joint keeps whatever friction torque it came to rest with, anywhere within
 its static band [-F_s, F_s], which no model of the state predicts, and an external torque within
 that band does not reach the motor. With thresholds, the estimate at rest is therefore the part of
