@@ -138,3 +138,62 @@ def test_at_rest_the_estimate_is_the_torque_outside_the_static_friction_band():
     assert np.max(np.abs(out.tau_ext[(t > 0.1) & (t < 1.0), 0])) == 0.0
     assert out.tau_ext[-1, 0] == pytest.approx(-1.5, abs=1e-6)    # clip(3, -1.5, 1.5) - 3
     assert out.contact[-1, 0] and not out.contact[t < 1.0, 0].any()
+
+
+def test_persistence_leaves_out_a_single_wrong_sample_and_flags_a_lasting_contact():
+    t = np.arange(0.0, 1.0, 0.01)
+    r = np.zeros_like(t)
+    r[20] = 5.0                                    # one wrong sample, far beyond the threshold
+    r[(t > 0.5) & (t < 0.8)] = 2.0                 # a contact that lasts
+    flags = {}
+    for persistence in (1, 3):
+        thr = observer.Thresholds(["2"], np.array([1.0]), np.array([1.5]), np.array([1.0]), persistence=persistence)
+        out = observer.replay(t, r[:, None], np.zeros((len(t), 1)), np.zeros((len(t), 1)), np.zeros((len(t), 1)),
+                              np.ones((len(t), 1)), gain=1e9, thresholds=thr)
+        flags[persistence] = np.flatnonzero(out.contact[:, 0])
+    assert 20 in flags[1] and 20 not in flags[3]
+    first = int(np.flatnonzero(r == 2.0)[0])
+    assert flags[1][flags[1] > 20][0] == first and flags[3][0] == first + 2     # the third sample beyond it
+    # a residual that changes sign from one sample to the next does not add up to a flag
+    alternating = np.where(np.arange(len(t)) % 2 == 0, 2.0, -2.0)
+    thr = observer.Thresholds(["2"], np.array([1.0]), np.array([1.5]), np.array([1.0]), persistence=3)
+    out = observer.replay(t, alternating[:, None], np.zeros((len(t), 1)), np.zeros((len(t), 1)),
+                          np.zeros((len(t), 1)), np.ones((len(t), 1)), gain=1e9, thresholds=thr)
+    assert not out.contact.any()
+
+
+def test_the_threshold_in_motion_grows_with_the_predicted_friction():
+    t, f0, tau_m, p, w, qd, _, _ = joint(seconds=5.0)
+    thr = observer.Thresholds(["2"], np.array([1.0]), np.array([1.5]), np.array([2.0]), share=np.array([0.25]))
+    out = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr)
+    level = np.zeros(len(t))                       # the observer's low-pass of the friction model (gain 50 1/s)
+    level[0] = f0[0, 0]
+    for i in range(1, len(t)):
+        kd = observer.DEFAULT_GAIN * (t[i] - t[i - 1])
+        level[i] = (level[i - 1] + kd * f0[i, 0]) / (1 + kd)
+    moves = np.abs(qd[:, 0]) > observer.DEFAULT_MOVING_SPEED
+    assert np.allclose(out.threshold[moves, 0], 1.0 + 0.25 * np.abs(level[moves]))
+    assert np.all(out.threshold[~moves, 0] == 1.0)
+
+
+def test_level_share_and_a_thresholds_file_of_before(tmp_path):
+    qd = np.ones((5, 2))
+    qd[0] = 0.0
+    a = np.array([[1.0, 1.0], [1.1, 0.9], [1.2, 0.95], [1.05, 1.0], [1.0, 0.8]])
+    a[0] = [5.0, 5.0]                              # at rest: left out
+    thr = observer.Thresholds(["1", "2"], np.ones(2), np.ones(2), np.ones(2), quantile=1.0, margin=1.5)
+    out = observer.level_share([a], [qd], thr)
+    assert out.shares == pytest.approx([1.5 * 0.2, 1.5 * 0.2])
+    data = out.as_json()
+    assert data["joints"]["1"]["share"] == pytest.approx(0.3) and data["persistence"] == 1
+    del data["persistence"]
+    for j in data["joints"].values():
+        del j["share"]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps(data))
+    old = observer.Thresholds.read(str(path))      # written before share and persistence: as before
+    assert old.persistence == 1 and np.all(old.shares == 0.0)
+    data["persistence"] = 0
+    path.write_text(json.dumps(data))
+    with pytest.raises(DataError):
+        observer.Thresholds.read(str(path))

@@ -54,6 +54,15 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     static = replay.run(arm, observer.DEFAULT_GAIN, None, None)
     direct = logs.external_torque(arm.signals[0], arm.f0[:, 0])
     assert np.corrcoef(static.tau_ext[100:, 0], direct[100:])[0, 1] > 0.9
+    # the constant thresholds of before: no share of the friction, a flag on the first sample beyond
+    settings = observer.Thresholds.read(str(thr))
+    assert settings.persistence == observer.DEFAULT_PERSISTENCE and settings.shares[0] > 0
+    before = tmp_path / "before.json"
+    done = invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", before, "--persistence", "1", "--no-level-share", "-q")
+    assert done.exit_code == 0, done.output
+    old = observer.Thresholds.read(str(before))
+    assert old.persistence == 1 and old.shares[0] == 0.0 and old.threshold[0] == settings.threshold[0]
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", before, "--persistence", "0").exit_code == 2
     # bad input: one line and the exit code
     assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
     thr.write_text("[1]")
@@ -126,8 +135,12 @@ def test_simulated_contacts_at_twice_the_threshold_are_flagged_within_20_ms(tmp_
     thr_path = tmp_path / "t.json"
     assert invoke("thresholds", folder, free, "-o", thr_path, "-q").exit_code == 0
     thr = observer.Thresholds.read(str(thr_path))
-    size = 2.0 * float(thr.threshold[0])
+    assert thr.persistence == observer.DEFAULT_PERSISTENCE and thr.shares[0] > 0
     probe = simulator.simulate("adapt", 2, seed=2, rate=1000.0, friction_state="base")
+    simulator.write(probe, str(tmp_path / "probe.parquet"))
+    f0 = replay.read_arm(str(folder), str(tmp_path / "probe.parquet")).f0
+    # twice the largest threshold in force in motion on the probe: base + share x |the model's friction|
+    size = 2.0 * float(thr.threshold[0] + thr.shares[0] * np.max(np.abs(f0)))
     t, qd = probe.column("t").to_numpy(), probe.column("qd").to_numpy()
     moving = np.flatnonzero((np.abs(qd) > 0.1) & (t > 5.0))
     starts = [float(t[moving[i]]) for i in np.linspace(0, len(moving) - 1, 4, endpoint=False).astype(int)]

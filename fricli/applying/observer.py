@@ -39,8 +39,11 @@ learned then); a and b are clipped to
 their bounds after every update and the covariance's trace is capped at its initial value
 (no wind-up while a direction is not excited). The friction of row k uses the level of rows < k.
 
-Contact: a joint is flagged when |r| exceeds its threshold and released when |r| falls below
-``release`` times it (hysteresis). At rest (|qd| at most ``moving_speed``) the friction is statically
+Contact: a joint is flagged once r has stayed beyond its threshold, with one sign, for
+``persistence`` samples in a row (a single wrong sample of tau_m or qd is not a contact), and
+released when |r| falls below ``release`` times the threshold (hysteresis). In motion the threshold
+is base + share x |a f_k + b|: a change of the friction level leaves an error proportional to the
+friction itself (``level_share`` calibrates the share); at rest it is base. At rest (|qd| at most ``moving_speed``) the friction is statically
 indeterminate: a held joint keeps whatever friction torque it came to rest with, anywhere within
 its static band [-F_s, F_s], which no model of the state predicts, and an external torque within
 that band does not reach the motor. With thresholds, the estimate at rest is therefore the part of
@@ -64,6 +67,7 @@ DEFAULT_QUANTILE = 0.999       # of |r| over the calibration logs' rows
 DEFAULT_MARGIN = 1.5           # threshold = margin x that quantile
 DEFAULT_RELEASE = 0.5          # a flag is released below this share of the threshold
 DEFAULT_MOVING_SPEED = 0.02    # |qd| above which a joint moves [rad/s or m/s]
+DEFAULT_PERSISTENCE = 3        # samples beyond the threshold, of one sign, before a flag
 THRESHOLDS_FORMAT = "fricli.thresholds"
 
 
@@ -88,6 +92,8 @@ class Thresholds:
     threshold: np.ndarray                 # (J,) of |tau_ext_pred|
     static_friction: np.ndarray           # (J,) F_s: the band of friction at rest
     friction_scale: np.ndarray            # (J,)
+    share: np.ndarray | None = None       # (J,) in motion the threshold grows by share x |filtered tau_f_pred|
+    persistence: int = 1                  # samples beyond the threshold, of one sign, before a flag
     gain: float = DEFAULT_GAIN
     quantile: float = DEFAULT_QUANTILE
     margin: float = DEFAULT_MARGIN
@@ -99,8 +105,9 @@ class Thresholds:
     def as_json(self) -> dict:
         return {"format": THRESHOLDS_FORMAT, "version": 1, "gain": self.gain, "quantile": self.quantile,
                 "margin": self.margin, "release": self.release, "moving_speed": self.moving_speed,
-                "form": self.form, "logs": self.logs,
+                "form": self.form, "logs": self.logs, "persistence": int(self.persistence),
                 "joints": {str(j): {"threshold": float(self.threshold[i]),
+                                    "share": float(self.shares[i]),
                                     "static_friction": float(self.static_friction[i]),
                                     "friction_scale": float(self.friction_scale[i])}
                            for i, j in enumerate(self.joints)}}
@@ -114,15 +121,22 @@ class Thresholds:
             thr = np.array([float(data["joints"][j]["threshold"]) for j in joints])
             rest = np.array([float(data["joints"][j]["static_friction"]) for j in joints])
             scale = np.array([float(data["joints"][j]["friction_scale"]) for j in joints])
-            out = cls(joints, thr, rest, scale, gain=float(data["gain"]), quantile=float(data["quantile"]),
+            share = np.array([float(data["joints"][j].get("share", 0.0)) for j in joints])
+            persistence = data.get("persistence", 1)
+            if not isinstance(persistence, int) or isinstance(persistence, bool) or persistence < 1:
+                raise ValueError("persistence")
+            out = cls(joints, thr, rest, scale, share=share, persistence=persistence,
+                      gain=float(data["gain"]), quantile=float(data["quantile"]),
                       margin=float(data["margin"]), release=float(data["release"]),
                       moving_speed=float(data["moving_speed"]), form=str(data["form"]),
                       logs=list(data.get("logs", [])))
         except (KeyError, TypeError, ValueError, AttributeError):
             raise DataError(f"{name}: not a thresholds file of fricli thresholds") from None
         if not (all(np.all(np.isfinite(x)) and np.all(x > 0) for x in (thr, rest, scale))
+                and np.all(np.isfinite(share)) and np.all(share >= 0)
                 and 0 < out.release < 1 and out.gain > 0 and out.moving_speed >= 0):
-            raise DataError(f"{name}: thresholds and friction scales must be positive numbers, release in (0, 1)")
+            raise DataError(f"{name}: thresholds and friction scales must be positive numbers, shares at least 0, "
+                            "release in (0, 1)")
         return out
 
     @classmethod
@@ -145,8 +159,13 @@ class Thresholds:
         if missing:
             raise DataError(f"{name}: no threshold for joint {missing[0]} (it has joints {', '.join(names)})")
         idx = [names.index(str(j)) for j in joints]
-        return dataclasses.replace(self, joints=list(joints), threshold=self.threshold[idx],
+        return dataclasses.replace(self, joints=list(joints), threshold=self.threshold[idx], share=self.shares[idx],
                                    static_friction=self.static_friction[idx], friction_scale=self.friction_scale[idx])
+
+    @property
+    def shares(self) -> np.ndarray:
+        """(J,) the share of |tau_f_pred| added to the threshold in motion (0 where not calibrated)."""
+        return np.zeros(len(self.threshold)) if self.share is None else np.asarray(self.share, dtype=float)
 
 
 class Observer:
@@ -173,14 +192,20 @@ class Observer:
         self._P = [[p0, 0.0, p0] for _ in range(joints)]   # P11, P12, P22 per joint
         self.p_max = (2.0 if adaptation is not None and adaptation.offset else 1.0) * p0
         self._contact = [False] * joints
+        self._run = [0] * joints            # samples in a row beyond the threshold, with the sign of _side
+        self._side = [0] * joints
+        self._limit = [math.inf] * joints   # the threshold of the last sample
         if thresholds is not None:
             threshold, band = thresholds.threshold, thresholds.static_friction
+            share, self.persistence = thresholds.shares, int(thresholds.persistence)
             scale, self.release, self.moving_speed = (thresholds.friction_scale, float(thresholds.release),
                                                       float(thresholds.moving_speed))
         else:
             threshold, band = np.full(joints, np.inf), None
+            share, self.persistence = np.zeros(joints), 1
             scale, self.release, self.moving_speed = np.ones(joints), DEFAULT_RELEASE, DEFAULT_MOVING_SPEED
         self._threshold = [float(x) for x in threshold]
+        self._share = [float(x) for x in share]
         self._band = None if band is None else [float(x) for x in band]
         self._scale = [float(x) for x in scale]
         if adaptation is not None:
@@ -220,25 +245,32 @@ class Observer:
                 self._y[j] = (self._y[j] - k * (p[j] - self._p[j]) + kd * (tau_m[j] - w[j])) / (1.0 + kd)
                 self._f[j] = (self._f[j] + kd * f0[j]) / (1.0 + kd)
             self._p[j] = p[j]
-            r = self._a[j] * self._f[j] + offset - self._y[j]
+            level = self._a[j] * self._f[j] + offset
+            r = level - self._y[j]
             moves = abs(qd[j]) > self.moving_speed
-            if self._band is not None and not moves:
+            threshold = self._threshold[j]
+            if moves:
+                threshold += self._share[j] * abs(level)
+            elif self._band is not None:
                 band, y = self._band[j], self._y[j]
                 r = min(max(y, -band), band) - y
             mag = abs(r)
-            threshold = self._threshold[j]
-            self._contact[j] = mag >= self.release * threshold if self._contact[j] else mag > threshold
+            side = 1 if r > threshold else (-1 if r < -threshold else 0)
+            self._run[j] = 0 if side == 0 else (self._run[j] + 1 if side == self._side[j] else 1)
+            self._side[j] = side
+            self._limit[j] = threshold
+            self._contact[j] = mag >= self.release * threshold if self._contact[j] else self._run[j] >= self.persistence
             res[j] = r
             if ad is not None and lam is not None:
-                self._adapt(j, t, lam, r, mag, moves)
+                self._adapt(j, t, lam, r, mag, moves, threshold)
         return np.array(tau_f), np.array(res), np.array(self._contact)
 
-    def _adapt(self, j: int, t: float, lam: float, r: float, mag: float, moves: bool) -> None:
+    def _adapt(self, j: int, t: float, lam: float, r: float, mag: float, moves: bool, threshold: float) -> None:
         """One recursive least-squares step of joint ``j``'s scale (and offset), forgetting ``lam``."""
         ad = self.adaptation
         if self._contact[j]:
             self._suspected[j] = t
-        if not (moves and mag <= ad.freeze * self._threshold[j] and t - self._suspected[j] >= ad.holdoff):
+        if not (moves and mag <= ad.freeze * threshold and t - self._suspected[j] >= ad.holdoff):
             return
         scale = self._scale[j]
         x1 = self._f[j] / scale                        # regressor (f / S, x2), target y / S
@@ -259,6 +291,11 @@ class Observer:
         self._P[j] = [n11 * cap, n12 * cap, n22 * cap]
 
     @property
+    def threshold(self) -> np.ndarray:
+        """The threshold each joint's last sample was compared with [Nm] (inf before the first)."""
+        return np.array(self._limit)
+
+    @property
     def a(self) -> np.ndarray:
         """The adapted scale a per joint."""
         return np.array(self._a)
@@ -271,13 +308,15 @@ class Observer:
 
 @dataclasses.dataclass
 class Replayed:
-    """Per row and joint (n, J): tau_f_pred, tau_ext_pred, contact, the adapted scale and offset."""
+    """Per row and joint (n, J): tau_f_pred, tau_ext_pred, contact, the adapted scale and offset, the
+    threshold the row was compared with."""
 
     tau_f: np.ndarray
     tau_ext: np.ndarray
     contact: np.ndarray
     scale: np.ndarray
     offset: np.ndarray
+    threshold: np.ndarray
 
 
 def replay(t: np.ndarray, f0: np.ndarray, tau_m: np.ndarray, p: np.ndarray, w: np.ndarray, qd: np.ndarray,
@@ -287,10 +326,11 @@ def replay(t: np.ndarray, f0: np.ndarray, tau_m: np.ndarray, p: np.ndarray, w: n
     n, joints = f0.shape
     obs = Observer(joints, gain, thresholds, adaptation)
     out = Replayed(np.empty((n, joints)), np.empty((n, joints)), np.zeros((n, joints), dtype=bool),
-                   np.empty((n, joints)), np.empty((n, joints)))
+                   np.empty((n, joints)), np.empty((n, joints)), np.empty((n, joints)))
     for i in range(n):
         out.scale[i], out.offset[i] = obs.a, obs.offset   # the level row i's friction uses
         out.tau_f[i], out.tau_ext[i], out.contact[i] = obs.step(float(t[i]), f0[i], tau_m[i], p[i], w[i], qd[i])
+        out.threshold[i] = obs.threshold
     return out
 
 
@@ -333,9 +373,25 @@ def calibrate(residuals: list[np.ndarray], friction: list[np.ndarray], speeds: l
                       margin=margin, release=release, moving_speed=moving_speed, form=form, logs=logs or [])
 
 
-def check_settings(quantile: float, margin: float, release: float, moving_speed: float) -> None:
-    if not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0:
-        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1) and a moving speed above 0 are needed")
+def level_share(scales: list[np.ndarray], speeds: list[np.ndarray], thresholds: Thresholds) -> Thresholds:
+    """``thresholds`` with each joint's share: ``margin`` x the ``quantile`` of |a - 1| over the rows
+    in motion, a (n, J) the friction scale the online adaptation (``Adaptation()``) found on the
+    collision-free calibration logs (``scales``, their |qd| ``speeds``). The friction level drifts
+    within a run (temperature, lubricant) by about that much; on another day by more; either way
+    the model's error from a level change is proportional to the friction itself."""
+    a = np.concatenate(scales)
+    mv = np.abs(np.concatenate(speeds)) > thresholds.moving_speed
+    share = np.array([thresholds.margin * float(np.quantile(np.abs(a[mv[:, j], j] - 1.0), thresholds.quantile))
+                      if mv[:, j].any() else 0.0 for j in range(a.shape[1])])
+    return dataclasses.replace(thresholds, share=share)
+
+
+def check_settings(quantile: float, margin: float, release: float, moving_speed: float,
+                   persistence: int = DEFAULT_PERSISTENCE) -> None:
+    if (not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0
+            or not persistence >= 1):
+        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1), a moving speed above 0 and a "
+                        "persistence of at least 1 sample are needed")
 
 
 @dataclasses.dataclass

@@ -104,12 +104,18 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
 @click.option("--moving-speed", type=Number(min=0, min_open=True), default=observer.DEFAULT_MOVING_SPEED, show_default=True,
               help="|qd| above which a joint moves [rad/s or m/s]: its threshold in motion applies, and the "
                    "adaptation may update.")
+@click.option("--persistence", type=click.IntRange(min=1), default=observer.DEFAULT_PERSISTENCE, show_default=True,
+              help="Samples in a row beyond the threshold, with one sign, before a contact is flagged (1: at once).")
+@click.option("--no-level-share", "no_level", is_flag=True,
+              help="A constant threshold in motion: leave out the share of the friction (the drift of its level).")
 @json_flag
 @common
-def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, moving_speed, as_json, quiet):
+def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, moving_speed, persistence, no_level,
+                   as_json, quiet):
     """Calibrate per-joint contact thresholds from collision-free LOGS replayed with MODEL (the
     static observer, as fricli replay without --adapt): margin x quantile of |tau_ext_pred| per
-    joint; the static friction band (the largest friction the model gives moving just above
+    joint; in motion plus a share of the predicted friction, margin x quantile of how far the online
+    adaptation moves the friction's scale on the LOGS (the drift of the friction level); the static friction band (the largest friction the model gives moving just above
     --moving-speed, up to 5 times it: at rest the estimate is the torque outside that band); and
     each joint's friction scale (the RMS of the model's friction in motion).
 
@@ -120,11 +126,12 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
     from fricli.robot import replay
 
     thr = replay.calibrate(model, list(logs), urdf, gain if gain is not None else observer.DEFAULT_GAIN, quantile,
-                           margin, release, moving_speed)
+                           margin, release, moving_speed, persistence=persistence, level=not no_level)
     replay.write_thresholds(thr, output)
     if not quiet:
-        for j, value, band in zip(thr.joints, thr.threshold, thr.static_friction):
-            say(f"  joint {j}: threshold {value:.4g}, static friction band {band:.4g}")
+        for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):
+            say(f"  joint {j}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "
+                f"{band:.4g}")
         say(f"wrote {output}")
     if as_json:
         emit_json(thr.as_json())

@@ -26,18 +26,20 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
     names = [str(_joint_of(e)) for e in entries]
     if thresholds is not None:
         thr = thresholds.for_joints(names, "the thresholds file")
-        move, band, scale = thr.threshold, thr.static_friction, thr.friction_scale
-        release, speed = thr.release, thr.moving_speed
+        move, band, scale, share = thr.threshold, thr.static_friction, thr.friction_scale, thr.shares
+        release, speed, persist = thr.release, thr.moving_speed, int(thr.persistence)
     else:
         move = band = None
-        scale, release, speed = [1.0] * n, observer.DEFAULT_RELEASE, observer.DEFAULT_MOVING_SPEED
+        scale, share, release, speed, persist = [1.0] * n, [0.0] * n, observer.DEFAULT_RELEASE, \
+            observer.DEFAULT_MOVING_SPEED, 1
     if adaptation is not None and thresholds is None:
         raise ModelFileError("adaptation needs the contact thresholds of fricli thresholds")
     ad = adaptation or observer.Adaptation()
     a = f"{prefix}_arm"
     table = lambda xs: "{" + ", ".join(c.num(x) for x in xs) + "}"   # noqa: E731
     huge = "{" + ", ".join(["HUGE_VAL"] * n) + "}"
-    detection = (f"thresholds of fricli thresholds on {', '.join(thresholds.logs) or 'its logs'}" if thresholds
+    detection = (f"thresholds of fricli thresholds on {', '.join(thresholds.logs) or 'its logs'} (in motion plus a "
+                 f"share of the predicted friction), flagged after {persist} samples in a row beyond" if thresholds
                  else "detection off (no thresholds)")
     adapting = "off"
     if adaptation is not None:
@@ -51,13 +53,14 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
            "typedef struct {"]
     out += [f"    {e.prefix}_state friction_{i};" for i, e in enumerate(entries)]
     out += [f"    double t, t_adapt, p[{n}], y[{n}], f[{n}], a[{n}], b[{n}], P11[{n}], P12[{n}], P22[{n}], suspected[{n}];",
-            f"    int started, adapt_started, contact[{n}];", f"}} {a}_state;", "",
+            f"    int started, adapt_started, contact[{n}], run[{n}], side[{n}];", f"}} {a}_state;", "",
             "/* Start a run (and after any pause in the samples). */",
             f"static inline void {a}_init({a}_state *s) {{", "    int j;"]
     out += [f"    {e.prefix}_init(&s->friction_{i});" for i, e in enumerate(entries)]
     out += ["    s->t = 0.0; s->t_adapt = 0.0; s->started = 0; s->adapt_started = 0;",
             f"    for (j = 0; j < {n}; ++j) {{",
             "        s->p[j] = 0.0; s->y[j] = 0.0; s->f[j] = 0.0; s->a[j] = 1.0; s->b[j] = 0.0; s->contact[j] = 0;",
+            "        s->run[j] = 0; s->side[j] = 0;",
             "        s->suspected[j] = -HUGE_VAL;",
             f"        s->P11[j] = {c.num(ad.initial_covariance)}; s->P12[j] = 0.0; s->P22[j] = {c.num(ad.initial_covariance)};",
             "    }", "}", "",
@@ -69,8 +72,10 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             f"    static const double thr[{n}] = {table(move) if move is not None else huge};",
             *([f"    static const double band[{n}] = {table(band)};"] if band is not None else []),
             f"    static const double scale[{n}] = {table(scale)};",
+            f"    static const double share[{n}] = {table(share)};",
             f"    const double k = {c.num(gain)}, release = {c.num(release)}, speed = {c.num(speed)};",
-            f"    double f0[{n}], r[{n}], mag[{n}];",
+            f"    const int persistence = {persist};",
+            f"    double f0[{n}], r[{n}], mag[{n}], lim[{n}];",
             f"    int moves[{n}], j;"]
     out += [f"    f0[{i}] = {e.prefix}_step_array(&s->friction_{i}, x[{i}]);" for i, e in enumerate(entries)]
     out += [f"    for (j = 0; j < {n}; ++j) tau_f[j] = s->a[j] * f0[j] + s->b[j] * scale[j];",
@@ -86,14 +91,20 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             "    s->t = t;",
             f"    for (j = 0; j < {n}; ++j) {{",
             "        s->p[j] = p[j];",
-            "        r[j] = s->a[j] * s->f[j] + s->b[j] * scale[j] - s->y[j];",
+            "        const double level = s->a[j] * s->f[j] + s->b[j] * scale[j];",
+            "        int side;",
+            "        r[j] = level - s->y[j];",
             "        moves[j] = fabs(qd[j]) > speed;",
-            *(["        (void)moves;"] if band is None and adaptation is None else []),
-            *(["        if (!moves[j]) {   /* at rest: the torque outside the static friction band */",
+            "        lim[j] = thr[j];",
+            "        if (moves[j]) lim[j] += share[j] * fabs(level);",
+            *(["        else {   /* at rest: the torque outside the static friction band */",
                "            const double c = s->y[j] < -band[j] ? -band[j] : (s->y[j] > band[j] ? band[j] : s->y[j]);",
                "            r[j] = c - s->y[j];", "        }"] if band is not None else []),
             "        mag[j] = fabs(r[j]);",
-            "        s->contact[j] = s->contact[j] ? mag[j] >= release * thr[j] : mag[j] > thr[j];",
+            "        side = r[j] > lim[j] ? 1 : (r[j] < -lim[j] ? -1 : 0);",
+            "        s->run[j] = side == 0 ? 0 : (side == s->side[j] ? s->run[j] + 1 : 1);",
+            "        s->side[j] = side;",
+            "        s->contact[j] = s->contact[j] ? mag[j] >= release * lim[j] : s->run[j] >= persistence;",
             "        tau_ext[j] = r[j];", "        contact[j] = s->contact[j];", "    }"]
     if adaptation is not None:
         lo, hi = (c.num(v) for v in ad.scale_bounds)
@@ -114,7 +125,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
                 + ", tr = n11 + n22 * x2;",
                 "            const double cap = tr > pmax ? pmax / tr : 1.0;",
                 "            if (s->contact[j]) s->suspected[j] = t;",
-                "            if (!(moves[j] && mag[j] <= freeze * thr[j] && t - s->suspected[j] >= holdoff)) continue;",
+                "            if (!(moves[j] && mag[j] <= freeze * lim[j] && t - s->suspected[j] >= holdoff)) continue;",
                 f"            an = an < {lo} ? {lo} : (an > {hi} ? {hi} : an);",
                 f"            bn = bn < -{c.num(ad.offset_bound)} ? -{c.num(ad.offset_bound)} : "
                 f"(bn > {c.num(ad.offset_bound)} ? {c.num(ad.offset_bound)} : bn);",

@@ -189,23 +189,30 @@ def moving(arm: Arm) -> np.ndarray:
 def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, gain: float = observer.DEFAULT_GAIN,
               quantile: float = observer.DEFAULT_QUANTILE, margin: float = observer.DEFAULT_MARGIN,
               release: float = observer.DEFAULT_RELEASE, moving_speed: float = observer.DEFAULT_MOVING_SPEED,
-              zero=()) -> observer.Thresholds:
-    """Thresholds from the static observer on collision-free logs (``observer.calibrate``)."""
+              zero=(), persistence: int = observer.DEFAULT_PERSISTENCE, level: bool = True) -> observer.Thresholds:
+    """Thresholds from the static observer on collision-free logs (``observer.calibrate``); with
+    ``level``, each joint's share of the friction from the online adaptation replayed on the same
+    logs with those thresholds (``observer.level_share``)."""
     arms = [read_arm(model_path, path, urdf, zero) for path in log_paths]
     names = [str(j) for j in arms[0].joints]
     for arm in arms[1:]:
         if [str(j) for j in arm.joints] != names:
             raise DataError(f"{arm.name}: joints {', '.join(map(str, arm.joints))}, but {arms[0].name} has "
                             f"{', '.join(names)}: calibrate on logs of the same joints")
-    observer.check_settings(quantile, margin, release, moving_speed)
+    observer.check_settings(quantile, margin, release, moving_speed, persistence)
     joints = list(arms[0].joints)
     band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
     free = observer.Thresholds(joints, np.full(len(joints), np.inf), band, np.ones(len(joints)), gain=gain,
                                moving_speed=moving_speed, form=arms[0].form)
     res = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, free) for a in arms]
-    return observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms], joints, gain,
-                              arms[0].form, band, quantile, margin, release, moving_speed,
-                              logs=[os.path.basename(p) for p in log_paths])
+    thr = observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms], joints, gain,
+                             arms[0].form, band, quantile, margin, release, moving_speed,
+                             logs=[os.path.basename(p) for p in log_paths])
+    thr = dataclasses.replace(thr, persistence=int(persistence), share=np.zeros(len(joints)))
+    if not level:
+        return thr
+    adapted = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, thr, observer.Adaptation()) for a in arms]
+    return observer.level_share([r.scale for r in adapted], [a.qd for a in arms], thr)
 
 
 def write_thresholds(thresholds: observer.Thresholds, path: str) -> None:

@@ -159,7 +159,8 @@ def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Gen
     """Contacts added to the motor torque of a collision-free run (tau_m - T from the onset for
     ADDED_LENGTH: the recorded path kept, the motor taking the push), one at a time, at times where
     its joint moves: per joint the delays at 2x the threshold and which sizes of a grid are flagged
-    (a flag within the contact that the run without it does not raise)."""
+    (a flag within the contact that the run without it does not raise). Sizes are multiples of the
+    threshold in force just before the onset (in motion: base + share x |tau_f_pred|, filtered)."""
     import copy
 
     t = arm.t
@@ -180,15 +181,18 @@ def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Gen
             if not wanted:
                 break
         obs.step(float(t[i]), arm.f0[i], arm.tau_m[i], arm.p[i], arm.w[i], arm.qd[i])
-    out = {str(j): {"delays": [], "seen": {str(s): 0 for s in sizes}, "trials": 0} for j in arm.joints}
+    out = {str(j): {"delays": [], "seen": {str(s): 0 for s in sizes}, "trials": 0, "limits": []}
+           for j in arm.joints}
     for i, k, sign in plan:
         rows = range(i, int(np.searchsorted(t, t[i] + ADDED_LENGTH)))
         free = _continue(snapshots[i], arm, rows, arm.tau_m)
         fig = out[str(arm.joints[k])]
         fig["trials"] += 1
+        limit = float(snapshots[i].threshold[k])
+        fig["limits"].append(limit)
         for s in sizes:
             tau_m = arm.tau_m.copy()
-            tau_m[rows.start:rows.stop, k] -= sign * s * thr.threshold[k]
+            tau_m[rows.start:rows.stop, k] -= sign * s * limit
             hit = np.flatnonzero(_continue(snapshots[i], arm, rows, tau_m)[:, k] & ~free[:, k])
             if len(hit):
                 fig["seen"][str(s)] += 1
@@ -198,8 +202,9 @@ def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Gen
 
 
 def held_contact(arm: replay.Arm, thr: observer.Thresholds, adapt) -> dict:
-    """A contact of 2x the threshold held for HOLD seconds on each joint alone, from 5 s into the run:
-    the adapted scale before the onset and at the release."""
+    """A contact of 2x the largest threshold in force (over the hold, in the run without it) held for
+    HOLD seconds on each joint alone, from 5 s into the run: the adapted scale before the onset and at
+    the release."""
     t = arm.t
     out = {}
     onset = np.searchsorted(t, t[0] + 5.0)
@@ -209,9 +214,10 @@ def held_contact(arm: replay.Arm, thr: observer.Thresholds, adapt) -> dict:
     free = observer.replay(t, arm.f0, arm.tau_m, arm.p, arm.w, arm.qd, thr.gain, thr, adapt)
     for k, j in enumerate(arm.joints):
         tau_m = arm.tau_m.copy()
-        tau_m[onset:end, k] -= 2.0 * thr.threshold[k]
+        limit = float(np.max(free.threshold[onset:end, k]))
+        tau_m[onset:end, k] -= 2.0 * limit
         res = observer.replay(t, arm.f0, tau_m, arm.p, arm.w, arm.qd, thr.gain, thr, adapt)
-        out[str(j)] = {"before": float(res.scale[onset, k]), "after": float(res.scale[end, k]),
+        out[str(j)] = {"before": float(res.scale[onset, k]), "after": float(res.scale[end, k]), "size": 2.0 * limit,
                        "free_after": float(free.scale[end, k]),
                        "flagged_share": float(res.contact[onset:end, k].mean())}
     return out
@@ -245,6 +251,19 @@ def c_check(work: str, fixed: str, thresholds: str, runs: list) -> dict:
     out["ns_per_step"] = observer_check.bench(exe, observer_check.rows(runs[0][1], paths), work, 2.0)
     out["load"] = os.getloadavg()[0]
     out["cpus"] = os.cpu_count()
+    return out
+
+
+def halves(replayed: tuple) -> dict:
+    """Rows flagged per joint and events in the first and the second half (in time) of a replay
+    (its output path and --json figures)."""
+    c = columns(replayed[0])
+    middle = 0.5 * (c["t"][0] + c["t"][-1])
+    first = c["t"] < middle
+    out = {}
+    for part, rows in (("first", first), ("second", ~first)):
+        out[part] = {"rows": {str(j): int(c["contact"][rows, k].sum()) for k, j in enumerate(JOINTS)},
+                     "events": int(sum(bool(e["start"] < middle) == (part == "first") for e in replayed[1]["events"]))}
     return out
 
 
@@ -288,18 +307,27 @@ def main(argv=None) -> None:
     fit = os.path.join(work, f"{FIT_RUN}-cal.parquet")
     validation = [os.path.join(work, f"{n}-cal.parquet") for n in study["validation_runs"]]
     load = os.path.join(work, f"{LOAD_RUN}-cal-payload.parquet")
+    # the payload run with the payload the joints carry, identified on its first half (the case study's)
+    seen = os.path.join(work, f"{LOAD_RUN}-cal-seen.parquet")
+    loads = [load] + ([seen] if os.path.exists(seen) else [])
     jointwise = [imported(args.data, work, "jointwise_motion", f"ur-20_01_22-joint_{j}", cal) for j in JOINTS]
     collision = [imported(args.data, work, "collision", f"ur-20_01_22-push_pose_{k}", cal) for k in (1, 2)]
     thresholds = os.path.join(work, "thresholds.json")
     fricli("thresholds", fixed, fit, "--urdf", cal, "-o", thresholds, "-q")
     thr = observer.Thresholds.read(thresholds)
+    # the constant thresholds of before (a flag on the first sample beyond, no share of the friction)
+    constant = os.path.join(work, "thresholds-constant.json")
+    fricli("thresholds", fixed, fit, "--urdf", cal, "--persistence", "1", "--no-level-share", "-o", constant, "-q")
     replays: dict[str, dict] = {}
-    for path in validation + [load] + jointwise + collision:
+    for path in validation + loads + jointwise + collision:
         name = os.path.basename(path).removesuffix(".parquet")
         replays[name] = {}
-        for mode, extra in (("static", []), ("adapt", ["--adapt"])):
+        modes = [("static", thresholds, []), ("adapt", thresholds, ["--adapt"])]
+        if "push_pose" not in name:
+            modes.append(("constant", constant, ["--adapt"]))
+        for mode, limits, extra in modes:
             out = os.path.join(work, f"replay-{mode}-{name}.parquet")
-            replays[name][mode] = (out, fricli("replay", fixed, path, "--urdf", cal, "--thresholds", thresholds,
+            replays[name][mode] = (out, fricli("replay", fixed, path, "--urdf", cal, "--thresholds", limits,
                                                *extra, "-o", out, "--json", "-q", json_out=True))
     names = [os.path.basename(p).removesuffix(".parquet") for p in validation]
     base = [study["joints"][str(j)]["linear"]["moving"] for j in JOINTS]
@@ -340,11 +368,13 @@ def main(argv=None) -> None:
         return text.replace(os.path.abspath(work), "WORK").replace(os.path.abspath(args.data), "DATA") \
             .replace(ROOT + os.sep, "")
 
-    result = {"thresholds": thr.as_json(), "baseline": base, "static": static_err, "adapt": adapt_err, "own": own,
+    result = {"thresholds": thr.as_json(), "constant": observer.Thresholds.read(constant).as_json(),
+              "load_run": os.path.basename(load).removesuffix(".parquet"), "baseline": base, "static": static_err, "adapt": adapt_err, "own": own,
               "fixed_case_study": [study["joints"][str(j)]["fixed"]["moving"] for j in JOINTS],
               "false_alarms": {n: {m: {"rows": {j: v["contact_rows"] for j, v in r[1]["joints"].items()},
                                        "events": len(r[1]["events"])} for m, r in modes.items()}
-                               for n, modes in replays.items() if "push_pose" not in n},
+                               for n, modes in replays.items() if "push_pose" not in n and LOAD_RUN not in n},
+              "payload": {n: {m: halves(r) for m, r in modes.items()} for n, modes in replays.items() if LOAD_RUN in n},
               "pushes": push_rows, "added": added, "held": held, "c": c_figures,
               "commands": [shown(c) for c in COMMANDS], "seconds": time.time() - started}
     atomic_write_bytes(os.path.join(args.out, "docs", "studies", "contact-detection-results.json"),
