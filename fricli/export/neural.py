@@ -64,7 +64,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names) if uses_net),
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
-             "    const int pos_ = qd > 0.0;",
+             "    const int pos_ = qd > 0.0; (void)pos_;",
              "    double m;",
              *(_net_magnitude(model, names, ctx) if uses_net else ["    m = 0.0;"]),
              *(_prior(model, ctx) if uses_prior else []),
