@@ -1,7 +1,8 @@
 """The dissipative network's exported step with its constants folded in and its zero-weight terms
 left out: C equals `fricli predict --precision double` to 1e-9 on every row for each variant (no
 load term, no prior, no bristles, blend 0 and 1, a prior without its Stribeck shape, an ensemble,
-extrapolation below v_min and above v_max with a slope), and predict leaves out only terms that add 0.
+extrapolation below v_min and above v_max with a slope, the settled Stribeck shape and bristle decay
+that the step skips), and predict leaves out only terms that add 0.
 """
 
 from __future__ import annotations
@@ -12,13 +13,14 @@ import pytest
 from conftest import SAMPLE
 from fricli import models
 from fricli.core import logs
-from fricli.export import c
+from fricli.export import c, neural
 from fricli.models import dissipative as D
 from fricli.models.dissipative import DissipativeFriction
 from test_export import _compare, needs_cc
 
 LOG = str(SAMPLE / "joint2_base.parquet")
 PRIOR = {"fc": 7.0, "fs": 9.0, "vs": 0.04, "delta": 1.2, "fv": 12.0, "kc": 0.04, "ks": 0.05}
+NARROW = {"fc": 7.0, "fs": 9.0, "vs": 0.005, "delta": 2.0, "fv": 12.0, "kc": 0.04, "ks": 0.05}   # shape 0 early
 FLAT = {"fc": 7.5, "fs": 7.5, "vs": 0.04, "delta": 1.2, "fv": 0.0, "kc": 0.0, "ks": 0.0}   # no shape, no load
 
 
@@ -61,6 +63,8 @@ VARIANTS = {
     "prior blend 0": dict(prior=PRIOR, blend=0.0),
     "prior blend 1, bristles": dict(prior=PRIOR, blend=1.0, sigma0=2e4),
     "flat prior blend 0.5, no load": dict(prior=FLAT, blend=0.5, load=False),
+    # the settled shortcuts: the Stribeck shape past v_cut, the bristle decay of stiff bristles
+    "narrow prior blend 0.2, stiff bristles": dict(prior=NARROW, blend=0.2, sigma0=1e9),
 }
 
 
@@ -98,6 +102,17 @@ def test_terms_of_weight_zero_are_not_written(tmp_path):
     model.slope_ = (0.0, 0.0)
     text = _header(model, tmp_path)
     assert "tau_g" not in text.split("fr_m_step")[1].split("}\n")[0] and "fmax(qd -" not in text
+
+
+def test_the_settled_shortcuts_are_taken_on_the_sample_log():
+    sig = logs.load_log(LOG).signals
+    model = _variant(_fit(), prior=NARROW, blend=0.2, sigma0=1e9)
+    v_cut = NARROW["vs"] * neural.SETTLED ** (1.0 / NARROW["delta"])
+    speed = np.abs(sig["qd"])
+    assert 0.1 < np.mean(speed >= v_cut) < 0.9          # both sides of v_cut are compared above
+    g = model._bristle_curve(sig)
+    decay = model.sigma0_ * speed[1:] * np.diff(sig["t"]) / g[1:]
+    assert 0.1 < np.mean(decay >= neural.SETTLED) < 0.99
 
 
 def test_predict_leaves_out_only_what_adds_zero():

@@ -83,6 +83,11 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     return Part(name, "\n".join(lines), stateful=True)
 
 
+# an exponent beyond which exp(-x) < 4.3e-18 is taken as 0 (the Stribeck shape, the bristle decay):
+# a change below 4.3e-18 of the torque it multiplies, within the rounding of the terms it is added to
+SETTLED = 40.0
+
+
 def _uses(model) -> tuple[bool, bool]:
     """Whether the magnitude needs the networks and the prior (as ``DissipativeFriction._run``)."""
     if model.prior_ is None:
@@ -129,8 +134,10 @@ def _prior(model, ctx: Context) -> list[str]:
     if p["fs"] != p["fc"] or p["ks"] != p["kc"]:
         level = " + ".join([*([f"load * {num((p['ks'] - p['kc']) * c)}"] if p["ks"] != p["kc"] else []),
                             *([num((p["fs"] - p["fc"]) * c)] if p["fs"] != p["fc"] else [])])
-        terms.append(f"(absv > 0.0 ? exp(-exp((log(absv) - {num(math.log(p['vs']))}) * {num(p['delta'])})) : 1.0)"
-                     f" * ({level})")
+        # exp(-|v / vs|^delta), taken as 0 from v_cut on, where |v / vs|^delta >= SETTLED (no log, no exp)
+        v_cut = p["vs"] * SETTLED ** (1.0 / p["delta"])
+        terms.append(f"(absv < {num(v_cut)} ? (absv > 0.0 ? exp(-exp((log(absv) - {num(math.log(p['vs']))}) * "
+                     f"{num(p['delta'])})) : 1.0) : 0.0) * ({level})")
     terms += [*([f"load * {num(p['kc'] * c)}"] if p["kc"] else []), *([num(p["fc"] * c)] if p["fc"] else []),
               *([f"absv * {num(p['fv'] * c)}"] if p["fv"] else [])]
     uses_load = any("load" in term for term in terms)
@@ -146,8 +153,8 @@ def _bristles(model, ctx: Context) -> list[str]:
     return [f"    {{ double g = m * {num(model.y_scale_)}, a, zss, z;",
             f"      g = g > {num(G_MIN)} ? g : {num(G_MIN)};",
             f"      a = fabs(qd) * {num(sigma0)} / g * (s->started ? {t} - s->t_prev : 0.0);",
-            "      a = exp(-(a < 700.0 ? a : 700.0));",
             f"      zss = (pos_ ? g : (qd < 0.0 ? -g : 0.0)) * {num(1.0 / sigma0)};",
-            "      z = (1.0 - a) * zss + a * (s->started ? s->z : zss);",
+            f"      if (a < {num(SETTLED)}) {{ a = exp(-a); z = (1.0 - a) * zss + a * (s->started ? s->z : zss); }}",
+            "      else z = zss;   /* settled: the decay is below 4.3e-18 */",
             f"      s->z = z; s->t_prev = {t}; s->started = 1;",
             f"      return z * {num(sigma0)}; }}", "}", ""]
