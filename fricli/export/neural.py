@@ -147,14 +147,16 @@ def _prior(model, ctx: Context) -> list[str]:
 
 
 def _bristles(model, ctx: Context) -> list[str]:
-    """The end of a dissipative step function with the pre-sliding state: g = y_scale m, the
-    bristle update, tau_f = sigma0 z (as ``DissipativeFriction.predict``)."""
-    t, sigma0 = ctx.signal("t"), model.sigma0_
-    return [f"    {{ double g = m * {num(model.y_scale_)}, a, zss, z;",
-            f"      g = g > {num(G_MIN)} ? g : {num(G_MIN)};",
-            f"      a = fabs(qd) * {num(sigma0)} / g * (s->started ? {t} - s->t_prev : 0.0);",
-            f"      zss = (pos_ ? g : (qd < 0.0 ? -g : 0.0)) * {num(1.0 / sigma0)};",
-            f"      if (a < {num(SETTLED)}) {{ a = exp(-a); z = (1.0 - a) * zss + a * (s->started ? s->z : zss); }}",
+    """The end of a dissipative step function with the pre-sliding state: g = y_scale m floored at
+    G_MIN, the bristle update, tau_f = sigma0 z (as ``DissipativeFriction.predict``), written in m
+    (y_scale folded into the constants) so that one division and one exp follow the magnitude."""
+    t, sigma0, y = ctx.signal("t"), model.sigma0_, model.y_scale_
+    return [f"    {{ const double dt_ = s->started ? {t} - s->t_prev : 0.0;",
+            "      double a, zss, z;",
+            f"      m = m > {num(G_MIN / y)} ? m : {num(G_MIN / y)};",
+            f"      a = fabs(qd) * {num(sigma0 / y)} * dt_ / m;",
+            f"      zss = (pos_ ? m : (qd < 0.0 ? -m : 0.0)) * {num(y / sigma0)};",
+            f"      if (a < {num(SETTLED)}) {{ a = exp(-a); z = zss + a * ((s->started ? s->z : zss) - zss); }}",
             "      else z = zss;   /* settled: the decay is below 4.3e-18 */",
             f"      s->z = z; s->t_prev = {t}; s->started = 1;",
             f"      return z * {num(sigma0)}; }}", "}", ""]
