@@ -101,7 +101,7 @@ def test_terms_of_weight_zero_are_not_written(tmp_path):
     model = _variant(_fit(), load=False)
     model.slope_ = (0.0, 0.0)
     text = _header(model, tmp_path)
-    assert "tau_g" not in text.split("fr_m_step")[1].split("}\n")[0] and "fmax(qd -" not in text
+    assert "tau_g" not in text.split("fr_m_step")[1].split("}\n")[0] and "qd - " not in text.split("fr_m_step")[1]
 
 
 def test_the_settled_shortcuts_are_taken_on_the_sample_log():

@@ -101,11 +101,13 @@ def _net_magnitude(model, names: list[str], ctx: Context) -> list[str]:
     b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
     inv_v0 = 1.0 / model.v0_
     by_dir = lambda pair: f"(pos_ ? {num(pair[0])} : {num(pair[1])})"  # noqa: E731
-    lines = ["    double x[2], r_, s_;",
-             f"    s_ = fabs(qd) * {num(inv_v0)};" if model.v_max_ is None else
-             f"    s_ = fmin(fabs(qd), {by_dir(model.v_max_)}) * {num(inv_v0)};"]
+    # limits as comparisons, not fmin and fmax (library calls at -O2); the same for every input
+    lines = ["    double x[2], r_, s_ = fabs(qd);"]
+    if model.v_max_ is not None:
+        lines.append(f"    {{ const double top_ = {by_dir(model.v_max_)}; s_ = s_ < top_ ? s_ : top_; }}")
     if model.v_min_ is not None:   # held at the slowest training speeds below them
-        lines.append(f"    s_ = fmax(s_, {by_dir(model.v_min_)} * {num(inv_v0)});")
+        lines.append(f"    {{ const double low_ = {by_dir(model.v_min_)}; s_ = s_ > low_ ? s_ : low_; }}")
+    lines.append(f"    s_ = s_ * {num(inv_v0)};")
     lines += ["    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
               "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
               f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};",
@@ -118,8 +120,9 @@ def _net_magnitude(model, names: list[str], ctx: Context) -> list[str]:
     if model.load_ and b1 != 0.0:
         lines.append(f"    m = m + {num(b1 / model.g_scale_)} * fabs({ctx.signal('tau_g')});")
     if model.v_max_ is not None and max(model.slope_) > 0.0:   # linear beyond the top training speeds
-        lines.append(f"    m = m + (pos_ ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
-                     f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));")
+        top = [num(v) for v in model.v_max_]
+        lines.append(f"    m = m + (pos_ ? {num(model.slope_[0])} * (qd > {top[0]} ? qd - {top[0]} : 0.0)"
+                     f" : {num(model.slope_[1])} * (-qd > {top[1]} ? -qd - {top[1]} : 0.0));")
     return lines
 
 
