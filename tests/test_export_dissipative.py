@@ -102,6 +102,7 @@ def test_terms_of_weight_zero_are_not_written(tmp_path):
     model.slope_ = (0.0, 0.0)
     text = _header(model, tmp_path)
     assert "tau_g" not in text.split("fr_m_step")[1].split("}\n")[0] and "qd - " not in text.split("fr_m_step")[1]
+    assert c.signals_of(model) == ["qd", "tau_g"]          # the step's signature does not depend on the terms
 
 
 def test_the_settled_shortcuts_are_taken_on_the_sample_log():

@@ -61,6 +61,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     uses_net, uses_prior = _uses(model)
     names = [f"{name}_net" if k == 0 else f"{name}_net{k}" for k in range(len(nets))]
     qd = ctx.signal("qd")
+    ctx.signal("tau_g")   # a step of (t,) qd, tau_g for every dissipative model, whether it reads tau_g or not
     lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names) if uses_net),
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
