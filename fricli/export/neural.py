@@ -52,39 +52,29 @@ def neural(model, name: str, ctx: Context) -> Part:
 def dissipative(model, name: str, ctx: Context) -> Part:
     """tau_f = y_scale tanh(qd / v_ps) (softplus(r0) + softplus(b1) |tau_g| / g_scale), r0 the
     network's first output for (u, sign(qd)); b1, the bias of its second, is a constant. An
-    ensemble of K networks: the mean of the K magnitudes (K network evaluations)."""
+    ensemble of K networks: the mean of the K magnitudes (K network evaluations). What is constant
+    per model is folded into the written numbers, and a term whose coefficients are 0 is not
+    written: the prior at blend 1, the networks at blend 0, a zero extrapolation slope or load term."""
     if model.net_ is None:
         raise ModelFileError("cannot export a network that is not fitted")
     nets = model.nets_
-    b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
-    qd, tau_g = ctx.signal("qd"), ctx.signal("tau_g")
+    uses_net, uses_prior = _uses(model)
     names = [f"{name}_net" if k == 0 else f"{name}_net{k}" for k in range(len(nets))]
-    softplus = "log(1.0 + exp(-fabs(r_))) + (r_ > 0.0 ? r_ : 0.0)"   # softplus(r_), to 1e-16 absolute
-    lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names)),
+    qd = ctx.signal("qd")
+    ctx.signal("tau_g")   # a step of (t,) qd, tau_g for every dissipative model, whether it reads tau_g or not
+    lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names) if uses_net),
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
-             "    double x[2], r0, r_, s_;",
-             (f"    s_ = fabs(qd) / {num(model.v0_)};" if model.v_max_ is None else
-              f"    s_ = fmin(fabs(qd), qd > 0.0 ? {num(model.v_max_[0])} : {num(model.v_max_[1])}) / {num(model.v0_)};"),
-             *([] if model.v_min_ is None else [   # held at the slowest training speeds below them
-                 f"    s_ = fmax(s_, (qd > 0.0 ? {num(model.v_min_[0])} : {num(model.v_min_[1])}) / {num(model.v0_)});"]),
-             "    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
-             "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
-             f"    x[0] = (s_ - {num(model.u_mean_)}) / {num(model.u_scale_)};",
-             f"    x[1] = {ctx.sgn}(qd);",
-             "    r0 = 0.0;",
-             *(f"    r_ = {net_name}(x); r0 += {softplus};" for net_name in names),
-             *([] if len(nets) == 1 else [f"    r0 = r0 / {num(float(len(nets)))};"]),
-             *([f"    r0 = r0 + {num(b1)} * (fabs({tau_g}) / {num(model.g_scale_)});"] if model.load_ else []),
-             *([] if model.v_max_ is None else [   # linear beyond the top training speeds
-                 f"    r0 = r0 + (qd > 0.0 ? {num(model.slope_[0])} * fmax(qd - {num(model.v_max_[0])}, 0.0)"
-                 f" : {num(model.slope_[1])} * fmax(-qd - {num(model.v_max_[1])}, 0.0));"]),
-             *([] if model.prior_ is None else _prior(model, ctx)),
-             *([f"    return r0 * tanh(qd / {num(model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
+             "    const int pos_ = qd > 0.0; (void)pos_;",
+             "    double m;",
+             *(_net_magnitude(model, names, ctx) if uses_net else ["    m = 0.0;"]),
+             *(_prior(model, ctx) if uses_prior else []),
+             *([f"    return m * tanh(qd * {num(1.0 / model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
                if model.sigma0_ is None else _bristles(model, ctx))]
     if model.sigma0_ is None:
         return Part(name, "\n".join(lines), stateful=False)
-    lines[len(nets):len(nets)] = [
+    k = len(nets) if uses_net else 0
+    lines[k:k] = [
         "typedef struct {", "    double z;       /* bristle deflection [rad] */",
         "    double t_prev;  /* time of the previous sample [s] */",
         "    int started;    /* 0 until the first sample */", f"}} {name}_state;", "",
@@ -94,29 +84,83 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     return Part(name, "\n".join(lines), stateful=True)
 
 
+# an exponent beyond which exp(-x) < 4.3e-18 is taken as 0 (the Stribeck shape, the bristle decay):
+# a change below 4.3e-18 of the torque it multiplies, within the rounding of the terms it is added to
+SETTLED = 40.0
+
+
+def _uses(model) -> tuple[bool, bool]:
+    """Whether the magnitude needs the networks and the prior (as ``DissipativeFriction._run``)."""
+    if model.prior_ is None:
+        return True, False
+    return model.blend_ != 0.0, model.blend_ != 1.0
+
+
+def _net_magnitude(model, names: list[str], ctx: Context) -> list[str]:
+    """m = the networks' magnitude softplus(r0) + k |tau_g| (+ the slope beyond v_max), / y_scale."""
+    nets = model.nets_
+    b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
+    inv_v0 = 1.0 / model.v0_
+    by_dir = lambda pair: f"(pos_ ? {num(pair[0])} : {num(pair[1])})"  # noqa: E731
+    # limits as comparisons, not fmin and fmax (library calls at -O2); the same for every input
+    lines = ["    double x[2], r_, s_ = fabs(qd);"]
+    if model.v_max_ is not None:
+        lines.append(f"    {{ const double top_ = {by_dir(model.v_max_)}; s_ = s_ < top_ ? s_ : top_; }}")
+    if model.v_min_ is not None:   # held at the slowest training speeds below them
+        lines.append(f"    {{ const double low_ = {by_dir(model.v_min_)}; s_ = s_ > low_ ? s_ : low_; }}")
+    lines.append(f"    s_ = s_ * {num(inv_v0)};")
+    lines += ["    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
+              "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
+              f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};",
+              "    x[1] = pos_ ? 1.0 : (qd < 0.0 ? -1.0 : 0.0);",
+              "    m = 0.0;"]
+    softplus = "log(1.0 + exp(-fabs(r_))) + (r_ > 0.0 ? r_ : 0.0)"   # softplus(r_), to 1e-16 absolute
+    lines += [f"    r_ = {net_name}(x); m += {softplus};" for net_name in names]
+    if len(nets) > 1:
+        lines.append(f"    m = m * {num(1.0 / len(nets))};")
+    if model.load_ and b1 != 0.0:
+        lines.append(f"    m = m + {num(b1 / model.g_scale_)} * fabs({ctx.signal('tau_g')});")
+    if model.v_max_ is not None and max(model.slope_) > 0.0:   # linear beyond the top training speeds
+        top = [num(v) for v in model.v_max_]
+        lines.append(f"    m = m + (pos_ ? {num(model.slope_[0])} * (qd > {top[0]} ? qd - {top[0]} : 0.0)"
+                     f" : {num(model.slope_[1])} * (-qd > {top[1]} ? -qd - {top[1]} : 0.0));")
+    return lines
+
+
 def _prior(model, ctx: Context) -> list[str]:
-    """r0 = blend r0 + (1 - blend) p / y_scale, p the prior's steady magnitude (as
-    ``DissipativeFriction.prior_magnitude``)."""
+    """m = blend m + (1 - blend) p / y_scale, p the prior's steady magnitude (as
+    ``DissipativeFriction.prior_magnitude``), its coefficients scaled by (1 - blend) / y_scale;
+    the Stribeck shape only when fs - fc or ks - kc is not 0."""
     p, blend = model.prior_, model.blend_
-    tau_g = ctx.signal("tau_g")
-    return [f"    {{ const double load = fabs({tau_g}), absv = fabs(qd);",
-            f"      const double shape = absv > 0.0 ? exp(-exp((log(absv) - {num(math.log(p['vs']))}) * "
-            f"{num(p['delta'])})) : 1.0;",
-            f"      const double p = shape * (load * {num(p['ks'] - p['kc'])} + {num(p['fs'] - p['fc'])})"
-            f" + (load * {num(p['kc'])} + {num(p['fc'])}) + absv * {num(p['fv'])};",
-            f"      r0 = r0 * {num(blend)} + p * {num((1.0 - blend) / model.y_scale_)}; }}"]
+    c = (1.0 - blend) / model.y_scale_
+    load = f"fabs({ctx.signal('tau_g')})"
+    terms = []
+    if p["fs"] != p["fc"] or p["ks"] != p["kc"]:
+        level = " + ".join([*([f"load * {num((p['ks'] - p['kc']) * c)}"] if p["ks"] != p["kc"] else []),
+                            *([num((p["fs"] - p["fc"]) * c)] if p["fs"] != p["fc"] else [])])
+        # exp(-|v / vs|^delta), taken as 0 from v_cut on, where |v / vs|^delta >= SETTLED (no log, no exp)
+        v_cut = p["vs"] * SETTLED ** (1.0 / p["delta"])
+        terms.append(f"(absv < {num(v_cut)} ? (absv > 0.0 ? exp(-exp((log(absv) - {num(math.log(p['vs']))}) * "
+                     f"{num(p['delta'])})) : 1.0) : 0.0) * ({level})")
+    terms += [*([f"load * {num(p['kc'] * c)}"] if p["kc"] else []), *([num(p["fc"] * c)] if p["fc"] else []),
+              *([f"absv * {num(p['fv'] * c)}"] if p["fv"] else [])]
+    uses_load = any("load" in term for term in terms)
+    return [f"    {{ {f'const double load = {load}; ' if uses_load else ''}const double absv = fabs(qd);"
+            f"{' (void)absv;' if not any('absv' in term for term in terms) else ''}",
+            f"      m = m{f' * {num(blend)}' if blend != 1.0 else ''} + ({' + '.join(terms) or '0.0'}); }}"]
 
 
 def _bristles(model, ctx: Context) -> list[str]:
-    """The end of a dissipative step function with the pre-sliding state: g = y_scale r0, the
-    bristle update, tau_f = sigma0 z (as ``DissipativeFriction.predict``)."""
-    t = ctx.signal("t")
-    return [f"    {{ double g = r0 * {num(model.y_scale_)}, rate, a, zss, z;",
-            f"      g = g > {num(G_MIN)} ? g : {num(G_MIN)};",
-            f"      rate = fabs(qd) * {num(model.sigma0_)} / g;",
-            f"      a = rate * (s->started ? {t} - s->t_prev : 0.0);",
-            "      a = exp(-(a < 700.0 ? a : 700.0));",
-            f"      zss = {ctx.sgn}(qd) * g / {num(model.sigma0_)};",
-            "      z = (1.0 - a) * zss + a * (s->started ? s->z : zss);",
+    """The end of a dissipative step function with the pre-sliding state: g = y_scale m floored at
+    G_MIN, the bristle update, tau_f = sigma0 z (as ``DissipativeFriction.predict``), written in m
+    (y_scale folded into the constants) so that one division and one exp follow the magnitude."""
+    t, sigma0, y = ctx.signal("t"), model.sigma0_, model.y_scale_
+    return [f"    {{ const double dt_ = s->started ? {t} - s->t_prev : 0.0;",
+            "      double a, zss, z;",
+            f"      m = m > {num(G_MIN / y)} ? m : {num(G_MIN / y)};",
+            f"      a = fabs(qd) * {num(sigma0 / y)} * dt_ / m;",
+            f"      zss = (pos_ ? m : (qd < 0.0 ? -m : 0.0)) * {num(y / sigma0)};",
+            f"      if (a < {num(SETTLED)}) {{ a = exp(-a); z = zss + a * ((s->started ? s->z : zss) - zss); }}",
+            "      else z = zss;   /* settled: the decay is below 4.3e-18 */",
             f"      s->z = z; s->t_prev = {t}; s->started = 1;",
-            f"      return z * {num(model.sigma0_)}; }}", "}", ""]
+            f"      return z * {num(sigma0)}; }}", "}", ""]

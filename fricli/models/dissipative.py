@@ -93,6 +93,7 @@ PRIOR_KEYS = ("fc", "fs", "vs", "delta", "fv", "kc", "ks")   # the prior's param
 G_MIN = 1e-12            # floor on the bristle curve g [Nm], so the bristle rate stays finite
 # fit_bristles: the bristle deflection g_typ / sigma0 [rad] searched (as identify's bounds)
 DEFLECTION_RANGE = (1e-8, 1.0)
+BRISTLE_BLOCK = 1 << 16  # rows per block of the bristle recurrence in predict (as LuGreModel's)
 
 
 @register
@@ -308,14 +309,20 @@ class DissipativeFriction(FrictionModel):
         if not t.size:
             return np.empty(0), state
         z, t_last = (None, None) if state is None else state
-        g = self._bristle_curve(signals)
-        tau, z = self._bristles(np.asarray(signals["qd"], dtype=np.float64), g, physics.intervals(t, t_last),
-                                self.sigma0_, z)
-        return tau, (z, float(t[-1]))
+        qd = np.asarray(signals["qd"], dtype=np.float64)
+        tau = self._bristle_curve(signals)
+        buf = physics.Buffers(min(t.size, BRISTLE_BLOCK))
+        for i in range(0, t.size, BRISTLE_BLOCK):   # blocks whose temporaries stay in the cache
+            sl = slice(i, i + BRISTLE_BLOCK)
+            z = physics.lugre_friction(qd[sl], tau[sl], 0.0, self.sigma0_, 0.0, physics.intervals(t[sl], t_last), z,
+                                       out=tau[sl], buffers=buf)[1]
+            t_last = float(t[sl][-1])
+        return tau, (z, t_last)
 
     def _bristle_curve(self, signals: dict[str, np.ndarray]) -> np.ndarray:
         """g = the magnitude, floored at G_MIN (n,) [Nm]."""
-        return np.maximum(self.magnitude(signals), G_MIN)
+        g = self.magnitude(signals)
+        return np.maximum(g, G_MIN, out=g)
 
     @staticmethod
     def _bristles(qd: np.ndarray, g: np.ndarray, dt: np.ndarray, sigma0: float,
@@ -360,15 +367,26 @@ class DissipativeFriction(FrictionModel):
             raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
         nets = [net.astype(np.float64) if self.precision == "double" else net for net in self.nets_]
         out = np.empty(n, dtype=np.float64)
+        # terms of weight 0 are left out (they would add 0): the networks at blend 0, the prior at
+        # blend 1, the extrapolation when both slopes are 0
+        uses_net = self.prior_ is None or self.blend_ != 0.0
+        uses_prior = self.prior_ is not None and self.blend_ != 1.0
+        slopes = uses_net and self.v_max_ is not None and max(self.slope_) > 0.0
 
         def run(part: list[tuple[int, int]]) -> None:
             ws = [None] * len(nets)
             for start, stop in part:
                 rows = {k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}
-                x = self._rows(rows, nets[0].dtype)
-                if sliding:
-                    x[2] = 1.0
-                for k, net in enumerate(nets):
+                if uses_net or not sliding:
+                    x = self._rows(rows, nets[0].dtype)
+                    if sliding:
+                        x[2] = 1.0
+                    c = x[2]
+                else:                               # blend 0: the prior alone, c = 1
+                    c = 1.0
+                if not uses_net:
+                    out[start:stop] = 0.0
+                for k, net in enumerate(nets if uses_net else ()):
                     if ws[k] is None or ws[k].n != stop - start:
                         ws[k] = net.workspace(stop - start, backward=False)
                     ws[k].set_inputs(x)
@@ -376,17 +394,17 @@ class DissipativeFriction(FrictionModel):
                         np.multiply(net.forward(ws[k])[0], self.y_scale_, out=out[start:stop])
                     else:
                         out[start:stop] += net.forward(ws[k])[0] * self.y_scale_
-                if len(nets) > 1:
+                if len(nets) > 1 and uses_net:
                     out[start:stop] /= len(nets)
-                if self.v_max_ is not None:
+                if slopes:
                     qd = signals["qd"][start:stop]
                     beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
                     if (beyond > 0).any():
                         grow = self._by_direction(qd, self.slope_) * np.maximum(beyond, 0.0) * self.y_scale_
-                        out[start:stop] += grow * x[2]
-                if self.prior_ is not None:
+                        out[start:stop] += grow * c
+                if uses_prior:
                     out[start:stop] *= self.blend_
-                    out[start:stop] += (1.0 - self.blend_) * x[2] * self.prior_magnitude(rows)
+                    out[start:stop] += (1.0 - self.blend_) * c * self.prior_magnitude(rows)
 
         predict_in_chunks(n, run)
         return out

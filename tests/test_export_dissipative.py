@@ -1,0 +1,141 @@
+"""The dissipative network's exported step with its constants folded in and its zero-weight terms
+left out: C equals `fricli predict --precision double` to 1e-9 on every row for each variant (no
+load term, no prior, no bristles, blend 0 and 1, a prior without its Stribeck shape, an ensemble,
+extrapolation below v_min and above v_max with a slope, the settled Stribeck shape and bristle decay
+that the step skips), and predict leaves out only terms that add 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from conftest import SAMPLE
+from fricli import models
+from fricli.core import logs
+from fricli.export import c, neural
+from fricli.models import dissipative as D
+from fricli.models.dissipative import DissipativeFriction
+from test_export import _compare, needs_cc
+
+LOG = str(SAMPLE / "joint2_base.parquet")
+PRIOR = {"fc": 7.0, "fs": 9.0, "vs": 0.04, "delta": 1.2, "fv": 12.0, "kc": 0.04, "ks": 0.05}
+NARROW = {"fc": 7.0, "fs": 9.0, "vs": 0.005, "delta": 2.0, "fv": 12.0, "kc": 0.04, "ks": 0.05}   # shape 0 early
+FLAT = {"fc": 7.5, "fs": 7.5, "vs": 0.04, "delta": 1.2, "fv": 0.0, "kc": 0.0, "ks": 0.0}   # no shape, no load
+
+
+def _fit(members: int = 1) -> DissipativeFriction:
+    log = logs.load_log(LOG)
+    sig = log.signals
+    rows = np.arange(0, len(log), 97)
+    rows = rows[sig["qd"][rows] != 0]
+    target = logs.friction_target(sig)[rows]
+    pick = {k: v[rows] for k, v in sig.items()}
+    model = DissipativeFriction(steps=60, hidden_sizes=(12, 10)).fit(pick, target, rng=np.random.default_rng(3))
+    if members > 1:
+        nets = [model.net_] + [DissipativeFriction(steps=40, hidden_sizes=(12, 10)).fit(
+            pick, target, rng=np.random.default_rng(4 + k), scales_from=model).net_ for k in range(members - 1)]
+        model.set_members(nets, pick["qd"])
+    # inputs beyond the training speeds on both sides: the clamps at v_min and v_max, a positive slope
+    top = float(np.max(np.abs(sig["qd"])))
+    model.v_max_, model.v_min_ = (0.5 * top, 0.4 * top), (0.05 * top, 0.04 * top)
+    model.slope_ = (0.3, 0.7)
+    return model
+
+
+def _variant(model: DissipativeFriction, *, prior=None, blend=None, sigma0=None, load=True,
+             extrapolation=True) -> DissipativeFriction:
+    model.set_prior(prior, blend)
+    model.sigma0_, model.load_ = sigma0, load
+    if not extrapolation:
+        model.v_max_ = model.v_min_ = model.slope_ = None
+    return model
+
+
+VARIANTS = {
+    "network alone": dict(),
+    "no load term": dict(load=False),
+    "no extrapolation": dict(extrapolation=False),
+    "bristles": dict(sigma0=2e4),
+    "prior blend 0.4": dict(prior=PRIOR, blend=0.4),
+    "prior blend 0.4, bristles": dict(prior=PRIOR, blend=0.4, sigma0=2e4),
+    "prior blend 0, bristles": dict(prior=PRIOR, blend=0.0, sigma0=2e4),
+    "prior blend 0": dict(prior=PRIOR, blend=0.0),
+    "prior blend 1, bristles": dict(prior=PRIOR, blend=1.0, sigma0=2e4),
+    "flat prior blend 0.5, no load": dict(prior=FLAT, blend=0.5, load=False),
+    # the settled shortcuts: the Stribeck shape past v_cut, the bristle decay of stiff bristles
+    "narrow prior blend 0.2, stiff bristles": dict(prior=NARROW, blend=0.2, sigma0=1e9),
+}
+
+
+@needs_cc
+@pytest.mark.parametrize("name", list(VARIANTS))
+def test_each_variant_exports_the_numbers_of_predict(name, tmp_path):
+    model = _variant(_fit(), **VARIANTS[name])
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, logs.load_log(LOG), rows_used=100, seed=0)
+    assert _compare(path, LOG, tmp_path) <= 1.0
+
+
+@needs_cc
+def test_an_ensemble_over_a_prior_exports_the_numbers_of_predict(tmp_path):
+    model = _variant(_fit(members=2), prior=PRIOR, blend=0.3, sigma0=2e4)
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, logs.load_log(LOG), rows_used=100, seed=0)
+    assert _compare(path, LOG, tmp_path) <= 1.0
+
+
+def _header(model, tmp_path) -> str:
+    path = str(tmp_path / "m.npz")
+    models.save_for_log(path, model, logs.load_log(LOG), rows_used=100, seed=0)
+    return c.export(path, "fr")
+
+
+def test_terms_of_weight_zero_are_not_written(tmp_path):
+    text = _header(_variant(_fit(), prior=PRIOR, blend=1.0, sigma0=2e4), tmp_path)
+    assert "fr_m_net(x)" in text and "exp(-exp(" not in text        # blend 1: no prior
+    text = _header(_variant(_fit(), prior=PRIOR, blend=0.0, sigma0=2e4), tmp_path)
+    assert "fr_m_net" not in text and "exp(-exp(" in text            # blend 0: no network
+    text = _header(_variant(_fit(), prior=FLAT, blend=0.5), tmp_path)
+    assert "fr_m_net(x)" in text and "exp(-exp(" not in text         # fs = fc, ks = kc: no Stribeck shape
+    model = _variant(_fit(), load=False)
+    model.slope_ = (0.0, 0.0)
+    text = _header(model, tmp_path)
+    assert "tau_g" not in text.split("fr_m_step")[1].split("}\n")[0] and "qd - " not in text.split("fr_m_step")[1]
+    assert c.signals_of(model) == ["qd", "tau_g"]          # the step's signature does not depend on the terms
+
+
+def test_the_settled_shortcuts_are_taken_on_the_sample_log():
+    sig = logs.load_log(LOG).signals
+    model = _variant(_fit(), prior=NARROW, blend=0.2, sigma0=1e9)
+    v_cut = NARROW["vs"] * neural.SETTLED ** (1.0 / NARROW["delta"])
+    speed = np.abs(sig["qd"])
+    assert 0.1 < np.mean(speed >= v_cut) < 0.9          # both sides of v_cut are compared above
+    g = model._bristle_curve(sig)
+    decay = model.sigma0_ * speed[1:] * np.diff(sig["t"]) / g[1:]
+    assert 0.1 < np.mean(decay >= neural.SETTLED) < 0.99
+
+
+def test_predict_leaves_out_only_what_adds_zero():
+    sig = logs.load_log(LOG).signals
+    with_prior = _variant(_fit(), prior=PRIOR, blend=1.0, sigma0=2e4)
+    alone = _variant(_fit(), sigma0=2e4)
+    assert np.array_equal(with_prior.predict(sig)[0], alone.predict(sig)[0])   # blend 1: the network alone
+    a = _variant(_fit(), prior=PRIOR, blend=0.0, sigma0=2e4)
+    b = _variant(_fit(), prior=PRIOR, blend=0.0, sigma0=2e4)
+    b.net_.set_weights([w * 3.0 for w in b.net_.weights])                   # another network
+    pa, pb = a.predict(sig)[0], b.predict(sig)[0]
+    assert np.array_equal(pa, pb)                                             # blend 0: the prior alone
+    a.set_prior(PRIOR, 1e-9)                                                  # next to 0: the network counts
+    assert np.allclose(a.predict(sig)[0], pa, rtol=1e-6, atol=1e-6) and not np.array_equal(a.predict(sig)[0], pa)
+
+
+def test_the_bristle_blocks_carry_the_state(monkeypatch):
+    sig = logs.load_log(LOG).signals
+    model = _variant(_fit(), prior=PRIOR, blend=0.4, sigma0=2e4)
+    whole, state = model.predict(sig)
+    monkeypatch.setattr(D, "BRISTLE_BLOCK", 1000)
+    blocks, state2 = model.predict(sig)
+    assert len(sig["t"]) > 10 * 1000
+    np.testing.assert_allclose(blocks, whole, rtol=1e-12, atol=1e-12)
+    assert state2[1] == state[1] and abs(state2[0] - state[0]) <= 1e-12 * (1.0 + abs(state[0]))
