@@ -15,11 +15,12 @@ UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "
 RATE, INTERNAL = 100.0, 10     # output rate [Hz]; the friction integrated at 10 times that
 
 
-def joint_log(seed: int, slip: float | None, seconds: float = 60.0):
+def joint_log(seed: int, slip: float | None, seconds: float = 60.0, level: float = 1.0):
     """The simulator's joint 2 (``fricli.sim``: extended LuGre friction, gravity, the torque noise
     ``noise_sd``) moved by a sum of three harmonics (no velocity levels: benchmarks/run.py's
     harmonic log), with the simulator's Maxwell-slip elements (``--effect hysteresis=slip``: slip
-    [Nm] their total break-away force, None the default 0.3 fc; 0 none)."""
+    [Nm] their total break-away force, None the default 0.3 fc; 0 none), the Coulomb and viscous
+    friction scaled by ``level`` (``--effect level``)."""
     from fricli.numerics import physics
     from fricli.sim import effects as fx
     from fricli.sim import joints, simulator
@@ -36,6 +37,8 @@ def joint_log(seed: int, slip: float | None, seconds: float = 60.0):
     scene = fx.Scene(joint=j, t=t, q=q, v=qd, qdd=qdd, phi=np.zeros_like(t), tau_g=g, tau_ext=np.zeros_like(t),
                      temp=np.full_like(t, state["temperature"]), loaded=False, kq=state["kq"],
                      shift_pos=state["fc_shift_pos"], shift_neg=state["fc_shift_neg"])
+    if level != 1.0:
+        fx.EFFECTS["level"].apply(scene, level, rng)
     if slip != 0:
         fx.EFFECTS["hysteresis"].apply(scene, fx.EFFECTS["hysteresis"].default(j) if slip is None else slip, rng)
     f = simulator.friction(scene, physics.intervals(t))[::INTERNAL]
@@ -138,3 +141,52 @@ def test_memory_off_gives_the_network_alone_byte_for_byte(trained, tmp_path):
         assert value.tobytes() == other.tobytes(), key
     on, on_summary = learning.train_base(log, memory="on")
     assert on.kind == "augmented" and on_summary["memory"]["chosen"]
+
+
+def test_adapt_over_a_base_with_memory(trained, tmp_path):
+    """NN_add learns a friction level 25 % higher on top of the network with the elements; the
+    elements stay in the adapted model, and its prediction carries their deflections over batches."""
+    from conftest import invoke
+    from fricli import models
+
+    base = trained["dir"] / "slip.npz"
+    new_day = write(joint_log(3, None, seconds=40.0, level=1.25), tmp_path / "day.parquet")
+    res = invoke("adapt", base, new_day, "-o", tmp_path / "adapted.npz", "--json")
+    assert res.exit_code == 0, res.stderr
+    import json
+
+    record = json.loads(res.stdout)
+    assert record["adapted"] and record["kind"] == "residual"
+    assert record["val"]["mae"] < 0.5 * record["base_val"]["mae"]
+    model, _ = models.load(str(tmp_path / "adapted.npz"))
+    assert model.base.kind == "augmented" and model.base.effects == ["hysteresis"]
+    sig = logs.load_log(str(new_day)).signals
+    models.set_precision(model, "double")     # float32 rounds with the batch's size
+    whole = model.predict(sig)[0]
+    state, parts = None, []
+    for a, b in ((0, 1234), (1234, 1235), (1235, len(whole))):
+        pred, state = model.predict({k: v[a:b] for k, v in sig.items()}, state)
+        parts.append(pred)
+    np.testing.assert_allclose(np.concatenate(parts), whole, rtol=1e-12, atol=1e-12)
+
+
+def test_export_of_a_model_with_memory_equals_predict_double(trained, tmp_path):
+    import pyarrow.parquet as pq
+
+    import export_check as check
+    from conftest import invoke
+    from fricli.export import c
+
+    if check.compiler() is None:
+        pytest.skip("no C compiler")
+    model_path, log_path = trained["dir"] / "slip.npz", trained["dir"] / "plain.parquet"
+    for args in (("predict", model_path, log_path, "-o", tmp_path / "p.parquet", "--precision", "double"),
+                 ("export", model_path, "-o", tmp_path / "m.h", "--prefix", "fr")):
+        res = invoke(*args, "-q")
+        assert res.exit_code == 0, (args[0], res.stderr)
+    model = trained["slip"][0]
+    exe = str(tmp_path / "driver")
+    assert check.build(str(tmp_path / "m.h"), "fr", exe) == ""
+    got = check.run(exe, check.signal_matrix(logs.load_log(str(log_path)).signals, c.signals_of(model)))
+    ref = pq.read_table(tmp_path / "p.parquet").column("tau_f_pred").to_numpy()
+    assert np.max(np.abs(got - ref) / (1e-9 + 1e-9 * np.abs(ref))) <= 1.0
