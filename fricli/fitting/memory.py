@@ -42,7 +42,9 @@ def with_memory(model: FrictionModel, log: logs.Log, memory: str = "auto") -> tu
     people); "tested" (the diagnosis ran); with it "significant" (chosen by the held-out test),
     the held-out figures over the diagnosis's folds ("folds"; "mae_before": the network's
     residual MAE [Nm or N], "mae_after": with the elements fitted on the other folds,
-    "rmse_before", "rmse_after", "gain": share of the held-out squared residual removed) and the
+    "rmse_before", "rmse_after", "gain": share of the held-out squared residual they remove
+    alone), what the diagnosis added ("diagnosis_added": hysteresis, level, velocity), the
+    network's scale 1 + b_p ("scale") and the
     elements' parameters ("params": limits d1..4, break-away forces F1..4, their sum F, the
     model's Coulomb and viscous level as rescaled); when chosen, "moving": MAE, RMSE, max [Nm
     or N] of the returned model over the log's rows in motion.
@@ -56,10 +58,10 @@ def with_memory(model: FrictionModel, log: logs.Log, memory: str = "auto") -> tu
     result = next(e for e in diagnosis.effects if e.name == N.HYSTERESIS)
     significant = N.HYSTERESIS in diagnosis.added
     fitted = _fit(model, log, result.terms, diagnosis.folds)
-    params, coef, implausible = fitted.pop("params"), fitted.pop("coef"), fitted.pop("implausible")
+    params, coef, implausible, turned = (fitted.pop(k) for k in ("params", "coef", "implausible", "turned"))
     summary = {"mode": memory, "tested": True, "significant": significant, "folds": diagnosis.folds, **fitted,
-               "params": params}
-    unphysical = implausible or _turned(fitted.pop("turned"), fitted["scale"])
+               "params": params, "diagnosis_added": list(diagnosis.added)}
+    unphysical = implausible or _turned(turned, fitted["scale"])
     better = fitted["mae_after"] < fitted["mae_before"]
     if unphysical:
         summary.update(chosen=False, why=f"not added: {unphysical}")
@@ -137,6 +139,11 @@ def _why_not(diagnosis: driver.Diagnosis, result: driver.EffectResult) -> str:
         return f"not added: {result.implausible}"
     if result.gain <= 0:
         return "not chosen: on held-out blocks the elements do not lower the network's residual"
+    if diagnosis.added:
+        instead = " and ".join({N.LEVEL: "a change of level", N.VELOCITY: "a smooth correction in speed"}[e]
+                               for e in diagnosis.added)
+        return (f"not chosen: {instead} explains the network's held-out residual (fricli diagnose --fix adds it); "
+                f"the elements remove {100 * max(result.gain, 0.0):.1f} % more")
     if not result.significant:
         return (f"not chosen: on held-out blocks the elements remove {100 * max(result.gain, 0.0):.1f} % of the "
                 "network's squared residual, not significantly more than a change of level or a smooth correction "
