@@ -190,3 +190,14 @@ def test_export_of_a_model_with_memory_equals_predict_double(trained, tmp_path):
     got = check.run(exe, check.signal_matrix(logs.load_log(str(log_path)).signals, c.signals_of(model)))
     ref = pq.read_table(tmp_path / "p.parquet").column("tau_f_pred").to_numpy()
     assert np.max(np.abs(got - ref) / (1e-9 + 1e-9 * np.abs(ref))) <= 1.0
+
+
+def test_a_memory_choice_that_does_not_exist_is_refused_naming_the_option():
+    from fricli.fitting import optionspec
+
+    assert optionspec.check("train-base", {})["memory"] == "auto"
+    with pytest.raises(optionspec.OptionError, match="memory") as err:
+        optionspec.check("train-base", {"memory": "sometimes"})
+    assert err.value.option == "memory"
+    with pytest.raises(ValueError, match="memory"):
+        learning.train_base(logs.from_table(joint_log(1, 0.0, seconds=20.0), name="short"), memory="sometimes")
