@@ -201,3 +201,10 @@ def test_a_memory_choice_that_does_not_exist_is_refused_naming_the_option():
     assert err.value.option == "memory"
     with pytest.raises(ValueError, match="memory"):
         learning.train_base(logs.from_table(joint_log(1, 0.0, seconds=20.0), name="short"), memory="sometimes")
+
+
+def test_a_log_too_short_for_the_test_trains_the_network_and_says_why():
+    log = logs.from_table(joint_log(1, None, seconds=1.9), name="short")
+    model, summary = learning.train_base(log, steps=200)
+    assert summary["velocity_groups"] == "moving" and model.kind == "dissipative"
+    assert not summary["memory"]["tested"] and "too few rows" in summary["memory"]["why"]

@@ -22,6 +22,7 @@ import numpy as np
 
 from fricli.core import effectnames as N
 from fricli.core import logs, metrics
+from fricli.core.errors import DataError, ModelFileError
 from fricli.fitting.diagnosis import driver
 from fricli.fitting.diagnosis import effects as E
 from fricli.fitting.diagnosis import selection
@@ -44,14 +45,18 @@ def with_memory(model: FrictionModel, log: logs.Log, memory: str = "auto") -> tu
     residual MAE [Nm or N], "mae_after": with the elements fitted on the other folds,
     "rmse_before", "rmse_after", "gain": share of the held-out squared residual they remove
     alone), what the diagnosis added ("diagnosis_added": hysteresis, level, velocity), the
-    network's scale 1 + b_p ("scale") and the
-    elements' parameters ("params": limits d1..4, break-away forces F1..4, their sum F, the
-    model's Coulomb and viscous level as rescaled); when chosen, "moving": MAE, RMSE, max [Nm
-    or N] of the returned model over the log's rows in motion.
+    network's scale 1 + b_p ("scale") and the elements' parameters ("params": limits d1..4,
+    break-away forces F1..4, their sum F, the model's Coulomb and viscous level as rescaled);
+    when chosen, "moving": MAE, RMSE, max [Nm or N] of the returned model over the log's rows
+    in motion. A log the diagnosis cannot take (too few rows for its folds, a joint held still,
+    no reversals) is not tested ("why" says why).
     """
     if memory not in ("auto", "on"):
         raise ValueError(f"unknown memory choice {memory!r}")
-    diagnosis = driver.diagnose(model, log, only=list(CANDIDATES))
+    try:
+        diagnosis = driver.diagnose(model, log, only=list(CANDIDATES))
+    except (DataError, ModelFileError) as exc:    # too few rows for the folds, a joint held still
+        return model, {"mode": memory, "chosen": False, "tested": False, "why": f"not tested: {exc}"}
     if N.HYSTERESIS in diagnosis.skipped:
         return model, {"mode": memory, "chosen": False, "tested": False,
                        "why": f"not tested: {diagnosis.skipped[N.HYSTERESIS]}"}
