@@ -3,10 +3,13 @@ scored on the last 40 % (RMS of the published friction target minus the predicti
 
     python benchmarks/franka_split.py                          # the default against --ensemble 5
     python benchmarks/franka_split.py --option=--bristles=off  # add options to every train-base
+    python benchmarks/franka_split.py --memory                 # --memory off against --memory auto
 
 For each file (slow, middle, high) the default ``fricli train-base`` (one network) and
 ``--ensemble 5`` (the mean of five) run one after the other on the same log, with their whole
-command's wall time. The files hold the joint's
+command's wall time; with --memory, ``--memory off`` (the network alone) and ``--memory auto``
+(Maxwell-slip elements where held-out blocks choose them) instead. The last 40 % is predicted
+with the state (pre-sliding deflection, slip elements) that the first 60 % leaves. The files hold the joint's
 friction torque as their authors extracted it (no gravity or dynamics left: --no-gravity
 --no-dynamics). Data: ../shared/data/franka (see ../shared/data/README.md), or --data.
 """
@@ -57,13 +60,18 @@ def fricli(*args: str) -> tuple[float, str]:
     return time.perf_counter() - start, proc.stdout
 
 
-def rms_on(model_path: str, test: str) -> float:
+def rms_on(model_path: str, fit: str, test: str) -> float:
+    """RMS [Nm] on ``test`` of the model, its state carried over from a prediction of ``fit``."""
     from fricli import models
     from fricli.core import logs
 
-    log = logs.load_log(test, zero=("tau_g", "tau_dyn"), warn=lambda *a: None)
+    def read(path):
+        return logs.load_log(path, zero=("tau_g", "tau_dyn"), warn=lambda *a: None)
+
+    log = read(test)
     model, _ = models.load(model_path)
-    pred = model.predict(log.signals)[0]
+    _, state = model.predict(read(fit).signals)
+    pred = model.predict(log.signals, state)[0]
     return float(np.sqrt(np.mean((logs.friction_target(log.signals) - pred) ** 2)))
 
 
@@ -71,12 +79,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA)
     ap.add_argument("--option", action="append", default=[], help="add to every train-base (repeatable)")
+    ap.add_argument("--memory", action="store_true", help="--memory off against --memory auto")
     ap.add_argument("--json", default=None, help="also write the figures to this file")
     args = ap.parse_args()
     if not os.path.exists(os.path.join(args.data, "joint2_slow.csv")):
         raise SystemExit(f"no Franka data at {args.data}")
     flags = ["--no-gravity", "--no-dynamics", "-q"]
-    variants = {"default (one network)": [], "--ensemble 5": ["--ensemble", "5"]}
+    variants = ({"--memory off": ["--memory", "off"], "--memory auto": ["--memory", "auto"]} if args.memory else
+                {"default (one network)": [], "--ensemble 5": ["--ensemble", "5"]})
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in FILES:
@@ -85,16 +95,22 @@ def main() -> None:
             for label, extra in variants.items():
                 path = os.path.join(tmp, "nn.npz")
                 wall, stdout = fricli("train-base", fit, "-o", path, "--json", *flags, *extra, *args.option)
-                row[label] = {"rmse": rms_on(path, test), "wall_s": wall, "seconds": json.loads(stdout)["seconds"]}
+                made = json.loads(stdout)
+                row[label] = {"rmse": rms_on(path, fit, test), "wall_s": wall, "seconds": made["seconds"],
+                              "kind": made["kind"] if "memory" not in made else
+                              ("network + slip elements" if made["memory"]["chosen"] else "network"),
+                              "memory": made.get("memory")}
             out[name] = row
     labels = list(next(iter(out.values())))
-    print("| file | " + " | ".join(f"{k}: RMS [Nm]" for k in labels) + " | one / five | train-base wall [s]: "
-          "default / --ensemble 5 |")
-    print("|---" * (len(labels) + 3) + "|")
+    first, second = labels
+    print("| file | " + " | ".join(f"{k}: RMS [Nm]" for k in labels) + f" | ratio | train-base wall [s]: "
+          f"{first} / {second} |" + (" --memory auto chose |" if args.memory else ""))
+    print("|---" * (len(labels) + 3 + args.memory) + "|")
     for name, row in out.items():
-        one, five = row["default (one network)"], row["--ensemble 5"]
+        one, two = row[first], row[second]
         print(f"| {name} | " + " | ".join(f"{row[k]['rmse']:.4f}" for k in labels)
-              + f" | {one['rmse'] / five['rmse']:.3f} | {one['wall_s']:.1f} / {five['wall_s']:.1f} |")
+              + f" | {one['rmse'] / two['rmse']:.3f} | {one['wall_s']:.1f} / {two['wall_s']:.1f} |"
+              + (f" {two['kind']} |" if args.memory else ""))
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(out, fh, indent=1)

@@ -60,6 +60,19 @@ def _rows_used(summary: dict, tau: str) -> str:
     return f"rows ({val} for validation, {summary['groups']} velocity {'levels' if mode == 'levels' else 'groups'})"
 
 
+def _memory(memory: dict, tau: str) -> str:
+    """train-base's choice of the Maxwell-slip elements, for its message."""
+    if not memory["tested"]:
+        return f"memory: {memory['why']}"
+    figures = (f"held-out MAE [{tau}] over {memory['folds']} blocks of time: network {memory['mae_before']:.4g}, "
+               f"with {sum(1 for k in memory['params'] if k.startswith('d'))} Maxwell-slip elements "
+               f"{memory['mae_after']:.4g}")
+    if memory["chosen"]:
+        return (f"memory: {figures}; {memory['why']}; the model is the network with the elements (augmented; "
+                f"moving rows MAE {memory['moving']['mae']:.3f})")
+    return f"memory: {figures}; {memory['why']}; the model is the network alone"
+
+
 def _decision(summary: dict, tau: str) -> str:
     """adapt's verdict on its held-out rows, for its message."""
     held = summary.get("held_out")
@@ -118,6 +131,11 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
     rows in motion instead and holds out whole blocks of time; stderr says which. There the
     dissipative network is the mean of five networks, each validated on other blocks, all
     stopped at the step of the least validation loss over every block.
+    On such a log the network's residual is then tested for friction with memory: Maxwell-slip
+    elements (fricli diagnose's hysteresis effect) are added on top of the network, as an
+    augmented model, when on held-out blocks of time they lower the error significantly more than
+    a change of level or a smooth correction in speed (--memory auto; on: always, where they stay
+    physical; off: never); stderr and --json ("memory") say what was chosen and why.
     The velocity enters the network as asinh(qd / v0) (v0 a low speed of the log, stored in the
     model), so slow speeds are resolved; --velocity-input linear gives the network qd itself.
     Adam's learning rate falls from --lr to 0 along a cosine over the steps (--schedule paper: the
@@ -147,6 +165,8 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
         tau = the_log.units["tau"]
         say(f"friction MAE [{tau}]: training {_mae(summary, 'train')}, validation {_mae(summary, 'val')}; "
             f"moving rows of the log {_mae(summary, 'moving')}, all rows {_mae(summary, 'log')}", quiet)
+        if "memory" in summary:
+            say(_memory(summary["memory"], tau), quiet)
         if summary["velocity_groups"] == "levels" and summary["groups"] < learning.MIN_VELOCITY_LEVELS:
             warn(f"warning: {the_log.name}{where}: the training rows hold {summary['groups']} velocity "
                  f"level{'s' if summary['groups'] != 1 else ''} (both directions counted): the model knows the "

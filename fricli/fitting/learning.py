@@ -52,6 +52,7 @@ def default_steps(arch: str, schedule: str = "cosine") -> int:
 
 VELOCITY_INPUTS = ("asinh", "linear")   # train-base: how the network sees qd (see models.neural)
 BRISTLES = ("off", "on", "auto")   # train-base: the dissipative network's pre-sliding state (bristle_check)
+MEMORY = ("auto", "on", "off")     # train-base: Maxwell-slip elements on a log without levels (memory.with_memory)
 MIN_ROWS_PER_DIRECTION = 20   # moving rows a network needs in each direction at the least
 
 
@@ -74,15 +75,29 @@ def train_base(log: logs.Log, *, arch: str = DEFAULT_ARCH, hidden: tuple[int, ..
                batch_size: int = 0, seed: int = 0, val_fraction: float = 0.2,
                balance: bool = True, max_samples: int | None = DEFAULT_MAX_SAMPLES,
                velocity_input: str = "asinh", velocity_scale: float | None = None,
-               ensemble: int = 1, bristles: str = "on", prior: bool = True,
+               ensemble: int = 1, bristles: str = "on", prior: bool = True, memory: str = "auto",
                on_eval: Callable | None = None) -> tuple[FrictionModel, dict]:
     """Train a network (``arch``) on the friction target of ``log``: ``train`` on the log's
-    signals with the generator of ``seed``."""
-    return train(log.signals, logs.friction_target(log.signals), name=log.name, units=log.units, arch=arch,
-                 hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr, batch_size=batch_size,
-                 rng=np.random.default_rng(seed), val_fraction=val_fraction, balance=balance,
-                 max_samples=max_samples, velocity_input=velocity_input, velocity_scale=velocity_scale,
-                 ensemble=ensemble, bristles=bristles, prior=prior, on_eval=on_eval)
+    signals with the generator of ``seed``.
+
+    On a log without velocity levels (summary "velocity_groups" "moving") ``memory`` (a key of
+    ``MEMORY``) adds Maxwell-slip elements to the trained network: "auto" when the
+    diagnosis's hysteresis test on held-out blocks chooses them, "on" always (both only where
+    they stay physical), "off" never (``memory.with_memory``; summary "memory", not given for
+    "off"); the model is then ``augmented``. A log with velocity levels trains as before."""
+    if memory not in MEMORY:
+        raise ValueError(f"unknown memory choice {memory!r}")
+    model, summary = train(log.signals, logs.friction_target(log.signals), name=log.name, units=log.units,
+                           arch=arch, hidden=hidden, steps=steps, schedule=schedule, patience=patience, lr=lr,
+                           batch_size=batch_size, rng=np.random.default_rng(seed), val_fraction=val_fraction,
+                           balance=balance, max_samples=max_samples, velocity_input=velocity_input,
+                           velocity_scale=velocity_scale, ensemble=ensemble, bristles=bristles, prior=prior,
+                           on_eval=on_eval)
+    if summary["velocity_groups"] == "moving" and memory != "off":
+        from fricli.fitting import memory as mem
+
+        model, summary["memory"] = mem.with_memory(model, log, memory)
+    return model, summary
 
 
 def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: dict, rng: np.random.Generator,

@@ -199,6 +199,12 @@ TRAIN_BASE = (
     Option("no_prior", "flag", False,
            "The dissipative network alone, not blended with the LuGre model's static curve fitted on the same rows "
            "(by default the network's share of the blend is chosen on the held-out rows; docs/neural-models.md)."),
+    Option("memory", "choice", "auto",
+           "On a log without velocity levels, friction with memory: Maxwell-slip elements (hysteresis) on top of the "
+           "trained network. auto: added when, on held-out blocks of time, they lower the network's residual "
+           "significantly more than a change of level or a smooth correction in speed (fricli diagnose's hysteresis "
+           "test); on: always; off: the network alone. Elements that would give energy back are never added "
+           "(docs/neural-models.md, Memory).", choices=learning.MEMORY),
     Option("coupling", "flag", False,
            "Train each group of joints that share motors (the log's transmission, docs/drives.md) as one model "
            "with a dissipative network per motor of the motor's velocity (kind coupled); the other joints as "

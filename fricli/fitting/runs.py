@@ -304,7 +304,7 @@ def _identify(data, opts, _base, _on_eval) -> Fitted:
 def _train_base(data, opts, _base, on_eval) -> Fitted:
     from fricli.fitting import learning
 
-    model, summary = learning.train_base(data, on_eval=on_eval, **_train_options(opts))
+    model, summary = learning.train_base(data, on_eval=on_eval, memory=opts["memory"], **_train_options(opts))
     return Fitted(model, summary, rows_used=summary["train_rows"] + summary["val_rows"], seed=opts["seed"])
 
 
