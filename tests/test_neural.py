@@ -669,6 +669,30 @@ def test_the_probe_in_a_child_process_gives_the_network_of_the_probe_in_a_thread
     assert sa["bristles"] == sb["bristles"] and sa["steps"] == sb["steps"]
 
 
+def test_what_is_kept_does_not_depend_on_which_training_runs_ahead(harmonic, monkeypatch):
+    """The model trains on until it has passed the probe's best record, so how far it ran depends on
+    timing; its weights, recorded steps and losses do not: the same bytes either way."""
+    import time
+
+    from fricli.models.dissipative import DissipativeFriction
+
+    fit = DissipativeFriction.fit
+    results = []
+    for late in ("probe", "model"):
+        def delayed(self, *args, snapshots=False, _late=late, **kwargs):
+            if (_late == "model") == snapshots:
+                time.sleep(1.0)
+            return fit(self, *args, snapshots=snapshots, **kwargs)
+
+        monkeypatch.setattr(DissipativeFriction, "fit", delayed)
+        model, _ = learning.train_base(load(harmonic["log"]), steps=600, seed=0)
+        results.append((model.get_params(), model.get_arrays()))
+    (pa, aa), (pb, ab) = results
+    assert pa == pb and aa.keys() == ab.keys()
+    for key in aa:
+        np.testing.assert_array_equal(aa[key], ab[key])
+
+
 def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(harmonic):
     """The probe ends once its held-out loss has not improved by 0.1 % over its patience (given,
     else PATIENCE_SHARE of the steps); the model trains on past the probe's best record and

@@ -59,7 +59,8 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     improved by 0.1 % for its patience (the model's, else PATIENCE_SHARE of ``steps``); the
     model records its weights at every loss record, trains on until it has passed the probe's
     best record and keeps the weights of that record. Which weights are kept depends on the
-    probe's losses alone, not on which training runs ahead.
+    probe's losses alone, not on which training runs ahead; so do the model's recorded steps (the
+    probe's) and training losses (up to the record kept).
     Returns (model, probe, summary): the probe stays fitted for the choices made on its
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
     chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
@@ -101,6 +102,10 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     model.snapshots_ = None
     model.set_members([model.net_], sig["qd"][rows])   # the extrapolation from the weights kept
     model.best_step_ = min((record + 1) * model.eval_every_, steps)
+    # how far the model ran past the probe's best record depends on which process ran ahead: what
+    # is kept depends on the probe's curve alone (the same bytes every run)
+    model.history_train_ = np.asarray(model.history_train_)[:record + 1]
+    model.steps_ = probe.steps_
     model.history_val_ = np.asarray(probe.history_val_)
     model.n_val_ = 0
     return model, probe, {"step": int(model.best_step_), "val_rows": val,
