@@ -39,7 +39,7 @@ if ROOT not in sys.path:
 import numpy as np  # noqa: E402
 
 from fricli.core import logs
-from fricli.fitting import learning
+from fricli.fitting import heldout, learning
 from fricli.numerics import forked, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
 from fricli.numerics.nn import activations as acts  # noqa: E402
@@ -397,14 +397,23 @@ def training_rows(log: logs.Log, arch: str, steps: int) -> tuple[np.ndarray, ...
     def net_input(x):
         return np.ascontiguousarray(x, dtype=np.float32)
 
-    original, apart = Trainer.fit, forked.AVAILABLE
-    Trainer.fit, forked.AVAILABLE = catch, False   # both trainers in this process, where the catch is
+    def one_by_one(tasks, stop=None):   # every trainer reaches the catch, whichever is caught first
+        for task in tasks:
+            try:
+                task()
+            except Caught:
+                pass
+        raise Caught
+
+    original, apart, parallel = Trainer.fit, forked.AVAILABLE, heldout.run_parallel
+    # both trainers in this process, where the catch is, one after the other
+    Trainer.fit, forked.AVAILABLE, heldout.run_parallel = catch, False, one_by_one
     try:
         learning.train_base(log, arch=arch, steps=steps)
     except Caught:
         pass
     finally:
-        Trainer.fit, forked.AVAILABLE = original, apart
+        Trainer.fit, forked.AVAILABLE, heldout.run_parallel = original, apart, parallel
     return caught["x"], caught["t"], caught.get("xv"), caught.get("tv")
 
 

@@ -129,8 +129,8 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
     level are held out for validation, and the weights with the lowest validation loss are kept.
     A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
     rows in motion instead and holds out whole blocks of time; stderr says which. There the
-    dissipative network is the mean of five networks, each validated on other blocks, all
-    stopped at the step of the least validation loss over every block.
+    dissipative network is one network on every row, stopped at the step a second network shows
+    best on two held-out blocks (--ensemble N: the mean of N networks, one per fold of blocks).
     On such a log the network's residual is then tested for friction with memory: Maxwell-slip
     elements (fricli diagnose's hysteresis effect) are added on top of the network, as an
     augmented model, when on held-out blocks of time they lower the error significantly more than
@@ -178,7 +178,7 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
                  f"of {summary['max_steps']}: training learned nothing the held-out rows confirm; the target may hold "
                  "what no friction of velocity and load gives (fricli diagnose says what)")
         say(wrote(out), quiet)
-        return {"model": out, "kind": arch, "seconds": round(seconds, 3), **summary}
+        return {"model": out, "kind": made.model.kind, "seconds": round(seconds, 3), **summary}
 
     def progress(data, motor=None):
         where = f" motor {motor + 1}" if motor is not None else (
