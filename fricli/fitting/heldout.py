@@ -138,11 +138,12 @@ def fitted_side_by_side(fits: list[Callable[[bool], FrictionModel]], stop: threa
         return run_parallel([partial(fit, True) for fit in fits], stop)
     done = []
     with single_threaded():
-        for k in range(0, len(fits) - 1, 2):
-            parcel, here = forked.beside(lambda f=fits[k]: _packed(f(False)), partial(fits[k + 1], True))
-            done += [_unpacked(type(here), parcel), here]
-        if len(fits) % 2:
-            done.append(fits[-1](True))
+        for k, fit in enumerate(fits):
+            if apart(k, len(fits)):   # with the next one, which runs here
+                parcel, here = forked.beside(lambda f=fit: _packed(f(False)), partial(fits[k + 1], True))
+                done += [_unpacked(type(here), parcel), here]
+            elif not (k and apart(k - 1, len(fits))):
+                done.append(fit(True))
     return done
 
 

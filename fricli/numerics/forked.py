@@ -2,7 +2,7 @@
 
 Two trainings in two threads of one process share its interpreter lock: a training step is a
 hundred short numpy calls, each of which gives the lock up and waits for it again, and two
-such loops slow each other down by half (measured: docs/performance.md). In two processes they
+such loops slow each other down by half (measured: docs/studies/performance.md). In two processes they
 run at full speed on two cores. ``beside`` forks (Linux only; elsewhere, and where
 ``AVAILABLE`` is off, both run on threads of this process), and the child sends its result back
 as JSON and numpy arrays through a temporary file (``np.savez``, read with
