@@ -224,10 +224,9 @@ def test_header_compiles_as_cpp_without_warnings(kind, sim_models, tmp_path):
 
 @pytest.mark.parametrize("cxx", [False, True], ids=["c", "c++"])
 @pytest.mark.parametrize("kind", ["dissipative", "residual", "augmented-nn"])
-def test_the_avx2_copy_of_a_network_gives_the_portable_bits(kind, cxx, sim_models, tmp_path):
-    """With GCC or Clang on x86-64 a CPU with AVX2 runs the networks' AVX2 copy: bit for bit
-    what the portable copy (FRICLI_PORTABLE) gives, also as C++, where gcc would contract
-    multiply-adds if the copy allowed them."""
+def test_the_fma_copy_of_a_network_agrees_with_the_portable_copy(kind, cxx, sim_models, tmp_path):
+    """With GCC or Clang on x86-64 a CPU with AVX2 and FMA runs the networks' fused copy: what
+    the portable copy (FRICLI_PORTABLE) gives, to rounding, also as C++."""
     if check.compiler(cxx) is None:
         pytest.skip("no C++ compiler" if cxx else "no C compiler")
     header = tmp_path / "fr.h"
@@ -238,7 +237,8 @@ def test_the_avx2_copy_of_a_network_gives_the_portable_bits(kind, cxx, sim_model
     assert check.build(str(header), "fr", portable, cxx=cxx, flags=("-DFRICLI_PORTABLE",)) == ""
     model, _ = models.load(sim_models[kind])
     x = check.signal_matrix(logs.load_log(str(SAMPLE / "joint2_extended_asym.parquet")).signals, c.signals_of(model))
-    assert np.array_equal(check.run(fast, x), check.run(portable, x))
+    a, b = check.run(fast, x), check.run(portable, x)
+    assert np.max(np.abs(a - b)) <= 1e-14 * max(1.0, np.max(np.abs(b)))   # 1e-15 of it measured
 
 
 def test_export_is_byte_identical_and_carries_the_meta(sim_models, tmp_path):

@@ -45,20 +45,18 @@ inline int long register restrict return short signed sizeof static struct switc
 volatile while bool class delete new operator private protected public template this throw try virtual""".split())
 
 
-AVX2 = "FRICLI_AVX2"   # macro: 1 when the networks' AVX2 copies are built (see PRELUDE)
+AVX2 = "FRICLI_AVX2"   # macro: 1 when the networks' AVX2 and FMA copies are built (see PRELUDE)
 
 PRELUDE = f"""\
-/* With GCC or Clang on x86-64, each network is also compiled for AVX2 (a GNU target attribute)
- * and that copy runs when the CPU has AVX2 (__builtin_cpu_supports): the same operations in the
- * same order, without fused multiply-adds, so the same results to the bit, sooner. Define
- * FRICLI_PORTABLE to build the portable C99 copy only. */
+/* With GCC or Clang on x86-64, each network also has a copy compiled for AVX2 and FMA (a GNU
+ * target attribute), its multiply-adds fused, which runs when the CPU has both
+ * (__builtin_cpu_supports); it agrees with the portable C99 copy to rounding (a few 1e-16
+ * relative). Define FRICLI_PORTABLE to build the portable copy only. */
 #ifndef {AVX2}
 #if defined(__GNUC__) && defined(__x86_64__) && !defined(__AVX2__) && !defined(FRICLI_PORTABLE)
 #define {AVX2} 1
-#define FRICLI_NET_INLINE __attribute__((always_inline)) static inline
 #else
 #define {AVX2} 0
-#define FRICLI_NET_INLINE static inline
 #endif
 #endif
 """
