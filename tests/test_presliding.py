@@ -184,3 +184,25 @@ def test_export_with_the_state_matches_predict(fitted, tmp_path):
         path = str(tmp_path / f"{name}.npz")
         models.save_for_log(path, model, log, rows_used=len(log))
         assert _compare(path, str(SAMPLE / "joint2_extended_asym.parquet"), tmp_path) <= 1.0
+
+
+def test_bristles_auto_drops_a_state_that_does_not_help_on_velocity_levels(tmp_path):
+    """A log of constant-velocity levels whose friction has no pre-sliding: --bristles auto measures
+    no gain and writes the static network (the check used to leave its state on the model)."""
+    from fricli.core import logs
+    from fricli.fitting import learning
+
+    qd = np.concatenate([np.r_[np.full(300, s * v), np.zeros(50)] for v in (0.05, 0.1, 0.2, 0.4) for s in (1, -1)])
+    t = np.arange(qd.size) / 100.0
+    zeros = np.zeros_like(t)
+    tau_m = 3 * np.tanh(qd / 0.01) + 5 * qd + 0.05 * np.random.default_rng(0).standard_normal(qd.size)
+    table = logs.table_from_arrays(
+        {"t": t, "q": np.cumsum(qd) / 100.0, "qd": qd, "qdd": zeros, "tau_m": tau_m, "tau_g": zeros, "tau_dyn": zeros},
+        {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm", "tau_dyn": "Nm"})
+    from conftest import write
+    log = logs.load_log(str(write(table, tmp_path / "levels.parquet")), cutoff_hz=50.0)
+    model, summary = learning.train_base(log, steps=200, seed=0, bristles="auto")
+    assert summary["velocity_groups"] == "levels"
+    check = summary["bristles"]
+    assert not check["helps"]
+    assert model.sigma0_ is None and not check["kept"]

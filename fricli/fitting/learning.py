@@ -230,6 +230,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             check = bristle_check([model], [(sel.train, sel.val)], sig, target)
             if bristles == "on" or check["helps"]:
                 model.fit_bristles(sig, target, sel.train)
+            else:
+                model.sigma0_ = None   # the check left its state on the model itself
     pred = model.predict(sig)[0]
     summary = {"arch": arch, **sel.summary(), "plateaus": plateaus and sel.mode == "moving",
                "best_step": int(model.best_step_), "steps": int(model.steps_),
