@@ -120,3 +120,34 @@ def test_every_command_reads_a_linear_model(fitted, tmp_path):
     assert res.exit_code == 0
     row = json.loads(res.stdout)["results"][0]
     assert 0 < row["friction"]["mae"] <= row["friction"]["rmse"]
+
+
+def one_speed_each_way(tmp_path, second: float | None = None) -> str:
+    """Out at 0.1 rad/s and back at 0.2 rad/s (raised-cosine ramps between); with ``second``, a
+    second hold out at that speed. Friction 6 Nm Coulomb, 12 Nm s/rad viscous, plus noise."""
+    def ramp(a, b, n=10):
+        return a + (b - a) * 0.5 * (1 - np.cos(np.pi * np.arange(n) / n))
+    parts = [ramp(0, 0.1), np.full(400, 0.1), ramp(0.1, 0), ramp(0, -0.2), np.full(300, -0.2), ramp(-0.2, 0)]
+    if second is not None:
+        parts += [ramp(0, second), np.full(400, second), ramp(second, 0)]
+    qd = np.concatenate(parts + [np.zeros(50)])
+    t = np.arange(qd.size) / 100.0
+    tau_f = 6.0 * np.sign(qd) + 12.0 * qd + 0.2 * np.random.default_rng(0).standard_normal(qd.size)
+    table = logs.table_from_arrays({"t": t, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": np.zeros_like(t),
+                                    "tau_m": tau_f},
+                                   {"t": "s", "qd": "rad/s", "qdd": "rad/s^2", "tau_g": "Nm", "tau_m": "Nm"})
+    return write(no_inertia(table), tmp_path / "levels.parquet")
+
+
+@pytest.mark.parametrize("kind", ["linear", "linear-asymmetric"])
+def test_one_speed_each_way_is_noted(kind, tmp_path):
+    """One speed per direction cannot separate Coulomb from viscous friction (and the offset):
+    the fit says so instead of giving what the ramps happen to suggest without a word."""
+    res = invoke("identify", one_speed_each_way(tmp_path), "-o", tmp_path / "m.npz", "--kind", kind, "--json")
+    assert res.exit_code == 0, res.output
+    notes = json.loads(res.stdout)["fit"]["notes"]
+    assert len(notes) == 1 and "one speed" in notes[0] and "0.1 and 0.2 rad/s" in notes[0], notes
+    assert "note: " + notes[0] in res.stderr
+    res = invoke("identify", one_speed_each_way(tmp_path, 0.4), "-o", tmp_path / "m.npz", "--kind", kind, "--json")
+    notes = json.loads(res.stdout)["fit"]["notes"]
+    assert (notes == []) == (kind == "linear"), notes   # asymmetric: still one speed back

@@ -82,8 +82,8 @@ def _report_linear(data, model, fit, out, quiet: bool) -> dict:
 
     if model.kind == "gms":
         linear = gms
-        for note in fit.get("notes", []):
-            say(f"note: {note}", quiet)
+    for note in fit.get("notes", []):
+        say(f"note: {note}", quiet)
 
     unit, params = data.units["tau"], model.parameters()
     say([*model.describe().splitlines(), f"fit error, all rows: {_figures(fit, unit)}",

@@ -131,5 +131,24 @@ def fit(signals: dict[str, np.ndarray], *, asymmetric: bool = False,
     pred = model.predict(signals)[0]
     record = metrics.errors(y, pred)
     record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
-                  condition=float(np.linalg.cond(X)))
+                  condition=float(np.linalg.cond(X)), notes=speed_notes(qd[moving], asymmetric, axis))
     return model, record
+
+
+def speed_notes(qd: np.ndarray, asymmetric: bool, axis: str = "rotary") -> list[str]:
+    """A note when the velocities in motion qd (n,) do not separate Coulomb from viscous friction:
+    one speed in each direction (symmetric, with its offset) or in either (asymmetric), one speed
+    meaning the 5th to 95th percentile of |qd| within a factor 1.5 (``identify``'s rule)."""
+    one = []
+    for side in (qd > 0, qd < 0):
+        lo, hi = np.percentile(np.abs(qd[side]), [5, 95])
+        one.append(hi < 1.5 * lo)
+    if not (any(one) if asymmetric else all(one)):
+        return []
+    unit = "m/s" if axis == "linear" else "rad/s"
+    speeds = " and ".join(f"{np.median(np.abs(qd[side])):.3g}" for side in (qd > 0, qd < 0))
+    which = "each direction" if all(one) else ("the positive" if one[0] else "the negative") + " direction"
+    terms = "Fc and Fv of that direction" if asymmetric else "Fc, Fv and the offset"
+    return [f"the rows in motion cover one speed in {which} (about {speeds} {unit} out and back): "
+            f"the log does not separate Coulomb from viscous friction, {terms} rest on the rows "
+            "that accelerate between; log motion at several speeds to identify them"]
