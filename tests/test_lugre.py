@@ -315,6 +315,23 @@ def test_a_stribeck_velocity_spanning_the_speeds_is_held():
     assert fitted.warnings_ == [] and fitted.model_.parameters()["fs"] > fitted.model_.parameters()["fc"]
 
 
+def test_a_coulomb_level_traded_against_a_spanning_stribeck_curve_is_fitted_again_without_it():
+    """Friction of one direction (0.5 Nm, slow rows) above the other's (0.15 Nm, fast rows), as on the
+    Franka slow file decimated to 50 Hz: the first fit is a decay across all speeds, with Fc and Fv at
+    their lower bounds and vs at its upper one. The Stribeck effect is dropped first and Fc, Fv
+    fitted again: holding all three at once left a model of no friction at all (Fc 3e-4 Nm)."""
+    rng = np.random.default_rng(0)
+    v = np.r_[rng.uniform(0.04, 0.09, 300), -rng.uniform(0.01, 0.05, 300)]
+    y = np.where(v > 0, 0.15, -0.5) + 0.05 * rng.standard_normal(v.size)
+    ident = LuGreIdentifier()
+    p = ident.fit_static(v, y)
+    assert p["fs"] == p["fc"] and 0.2 < p["fc"] < 0.5
+    assert any(n.startswith("Stribeck velocity vs (no breakaway") for n in ident.notes_)
+    assert not any(n.startswith("Coulomb friction Fc") for n in ident.notes_), ident.notes_
+    mae = np.mean(np.abs(LuGreModel(**p).steady_state(v, None) - y))
+    assert mae < 0.8 * np.mean(np.abs(y))   # the model of no friction had the error of y itself
+
+
 def test_warning_stribeck_velocity_spanning_the_speeds():
     sig = sweep_signals(seed=3)
     ident = LuGreIdentifier().fit(sig)

@@ -263,11 +263,16 @@ class LuGreIdentifier:
             hit.update(bound)
             if not bound:
                 break
+            if layout.stribeck and {"fs", "vs"} & set(bound):
+                # Fc or Fv at a bound beside it may be traded against a decay across all the speeds:
+                # the Stribeck effect is held alone first, and they are fitted again without it
+                bound = {k: side for k, side in bound.items() if k in ("fs", "vs", "delta")}
             # a parameter the fit runs to its bound is not determined by the log: held at its default, refit
             layout = _hold(layout, bound)
             start = _held_values(layout, params, bound)
             fixed.update(start)
-        idle = "delta" in layout.held and params["fs"] == params["fc"] and params["ks"] == params["kc"]
+        idle = (("delta" in layout.held or not layout.stribeck) and params["fs"] == params["fc"]
+                and params["ks"] == params["kc"])
         if idle:   # no Stribeck rise at any load: the exponent has no effect, shown at its neutral 1
             params["delta"] = 1.0
         self._note_held(layout.held, delta_idle=idle)
@@ -285,7 +290,7 @@ class LuGreIdentifier:
                          if k == "delta" else f"{k} = {HELD[k]:g}")
                 self.notes_.append(f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, "
                                    f"or traded it against another term), "
-                                   f"held at its default {value}")
+                                   f"held at {'' if k == 'fc' else 'its default '}{value}")
 
     # ----------------------------------------------------------------- stage 2
 
