@@ -869,3 +869,25 @@ def test_a_negative_gravity_scale_names_the_joint_zero_and_sign_convention():
     assert g.implausible.startswith("a gravity scale of -0.5")
     assert "likely cause is the joint's zero or sign convention against the URDF" in g.implausible
     assert "fricli import checks the mapping" in g.implausible
+
+
+def test_a_log_without_position_is_diagnosed_and_trained_without_the_position_effects(tmp_path):
+    """A log with qd and no q (the log contract allows it): diagnose, and train-base's memory test,
+    leave out what needs the position instead of failing with an internal error (KeyError 'q')."""
+    import pyarrow.parquet as pq
+    from conftest import invoke
+
+    from fricli.sim import simulate
+
+    table = simulate("extended", 2, seed=4, duration=60.0).drop_columns(["q"])   # no velocity levels
+    log = tmp_path / "noq.parquet"
+    pq.write_table(table, log)
+    model = tmp_path / "linear.npz"
+    assert invoke("identify", log, "--kind", "linear", "-o", model, "-q").exit_code == 0
+    res = invoke("diagnose", model, log, "--json")
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    assert "position" not in out["unexplained"]
+    res = invoke("train-base", log, "-o", tmp_path / "nn.npz", "--steps", "200", "--json", "-q")
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["memory"]["tested"] is False

@@ -44,7 +44,7 @@ class View:
 class Structure:
     time: View
     velocity: View
-    position: View
+    position: View | None = None    # None for a log without q
 
     @property
     def share(self) -> float:
@@ -55,7 +55,8 @@ class Structure:
         return max(self.views().items(), key=lambda kv: kv[1].share)[0]
 
     def views(self) -> dict[str, View]:
-        return {"time": self.time, "velocity": self.velocity, "position": self.position}
+        views = {"time": self.time, "velocity": self.velocity, "position": self.position}
+        return {k: v for k, v in views.items() if v is not None}
 
     def to_json(self) -> dict:
         return {"share": self.share, "main": self.main, **{k: v.to_json() for k, v in self.views().items()}}
@@ -155,8 +156,9 @@ def over_variable(e: np.ndarray, x: np.ndarray, alpha: float) -> View:
 
 
 def analyse(e: np.ndarray, signals: dict[str, np.ndarray], alpha: float) -> Structure:
-    """Structure of the residual e (n,) over t, qd and q (signals of the log)."""
+    """Structure of the residual e (n,) over t, qd and q (signals of the log; not over q when the
+    log has no position)."""
     e = np.asarray(e, dtype=np.float64)
     return Structure(time=over_time(e, signals["t"], alpha),
                      velocity=over_variable(e, signals["qd"], alpha),
-                     position=over_variable(e, signals["q"], alpha))
+                     position=over_variable(e, signals["q"], alpha) if "q" in signals else None)
