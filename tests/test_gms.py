@@ -132,3 +132,24 @@ def test_franka_joint_fitted_on_slow_and_middle_beats_the_classical_models_on_th
     rms = float(np.sqrt(np.mean((model.predict(high)[0] - high["tau_m"]) ** 2)))
     assert rms < classical, (rms, classical)
     assert record["recordings"] == 2
+
+
+def test_a_log_without_position_is_refused_with_one_line(tmp_path):
+    """The elements deflect with q: predict (and every command that runs the model) on a log with
+    qd and no q says so (DATA, exit code 6) instead of failing with KeyError 'q'."""
+    import pyarrow.parquet as pq
+    from conftest import invoke
+
+    from fricli import models
+
+    model = GMSModel([0.002, 0.006], [1.5, 0.9], fc=4.0, fst=1.0, vs=0.03, fv=8.0)
+    path = str(tmp_path / "gms.npz")
+    models.save(path, model, joint=2, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    log = tmp_path / "noq.parquet"
+    pq.write_table(simulate("daily", 2, seed=1).slice(0, 2000).drop_columns(["q"]), log)
+    for args in (["predict", path, log, "-o", tmp_path / "p.parquet"], ["diagnose", path, log],
+                 ["estimate-ext", path, log, "-o", tmp_path / "e.parquet"]):
+        res = invoke(*args)
+        assert res.exit_code == 6, (args[0], res.output)
+        assert res.stderr.strip().splitlines()[-1].startswith("fricli: error: ") and "'q'" in res.stderr
+        assert "internal error" not in res.stderr

@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel, parameter_info
 from fricli.models.terms import held_sign, stop
@@ -176,6 +177,8 @@ class GMSModel(FrictionModel):
         """(friction (n,), robot-model error (n,), state) [Nm]; their sum is ``predict``. Each part
         summed term by term, left to right (the exported C code sums in the same order)."""
         qd = np.asarray(signals["qd"], dtype=np.float64)
+        if "q" not in signals:
+            raise DataError("the log has no column 'q' (the position), which the model's elements deflect with")
         q = np.asarray(signals["q"], dtype=np.float64)
         (z, s), state = _direction_and_elements(q, qd, self.deflection, state)
         friction = np.zeros(len(qd))
