@@ -156,6 +156,10 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     check_motion(name, sig["qd"], sweeping, "train-base")
     # velocity plateaus too many or too close together to tell apart by speed (a long stepped
     # log): without levels, train on the plateaus, not on the ramps between them
+    # the bristle stiffness acts where the joint moves slowly (through a reversal): sigma0 is fitted
+    # and checked on those rows as well as on the rows in motion (where the state has settled);
+    # standstill (qd = 0) holds what the controller sets there, not what the motion left
+    sliding = moving | (sig["qd"] != 0)
     steady = moving & steady_state_mask(sig["t"], sig["qd"])
     plateaus = bool(steady.sum() >= training_data.PLATEAU_SHARE * moving.sum())
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
@@ -202,9 +206,10 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             fold_rows = [np.setdiff1d(rows, np.flatnonzero(np.isin(block, h))) for h in held]
             prior_summary = blend_prior(model, members, fold_rows, [h for _, h in splits], sig, target, rows, units)
         if bristles != "off":
-            check = bristle_check(members, splits, sig, target)
+            check = bristle_check(members, [(np.flatnonzero(sliding & ~np.isin(block, h)),
+                                              np.flatnonzero(sliding & np.isin(block, h))) for h in held], sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(moving))
+                model.fit_bristles(sig, target, np.flatnonzero(sliding))
     elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
         # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
         rows, train_rows = np.union1d(sel.train, sel.val), sel.train
@@ -217,9 +222,10 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             # the prior share from the probe (its prior fitted on its training rows), held-out rows scoring
             prior_summary = blend_prior(model, [probe], [train_rows], [split[1]], sig, target, rows, units)
         if bristles != "off":
-            check = bristle_check([probe], [split], sig, target)
+            check = bristle_check([probe], [(np.flatnonzero(sliding & ~np.isin(block, held)),
+                                             np.flatnonzero(sliding & np.isin(block, held)))], sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(moving))
+                model.fit_bristles(sig, target, np.flatnonzero(sliding))
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
@@ -229,7 +235,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         if bristles != "off" and arch == "dissipative":
             check = bristle_check([model], [(sel.train, sel.val)], sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, sel.train)
+                model.fit_bristles(sig, target, np.union1d(sel.train, np.flatnonzero(sliding & ~moving)))
             else:
                 model.sigma0_ = None   # the check left its state on the model itself
     pred = model.predict(sig)[0]
