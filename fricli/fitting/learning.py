@@ -156,10 +156,9 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     check_motion(name, sig["qd"], sweeping, "train-base")
     # velocity plateaus too many or too close together to tell apart by speed (a long stepped
     # log): without levels, train on the plateaus, not on the ramps between them
-    # the bristle stiffness acts where the joint moves slowly (through a reversal): sigma0 is fitted
-    # and checked on those rows as well as on the rows in motion (where the state has settled);
-    # standstill (qd = 0) holds what the controller sets there, not what the motion left
-    sliding = moving | (sig["qd"] != 0)
+    # rows of slow motion (a reversal passes there): they decide the bristle stiffness when the rows
+    # in motion, where the state has settled, do not (fit_bristles)
+    slow = np.flatnonzero((sig["qd"] != 0) & ~moving)
     steady = moving & steady_state_mask(sig["t"], sig["qd"])
     plateaus = bool(steady.sum() >= training_data.PLATEAU_SHARE * moving.sum())
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,
@@ -206,10 +205,10 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             fold_rows = [np.setdiff1d(rows, np.flatnonzero(np.isin(block, h))) for h in held]
             prior_summary = blend_prior(model, members, fold_rows, [h for _, h in splits], sig, target, rows, units)
         if bristles != "off":
-            check = bristle_check(members, [(np.flatnonzero(sliding & ~np.isin(block, h)),
-                                              np.flatnonzero(sliding & np.isin(block, h))) for h in held], sig, target)
+            check = bristle_check(members, [(*split, slow[~np.isin(block[slow], h)]) for split, h in zip(splits, held)],
+                                  sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(sliding))
+                model.fit_bristles(sig, target, np.flatnonzero(moving), slow, MIN_GAIN)
     elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
         # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
         rows, train_rows = np.union1d(sel.train, sel.val), sel.train
@@ -222,10 +221,9 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
             # the prior share from the probe (its prior fitted on its training rows), held-out rows scoring
             prior_summary = blend_prior(model, [probe], [train_rows], [split[1]], sig, target, rows, units)
         if bristles != "off":
-            check = bristle_check([probe], [(np.flatnonzero(sliding & ~np.isin(block, held)),
-                                             np.flatnonzero(sliding & np.isin(block, held)))], sig, target)
+            check = bristle_check([probe], [(*split, slow[~np.isin(block[slow], held)])], sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(sliding))
+                model.fit_bristles(sig, target, np.flatnonzero(moving), slow, MIN_GAIN)
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
@@ -233,9 +231,9 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         if prior and arch == "dissipative" and sel.val.size:
             prior_summary = blend_prior(model, [model], [sel.train], [sel.val], sig, target, sel.train, units)
         if bristles != "off" and arch == "dissipative":
-            check = bristle_check([model], [(sel.train, sel.val)], sig, target)
+            check = bristle_check([model], [(sel.train, sel.val, slow)], sig, target)
             if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.union1d(sel.train, np.flatnonzero(sliding & ~moving)))
+                model.fit_bristles(sig, target, sel.train, slow, MIN_GAIN)
             else:
                 model.sigma0_ = None   # the check left its state on the model itself
     pred = model.predict(sig)[0]
@@ -369,23 +367,25 @@ def train_group(datas: list, transmission, *, seed: int = 0, progress: Callable 
                    "joints": {str(j): coupled.figures(err[:, c]) for c, j in enumerate(transmission.joints)}}
 
 
-def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarray, np.ndarray]],
+def bristle_check(fitted: list[DissipativeFriction], splits: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
                   sig: dict[str, np.ndarray], target: np.ndarray) -> dict:
     """Whether the pre-sliding state lowers the error on rows the networks did not train on.
 
-    ``splits`` gives, for each of the ``fitted`` models, its training rows and its held-out rows
-    (indices into ``sig`` and ``target`` (n,) [Nm]). Each model gets the state with sigma0 fitted
-    on its training rows (left on it); both predictions run over the whole log. Returns the RMS
+    ``splits`` gives, for each of the ``fitted`` models, its training rows, its held-out rows and
+    the rows of slow motion outside the held-out ones (indices into ``sig`` and ``target`` (n,)
+    [Nm]). Each model gets the state with sigma0 fitted on its training rows (and those slow rows
+    where the training rows do not determine it: ``fit_bristles``; left on it); both predictions
+    run over the whole log. Returns the RMS
     [Nm] over all held-out rows without and with the state, and "helps": the state lowers it by
     MIN_GAIN at least (False when no rows are held out).
     """
     e_static, e_state = [], []
-    for model, (train, held) in zip(fitted, splits):
+    for model, (train, held, slow) in zip(fitted, splits):
         if not train.size or not held.size:
             continue
         model.sigma0_ = None
         e_static.append(target[held] - model.predict(sig)[0][held])
-        model.fit_bristles(sig, target, train)
+        model.fit_bristles(sig, target, train, slow, MIN_GAIN)
         e_state.append(target[held] - model.predict(sig)[0][held])
     if not e_static:
         return {"helps": False}

@@ -331,11 +331,22 @@ class DissipativeFriction(FrictionModel):
         intervals dt (n,) [s] (``physics.lugre_friction`` without damping and viscous term)."""
         return physics.lugre_friction(qd, g, 0.0, sigma0, 0.0, dt, z0)
 
-    def fit_bristles(self, sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray) -> float:
+    def fit_bristles(self, sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray,
+                     slow: np.ndarray | None = None, min_gain: float = 0.01) -> float:
         """Set ``sigma0_`` [Nm/rad] to the least mean squared error of tau_f against ``target`` (n,)
         [Nm] over ``rows`` (indices), the state run over every row of ``sig`` in order: a grid of
         bristle deflections g_typ / sigma0 over DEFLECTION_RANGE (g_typ the median magnitude over
-        ``rows``), refined by a bounded scalar search. Returns that error, rooted [Nm]."""
+        ``rows``), refined by a bounded scalar search. When that error is not ``min_gain`` below
+        the stiffest state's (``rows`` do not show the stiffness: the state has settled on them),
+        it is fitted again over ``rows`` and ``slow`` (indices of rows of slow motion, where a
+        reversal passes), if given. Returns that error, rooted [Nm]."""
+        rmse, ratio = self._fit_bristles(sig, target, rows)
+        if ratio > 1.0 - min_gain and slow is not None and len(slow):
+            rmse = self._fit_bristles(sig, target, np.union1d(rows, slow))[0]
+        return rmse
+
+    def _fit_bristles(self, sig, target, rows) -> tuple[float, float]:
+        """``fit_bristles`` over ``rows`` alone: (rooted error [Nm], its ratio to the stiffest state's)."""
         from scipy.optimize import minimize_scalar
 
         self.sigma0_ = None
@@ -357,7 +368,8 @@ class DissipativeFriction(FrictionModel):
                               method="bounded", options={"xatol": 1e-3})
         best = float(res.x) if res.fun < costs[k] else float(grid[k])
         self.sigma0_ = g_typ / 10.0 ** best
-        return float(np.sqrt(min(res.fun, costs[k])))
+        rmse = float(np.sqrt(min(res.fun, costs[k])))
+        return rmse, rmse / float(np.sqrt(costs[0]))
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
         """y_scale * head output (n,), in chunks (``predict_in_chunks``); ``sliding``: c = 1. The network
