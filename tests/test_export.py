@@ -170,6 +170,17 @@ def test_export_matches_predict_on_a_held_out_simulated_log(kind, sim_models, tm
 
 
 @needs_cc
+def test_an_augmented_model_over_one_that_adds_nothing_compiles_and_matches_predict(sim_models, tmp_path):
+    """diagnose --fix that finds nothing to add over an augmented model writes one with no terms
+    over it: its step reads the base's friction and error only (no unused variable)."""
+    base, _ = models.load(sim_models["augmented-errors"])
+    log = logs.load_log(str(SAMPLE / "joint2_base.parquet"))
+    path = str(tmp_path / "nothing-added.npz")
+    models.save_for_log(path, AugmentedModel(base, [], np.zeros(0)), log, rows_used=len(log))
+    assert _compare(path, str(SAMPLE / "joint2_extended_asym.parquet"), tmp_path) <= 1.0
+
+
+@needs_cc
 @pytest.mark.parametrize("kind", ["lugre", "mlp", "selmic", "nnacm", "dissipative", "residual", "residual-mlp",
                                   "residual-dissipative", "residual-additive", "augmented", "augmented-nn",
                                   "augmented-errors", "augmented-dissipative"])

@@ -103,7 +103,7 @@ def augmented(model, name: str, ctx: Context) -> Part:
     for terms, coef, sum_ in ((model.terms, model.coef, "acc"), (model.error_terms, model.error_coef, "err")):
         for spec, c in zip(terms, coef):
             body += [f"    /* {comment(spec['name'])} */", f"    {T.term(spec, ctx)}", f"    {sum_} += {num(c)} * v;"]
-    body += ["    (void)v;", "    *error = err;", "    return pf + acc;"]
+    body += ["    (void)v; (void)p;", "    *error = err;", "    return pf + acc;"]
     if stateful:
         inits = ([base.init("&s->base")] if base.stateful else []) + (["s->dir = 0.0;"] if held_dir else []) + (
             ["s->gear = 0.0;"] if held_gear else []) + (
