@@ -202,19 +202,28 @@ def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
     return table.take(pa.Array.from_buffers(pa.int64(), len(idx), [None, pa.py_buffer(idx)]))
 
 
-def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> np.ndarray:
+def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0, drop_invalid: bool = False) -> np.ndarray:
+    """float64 (n,) of a numeric column; missing values (nulls) refused, or with ``drop_invalid``
+    read as NaN, which ``check_signals`` drops with the other invalid rows."""
     col = table.column(column)
     typ = col.type
     if not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
         raise LogError(f"{name}: column {column!r} has type {typ}, expected numbers")
     if col.null_count:
+        if drop_invalid:
+            import pyarrow.compute as pc
+
+            return float64_values(pc.fill_null(col.cast(pa.float64()), np.nan))
         first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
-        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first})")
+        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first}); "
+                       "use --drop-invalid to drop their rows")
     return float64_values(col)
 
 
-def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None) -> dict[str, np.ndarray]:
-    """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation)."""
+def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None,
+                  drop_invalid: bool = False) -> dict[str, np.ndarray]:
+    """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation); missing
+    values are NaN with ``drop_invalid`` (``_numeric``)."""
     out: dict[str, np.ndarray] = {}
     for field in table.schema:
         column = field.name
@@ -223,7 +232,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
         typ = field.type
         if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
             continue  # non-numeric extra columns are carried through, not used
-        values = _numeric(table, column, name)
+        values = _numeric(table, column, name, drop_invalid=drop_invalid)
         unit = field_unit(field)
         if unit is not None and column in _EXPECTED:
             dim, factor = _UNITS[_field_spelling(field, name)]
@@ -276,7 +285,7 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
         if not isinstance(listed, list):
             raise LogError(f"{name}: the metadata key fricli.zero_columns is not a JSON list of column names")
         found += listed
-    bad = [c for c in found if c not in ROBOT_MODEL]
+    bad = [c for c in found if not isinstance(c, str) or c not in ROBOT_MODEL]
     if bad:
         raise LogError(f"{name}: only tau_g and tau_dyn can be declared zero, not {bad[0]!r}")
     return tuple(c for c in ROBOT_MODEL if c in found)
@@ -308,7 +317,8 @@ def robot_record(schema: pa.Schema) -> dict:
                 record = json.loads(meta[key])
             except ValueError:
                 continue
-            record = record.get("robot", record) if key == b"fricli.import" else record
+            if key == b"fricli.import" and isinstance(record, dict):
+                record = record.get("robot", record)
             if isinstance(record, dict):
                 return record
     return {}
@@ -329,15 +339,22 @@ def held_of(schema: pa.Schema) -> tuple[str, ...]:
     return tuple(robot_record(schema).get("held") or ())
 
 
+def _other_case(sig: dict, *wanted: str) -> str:
+    """', and the log has 'TAU_M' (column names are case-sensitive)' when a column differs from a
+    wanted one in case only; else ''."""
+    found = [c for c in sig if c.lower() in wanted and c not in wanted]
+    return f" (the log has {found[0]!r}: column names are case-sensitive)" if found else ""
+
+
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
                   warn=None) -> np.ndarray | None:
     """Check finiteness and time order. Returns a row mask when rows were dropped."""
     if "t" not in sig:
-        raise LogError(f"{name}: missing required column 't'")
+        raise LogError(f"{name}: missing required column 't'{_other_case(sig, 't')}")
     if "tau_m" not in sig:
-        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt)")
+        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt){_other_case(sig, 'tau_m', 'i_m')}")
     if "q" not in sig and "qd" not in sig:
-        raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'")
+        raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'{_other_case(sig, 'q', 'qd')}")
     n = len(sig["t"])
     if n == 0:
         raise LogError(f"{name}: the log is empty")
@@ -345,7 +362,8 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     cols = []
     with np.errstate(over="ignore", invalid="ignore"):   # huge finite values may overflow the sum
         for column, values in sig.items():
-            limit = np.inf if column == "t" else MAGNITUDE_LIMIT
+            # t may be large (absolute time stamps) but not infinite
+            limit = np.finfo(np.float64).max if column == "t" else MAGNITUDE_LIMIT
             # a finite sum holds no NaN or inf; only then look row by row
             if not np.isfinite(np.sum(values)) or values.max() > limit or values.min() < -limit:
                 invalid = ~(np.abs(values) <= limit)
@@ -362,7 +380,7 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
                            f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
         mask = ~bad
         if warn:
-            warn(f"warning: dropped {int(bad.sum())} of {n} rows with {what} ({', '.join(cols)})")
+            warn(f"warning: dropped {int(bad.sum())} of {n} rows with missing, {what} ({', '.join(cols)})")
         for column in sig:
             sig[column] = sig[column][mask]
         if len(sig["t"]) == 0:
@@ -428,7 +446,7 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     note = unitless_note(table.schema, name)
     if note and warn:
         warn(note)
-    sig = table_signals(table, axis, name, kt=kt)
+    sig = table_signals(table, axis, name, kt=kt, drop_invalid=drop_invalid)
     mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
     if mask is not None:
         table = take_rows(table, mask)

@@ -1,0 +1,80 @@
+"""Defective inputs as recorders and other tools write them: one clear refusal or the good rows
+kept, never an internal error."""
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from conftest import invoke, make_table, write
+from fricli.core import logs, modelfile
+from fricli.core.errors import LogError, ModelFileError
+
+
+def test_infinite_time_is_an_invalid_row_not_a_time_order_error():
+    table = make_table()
+    t = table.column("t").to_numpy().copy()
+    t[50] = np.inf
+    table = table.set_column(0, "t", pa.array(t))
+    with pytest.raises(LogError, match=r"1 rows hold NaN, infinite .*first at row 50, columns t.*--drop-invalid"):
+        logs.from_table(table, name="x")
+    log = logs.from_table(table, name="x", drop_invalid=True)
+    assert len(log) == 499 and np.isfinite(log.signals["t"]).all()
+
+
+def test_missing_values_are_invalid_rows_that_drop_invalid_drops():
+    table = make_table()
+    tau = table.column("tau_m").to_numpy()
+    table = table.set_column(3, "tau_m", pa.array(tau, mask=np.isin(np.arange(500), [7, 9])))
+    with pytest.raises(LogError, match=r"'tau_m' has 2 missing values \(first at row 7\).*--drop-invalid"):
+        logs.from_table(table, name="x")
+    messages = []
+    log = logs.from_table(table, name="x", drop_invalid=True, warn=messages.append)
+    assert len(log) == 498 and len(log.table) == 498
+    np.testing.assert_array_equal(log.signals["tau_m"], np.delete(tau, [7, 9]))
+    assert any("dropped 2 of 500 rows" in m and "missing" in m for m in messages)
+
+
+def test_missing_column_names_a_column_that_differs_in_case():
+    table = make_table().rename_columns([c.upper() if c == "tau_m" else c for c in make_table().column_names])
+    with pytest.raises(LogError, match=r"missing required column 'tau_m'.*'TAU_M'.*case"):
+        logs.from_table(table, name="x")
+
+
+@pytest.mark.parametrize("metadata", [{"fricli.import": "[1, 2]"}, {"fricli.dynamics": '"x"'},
+                                      {"fricli.import": '{"robot": [1]}'}])
+def test_robot_record_of_another_shape_counts_as_unrecorded(metadata):
+    schema = make_table().schema.with_metadata(metadata)
+    assert logs.robot_record(schema) == {}
+    assert logs.robot_model(schema) is None and logs.gravity_of(schema) == logs.DEFAULT_GRAVITY
+
+
+@pytest.mark.parametrize("listed", ['[["tau_g"]]', '[{"a": 1}]', "[null]"])
+def test_zero_columns_of_other_values_refused(listed):
+    table = make_table().drop_columns(["tau_g"]).replace_schema_metadata({"fricli.zero_columns": listed})
+    with pytest.raises(LogError, match="only tau_g and tau_dyn can be declared zero"):
+        logs.from_table(table, name="x")
+
+
+def test_cli_reads_a_log_whose_import_record_is_not_an_object(tmp_path):
+    table = make_table().replace_schema_metadata({"fricli.import": "[1, 2]"})
+    write(table, tmp_path / "log.parquet")
+    result = invoke("identify", tmp_path / "log.parquet", "--kind", "linear", "-o", tmp_path / "m.npz")
+    assert result.exit_code == 0, result.output
+
+
+META = {"format": modelfile.FORMAT, "format_version": modelfile.FORMAT_VERSION, "kind": "lugre"}
+
+
+@pytest.mark.parametrize("key,value", [("joint", [1]), ("joint", {"a": 1}), ("provenance", [1]),
+                                       ("units", "Nm"), ("units", None), ("model", [1]), ("kind", 5),
+                                       ("inputs", "qd")])
+def test_model_meta_of_the_wrong_shape_refused(key, value):
+    data = modelfile.dumps(META | {key: value}, {"w": np.ones(3)})
+    with pytest.raises(ModelFileError, match=rf"m\.npz: damaged model \(meta '{key}'"):
+        modelfile.loads(data, "m.npz")
+
+
+def test_model_meta_of_the_right_shape_loads():
+    meta = META | {"joint": "j2", "provenance": {}, "units": {"tau": "Nm"}, "model": {}, "inputs": ["qd"]}
+    assert modelfile.loads(modelfile.dumps(meta, {}), "m.npz")[0] == meta
+    assert modelfile.loads(modelfile.dumps(META | {"joint": None}, {}), "m.npz")[0]["joint"] is None
