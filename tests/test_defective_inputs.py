@@ -78,3 +78,44 @@ def test_model_meta_of_the_right_shape_loads():
     meta = META | {"joint": "j2", "provenance": {}, "units": {"tau": "Nm"}, "model": {}, "inputs": ["qd"]}
     assert modelfile.loads(modelfile.dumps(meta, {}), "m.npz")[0] == meta
     assert modelfile.loads(modelfile.dumps(META | {"joint": None}, {}), "m.npz")[0]["joint"] is None
+
+
+HEADED = """header = true
+time = {column = "t", unit = "s"}
+
+[[joints]]
+name = 1
+q = "q"
+tau_m = "tau"
+"""
+
+
+def recording_of(text, mapping_text=HEADED):
+    import tomllib
+
+    from fricli.robot import recording
+    from fricli.robot.mapping import parse_mapping
+
+    return recording.read_recording(text.encode(), parse_mapping(tomllib.loads(mapping_text)), "rec.csv")
+
+
+ROWS = "".join(f"{k * 0.01:.2f},{np.sin(k * 0.01):.6f},{1 + 0.1 * k:.1f}\n" for k in range(20))
+
+
+@pytest.mark.parametrize("head", ["# recorded by the cell controller\n#\n", "\ufeff# recorded, 2024\n\n"])
+def test_comment_lines_before_the_header_are_skipped(head):
+    rec = recording_of(head + "t,q,tau\n" + ROWS)
+    assert len(rec.lines) == 20 and not rec.defects
+    np.testing.assert_allclose(rec.values["tau"], 1 + 0.1 * np.arange(20))
+
+
+def test_a_header_written_as_a_comment_names_the_columns():
+    """numpy.savetxt(header=...) writes '# t,q,tau' above the rows."""
+    rec = recording_of("# t,q,tau\n" + ROWS)
+    assert len(rec.lines) == 20 and not rec.defects and rec.lines[0] == 2
+
+
+def test_comment_lines_before_rows_without_a_header_are_skipped():
+    rec = recording_of("# run 4\n# t q tau\n" + ROWS, HEADED.replace("header = true", "header = false")
+                       .replace('"t"', "1").replace('"q"', "2").replace('"tau"', "3"))
+    assert len(rec.lines) == 20 and not rec.defects

@@ -334,6 +334,22 @@ def listing(defects: dict[str, Defect], unit: str = "line") -> str:
                      f"{': ' + d.example if d.example else ''})" for k, d in defects.items())
 
 
+_BOM = "\ufeff".encode()
+
+
+def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple[bytes, int]:
+    """(the header line's text, the index of the first line after it). The header is the first
+    line that is not a comment, or the last comment line without its '#' when that line has as
+    many fields as the line after it (``numpy.savetxt(header=...)`` writes '# t,q,tau')."""
+    if comments:
+        text = line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip()
+        fields = len(_fields(text, delimiter))
+        if fields > 1 and fields == len(_fields(line(first), delimiter)) and not re.match(_NUMBER, text.split(
+                delimiter.encode())[0].strip().decode("ascii", "replace")):
+            return text, first
+    return line(first).removeprefix(_BOM), first + 1
+
+
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
@@ -358,18 +374,19 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     starts, ends, terminated = _line_bounds(data)
     line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
     n_lines = len(starts)
-    first = next((i for i in np.flatnonzero(ends > starts) if line(i).strip()), None)
+    filled = (int(i) for i in np.flatnonzero(ends > starts) if line(i).strip())
+    comments = []   # leading lines starting with '#': a recorder's preamble, skipped like empty lines
+    while (first := next(filled, None)) is not None and line(first).removeprefix(_BOM).lstrip().startswith(b"#"):
+        comments.append(first)
     if first is None:
-        raise LogError(f"{name}: the recording is empty")
+        raise LogError(f"{name}: the recording is empty" + (" (it holds comment lines only)" if comments else ""))
     header = None
-    start = int(first)
+    start = first
     if mapping.header:
-        header = [f.strip().decode("utf-8", "replace") for f in _fields(line(start), mapping.delimiter)]
+        top, start = _header_line(line, comments, first, mapping.delimiter)
+        header = [f.strip().decode("utf-8", "replace") for f in _fields(top, mapping.delimiter)]
         header = [h[1:-1] if len(h) > 1 and h[0] == h[-1] == '"' else h for h in header]   # "name", as R writes it
-        if start == 0:
-            header[0] = header[0].removeprefix("\ufeff")   # a UTF-8 byte order mark
         n_fields = len(header)
-        start += 1
     else:
         sample = (line(i) for i in range(start, min(start + 200, n_lines)))
         counts = collections.Counter(len(_fields(ln, mapping.delimiter)) for ln in sample if ln.strip())
