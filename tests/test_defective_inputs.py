@@ -119,3 +119,43 @@ def test_comment_lines_before_rows_without_a_header_are_skipped():
     rec = recording_of("# run 4\n# t q tau\n" + ROWS, HEADED.replace("header = true", "header = false")
                        .replace('"t"', "1").replace('"q"', "2").replace('"tau"', "3"))
     assert len(rec.lines) == 20 and not rec.defects
+
+
+def two_joints(b):
+    a = make_table().append_column("joint", pa.array([2] * 500))
+    return pa.concat_tables([a, b.append_column("joint", pa.array([3] * b.num_rows))])
+
+
+def test_a_joints_bad_row_is_given_as_the_logs_row():
+    b = make_table()
+    tau = b.column("tau_m").to_numpy().copy()
+    tau[5] = np.nan
+    log = two_joints(b.set_column(3, "tau_m", pa.array(tau)))
+    with pytest.raises(LogError, match=r"first at row 505, columns tau_m"):
+        logs.from_table(log, name="x", joint=3)
+    nulls = two_joints(b.set_column(3, "tau_m", pa.array(tau, mask=np.isnan(tau))))
+    with pytest.raises(LogError, match=r"1 missing values \(first at row 505\)"):
+        logs.from_table(nulls, name="x", joint=3)
+
+
+def test_time_order_is_given_as_the_logs_row_after_rows_were_dropped():
+    b = make_table()
+    t, tau = b.column("t").to_numpy().copy(), b.column("tau_m").to_numpy().copy()
+    tau[5] = np.nan
+    t[100] = t[99]
+    log = two_joints(b.set_column(0, "t", pa.array(t)).set_column(3, "tau_m", pa.array(tau)))
+    with pytest.raises(LogError, match=r"duplicate timestamps \(first at row 600, t = 0\.99 s\)"):
+        logs.from_table(log, name="x", joint=3, drop_invalid=True)
+    with pytest.raises(LogError, match=r"duplicate timestamps \(first at row 100, t = 0\.99 s\)"):
+        logs.from_table(b.set_column(0, "t", pa.array(t)).set_column(3, "tau_m", pa.array(tau)), name="x",
+                        drop_invalid=True)
+
+
+def test_time_stamps_that_float32_cannot_hold_apart_say_so():
+    """Seconds since 1970 in float32 are 128 s apart: every row looks like the one before."""
+    table = make_table()
+    t = (table.column("t").to_numpy() + 1.7e9).astype(np.float32)
+    table = table.set_column(0, pa.field("t", pa.float32(), metadata={"unit": "s"}), pa.array(t))
+    with pytest.raises(LogError, match=r"duplicate timestamps \(first at row 1, t = 1700000000 s\); 't' is stored "
+                                       r"as float32, whose steps are 128 s at this time: write it as float64"):
+        logs.from_table(table, name="x")

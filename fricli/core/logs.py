@@ -202,9 +202,11 @@ def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
     return table.take(pa.Array.from_buffers(pa.int64(), len(idx), [None, pa.py_buffer(idx)]))
 
 
-def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0, drop_invalid: bool = False) -> np.ndarray:
+def _numeric(table: pa.Table, column: str, name: str, rows: np.ndarray | None = None,
+             drop_invalid: bool = False) -> np.ndarray:
     """float64 (n,) of a numeric column; missing values (nulls) refused, or with ``drop_invalid``
-    read as NaN, which ``check_signals`` drops with the other invalid rows."""
+    read as NaN, which ``check_signals`` drops with the other invalid rows. ``rows``: the log's
+    row number of each row (n,), for the message (default: 0..n-1)."""
     col = table.column(column)
     typ = col.type
     if not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
@@ -214,16 +216,16 @@ def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0, drop
             import pyarrow.compute as pc
 
             return float64_values(pc.fill_null(col.cast(pa.float64()), np.nan))
-        first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
+        first = _log_row(rows, int(np.flatnonzero(np.asarray(col.is_null()))[0]))
         raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first}); "
                        "use --drop-invalid to drop their rows")
     return float64_values(col)
 
 
 def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None,
-                  drop_invalid: bool = False) -> dict[str, np.ndarray]:
+                  drop_invalid: bool = False, rows: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation); missing
-    values are NaN with ``drop_invalid`` (``_numeric``)."""
+    values are NaN with ``drop_invalid`` (``_numeric``; ``rows`` as there)."""
     out: dict[str, np.ndarray] = {}
     for field in table.schema:
         column = field.name
@@ -232,7 +234,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
         typ = field.type
         if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
             continue  # non-numeric extra columns are carried through, not used
-        values = _numeric(table, column, name, drop_invalid=drop_invalid)
+        values = _numeric(table, column, name, rows=rows, drop_invalid=drop_invalid)
         unit = field_unit(field)
         if unit is not None and column in _EXPECTED:
             dim, factor = _UNITS[_field_spelling(field, name)]
@@ -346,9 +348,17 @@ def _other_case(sig: dict, *wanted: str) -> str:
     return f" (the log has {found[0]!r}: column names are case-sensitive)" if found else ""
 
 
+def _log_row(rows: np.ndarray | None, i: int) -> int:
+    """The log's row number of row ``i`` of the rows read (``rows``: theirs, None: the same)."""
+    return i if rows is None else int(rows[i])
+
+
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
-                  warn=None) -> np.ndarray | None:
-    """Check finiteness and time order. Returns a row mask when rows were dropped."""
+                  warn=None, rows: np.ndarray | None = None, time_stored=None) -> np.ndarray | None:
+    """Check finiteness and time order. Returns a row mask when rows were dropped. ``rows``: the
+    log's row number of each row (n,) for the messages (default: 0..n-1), e.g. of one joint's rows;
+    ``time_stored``: (Arrow type, factor to s) of the column ``t`` was read from (a time order error
+    says when that type is too coarse)."""
     if "t" not in sig:
         raise LogError(f"{name}: missing required column 't'{_other_case(sig, 't')}")
     if "tau_m" not in sig:
@@ -372,13 +382,14 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
                     cols.append(column)
     mask = None
     if bad.any():
-        first = int(np.flatnonzero(bad)[0])
+        first = _log_row(rows, int(np.flatnonzero(bad)[0]))
         cols = sorted(cols)
         what = f"NaN, infinite or absurd values (beyond {MAGNITUDE_LIMIT:g} in magnitude)"
         if not drop_invalid:
             raise LogError(f"{name}: {int(bad.sum())} rows hold {what} "
                            f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
         mask = ~bad
+        rows = np.flatnonzero(mask) if rows is None else rows[mask]
         if warn:
             warn(f"warning: dropped {int(bad.sum())} of {n} rows with missing, {what} ({', '.join(cols)})")
         for column in sig:
@@ -386,13 +397,35 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
         if len(sig["t"]) == 0:
             raise LogError(f"{name}: no valid rows left after dropping invalid ones")
     dt = np.diff(sig["t"])
-    if (dt == 0).any():
-        row = int(np.flatnonzero(dt == 0)[0]) + 1
-        raise LogError(f"{name}: duplicate timestamps (first at row {row}, t = {sig['t'][row]:g} s)")
-    if (dt < 0).any():
-        row = int(np.flatnonzero(dt < 0)[0]) + 1
-        raise LogError(f"{name}: 't' is not increasing (first at row {row}, t = {sig['t'][row]:g} s)")
+    for what, wrong in (("duplicate timestamps", dt == 0), ("'t' is not increasing", dt < 0)):
+        if wrong.any():
+            row = int(np.flatnonzero(wrong)[0]) + 1
+            t = sig["t"][row]
+            raise LogError(f"{name}: {what} (first at row {_log_row(rows, row)}, t = {t:.15g} s)"
+                           f"{_coarse_time(time_stored, t, sig['t'][row - 1])}")
     return mask
+
+
+def _time_stored(table: pa.Table, name: str) -> tuple | None:
+    """(Arrow type, factor to s) of the log's column ``t``; None without it."""
+    if "t" not in table.schema.names:
+        return None
+    field = table.schema.field("t")
+    unit = field_unit(field)
+    return field.type, (_UNITS[_field_spelling(field, name)][1] if unit is not None else 1.0)
+
+
+def _coarse_time(time_stored, t: float, before: float) -> str:
+    """'; t is stored as float32, ...' when ``t`` [s] was stored (``time_stored``: Arrow type, factor
+    to s) as a float type too coarse to tell it from the row ``before`` apart (seconds since 1970
+    in float32 are 128 s apart); else ''."""
+    if time_stored is None or not pa.types.is_floating(time_stored[0]) or time_stored[0].bit_width >= 64:
+        return ""
+    dtype, factor = np.dtype(f"float{time_stored[0].bit_width}"), time_stored[1]
+    step = float(np.spacing(dtype.type(abs(t) / factor))) * factor
+    if abs(t - before) > 4 * step:
+        return ""
+    return f"; 't' is stored as {dtype.name}, whose steps are {step:.3g} s at this time: write it as float64"
 
 
 def _joint_values(table: pa.Table) -> np.ndarray:
@@ -421,17 +454,23 @@ def joints_of(table: pa.Table, name: str = "log") -> list | None:
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
     """Rows of one joint by the joint rule (``fricli.core.joints``): ``joint=None`` means the only
     joint; several need a choice; ``--joint`` on a log without a joint column is refused."""
+    return select_joint_rows(table, joint, name)[:2]
+
+
+def select_joint_rows(table: pa.Table, joint, name: str) -> tuple[pa.Table, object, np.ndarray | None]:
+    """``select_joint`` and the log's row numbers of the rows selected (None: every row)."""
     found = joints_of(table, name)
     if found is None:
-        return table, joints.select(None, joint, name)[0]   # refuses --joint
+        return table, joints.select(None, joint, name)[0], None   # refuses --joint
     if not found:  # no rows: refused as empty later
-        return table, joint
+        return table, joint, None
     covered = joints.select(found, joint, name)
     if len(covered) > 1:
         raise joints.several(found, name)
     if len(found) == 1:
-        return table, covered[0]
-    return take_rows(table, _joint_values(table) == covered[0]), covered[0]
+        return table, covered[0], None
+    keep = _joint_values(table) == covered[0]
+    return take_rows(table, keep), covered[0], np.flatnonzero(keep)
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
@@ -441,13 +480,13 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     filled with zeros in ``signals``, with a note through ``warn``. ``Log.reading`` keeps these
     options (the names of the options of ``fricli.fitting.optionspec.READING``)."""
     joint_given, declared = joint, tuple(zero)
-    table, joint = select_joint(table, joint, name)
+    table, joint, rows = select_joint_rows(table, joint, name)
     axis = axis_of(table.schema, name)
     note = unitless_note(table.schema, name)
     if note and warn:
         warn(note)
-    sig = table_signals(table, axis, name, kt=kt, drop_invalid=drop_invalid)
-    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
+    sig = table_signals(table, axis, name, kt=kt, drop_invalid=drop_invalid, rows=rows)
+    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn, rows=rows, time_stored=_time_stored(table, name))
     if mask is not None:
         table = take_rows(table, mask)
     for column, note in not_measured(sig):
