@@ -159,3 +159,21 @@ def test_time_stamps_that_float32_cannot_hold_apart_say_so():
     with pytest.raises(LogError, match=r"duplicate timestamps \(first at row 1, t = 1700000000 s\); 't' is stored "
                                        r"as float32, whose steps are 128 s at this time: write it as float64"):
         logs.from_table(table, name="x")
+
+
+def test_a_mapping_saved_with_a_byte_order_mark_reads():
+    """Windows editors save UTF-8 with a byte order mark, which TOML parsers refuse."""
+    from fricli.robot.mapping import load_mapping
+
+    def load(text, tmp):
+        tmp.write_bytes(text)
+        return load_mapping(str(tmp))
+
+    import pathlib
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = pathlib.Path(folder) / "map.toml"
+        plain = load(HEADED.encode(), path)
+        assert load("\ufeff".encode() + HEADED.encode(), path) == plain
+        assert load(HEADED.encode("utf-16"), path) == plain

@@ -399,7 +399,8 @@ def load_mapping(path: str, *, bag: bool = False) -> Mapping:
     or wrong."""
     text = files.read_bytes(path, LogError, "mapping file", "mapping file")
     try:
-        doc = tomllib.loads(text.decode("utf-8"))
+        # a byte order mark, as editors on Windows save UTF-8 and UTF-16 text, is no TOML
+        doc = tomllib.loads(text.decode("utf-16" if text[:2] in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise LogError(f"{path}: not a valid TOML mapping ({str(exc).splitlines()[0]})") from None
     return parse_bag_mapping(doc, path) if bag else parse_mapping(doc, path)
