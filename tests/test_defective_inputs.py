@@ -177,3 +177,14 @@ def test_a_mapping_saved_with_a_byte_order_mark_reads():
         plain = load(HEADED.encode(), path)
         assert load("\ufeff".encode() + HEADED.encode(), path) == plain
         assert load(HEADED.encode("utf-16"), path) == plain
+
+
+def test_decimal_columns_are_read_as_numbers():
+    """A database export writes fixed-point decimals; they are numbers like any other."""
+    import decimal
+
+    table = make_table()
+    tau = np.round(table.column("tau_m").to_numpy(), 4)
+    column = pa.array([decimal.Decimal(f"{v:.4f}") for v in tau], type=pa.decimal128(12, 4))
+    table = table.set_column(3, pa.field("tau_m", column.type, metadata={"unit": "Nm"}), column)
+    np.testing.assert_allclose(logs.from_table(table, name="x").signals["tau_m"], tau, rtol=0, atol=1e-12)

@@ -202,6 +202,12 @@ def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
     return table.take(pa.Array.from_buffers(pa.int64(), len(idx), [None, pa.py_buffer(idx)]))
 
 
+def is_number(typ) -> bool:
+    """Whether an Arrow type holds numbers a log's signal reads (as float64): float, integer or
+    decimal (a database's fixed-point export)."""
+    return pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)
+
+
 def _numeric(table: pa.Table, column: str, name: str, rows: np.ndarray | None = None,
              drop_invalid: bool = False) -> np.ndarray:
     """float64 (n,) of a numeric column; missing values (nulls) refused, or with ``drop_invalid``
@@ -209,7 +215,7 @@ def _numeric(table: pa.Table, column: str, name: str, rows: np.ndarray | None = 
     row number of each row (n,), for the message (default: 0..n-1)."""
     col = table.column(column)
     typ = col.type
-    if not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
+    if not is_number(typ):
         raise LogError(f"{name}: column {column!r} has type {typ}, expected numbers")
     if col.null_count:
         if drop_invalid:
@@ -232,7 +238,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
         if column == "joint" or (is_marked_reference(field) and column not in REFERENCES):
             continue
         typ = field.type
-        if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
+        if column not in KNOWN and not is_number(typ):
             continue  # non-numeric extra columns are carried through, not used
         values = _numeric(table, column, name, rows=rows, drop_invalid=drop_invalid)
         unit = field_unit(field)
