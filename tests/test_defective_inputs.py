@@ -188,3 +188,19 @@ def test_decimal_columns_are_read_as_numbers():
     column = pa.array([decimal.Decimal(f"{v:.4f}") for v in tau], type=pa.decimal128(12, 4))
     table = table.set_column(3, pa.field("tau_m", column.type, metadata={"unit": "Nm"}), column)
     np.testing.assert_allclose(logs.from_table(table, name="x").signals["tau_m"], tau, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("scale,unit,warned", [(1e9, "s", True), (1e9, "ns", False), (1.0, "s", False),
+                                               (1e-7, "s", True)])
+def test_a_time_step_no_controller_samples_at_is_flagged(scale, unit, warned):
+    """Nanoseconds labelled as seconds: every derivative and rate would be off by 1e9."""
+    table = make_table()
+    t = table.column("t").to_numpy() * scale
+    table = table.set_column(0, pa.field("t", pa.float64(), metadata={"unit": unit}), pa.array(t))
+    messages = []
+    logs.from_table(table, name="x", warn=messages.append)
+    flagged = [m for m in messages if "median time step" in m]
+    assert bool(flagged) == warned, messages
+    if warned:
+        assert flagged == [f"warning: x: the median time step is {0.01 * scale:.3g} s, which no controller samples at: "
+                           "check the unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)"]

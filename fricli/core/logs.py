@@ -302,6 +302,7 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
 # No robot signal reaches this magnitude in canonical units (rad, m, rad/s, Nm, N, A, degC);
 # a value beyond it is garbage (uninitialised memory), and squares of it would overflow
 MAGNITUDE_LIMIT = 1e9
+PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
 
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)   # m/s^2 in the URDF's base frame, as a level-mounted arm sees it
@@ -495,6 +496,11 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn, rows=rows, time_stored=_time_stored(table, name))
     if mask is not None:
         table = take_rows(table, mask)
+    # the first 100,000 steps tell the sample period (and cost a millisecond on a log of any length)
+    step = float(np.median(np.diff(sig["t"][:100_001]))) if len(sig["t"]) > 1 else None
+    if warn and step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+        warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
+             "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
     for column, note in not_measured(sig):
         del sig[column]
         if warn:

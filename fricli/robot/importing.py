@@ -35,7 +35,7 @@ class Imported:
     source: str = ""                 # what was imported: the name, or a bag's topic in it
 
 
-PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
+PLAUSIBLE_STEP = logs.PLAUSIBLE_STEP
 
 
 def is_bag(path: str) -> bool:
