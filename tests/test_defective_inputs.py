@@ -204,3 +204,17 @@ def test_a_time_step_no_controller_samples_at_is_flagged(scale, unit, warned):
     if warned:
         assert flagged == [f"warning: x: the median time step is {0.01 * scale:.3g} s, which no controller samples at: "
                            "check the unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)"]
+
+
+@pytest.mark.parametrize("header,row_end", [("t,q,tau,\n", ""), ("t,q,tau\n", ","), ("t,q,tau,\n", ",")])
+def test_a_delimiter_ending_the_header_or_every_row_is_no_column(header, row_end):
+    """Spreadsheet and LabVIEW exports end lines with a delimiter, sometimes the header's only."""
+    rows = "".join(line + row_end + "\n" for line in ROWS.splitlines())
+    rec = recording_of(header + rows)
+    assert len(rec.lines) == 20 and not rec.defects
+    np.testing.assert_allclose(rec.values["tau"], 1 + 0.1 * np.arange(20))
+
+
+def test_a_header_longer_than_the_rows_otherwise_is_still_refused():
+    with pytest.raises(LogError, match=r"no usable rows \(20 with wrong number of fields"):
+        recording_of("t,q,tau,extra\n" + ROWS)

@@ -350,6 +350,22 @@ def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple
     return line(first).removeprefix(_BOM), first + 1
 
 
+def _trailing_delimiter(header: list[str], sample: list[bytes], delimiter: str) -> list[str]:
+    """The header's names, matched to rows whose lines end with a delimiter and the header's not
+    (an empty name added), or the other way round (its empty last name left out): an export's
+    line-end artefact, not a column. ``sample``: the lines after the header."""
+    counts = collections.Counter(len(_fields(ln, delimiter)) for ln in sample if ln.strip())
+    if not counts:
+        return header
+    common = counts.most_common(1)[0][0]
+    if common == len(header) - 1 and header[-1] == "":
+        return header[:-1]
+    ends = [ln.rstrip().endswith(delimiter.encode()) for ln in sample if ln.strip()]
+    if common == len(header) + 1 and sum(ends) > len(ends) / 2:
+        return header + [""]
+    return header
+
+
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
@@ -386,6 +402,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         top, start = _header_line(line, comments, first, mapping.delimiter)
         header = [f.strip().decode("utf-8", "replace") for f in _fields(top, mapping.delimiter)]
         header = [h[1:-1] if len(h) > 1 and h[0] == h[-1] == '"' else h for h in header]   # "name", as R writes it
+        header = _trailing_delimiter(header, [line(i) for i in range(start, min(start + 200, n_lines))],
+                                     mapping.delimiter)
         n_fields = len(header)
     else:
         sample = (line(i) for i in range(start, min(start + 200, n_lines)))
