@@ -218,3 +218,13 @@ def test_a_delimiter_ending_the_header_or_every_row_is_no_column(header, row_end
 def test_a_header_longer_than_the_rows_otherwise_is_still_refused():
     with pytest.raises(LogError, match=r"no usable rows \(20 with wrong number of fields"):
         recording_of("t,q,tau,extra\n" + ROWS)
+
+
+def test_two_models_of_one_joint_in_a_folder_are_both_named(tmp_path):
+    from fricli.core import modelset
+
+    data = modelfile.dumps(META | {"joint": 2}, {})
+    (tmp_path / "joint_2.npz").write_bytes(data)
+    (tmp_path / "copy of joint_2.npz").write_bytes(data)
+    with pytest.raises(ModelFileError, match=r"two models of joint 2 \(copy of joint_2\.npz and joint_2\.npz\)"):
+        modelset.listing(str(tmp_path))
