@@ -228,3 +228,11 @@ def test_two_models_of_one_joint_in_a_folder_are_both_named(tmp_path):
     (tmp_path / "copy of joint_2.npz").write_bytes(data)
     with pytest.raises(ModelFileError, match=r"two models of joint 2 \(copy of joint_2\.npz and joint_2\.npz\)"):
         modelset.listing(str(tmp_path))
+
+
+def test_a_huge_time_bound_is_written_short():
+    from fricli.core import timewindow
+
+    assert timewindow.seconds_text(1714000059.9) == "1714000059.9"
+    assert timewindow.seconds_text(1e300) == "1e+300"
+    assert len(timewindow.seconds_text(-1.2345e30)) < 25
