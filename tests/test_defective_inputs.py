@@ -236,3 +236,22 @@ def test_a_huge_time_bound_is_written_short():
     assert timewindow.seconds_text(1714000059.9) == "1714000059.9"
     assert timewindow.seconds_text(1e300) == "1e+300"
     assert len(timewindow.seconds_text(-1.2345e30)) < 25
+
+
+@pytest.mark.parametrize("column", ["q", "qd", "tau_m", "t", "tau_g"])
+def test_an_input_column_marked_as_a_reference_is_refused(column):
+    """Marked, q was left out silently (diagnose then failed inside), qd was derived instead of
+    read, and tau_m or t were reported missing although the log has them."""
+    table = make_table()
+    i = table.schema.get_field_index(column)
+    field = table.schema.field(i)
+    table = table.set_column(i, field.with_metadata({**field.metadata, b"role": b"reference"}), table.column(i))
+    with pytest.raises(LogError, match=rf"column '{column}' is marked as a reference .*but it is an input"):
+        logs.from_table(table, name="x")
+
+
+def test_a_reference_column_marked_as_one_is_read_as_before():
+    table = make_table(tau_ext=np.ones(500))
+    i = table.schema.get_field_index("tau_ext")
+    table = table.set_column(i, table.schema.field(i).with_metadata({b"role": b"reference"}), table.column(i))
+    assert logs.from_table(table, name="x").has("tau_ext")

@@ -235,6 +235,9 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
     out: dict[str, np.ndarray] = {}
     for field in table.schema:
         column = field.name
+        if is_marked_reference(field) and column in INPUTS:
+            raise LogError(f"{name}: column {column!r} is marked as a reference (field metadata role), but it is an "
+                           "input of the log contract: remove the mark (docs/log-format.md#inputs-and-references)")
         if column == "joint" or (is_marked_reference(field) and column not in REFERENCES):
             continue
         typ = field.type
