@@ -41,7 +41,9 @@ def test_missing_column_names_a_column_that_differs_in_case():
 
 
 @pytest.mark.parametrize("metadata", [{"fricli.import": "[1, 2]"}, {"fricli.dynamics": '"x"'},
-                                      {"fricli.import": '{"robot": [1]}'}])
+                                      {"fricli.import": '{"robot": [1]}'}, {"fricli.dynamics": '{"held": 5}'},
+                                      {"fricli.dynamics": '{"gravity": [0, 0, "a"], "urdf_sha256": "ab"}'},
+                                      {"fricli.import": '{"robot": {"gravity": [0, 0]}}'}])
 def test_robot_record_of_another_shape_counts_as_unrecorded(metadata):
     schema = make_table().schema.with_metadata(metadata)
     assert logs.robot_record(schema) == {}
@@ -255,3 +257,10 @@ def test_a_reference_column_marked_as_one_is_read_as_before():
     i = table.schema.get_field_index("tau_ext")
     table = table.set_column(i, table.schema.field(i).with_metadata({b"role": b"reference"}), table.column(i))
     assert logs.from_table(table, name="x").has("tau_ext")
+
+
+def test_a_robot_record_as_fricli_writes_it_is_read():
+    record = '{"urdf_sha256": "ab", "gravity": [0, 0, -9.81], "held": ["j7"], "rotor_inertia": null, "payload": null}'
+    schema = make_table().schema.with_metadata({"fricli.dynamics": record})
+    assert logs.held_of(schema) == ("j7",) and logs.gravity_of(schema) == (0, 0, -9.81)
+    assert logs.robot_model(schema)["urdf_sha256"] == "ab"

@@ -321,7 +321,9 @@ def gravity_of(schema: pa.Schema, given=None) -> tuple:
 
 def robot_record(schema: pa.Schema) -> dict:
     """What the log's tau_g and tau_dyn came from, as ``fricli dynamics`` (preferred: it replaces
-    them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded."""
+    them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded (or
+    when the record has another shape than fricli writes: not an object, a gravity that is not
+    three numbers, held joints that are not a list of names)."""
     meta = schema.metadata or {}
     for key in (b"fricli.dynamics", b"fricli.import"):
         if key in meta:
@@ -331,9 +333,17 @@ def robot_record(schema: pa.Schema) -> dict:
                 continue
             if key == b"fricli.import" and isinstance(record, dict):
                 record = record.get("robot", record)
-            if isinstance(record, dict):
+            if isinstance(record, dict) and _record_fits(record):
                 return record
     return {}
+
+
+def _record_fits(record: dict) -> bool:
+    gravity, held = record.get("gravity"), record.get("held")
+    numbers = isinstance(gravity, list) and len(gravity) == 3 and all(
+        isinstance(g, (int, float)) and not isinstance(g, bool) and np.isfinite(g) for g in gravity)
+    return ((gravity is None or numbers)
+            and (held is None or (isinstance(held, list) and all(isinstance(h, str) for h in held))))
 
 
 def robot_model(schema: pa.Schema) -> dict | None:
