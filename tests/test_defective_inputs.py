@@ -264,3 +264,26 @@ def test_a_robot_record_as_fricli_writes_it_is_read():
     schema = make_table().schema.with_metadata({"fricli.dynamics": record})
     assert logs.held_of(schema) == ("j7",) and logs.gravity_of(schema) == (0, 0, -9.81)
     assert logs.robot_model(schema)["urdf_sha256"] == "ab"
+
+
+@pytest.mark.parametrize("value", [0.0, 3.5])
+def test_a_motor_torque_constant_while_the_joint_moves_both_ways_is_flagged(value):
+    """A recorder writes zeros (or a last value) for a torque channel it did not record: the
+    friction target built from it is meaningless."""
+    table = make_table()
+    table = table.set_column(3, table.schema.field(3), pa.array(np.full(500, value)))
+    messages = []
+    logs.from_table(table, name="x", warn=messages.append)
+    assert [m for m in messages if "tau_m" in m] == [
+        f"warning: x: 'tau_m' is {value:g} Nm on every one of the 500 rows while the joint moves both ways: not a "
+        "measurement (a channel the recorder did not record?); the friction target and the external torque "
+        "built from it are meaningless"]
+
+
+def test_a_motor_torque_that_varies_or_a_joint_moving_one_way_is_not_flagged():
+    messages = []
+    logs.from_table(make_table(), name="x", warn=messages.append)
+    one_way = make_table(n=50)   # 0.5 s of the sine: qd > 0 throughout
+    one_way = one_way.set_column(3, one_way.schema.field(3), pa.array(np.zeros(50)))
+    logs.from_table(one_way, name="x", warn=messages.append)
+    assert not [m for m in messages if "tau_m" in m]

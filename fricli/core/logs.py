@@ -28,7 +28,8 @@ from fricli.core.errors import DataError, LogError
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
                                  read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
                                  write_table)
-from fricli.core.logs_motion import _contradicts, derive_motion, lowpass, lowpass_applies, not_measured  # noqa: F401
+from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, lowpass, lowpass_applies,  # noqa: F401
+                                     not_measured)
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -519,6 +520,9 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         if warn:
             warn(f"note: {name}: {note}")
     derived = derive_motion(sig, cutoff_hz)
+    dead = dead_torque(sig, CANONICAL[axis]["tau"])
+    if dead and warn:
+        warn(f"warning: {name}: {dead}")
     zero = tuple(c for c in declared_zero(table.schema, name, zero) if c not in sig)
     for column in zero:
         sig[column] = np.zeros(len(sig["t"]))

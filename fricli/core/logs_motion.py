@@ -53,6 +53,18 @@ def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
     return out
 
 
+def dead_torque(sig: dict[str, np.ndarray], unit: str = "Nm") -> str | None:
+    """A note when the motor torque is one value on every row while the joint moves both ways:
+    friction changes sign with the motion, so no measured torque stays put (a recorder writes
+    zeros, or its last value, for a channel it did not record); else None."""
+    tau, qd = sig.get("tau_m"), sig.get("qd")
+    if tau is None or qd is None or len(tau) < 3 or np.ptp(tau) != 0 or not (qd.max() > 0 > qd.min()):
+        return None
+    return (f"'tau_m' is {tau[0]:g} {unit} on every one of the {len(tau)} rows while the joint moves both ways: not a "
+            "measurement (a channel the recorder did not record?); the friction target and the external torque "
+            "built from it are meaningless")
+
+
 def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
     derived = []
