@@ -1,6 +1,8 @@
 """Defective inputs as recorders and other tools write them: one clear refusal or the good rows
 kept, never an internal error."""
 
+import re
+
 import numpy as np
 import pyarrow as pa
 import pytest
@@ -287,3 +289,28 @@ def test_a_motor_torque_that_varies_or_a_joint_moving_one_way_is_not_flagged():
     one_way = one_way.set_column(3, one_way.schema.field(3), pa.array(np.zeros(50)))
     logs.from_table(one_way, name="x", warn=messages.append)
     assert not [m for m in messages if "tau_m" in m]
+
+
+def _mapping(text):
+    import tomllib
+
+    from fricli.robot.mapping import parse_mapping
+
+    return parse_mapping(tomllib.loads(text), "map.toml")
+
+
+@pytest.mark.parametrize("joints,says", [
+    ('[[joints]]\nname = 1\nq = 2\ntau_m = 2\n', "column 2 is mapped twice (joint 1's q and joint 1's tau_m)"),
+    ('[[joints]]\nname = 1\nq = 2\ntau_m = 3\n[[joints]]\nname = 2\nq = 2\ntau_m = 4\n',
+     "column 2 is mapped twice (joint 1's q and joint 2's q)"),
+    ('[[joints]]\nname = 1\nq = 1\ntau_m = 3\n', "column 1 is mapped twice (the time and joint 1's q)")])
+def test_a_column_mapped_to_two_signals_is_refused(joints, says):
+    """A typo that maps the position column as the torque too imported the position as torque."""
+    with pytest.raises(LogError, match=re.escape(says)):
+        _mapping("time = 1\n" + joints)
+
+
+def test_a_temperature_column_shared_by_the_joints_is_kept():
+    mapping = _mapping("time = 1\n" + "".join(f"[[joints]]\nname = {j}\nq = {j + 1}\ntau_m = {j + 5}\ntemp = 9\n"
+                                              for j in (1, 2, 3)))
+    assert [jm.columns["temp"].ref for jm in mapping.joints] == [9, 9, 9]
