@@ -314,3 +314,24 @@ def test_a_temperature_column_shared_by_the_joints_is_kept():
     mapping = _mapping("time = 1\n" + "".join(f"[[joints]]\nname = {j}\nq = {j + 1}\ntau_m = {j + 5}\ntemp = 9\n"
                                               for j in (1, 2, 3)))
     assert [jm.columns["temp"].ref for jm in mapping.joints] == [9, 9, 9]
+
+
+RATED = HEADED.replace('time = {column = "t", unit = "s"}', "time = {rate = 100}")
+
+
+@pytest.mark.parametrize("gap", ["\n", "  \n", "\t\r\n"])
+def test_blank_lines_take_no_sample_time(gap):
+    """With time = {rate = HZ} the k-th data line is at k / rate: a blank line is no data line
+    (it counted as one, shifting every later row by a sample period, and a file written with a
+    blank line after every row had its time doubled)."""
+    lines = ROWS.splitlines(True)
+    rec = recording_of("t,q,tau\n" + "".join(line + gap for line in lines), RATED)
+    assert len(rec.lines) == 20 and not rec.defects
+    np.testing.assert_allclose(rec.values[None], np.arange(20) / 100)
+
+
+def test_a_garbage_line_keeps_its_sample_time():
+    """A malformed line was a sample the recorder wrote badly: the rows after it keep their times."""
+    lines = ROWS.splitlines(True)
+    rec = recording_of("t,q,tau\n" + "".join(lines[:5]) + "1,2\n" + "".join(lines[6:]), RATED)
+    np.testing.assert_allclose(rec.values[None], np.delete(np.arange(20), 5) / 100)

@@ -185,6 +185,16 @@ def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, bool]:
     return starts, ends, terminated
 
 
+def _filled(data: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Whether each line holds more than spaces, tabs and carriage returns (bool, as ``starts``):
+    vectorised, with a closer look only at the lines that start with one of those."""
+    filled = ends > starts
+    first = np.frombuffer(data, dtype=np.uint8)[np.minimum(starts, max(len(data) - 1, 0))] if len(data) else starts
+    for i in np.flatnonzero(filled & np.isin(first, (9, 13, 32))):
+        filled[i] = bool(data[starts[i]:ends[i]].strip())
+    return filled
+
+
 def _fields(line: bytes, delimiter: str) -> list[bytes]:
     """Fields of one line: plain splitting (no quoting; numbers need none)."""
     return line.split(delimiter.encode())
@@ -278,7 +288,7 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
 
     starts, ends = starts[start:stop], ends[start:stop]
     numbers = np.arange(start, stop) + 1
-    filled = ends > starts
+    filled = _filled(data, starts, ends)
     starts, ends, numbers = starts[filled], ends[filled], numbers[filled]
     marks = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord(delimiter))
     fields = np.searchsorted(marks, ends) - np.searchsorted(marks, starts) + 1
@@ -427,7 +437,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
     n_body = n_lines - 1 if not terminated and n_lines > start else n_lines
-    numbers = np.flatnonzero(ends[start:n_body] > starts[start:n_body]) + start + 1   # 1-based, non-empty
+    filled = _filled(data, starts, ends)   # blank lines hold nothing: no row, no sample time
+    numbers = np.flatnonzero(filled[start:n_body]) + start + 1   # 1-based, non-blank
     fast = None
     if len(numbers):
         body_end = starts[n_body] if n_body < n_lines else len(data)
@@ -452,7 +463,9 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
     if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
         index[None] = -1
-        cols[-1] = (numbers - (start + 1)) / mapping.time.rate
+        count = np.cumsum(filled)   # non-blank lines up to each line, itself included
+        slot = count - 1 - (count[start] - filled[start])   # data lines before each, from line ``start`` on
+        cols[-1] = slot[numbers - 1] / mapping.time.rate
     keep, found = consistent_rows(mapping.time.values(cols[index[mapping.time.ref]]) * mapping.time.factor, signals,
                                   numbers, name=name, drop_backward=drop_backward)
     for kind, d in found.items():
