@@ -335,3 +335,51 @@ def test_a_garbage_line_keeps_its_sample_time():
     lines = ROWS.splitlines(True)
     rec = recording_of("t,q,tau\n" + "".join(lines[:5]) + "1,2\n" + "".join(lines[6:]), RATED)
     np.testing.assert_allclose(rec.values[None], np.delete(np.arange(20), 5) / 100)
+
+
+JOINED = """files = ["positions", "torques"]
+time = {rate = 100}
+
+[[joints]]
+name = 1
+q = {file = "positions", column = 1}
+tau_m = {file = "torques", column = 1}
+"""
+
+
+@pytest.mark.parametrize("positions", [
+    "".join(f"{k + 1}\n" + ("\n" if k == 4 else "") for k in range(20)),       # a blank line after row 5
+    "# exported by the drive\n" + "".join(f"{k + 1}\n" for k in range(20)),   # a comment line first
+    "".join(f"{k + 1}\n" for k in range(20))])
+def test_files_joined_row_by_row_pair_their_kth_data_lines(positions):
+    """Rows were paired by line number: a blank or comment line in one file paired every later
+    row with the next row of the other file."""
+    import tomllib
+
+    from fricli.robot.joined import read_joined
+    from fricli.robot.mapping import parse_mapping
+
+    torques = "".join(f"{100 + k + 1}\n" for k in range(20))
+    rec = read_joined([positions.encode(), torques.encode()], parse_mapping(tomllib.loads(JOINED)), ["p", "t"])
+    q, tau = rec.values[1], rec.values[(1, 1)]
+    assert len(q) == 20 and not rec.defects
+    np.testing.assert_array_equal(tau - q, 100)
+    np.testing.assert_allclose(rec.values[None], np.arange(20) / 100)
+
+
+def test_blank_lines_between_rows_of_a_sample_rate_are_noted():
+    from fricli.robot.importing import import_recording
+
+    lines = ROWS.splitlines(True)
+    data = ("t,q,tau\n" + "".join(line + "\n" for line in lines)).encode()
+    import tomllib
+
+    from fricli.robot.mapping import parse_mapping
+
+    from fricli.robot.importing import _notices
+
+    result = import_recording(data, parse_mapping(tomllib.loads(RATED)), "rec.csv")
+    assert ("note", "note: rec.csv: 19 blank lines between the rows take no sample (rows are counted by data "
+                    "line, without them)") in _notices(result.meta, "rec.csv", None)
+    timed = import_recording(data, parse_mapping(tomllib.loads(HEADED)), "rec.csv")
+    assert "blank_lines" not in timed.meta

@@ -65,6 +65,8 @@ class Recording:
     defects: dict[str, Defect]
     n_fields: int
     unterminated: int | None = None   # line number of a last line without line end, kept as complete
+    rows: np.ndarray | None = None    # each row's data line: 0 for the first, blank lines not counted
+    blank_lines: int = 0              # blank lines between the first and the last row (no sample)
 
 
 def _refs(mapping: Mapping) -> list[int | str]:
@@ -461,11 +463,11 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         raise LogError(f"{name}: no usable rows" + (f" ({listing(defects)})" if defects else ""))
 
     signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
+    count = np.cumsum(filled)   # non-blank lines up to each line, itself included
+    rows = (count - 1 - (count[start] - filled[start]))[numbers - 1]   # data lines before each, from ``start`` on
     if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
         index[None] = -1
-        count = np.cumsum(filled)   # non-blank lines up to each line, itself included
-        slot = count - 1 - (count[start] - filled[start])   # data lines before each, from line ``start`` on
-        cols[-1] = slot[numbers - 1] / mapping.time.rate
+        cols[-1] = rows / mapping.time.rate
     keep, found = consistent_rows(mapping.time.values(cols[index[mapping.time.ref]]) * mapping.time.factor, signals,
                                   numbers, name=name, drop_backward=drop_backward)
     for kind, d in found.items():
@@ -476,7 +478,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         raise LogError(f"{name}: {usable}" + (f" ({listing(defects)})" if defects else ""))
     if not keep.all():
         cols = {c: v[keep] for c, v in cols.items()}
-        numbers = numbers[keep]
+        numbers, rows = numbers[keep], rows[keep]
     defects = dict(sorted(defects.items(), key=lambda kv: list(KINDS).index(kv[0])))
     return Recording(values={ref: cols[i] for ref, i in index.items()}, lines=numbers, defects=defects,
-                     n_fields=n_fields, unterminated=unterminated if unterminated in numbers else None)
+                     n_fields=n_fields, unterminated=unterminated if unterminated in numbers else None, rows=rows,
+                     blank_lines=int(np.count_nonzero(~filled[numbers[0] - 1:numbers[-1]])))
