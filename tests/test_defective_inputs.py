@@ -383,3 +383,8 @@ def test_blank_lines_between_rows_of_a_sample_rate_are_noted():
                     "line, without them)") in _notices(result.meta, "rec.csv", None)
     timed = import_recording(data, parse_mapping(tomllib.loads(HEADED)), "rec.csv")
     assert "blank_lines" not in timed.meta
+
+
+def test_a_comment_above_the_header_is_not_taken_for_it():
+    rec = recording_of("# a,b,c\nt,q,tau\n" + ROWS)
+    assert len(rec.lines) == 20 and not rec.defects

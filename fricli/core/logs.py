@@ -340,6 +340,7 @@ def robot_record(schema: pa.Schema) -> dict:
 
 
 def _record_fits(record: dict) -> bool:
+    """Whether a robot-model record's gravity (3 finite numbers) and held joints (names) are as fricli writes them."""
     gravity, held = record.get("gravity"), record.get("held")
     numbers = isinstance(gravity, list) and len(gravity) == 3 and all(
         isinstance(g, (int, float)) and not isinstance(g, bool) and np.isfinite(g) for g in gravity)
@@ -363,8 +364,8 @@ def held_of(schema: pa.Schema) -> tuple[str, ...]:
 
 
 def _other_case(sig: dict, *wanted: str) -> str:
-    """', and the log has 'TAU_M' (column names are case-sensitive)' when a column differs from a
-    wanted one in case only; else ''."""
+    """" (the log has 'TAU_M': column names are case-sensitive)" when a column of ``sig`` differs
+    from a wanted one in case only; else ""."""
     found = [c for c in sig if c.lower() in wanted and c not in wanted]
     return f" (the log has {found[0]!r}: column names are case-sensitive)" if found else ""
 

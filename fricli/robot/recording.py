@@ -351,14 +351,17 @@ _BOM = "\ufeff".encode()
 
 def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple[bytes, int]:
     """(the header line's text, the index of the first line after it). The header is the first
-    line that is not a comment, or the last comment line without its '#' when that line has as
-    many fields as the line after it (``numpy.savetxt(header=...)`` writes '# t,q,tau')."""
+    line that is not a comment, or the last comment line without its '#' when it names as many
+    fields as the line after it, which holds numbers (``numpy.savetxt(header=...)`` writes
+    '# t,q,tau' above the rows)."""
+    def number(text: bytes) -> bool:
+        return bool(re.match(_NUMBER, text.strip().decode("ascii", "replace")))
+
     if comments:
-        text = line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip()
-        fields = len(_fields(text, delimiter))
-        if fields > 1 and fields == len(_fields(line(first), delimiter)) and not re.match(_NUMBER, text.split(
-                delimiter.encode())[0].strip().decode("ascii", "replace")):
-            return text, first
+        names, row = _fields(line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip(), delimiter), \
+            _fields(line(first), delimiter)
+        if 1 < len(names) == len(row) and not number(names[0]) and number(row[0]):
+            return line(comments[-1]).removeprefix(_BOM).lstrip()[1:], first
     return line(first).removeprefix(_BOM), first + 1
 
 
@@ -402,9 +405,10 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     starts, ends, terminated = _line_bounds(data)
     line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
     n_lines = len(starts)
-    filled = (int(i) for i in np.flatnonzero(ends > starts) if line(i).strip())
+    filled = _filled(data, starts, ends)   # blank lines hold nothing: no row, no sample time
+    non_blank = (int(i) for i in np.flatnonzero(filled))
     comments = []   # leading lines starting with '#': a recorder's preamble, skipped like empty lines
-    while (first := next(filled, None)) is not None and line(first).removeprefix(_BOM).lstrip().startswith(b"#"):
+    while (first := next(non_blank, None)) is not None and line(first).removeprefix(_BOM).lstrip().startswith(b"#"):
         comments.append(first)
     if first is None:
         raise LogError(f"{name}: the recording is empty" + (" (it holds comment lines only)" if comments else ""))
@@ -439,7 +443,6 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
     n_body = n_lines - 1 if not terminated and n_lines > start else n_lines
-    filled = _filled(data, starts, ends)   # blank lines hold nothing: no row, no sample time
     numbers = np.flatnonzero(filled[start:n_body]) + start + 1   # 1-based, non-blank
     fast = None
     if len(numbers):
