@@ -388,3 +388,10 @@ def test_blank_lines_between_rows_of_a_sample_rate_are_noted():
 def test_a_comment_above_the_header_is_not_taken_for_it():
     rec = recording_of("# a,b,c\nt,q,tau\n" + ROWS)
     assert len(rec.lines) == 20 and not rec.defects
+
+
+def test_a_nan_joint_is_a_missing_joint():
+    """A float joint column with NaN made a joint named 'nan' that selected no row ('the log is empty')."""
+    table = make_table().append_column("joint", pa.array(np.where(np.arange(500) == 100, np.nan, 2.0)))
+    with pytest.raises(LogError, match="the 'joint' column has missing values"):
+        logs.joints_of(table, "x")
