@@ -395,3 +395,13 @@ def test_a_nan_joint_is_a_missing_joint():
     table = make_table().append_column("joint", pa.array(np.where(np.arange(500) == 100, np.nan, 2.0)))
     with pytest.raises(LogError, match="the 'joint' column has missing values"):
         logs.joints_of(table, "x")
+
+
+@pytest.mark.parametrize("head,names", [("# recorded by the cell\n\nt,q1,i1\n", ["t", "q1", "i1"]),
+                                        ("# t,q1,i1\n", ["t", "q1", "i1"]), ("t,q1,i1\n", ["t", "q1", "i1"]),
+                                        ("", None)])
+def test_the_template_reads_the_columns_past_comment_lines(head, names):
+    from fricli.robot.template import header_fields
+
+    fields, count, delimiter = header_fields((head + "0.0,1.5,0.2\n0.01,1.6,0.3\n").encode(), "rec.csv")
+    assert (fields, count, delimiter) == (names, 3, ",")
