@@ -364,8 +364,8 @@ def held_of(schema: pa.Schema) -> tuple[str, ...]:
 
 
 def _other_case(sig: dict, *wanted: str) -> str:
-    """" (the log has 'TAU_M': column names are case-sensitive)" when a column of ``sig`` differs
-    from a wanted one in case only; else ""."""
+    """A hint naming a column of ``sig`` that differs from a wanted one in case only (`` (the log has
+    'TAU_M': column names are case-sensitive)``); else an empty string."""
     found = [c for c in sig if c.lower() in wanted and c not in wanted]
     return f" (the log has {found[0]!r}: column names are case-sensitive)" if found else ""
 
