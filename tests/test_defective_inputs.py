@@ -405,3 +405,19 @@ def test_the_template_reads_the_columns_past_comment_lines(head, names):
 
     fields, count, delimiter = header_fields((head + "0.0,1.5,0.2\n0.01,1.6,0.3\n").encode(), "rec.csv")
     assert (fields, count, delimiter) == (names, 3, ",")
+
+
+@pytest.mark.parametrize("t_scale,q_unit,qd_unit,ratio", [(1e3, "rad", "rad/s", 1e3), (1.0, "rad", "deg/s", 0.0175),
+                                                           (1.0, "deg", "rad/s", 57.3), (1.0, "rad", "rad/s", None)])
+def test_units_of_t_q_and_qd_that_disagree_are_flagged(t_scale, q_unit, qd_unit, ratio):
+    """t in ms taken as s, or degrees taken as radians in one of q and qd: qd is no longer the
+    rate of change of q, and every model reads the wrong one silently."""
+    table = make_table(units={"q": q_unit, "qd": qd_unit})
+    table = table.set_column(0, table.schema.field(0), pa.array(table.column("t").to_numpy() * t_scale))
+    messages = []
+    logs.from_table(table, name="x", warn=messages.append)
+    flagged = [m for m in messages if "rate of change" in m]
+    if ratio is None:
+        assert not flagged, messages
+    else:
+        assert len(flagged) == 1 and f"qd is {ratio:.3g} times the rate of change of q over t" in flagged[0], messages

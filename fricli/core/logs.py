@@ -29,7 +29,7 @@ from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parqu
                                  read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
                                  write_table)
 from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, lowpass, lowpass_applies,  # noqa: F401
-                                     not_measured)
+                                     not_measured, rate_mismatch)
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -520,6 +520,9 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         del sig[column]
         if warn:
             warn(f"note: {name}: {note}")
+    mismatch = rate_mismatch(sig)
+    if mismatch and warn:
+        warn(f"warning: {name}: {mismatch}")
     derived = derive_motion(sig, cutoff_hz)
     dead = dead_torque(sig, CANONICAL[axis]["tau"])
     if dead and warn:
