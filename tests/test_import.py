@@ -434,10 +434,10 @@ def test_what_is_wrong_with_the_first_bad_row_is_shown():
     head = "t,q1,q2,qd1,qd2,i1,i2,status\n"
     semicolon = head.replace(",", ";") + "\n".join(r.replace(",", ";").replace(".", ",") for r in rows()) + "\n"
     dates = head + "\n".join(f"2026-11-25T10:00:{k:02d}," + r.split(",", 1)[1] for k, r in enumerate(rows())) + "\n"
-    trailing = head + "\n".join(r + "," for r in rows()) + "\n"
+    trailing = head + "\n".join(r + ",," for r in rows()) + "\n"   # one delimiter at the end is no field
     for data, text, says in ((semicolon, 'delimiter = ";"\n' + header, "'100,00' in column 't': a decimal comma (set decimal = \",\" in the mapping)"),
                              (dates, header, "'2026-11-25T10:00:00' in column 't': a date and time"),
-                             (trailing, header, "first at line 2: 9 fields, 8 expected (a delimiter ends the line)")):
+                             (trailing, header, "first at line 2: 10 fields, 8 expected (a delimiter ends the line)")):
         with pytest.raises(recording.LogError, match=re.escape(says)):
             import_recording(data.encode(), mapping(text), "rec.csv")
     quoted = head.replace("t,", '"t",')

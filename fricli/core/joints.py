@@ -52,7 +52,9 @@ def mismatch(model_name: str, model_joint, log_name: str, log_joint) -> JointMis
 
 def named(values: list, name: str) -> list | None:
     """The distinct values of a log's ``joint`` column as the log's joints: None when every value
-    is missing (a column of nulls names no joint, like no column); some missing is refused."""
+    is missing (a column of nulls names no joint, like no column); some missing is refused. A
+    float NaN is missing too (it is no joint, and equals no row's joint)."""
+    values = [None if isinstance(v, float) and v != v else v for v in values]
     if values and all(v is None for v in values):
         return None
     if any(v is None for v in values):

@@ -28,7 +28,8 @@ from fricli.core.errors import DataError, LogError
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
                                  read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
                                  write_table)
-from fricli.core.logs_motion import _contradicts, derive_motion, lowpass, lowpass_applies, not_measured  # noqa: F401
+from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, lowpass, lowpass_applies,  # noqa: F401
+                                     not_measured, rate_mismatch)
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -202,28 +203,48 @@ def take_rows(table: pa.Table, keep: np.ndarray) -> pa.Table:
     return table.take(pa.Array.from_buffers(pa.int64(), len(idx), [None, pa.py_buffer(idx)]))
 
 
-def _numeric(table: pa.Table, column: str, name: str, rows_offset: int = 0) -> np.ndarray:
+def is_number(typ) -> bool:
+    """Whether an Arrow type holds numbers a log's signal reads (as float64): float, integer or
+    decimal (a database's fixed-point export)."""
+    return pa.types.is_floating(typ) or pa.types.is_integer(typ) or pa.types.is_decimal(typ)
+
+
+def _numeric(table: pa.Table, column: str, name: str, rows: np.ndarray | None = None,
+             drop_invalid: bool = False) -> np.ndarray:
+    """float64 (n,) of a numeric column; missing values (nulls) refused, or with ``drop_invalid``
+    read as NaN, which ``check_signals`` drops with the other invalid rows. ``rows``: the log's
+    row number of each row (n,), for the message (default: 0..n-1)."""
     col = table.column(column)
     typ = col.type
-    if not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
+    if not is_number(typ):
         raise LogError(f"{name}: column {column!r} has type {typ}, expected numbers")
     if col.null_count:
-        first = int(np.flatnonzero(np.asarray(col.is_null()))[0]) + rows_offset
-        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first})")
+        if drop_invalid:
+            import pyarrow.compute as pc
+
+            return float64_values(pc.fill_null(col.cast(pa.float64()), np.nan))
+        first = _log_row(rows, int(np.flatnonzero(np.asarray(col.is_null()))[0]))
+        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first}); "
+                       "use --drop-invalid to drop their rows")
     return float64_values(col)
 
 
-def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None) -> dict[str, np.ndarray]:
-    """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation)."""
+def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None,
+                  drop_invalid: bool = False, rows: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Numeric columns of ``table`` as float64 arrays in canonical units (no derivation); missing
+    values are NaN with ``drop_invalid`` (``_numeric``; ``rows`` as there)."""
     out: dict[str, np.ndarray] = {}
     for field in table.schema:
         column = field.name
+        if is_marked_reference(field) and column in INPUTS:
+            raise LogError(f"{name}: column {column!r} is marked as a reference (field metadata role), but it is an "
+                           "input of the log contract: remove the mark (docs/log-format.md#inputs-and-references)")
         if column == "joint" or (is_marked_reference(field) and column not in REFERENCES):
             continue
         typ = field.type
-        if column not in KNOWN and not (pa.types.is_floating(typ) or pa.types.is_integer(typ)):
+        if column not in KNOWN and not is_number(typ):
             continue  # non-numeric extra columns are carried through, not used
-        values = _numeric(table, column, name)
+        values = _numeric(table, column, name, rows=rows, drop_invalid=drop_invalid)
         unit = field_unit(field)
         if unit is not None and column in _EXPECTED:
             dim, factor = _UNITS[_field_spelling(field, name)]
@@ -276,7 +297,7 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
         if not isinstance(listed, list):
             raise LogError(f"{name}: the metadata key fricli.zero_columns is not a JSON list of column names")
         found += listed
-    bad = [c for c in found if c not in ROBOT_MODEL]
+    bad = [c for c in found if not isinstance(c, str) or c not in ROBOT_MODEL]
     if bad:
         raise LogError(f"{name}: only tau_g and tau_dyn can be declared zero, not {bad[0]!r}")
     return tuple(c for c in ROBOT_MODEL if c in found)
@@ -285,6 +306,7 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
 # No robot signal reaches this magnitude in canonical units (rad, m, rad/s, Nm, N, A, degC);
 # a value beyond it is garbage (uninitialised memory), and squares of it would overflow
 MAGNITUDE_LIMIT = 1e9
+PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
 
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)   # m/s^2 in the URDF's base frame, as a level-mounted arm sees it
@@ -300,7 +322,9 @@ def gravity_of(schema: pa.Schema, given=None) -> tuple:
 
 def robot_record(schema: pa.Schema) -> dict:
     """What the log's tau_g and tau_dyn came from, as ``fricli dynamics`` (preferred: it replaces
-    them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded."""
+    them) or ``fricli import --urdf`` recorded it in the schema metadata; {} when unrecorded (or
+    when the record has another shape than fricli writes: not an object, a gravity that is not
+    three numbers, held joints that are not a list of names)."""
     meta = schema.metadata or {}
     for key in (b"fricli.dynamics", b"fricli.import"):
         if key in meta:
@@ -308,10 +332,20 @@ def robot_record(schema: pa.Schema) -> dict:
                 record = json.loads(meta[key])
             except ValueError:
                 continue
-            record = record.get("robot", record) if key == b"fricli.import" else record
-            if isinstance(record, dict):
+            if key == b"fricli.import" and isinstance(record, dict):
+                record = record.get("robot", record)
+            if isinstance(record, dict) and _record_fits(record):
                 return record
     return {}
+
+
+def _record_fits(record: dict) -> bool:
+    """Whether a robot-model record's gravity (3 finite numbers) and held joints (names) are as fricli writes them."""
+    gravity, held = record.get("gravity"), record.get("held")
+    numbers = isinstance(gravity, list) and len(gravity) == 3 and all(
+        isinstance(g, (int, float)) and not isinstance(g, bool) and np.isfinite(g) for g in gravity)
+    return ((gravity is None or numbers)
+            and (held is None or (isinstance(held, list) and all(isinstance(h, str) for h in held))))
 
 
 def robot_model(schema: pa.Schema) -> dict | None:
@@ -329,15 +363,30 @@ def held_of(schema: pa.Schema) -> tuple[str, ...]:
     return tuple(robot_record(schema).get("held") or ())
 
 
+def _other_case(sig: dict, *wanted: str) -> str:
+    """A hint naming a column of ``sig`` that differs from a wanted one in case only (`` (the log has
+    'TAU_M': column names are case-sensitive)``); else an empty string."""
+    found = [c for c in sig if c.lower() in wanted and c not in wanted]
+    return f" (the log has {found[0]!r}: column names are case-sensitive)" if found else ""
+
+
+def _log_row(rows: np.ndarray | None, i: int) -> int:
+    """The log's row number of row ``i`` of the rows read (``rows``: theirs, None: the same)."""
+    return i if rows is None else int(rows[i])
+
+
 def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = False,
-                  warn=None) -> np.ndarray | None:
-    """Check finiteness and time order. Returns a row mask when rows were dropped."""
+                  warn=None, rows: np.ndarray | None = None, time_stored=None) -> np.ndarray | None:
+    """Check finiteness and time order. Returns a row mask when rows were dropped. ``rows``: the
+    log's row number of each row (n,) for the messages (default: 0..n-1), e.g. of one joint's rows;
+    ``time_stored``: (Arrow type, factor to s) of the column ``t`` was read from (a time order error
+    says when that type is too coarse)."""
     if "t" not in sig:
-        raise LogError(f"{name}: missing required column 't'")
+        raise LogError(f"{name}: missing required column 't'{_other_case(sig, 't')}")
     if "tau_m" not in sig:
-        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt)")
+        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt){_other_case(sig, 'tau_m', 'i_m')}")
     if "q" not in sig and "qd" not in sig:
-        raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'")
+        raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'{_other_case(sig, 'q', 'qd')}")
     n = len(sig["t"])
     if n == 0:
         raise LogError(f"{name}: the log is empty")
@@ -345,7 +394,8 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     cols = []
     with np.errstate(over="ignore", invalid="ignore"):   # huge finite values may overflow the sum
         for column, values in sig.items():
-            limit = np.inf if column == "t" else MAGNITUDE_LIMIT
+            # t may be large (absolute time stamps) but not infinite
+            limit = np.finfo(np.float64).max if column == "t" else MAGNITUDE_LIMIT
             # a finite sum holds no NaN or inf; only then look row by row
             if not np.isfinite(np.sum(values)) or values.max() > limit or values.min() < -limit:
                 invalid = ~(np.abs(values) <= limit)
@@ -354,27 +404,50 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
                     cols.append(column)
     mask = None
     if bad.any():
-        first = int(np.flatnonzero(bad)[0])
+        first = _log_row(rows, int(np.flatnonzero(bad)[0]))
         cols = sorted(cols)
         what = f"NaN, infinite or absurd values (beyond {MAGNITUDE_LIMIT:g} in magnitude)"
         if not drop_invalid:
             raise LogError(f"{name}: {int(bad.sum())} rows hold {what} "
                            f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
         mask = ~bad
+        rows = np.flatnonzero(mask) if rows is None else rows[mask]
         if warn:
-            warn(f"warning: dropped {int(bad.sum())} of {n} rows with {what} ({', '.join(cols)})")
+            warn(f"warning: dropped {int(bad.sum())} of {n} rows with missing, {what} ({', '.join(cols)})")
         for column in sig:
             sig[column] = sig[column][mask]
         if len(sig["t"]) == 0:
             raise LogError(f"{name}: no valid rows left after dropping invalid ones")
     dt = np.diff(sig["t"])
-    if (dt == 0).any():
-        row = int(np.flatnonzero(dt == 0)[0]) + 1
-        raise LogError(f"{name}: duplicate timestamps (first at row {row}, t = {sig['t'][row]:g} s)")
-    if (dt < 0).any():
-        row = int(np.flatnonzero(dt < 0)[0]) + 1
-        raise LogError(f"{name}: 't' is not increasing (first at row {row}, t = {sig['t'][row]:g} s)")
+    for what, wrong in (("duplicate timestamps", dt == 0), ("'t' is not increasing", dt < 0)):
+        if wrong.any():
+            row = int(np.flatnonzero(wrong)[0]) + 1
+            t = sig["t"][row]
+            raise LogError(f"{name}: {what} (first at row {_log_row(rows, row)}, t = {t:.15g} s)"
+                           f"{_coarse_time(time_stored, t, sig['t'][row - 1])}")
     return mask
+
+
+def _time_stored(table: pa.Table, name: str) -> tuple | None:
+    """(Arrow type, factor to s) of the log's column ``t``; None without it."""
+    if "t" not in table.schema.names:
+        return None
+    field = table.schema.field("t")
+    unit = field_unit(field)
+    return field.type, (_UNITS[_field_spelling(field, name)][1] if unit is not None else 1.0)
+
+
+def _coarse_time(time_stored, t: float, before: float) -> str:
+    """'; t is stored as float32, ...' when ``t`` [s] was stored (``time_stored``: Arrow type, factor
+    to s) as a float type too coarse to tell it from the row ``before`` apart (seconds since 1970
+    in float32 are 128 s apart); else ''."""
+    if time_stored is None or not pa.types.is_floating(time_stored[0]) or time_stored[0].bit_width >= 64:
+        return ""
+    dtype, factor = np.dtype(f"float{time_stored[0].bit_width}"), time_stored[1]
+    step = float(np.spacing(dtype.type(abs(t) / factor))) * factor
+    if abs(t - before) > 4 * step:
+        return ""
+    return f"; 't' is stored as {dtype.name}, whose steps are {step:.3g} s at this time: write it as float64"
 
 
 def _joint_values(table: pa.Table) -> np.ndarray:
@@ -403,17 +476,23 @@ def joints_of(table: pa.Table, name: str = "log") -> list | None:
 def select_joint(table: pa.Table, joint, name: str) -> tuple[pa.Table, object]:
     """Rows of one joint by the joint rule (``fricli.core.joints``): ``joint=None`` means the only
     joint; several need a choice; ``--joint`` on a log without a joint column is refused."""
+    return select_joint_rows(table, joint, name)[:2]
+
+
+def select_joint_rows(table: pa.Table, joint, name: str) -> tuple[pa.Table, object, np.ndarray | None]:
+    """``select_joint`` and the log's row numbers of the rows selected (None: every row)."""
     found = joints_of(table, name)
     if found is None:
-        return table, joints.select(None, joint, name)[0]   # refuses --joint
+        return table, joints.select(None, joint, name)[0], None   # refuses --joint
     if not found:  # no rows: refused as empty later
-        return table, joint
+        return table, joint, None
     covered = joints.select(found, joint, name)
     if len(covered) > 1:
         raise joints.several(found, name)
     if len(found) == 1:
-        return table, covered[0]
-    return take_rows(table, _joint_values(table) == covered[0]), covered[0]
+        return table, covered[0], None
+    keep = _joint_values(table) == covered[0]
+    return take_rows(table, keep), covered[0], np.flatnonzero(keep)
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
@@ -423,20 +502,31 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     filled with zeros in ``signals``, with a note through ``warn``. ``Log.reading`` keeps these
     options (the names of the options of ``fricli.fitting.optionspec.READING``)."""
     joint_given, declared = joint, tuple(zero)
-    table, joint = select_joint(table, joint, name)
+    table, joint, rows = select_joint_rows(table, joint, name)
     axis = axis_of(table.schema, name)
     note = unitless_note(table.schema, name)
     if note and warn:
         warn(note)
-    sig = table_signals(table, axis, name, kt=kt)
-    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn)
+    sig = table_signals(table, axis, name, kt=kt, drop_invalid=drop_invalid, rows=rows)
+    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn, rows=rows, time_stored=_time_stored(table, name))
     if mask is not None:
         table = take_rows(table, mask)
+    # the first 100,000 steps tell the sample period (and cost a millisecond on a log of any length)
+    step = float(np.median(np.diff(sig["t"][:100_001]))) if len(sig["t"]) > 1 else None
+    if warn and step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+        warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
+             "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
     for column, note in not_measured(sig):
         del sig[column]
         if warn:
             warn(f"note: {name}: {note}")
+    mismatch = rate_mismatch(sig)
+    if mismatch and warn:
+        warn(f"warning: {name}: {mismatch}")
     derived = derive_motion(sig, cutoff_hz)
+    dead = dead_torque(sig, CANONICAL[axis]["tau"])
+    if dead and warn:
+        warn(f"warning: {name}: {dead}")
     zero = tuple(c for c in declared_zero(table.schema, name, zero) if c not in sig)
     for column in zero:
         sig[column] = np.zeros(len(sig["t"]))

@@ -53,6 +53,41 @@ def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
     return out
 
 
+def dead_torque(sig: dict[str, np.ndarray], unit: str = "Nm") -> str | None:
+    """A note when the motor torque is one value on every row while the joint moves both ways:
+    friction changes sign with the motion, so no measured torque stays put (a recorder writes
+    zeros, or its last value, for a channel it did not record); else None."""
+    tau, qd = sig.get("tau_m"), sig.get("qd")
+    if tau is None or qd is None or len(tau) < 3 or np.ptp(tau) != 0 or not (qd.max() > 0 > qd.min()):
+        return None
+    return (f"'tau_m' is {tau[0]:g} {unit} on every one of the {len(tau)} rows while the joint moves both ways: not a "
+            "measurement (a channel the recorder did not record?); the friction target and the external torque "
+            "built from it are meaningless")
+
+
+def rate_mismatch(sig: dict[str, np.ndarray]) -> str | None:
+    """A note when a measured ``qd`` is not the rate of change of ``q`` over ``t`` but a multiple
+    of it (units of t, q and qd that disagree: t in ms read as s, degrees read as radians); else
+    None. The increments of q over 200 windows of the first 100,000 rows are compared with the
+    integral of qd over them (a least-squares factor), where the two agree in shape (correlation
+    above 0.95)."""
+    q, qd, t = sig.get("q"), sig.get("qd"), sig["t"]
+    if q is None or qd is None or len(t) < 10:
+        return None
+    q, qd, t = q[:100_000], qd[:100_000], t[:100_000]
+    w = max(1, len(t) // 200)
+    moved = np.concatenate([[0.0], np.cumsum(0.5 * (qd[1:] + qd[:-1]) * np.diff(t))])
+    a, b = moved[w:] - moved[:-w], q[w:] - q[:-w]
+    ab, aa, bb = float(np.dot(a, b)), float(np.dot(a, a)), float(np.dot(b, b))
+    if not (aa > 0 and bb > 0 and np.isfinite(ab * aa * bb)) or ab / np.sqrt(aa * bb) < 0.95:
+        return None
+    factor = ab / bb
+    if 0.2 < factor < 5:
+        return None
+    return (f"qd is {factor:.3g} times the rate of change of q over t: their units disagree (1e+03: t in ms read "
+            "as s; 57.3 or 0.0175: degrees read as radians); check each column's field metadata 'unit'")
+
+
 def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
     """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
     derived = []

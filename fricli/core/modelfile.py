@@ -133,6 +133,7 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
         shown = version if isinstance(version, int) and not isinstance(version, bool) else json.dumps(version)
         raise ModelFileError(f"{name}: model format version {shown} is not supported "
                              f"(this fricli reads version {FORMAT_VERSION})")
+    _check_shapes(meta, name)
     for key, arr in arrays.items():
         if arr.dtype.kind not in "biuf":  # model arrays are real numbers
             raise ModelFileError(f"{name}: damaged model (array {key!r} has type {arr.dtype})")
@@ -140,6 +141,27 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
         if arr.dtype.kind == "f" and not (np.abs(arr) <= np.finfo(np.float32).max).all():
             raise ModelFileError(f"{name}: damaged model (array {key!r} holds NaN, infinite or huge values)")
     return meta, arrays
+
+
+_SCALAR = (str, int, float)
+# meta key -> (what its value must be when present, how a message says it)
+_SHAPES = {
+    "kind": (lambda v: isinstance(v, str), "a name"),
+    "joint": (lambda v: v is None or isinstance(v, _SCALAR), "a joint name or number"),
+    "joints": (lambda v: isinstance(v, list) and all(isinstance(j, _SCALAR) for j in v), "a list of joints"),
+    "inputs": (lambda v: isinstance(v, list) and all(isinstance(c, str) for c in v), "a list of column names"),
+    "envelope": (lambda v: v is None or isinstance(v, dict), "an object"),
+    **{key: (lambda v: isinstance(v, dict), "an object") for key in ("model", "units", "provenance", "fit")},
+}
+
+
+def _check_shapes(meta: dict, name: str) -> None:
+    """ModelFileError when a top-level meta entry every reader relies on has another JSON type
+    (a file edited or written by another tool), instead of an error deep inside a command."""
+    for key, (fits, expected) in _SHAPES.items():
+        if key in meta and not fits(meta[key]):
+            raise ModelFileError(f"{name}: damaged model (meta '{key}' is {json.dumps(meta[key])[:40]}, "
+                                 f"expected {expected})")
 
 
 def read(path: str) -> tuple[dict, dict[str, np.ndarray]]:

@@ -45,8 +45,10 @@ def listing(folder: str) -> dict:
         for joint in covers(meta):
             if joint is None:
                 raise ModelFileError(f"{path}: records no joint; a model folder holds one model per named joint")
-            if any(same(joint, j) for j in out):
-                raise ModelFileError(f"{folder}: two models of joint {joint} ({name} and another)")
+            other = next((out[j] for j in out if same(joint, j)), None)
+            if other is not None:
+                raise ModelFileError(f"{folder}: two models of joint {joint} ({os.path.basename(other)} and {name}): "
+                                     "move one out of the folder")
             out[joint] = path
     if not out:
         raise ModelFileError(f"{folder}: no model files (.npz) in the folder")

@@ -25,7 +25,9 @@ def seconds_text(x: float) -> str:
     1714000059.9, not 1.714e+09), and as short as ``:g`` otherwise."""
     if not np.isfinite(x) or x == 0:
         return f"{x:g}"
-    return f"{x:.{max(6, int(np.floor(np.log10(abs(x)))) + 4)}g}"
+    digits = max(6, int(np.floor(np.log10(abs(x)))) + 4)
+    # beyond 17 digits (no clock reaches 1e14 s) only the binary expansion would be printed
+    return f"{x:.{digits}g}" if digits <= 17 else repr(float(x))
 
 
 @dataclasses.dataclass(frozen=True)

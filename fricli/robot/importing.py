@@ -35,7 +35,7 @@ class Imported:
     source: str = ""                 # what was imported: the name, or a bag's topic in it
 
 
-PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
+PLAUSIBLE_STEP = logs.PLAUSIBLE_STEP
 
 
 def is_bag(path: str) -> bool:
@@ -144,6 +144,10 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
         left = meta["i_m_left_out"]
         out.append(("note", f"note: {name}: the effort of joint{'s' if len(left) > 1 else ''} {', '.join(left)} is a "
                     "current and of the others not: tau_m holds each joint's torque, and the log has no i_m column"))
+    if meta.get("blank_lines"):
+        k = meta["blank_lines"]
+        out.append(("note", f"note: {name}: {k:,} blank line{'s' if k > 1 else ''} between the rows "
+                    f"{'take' if k > 1 else 'takes'} no sample (rows are counted by data line, without them)"))
     if meta["unterminated_last_line"]:
         out.append(("note", f"note: {name}: the last line (line {meta['unterminated_last_line']}) has no line end; "
                     "it is complete and kept"))
@@ -396,6 +400,8 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "i_m_left_out": currents if "i_m" not in present else [],
         "robot": robot, "time_step_s": float(np.median(np.diff(t))) if n > 1 else None,
     }
+    if rec.blank_lines and (mapping.time.ref is None or (mapping.files and mapping.join == "rows")):
+        meta["blank_lines"] = rec.blank_lines   # rows counted by data line: these took no row
     schema_meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(meta).encode()}
     if tr is not None and tr.coupled_groups():   # for identify --coupling (a diagonal one is fully applied)
         schema_meta[transmission.META_KEY] = tr.to_json().encode()

@@ -48,8 +48,8 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
                        f"{len(datas)} {'was' if len(datas) == 1 else 'were'} given")
     recs = [read_recording(data, _file_mapping(mapping, f), name, drop_backward=drop_backward)
             for f, (data, name) in enumerate(zip(datas, names))]
-    if mapping.join == "rows":
-        keys = [rec.lines for rec in recs]
+    if mapping.join == "rows":   # the k-th data line of each file (blank and comment lines are none)
+        keys = [rec.rows for rec in recs]
     else:
         keys = [rec.values[mapping.time.ref] for rec in recs]
     common = keys[0]
@@ -60,11 +60,11 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
         _merge(defects, rec.defects, name)
     values: dict = {}
     lines = None
-    ends = [int(rec.lines[-1]) for rec in recs]
+    ends = [int(k[-1]) for k in keys]
     for f, (rec, k) in enumerate(zip(recs, keys)):
         keep = np.isin(k, common)
         # row by row, a row dropped from another file for a defect of its own is reported there
-        alone = ~keep if mapping.join == "time" else ~keep & (rec.lines > min(ends[:f] + ends[f + 1:]))
+        alone = ~keep if mapping.join == "time" else ~keep & (k > min(ends[:f] + ends[f + 1:]))
         if alone.any():
             gone = rec.lines[alone]
             _merge(defects, {"unmatched": Defect(len(gone), int(gone[0]), ranges(gone))}, names[f])
@@ -78,4 +78,5 @@ def read_joined(datas: list[bytes], mapping: Mapping, names: list[str], *, drop_
     from fricli.robot.recording import KINDS
     defects = dict(sorted(defects.items(), key=lambda kv: list(KINDS).index(kv[0])))
     return Recording(values=values, lines=lines, defects=defects, n_fields=recs[0].n_fields,
-                     unterminated=recs[0].unterminated if recs[0].unterminated in lines else None)
+                     unterminated=recs[0].unterminated if recs[0].unterminated in lines else None,
+                     blank_lines=sum(rec.blank_lines for rec in recs) if mapping.join == "rows" else 0)

@@ -315,6 +315,7 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
     if len(kinds) > 1:
         _fail(name, "mixes rotary and linear joints: a log holds one kind (import them separately; with --urdf, "
                     "map the arm's joints and hold the others: hold = [...] under [robot], or --hold JOINT)")
+    _check_once(time, joints, name)
     transmission = _transmission(doc["transmission"], joints, f"{name}: transmission") if motor_side else None
     if transmission is not None and "rotor_inertia" in doc["transmission"] and any(j.rotor_inertia for j in joints):
         _fail(name, "rotor inertias are given twice: per joint (joint side) and in [transmission] (motor side)")
@@ -326,6 +327,21 @@ def parse_mapping(doc: dict, name: str = "mapping") -> Mapping:
         _fail(f"{name}: files", f"no column is read from file {unused[0]!r}")
     return Mapping(time=time, joints=joints, header=header, delimiter=delimiter, decimal=decimal, files=files,
                    join=join,                    transmission=transmission, **_robot(doc, name))
+
+
+def _check_once(time: Column, joints: list[JointMap], name: str) -> None:
+    """LogError when a column is mapped to two signals (the time, or two signals of the joints): a
+    typo that would import one signal as another. A temperature may be shared (one sensor)."""
+    seen = {} if time.ref is None else {(time.file, time.ref): "the time"}
+    for jm in joints:
+        for signal, column in jm.columns.items():
+            if signal == "temp":
+                continue
+            key, what = (column.file, column.ref), f"joint {jm.name}'s {signal}"
+            if key in seen:
+                _fail(name, f"column {column.ref!r} is mapped twice ({seen[key]} and {what}): a column holds one "
+                            "signal of one joint")
+            seen[key] = what
 
 
 def _robot(doc: dict, name: str) -> dict:
@@ -399,7 +415,8 @@ def load_mapping(path: str, *, bag: bool = False) -> Mapping:
     or wrong."""
     text = files.read_bytes(path, LogError, "mapping file", "mapping file")
     try:
-        doc = tomllib.loads(text.decode("utf-8"))
+        # a byte order mark, as editors on Windows save UTF-8 and UTF-16 text, is no TOML
+        doc = tomllib.loads(text.decode("utf-16" if text[:2] in (b"\xff\xfe", b"\xfe\xff") else "utf-8-sig"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise LogError(f"{path}: not a valid TOML mapping ({str(exc).splitlines()[0]})") from None
     return parse_bag_mapping(doc, path) if bag else parse_mapping(doc, path)

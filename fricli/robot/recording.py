@@ -65,6 +65,8 @@ class Recording:
     defects: dict[str, Defect]
     n_fields: int
     unterminated: int | None = None   # line number of a last line without line end, kept as complete
+    rows: np.ndarray | None = None    # each row's data line: 0 for the first, blank lines not counted
+    blank_lines: int = 0              # blank lines between the first and the last row (no sample)
 
 
 def _refs(mapping: Mapping) -> list[int | str]:
@@ -185,6 +187,16 @@ def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray, bool]:
     return starts, ends, terminated
 
 
+def _filled(data: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Whether each line holds more than spaces, tabs and carriage returns (bool, as ``starts``):
+    vectorised, with a closer look only at the lines that start with one of those."""
+    filled = ends > starts
+    first = np.frombuffer(data, dtype=np.uint8)[np.minimum(starts, max(len(data) - 1, 0))] if len(data) else starts
+    for i in np.flatnonzero(filled & np.isin(first, (9, 13, 32))):
+        filled[i] = bool(data[starts[i]:ends[i]].strip())
+    return filled
+
+
 def _fields(line: bytes, delimiter: str) -> list[bytes]:
     """Fields of one line: plain splitting (no quoting; numbers need none)."""
     return line.split(delimiter.encode())
@@ -278,7 +290,7 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
 
     starts, ends = starts[start:stop], ends[start:stop]
     numbers = np.arange(start, stop) + 1
-    filled = ends > starts
+    filled = _filled(data, starts, ends)
     starts, ends, numbers = starts[filled], ends[filled], numbers[filled]
     marks = np.flatnonzero(np.frombuffer(data, dtype=np.uint8) == ord(delimiter))
     fields = np.searchsorted(marks, ends) - np.searchsorted(marks, starts) + 1
@@ -334,6 +346,41 @@ def listing(defects: dict[str, Defect], unit: str = "line") -> str:
                      f"{': ' + d.example if d.example else ''})" for k, d in defects.items())
 
 
+_BOM = "\ufeff".encode()
+
+
+def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple[bytes, int]:
+    """(the header line's text, the index of the first line after it). The header is the first
+    line that is not a comment, or the last comment line without its '#' when it names as many
+    fields as the line after it, which holds numbers (``numpy.savetxt(header=...)`` writes
+    '# t,q,tau' above the rows)."""
+    def number(text: bytes) -> bool:
+        return bool(re.match(_NUMBER, text.strip().decode("ascii", "replace")))
+
+    if comments:
+        names, row = _fields(line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip(), delimiter), \
+            _fields(line(first), delimiter)
+        if 1 < len(names) == len(row) and not number(names[0]) and number(row[0]):
+            return line(comments[-1]).removeprefix(_BOM).lstrip()[1:], first
+    return line(first).removeprefix(_BOM), first + 1
+
+
+def _trailing_delimiter(header: list[str], sample: list[bytes], delimiter: str) -> list[str]:
+    """The header's names, matched to rows whose lines end with a delimiter and the header's not
+    (an empty name added), or the other way round (its empty last name left out): an export's
+    line-end artefact, not a column. ``sample``: the lines after the header."""
+    counts = collections.Counter(len(_fields(ln, delimiter)) for ln in sample if ln.strip())
+    if not counts:
+        return header
+    common = counts.most_common(1)[0][0]
+    if common == len(header) - 1 and header[-1] == "":
+        return header[:-1]
+    ends = [ln.rstrip().endswith(delimiter.encode()) for ln in sample if ln.strip()]
+    if common == len(header) + 1 and sum(ends) > len(ends) / 2:
+        return header + [""]
+    return header
+
+
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
@@ -358,18 +405,22 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     starts, ends, terminated = _line_bounds(data)
     line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
     n_lines = len(starts)
-    first = next((i for i in np.flatnonzero(ends > starts) if line(i).strip()), None)
+    filled = _filled(data, starts, ends)   # blank lines hold nothing: no row, no sample time
+    non_blank = (int(i) for i in np.flatnonzero(filled))
+    comments = []   # leading lines starting with '#': a recorder's preamble, skipped like empty lines
+    while (first := next(non_blank, None)) is not None and line(first).removeprefix(_BOM).lstrip().startswith(b"#"):
+        comments.append(first)
     if first is None:
-        raise LogError(f"{name}: the recording is empty")
+        raise LogError(f"{name}: the recording is empty" + (" (it holds comment lines only)" if comments else ""))
     header = None
-    start = int(first)
+    start = first
     if mapping.header:
-        header = [f.strip().decode("utf-8", "replace") for f in _fields(line(start), mapping.delimiter)]
+        top, start = _header_line(line, comments, first, mapping.delimiter)
+        header = [f.strip().decode("utf-8", "replace") for f in _fields(top, mapping.delimiter)]
         header = [h[1:-1] if len(h) > 1 and h[0] == h[-1] == '"' else h for h in header]   # "name", as R writes it
-        if start == 0:
-            header[0] = header[0].removeprefix("\ufeff")   # a UTF-8 byte order mark
+        header = _trailing_delimiter(header, [line(i) for i in range(start, min(start + 200, n_lines))],
+                                     mapping.delimiter)
         n_fields = len(header)
-        start += 1
     else:
         sample = (line(i) for i in range(start, min(start + 200, n_lines)))
         counts = collections.Counter(len(_fields(ln, mapping.delimiter)) for ln in sample if ln.strip())
@@ -392,7 +443,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
 
     # an unterminated last line is parsed on its own: a truncated one is a defect of its own kind
     n_body = n_lines - 1 if not terminated and n_lines > start else n_lines
-    numbers = np.flatnonzero(ends[start:n_body] > starts[start:n_body]) + start + 1   # 1-based, non-empty
+    numbers = np.flatnonzero(filled[start:n_body]) + start + 1   # 1-based, non-blank
     fast = None
     if len(numbers):
         body_end = starts[n_body] if n_body < n_lines else len(data)
@@ -415,9 +466,11 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         raise LogError(f"{name}: no usable rows" + (f" ({listing(defects)})" if defects else ""))
 
     signals = [c.values(cols[index[c.ref]]) * c.factor for c in _signal_columns(mapping)]
+    count = np.cumsum(filled)   # non-blank lines up to each line, itself included
+    rows = (count - 1 - (count[start] - filled[start]))[numbers - 1]   # data lines before each, from ``start`` on
     if mapping.time.ref is None:   # a sample rate: the k-th data line after the first is at k / rate
         index[None] = -1
-        cols[-1] = (numbers - (start + 1)) / mapping.time.rate
+        cols[-1] = rows / mapping.time.rate
     keep, found = consistent_rows(mapping.time.values(cols[index[mapping.time.ref]]) * mapping.time.factor, signals,
                                   numbers, name=name, drop_backward=drop_backward)
     for kind, d in found.items():
@@ -428,7 +481,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         raise LogError(f"{name}: {usable}" + (f" ({listing(defects)})" if defects else ""))
     if not keep.all():
         cols = {c: v[keep] for c, v in cols.items()}
-        numbers = numbers[keep]
+        numbers, rows = numbers[keep], rows[keep]
     defects = dict(sorted(defects.items(), key=lambda kv: list(KINDS).index(kv[0])))
     return Recording(values={ref: cols[i] for ref, i in index.items()}, lines=numbers, defects=defects,
-                     n_fields=n_fields, unterminated=unterminated if unterminated in numbers else None)
+                     n_fields=n_fields, unterminated=unterminated if unterminated in numbers else None, rows=rows,
+                     blank_lines=int(np.count_nonzero(~filled[numbers[0] - 1:numbers[-1]])))

@@ -37,14 +37,28 @@ def urdf_joints(text: str, name: str) -> list[str]:
 
 
 def header_fields(data: bytes, name: str) -> tuple[list[str] | None, int, str]:
-    """(column names or None when the first line holds numbers only, the number of columns, delimiter)."""
-    first = data.split(b"\n", 1)[0].decode("utf-8", "replace").strip("\r\ufeff ")
+    """(column names or None when the first line holds numbers only, the number of columns, delimiter).
+    Blank lines and '#' comment lines before it are passed over, as ``fricli import`` does; the
+    last comment names the columns when the first line holds numbers and as many fields
+    ('# t,q,tau', as ``numpy.savetxt`` writes it)."""
+    lines = (ln.decode("utf-8", "replace").strip("\r\ufeff \t") for ln in data.split(b"\n", 400)[:400])
+    comment, first = None, ""
+    for first in lines:
+        if first and not first.startswith("#"):
+            break
+        comment = first[1:].strip() if first else comment
+        first = ""
     if not first:
         raise LogError(f"{name}: empty input, no first line to read the columns from")
     delimiter = max((",", ";", "\t", " "), key=first.count)
     fields = [f.strip().strip('"') for f in first.split(delimiter)]
-    numbers = all(re.fullmatch(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?", f) for f in fields if f)
-    return (None if numbers else fields), len(fields), delimiter
+    number = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+    if all(number.fullmatch(f) for f in fields if f):
+        named = [f.strip().strip('"') for f in (comment or "").split(delimiter)]
+        if len(named) == len(fields) > 1 and not any(number.fullmatch(f) for f in named):
+            return named, len(fields), delimiter
+        return None, len(fields), delimiter
+    return fields, len(fields), delimiter
 
 
 def _tokens(field: str) -> list[str]:
