@@ -180,3 +180,33 @@ def test_the_example_in_the_contact_detection_doc_compiles(folder, tmp_path):
         done = subprocess.run([compiler, *flags, "-c", str(src), "-o", str(tmp_path / "example.o")],
                               capture_output=True, text=True)
         assert done.returncode == 0 and done.stderr == "", done.stderr
+
+
+def test_a_log_without_robot_model_columns_replays_with_them_declared_zero(folder, tmp_path):
+    """A horizontal axis records no tau_g or tau_dyn: replay and thresholds refuse the log (exit 6)
+    and name --no-gravity, which they take, as the commands that fit models do."""
+    table = pq.read_table(f"{ROOT}/{SAMPLE}")
+    bare = tmp_path / "bare.parquet"
+    pq.write_table(table.drop_columns(["tau_g", "tau_dyn"]), bare)
+    out, thr = tmp_path / "out.parquet", tmp_path / "t.json"
+    refused = invoke("replay", folder, bare, "-o", out)
+    assert refused.exit_code == 6 and "--no-gravity" in refused.output and not out.exists()
+    flags = ("--no-gravity", "--no-dynamics", "-q")
+    assert invoke("thresholds", folder, bare, "-o", thr, *flags).exit_code == 0
+    done = invoke("replay", folder, bare, "-o", out, "--adapt", "--thresholds", thr, *flags)
+    assert done.exit_code == 0, done.output
+    zero = logs.load_log(f"{ROOT}/{SAMPLE}", zero=("tau_g", "tau_dyn"))
+    assert len(pq.read_table(out)) == len(zero.signals["t"])
+
+
+def test_a_pause_far_longer_than_the_adaptation_memory_forgets_without_failing(folder, tmp_path):
+    """Time stamps 1e7 times too far apart (steps of a day): the forgetting factor exp(-dt/T)
+    underflows to 0; the adaptation forgets down to its covariance cap instead of dividing by 0."""
+    table = pq.read_table(f"{ROOT}/{SAMPLE}")
+    t = table.column("t").to_numpy() * 1e7
+    paused = tmp_path / "paused.parquet"
+    pq.write_table(table.set_column(table.column_names.index("t"), table.schema.field("t"), [t]), paused)
+    thr, out = tmp_path / "t.json", tmp_path / "out.parquet"
+    assert invoke("thresholds", folder, paused, "-o", thr, "-q").exit_code == 0
+    assert invoke("replay", folder, paused, "-o", out, "--adapt", "--thresholds", thr, "-q").exit_code == 0
+    assert np.isfinite(pq.read_table(out).column("tau_ext_pred").to_numpy()).all()

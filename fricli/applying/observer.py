@@ -68,6 +68,8 @@ DEFAULT_MARGIN = 1.5           # threshold = margin x that quantile
 DEFAULT_RELEASE = 0.5          # a flag is released below this share of the threshold
 DEFAULT_MOVING_SPEED = 0.02    # |qd| above which a joint moves [rad/s or m/s]
 DEFAULT_PERSISTENCE = 3        # samples beyond the threshold, of one sign, before a flag
+FORGET_MIN = 1e-12             # least forgetting factor: a gap of over 27.6 T forgets as much (the
+                               # covariance cap binds; exp underflows to 0 past 745 T)
 THRESHOLDS_FORMAT = "fricli.thresholds"
 
 
@@ -232,7 +234,7 @@ class Observer:
         if ad is not None:
             lam = None
             if self.t_adapt is not None:        # the first sample: no interval to forget over yet
-                lam = math.exp(-(t - self.t_adapt) / ad.time_constant)
+                lam = max(math.exp(-(t - self.t_adapt) / ad.time_constant), FORGET_MIN)
             self.t_adapt = t
         tau_f, res = [0.0] * self.n, [0.0] * self.n
         for j in range(self.n):

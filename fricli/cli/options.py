@@ -153,17 +153,28 @@ def log_reading(f):
     ``zero`` (a tuple of column names); --from, --until as ``window`` (``window_options``)."""
     from fricli.fitting.optionspec import READING, ZERO_FLAGS
 
+    f = robot_model_flags(f)
+    for opt in reversed([opt for opt in READING if opt.name not in ZERO_FLAGS]):
+        f = _click_option(opt)(f)
+    return window_options(f)
+
+
+def robot_model_flags(f):
+    """--no-gravity, --no-dynamics alone (log_reading's flags): the robot-model columns declared
+    zero, given to the command as ``zero`` (a tuple of column names)."""
+    from fricli.fitting.optionspec import READING, ZERO_FLAGS
+
     command = f
 
     @functools.wraps(command)
     def declared(*args, **params):
-        zero = tuple(column for flag, column in ZERO_FLAGS.items() if params.pop(flag, False))
-        return command(*args, zero=zero, **params)
+        return command(*args, zero=tuple(column for flag, column in ZERO_FLAGS.items() if params.pop(flag, False)),
+                       **params)
 
     f = declared
-    for opt in reversed(READING):
-        f = click.option(opt.flag, is_flag=True, help=opt.help)(f) if opt.name in ZERO_FLAGS else _click_option(opt)(f)
-    return window_options(f)
+    for opt in reversed([opt for opt in READING if opt.name in ZERO_FLAGS]):
+        f = click.option(opt.flag, is_flag=True, help=opt.help)(f)
+    return f
 
 
 def json_flag(f):

@@ -6,7 +6,7 @@ import click
 
 from fricli.applying import observer
 from fricli.cli import cli
-from fricli.cli.options import Number, common, emit_json, json_flag, say
+from fricli.cli.options import Number, common, emit_json, json_flag, robot_model_flags, say
 
 
 def urdf_option(f):
@@ -50,9 +50,11 @@ def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: fl
 @click.option("--time-constant", type=Number(min=0, min_open=True), default=observer.Adaptation().time_constant,
               show_default=True, help="Memory of the adaptation [s]: forgetting factor exp(-dt / T).")
 @gain_option
+@robot_model_flags
 @json_flag
 @common
-def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, time_constant, gain, as_json, quiet):
+def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, time_constant, gain, zero, as_json,
+               quiet):
     """Run LOG row by row through what the controller runs: MODEL's friction, the momentum observer
     of the external torque, with --adapt the online friction level, with --thresholds contact
     detection. Writes the log with tau_f_pred, tau_ext_pred and contact (0/1) added.
@@ -69,7 +71,7 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
     from fricli.robot import replay
 
     k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
-    arm = replay.read_arm(model, log, urdf)
+    arm = replay.read_arm(model, log, urdf, zero)
     out = replay.run(arm, k, thr, adaptation)
     replay.write(arm, out, output)
     figures = replay.summary(arm, out)
@@ -108,10 +110,11 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
               help="Samples in a row beyond the threshold, with one sign, before a contact is flagged (1: at once).")
 @click.option("--no-level-share", "no_level", is_flag=True,
               help="A constant threshold in motion: leave out the share of the friction (the drift of its level).")
+@robot_model_flags
 @json_flag
 @common
 def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, moving_speed, persistence, no_level,
-                   as_json, quiet):
+                   zero, as_json, quiet):
     """Calibrate per-joint contact thresholds from collision-free LOGS replayed with MODEL (the
     static observer, as fricli replay without --adapt): margin x quantile of |tau_ext_pred| per
     joint; in motion plus a share of the predicted friction, margin x quantile of how far the online
@@ -126,7 +129,7 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
     from fricli.robot import replay
 
     thr = replay.calibrate(model, list(logs), urdf, gain if gain is not None else observer.DEFAULT_GAIN, quantile,
-                           margin, release, moving_speed, persistence=persistence, level=not no_level)
+                           margin, release, moving_speed, zero=zero, persistence=persistence, level=not no_level)
     replay.write_thresholds(thr, output)
     if not quiet:
         for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):

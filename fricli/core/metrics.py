@@ -69,6 +69,13 @@ def in_motion(qd: np.ndarray, share: float = REST_SHARE) -> np.ndarray:
     return speed > share * top if top > 0 else np.zeros(speed.shape, dtype=bool)
 
 
+def slow_motion(qd: np.ndarray) -> np.ndarray:
+    """Rows that move but not ``in_motion``: 0 < |qd| at or below its share, (n,) bool. A joint
+    passes there through each reversal (where a pre-sliding state shows); standstill, qd = 0,
+    holds what the controller set."""
+    return (np.asarray(qd) != 0) & ~in_motion(qd)
+
+
 def moving_both_ways(qd: np.ndarray, what: str) -> np.ndarray:
     """The rows in motion (``in_motion``), (n,) bool; DataError naming ``what`` (e.g. "the linear
     model") when none of them moves in one of the two directions."""

@@ -110,7 +110,8 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
         lo, hi = (c.num(v) for v in ad.scale_bounds)
         out += ["    if (!s->adapt_started) { s->adapt_started = 1; s->t_adapt = t; return; }",
                 "    {",
-                f"        const double lam = exp(-(t - s->t_adapt) / {c.num(ad.time_constant)});",
+                f"        const double lam = fmax(exp(-(t - s->t_adapt) / {c.num(ad.time_constant)}), "
+                f"{c.num(observer.FORGET_MIN)});",
                 f"        const double freeze = {c.num(ad.freeze)}, holdoff = {c.num(ad.holdoff)}, "
                 f"pmax = {c.num((2.0 if ad.offset else 1.0) * ad.initial_covariance)}, x2 = {'1.0' if ad.offset else '0.0'};",
                 "        s->t_adapt = t;",

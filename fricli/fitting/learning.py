@@ -158,7 +158,7 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     # log): without levels, train on the plateaus, not on the ramps between them
     # rows of slow motion (a reversal passes there): they decide the bristle stiffness when the rows
     # in motion, where the state has settled, do not (fit_bristles)
-    slow = np.flatnonzero((sig["qd"] != 0) & ~moving)
+    slow = np.flatnonzero(metrics.slow_motion(sig["qd"]))
     steady = moving & steady_state_mask(sig["t"], sig["qd"])
     plateaus = bool(steady.sum() >= training_data.PLATEAU_SHARE * moving.sum())
     sel = training_data.select(sig["qd"], val_fraction=val_fraction, max_samples=max_samples, balance=balance,

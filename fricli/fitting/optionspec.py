@@ -115,7 +115,7 @@ READING = (
     Option("cutoff", "float", DEFAULT_CUTOFF_HZ, "Low-pass cut-off [Hz] used when qd/qdd are derived from q.",
            unit="Hz", low=0, low_open=True),
     Option("drop_invalid", "flag", False,
-           "Drop rows with NaN or infinite values (with a warning) instead of refusing the log."),
+           "Drop invalid rows (NaN, infinite or missing values; with a warning) instead of refusing the log."),
     Option("no_gravity", "flag", False, "When the log has no tau_g column, take tau_g as 0: the joint carries no "
                                         "gravity load."),
     Option("no_dynamics", "flag", False, "When the log has no tau_dyn column, take tau_dyn (inertia and Coriolis "
