@@ -891,3 +891,17 @@ def test_a_log_without_position_is_diagnosed_and_trained_without_the_position_ef
     res = invoke("train-base", log, "-o", tmp_path / "nn.npz", "--steps", "200", "--json", "-q")
     assert res.exit_code == 0, res.output
     assert json.loads(res.stdout)["memory"]["tested"] is False
+
+
+def test_a_named_column_the_log_lacks_is_reported_not_tested():
+    """--effects column:NAME for a column the log does not have is listed as not tested, with the
+    reason, instead of dropped without a word."""
+    sig = {"t": np.arange(10.0), "qd": np.linspace(-1, 1, 10), "temp": np.linspace(20, 30, 10)}
+    names = [e.name for e in E.library(sig, only=["column:nothere", "column:temp", "level"])]
+    assert "column:nothere" in names and "column:temp" in names and "level" in names
+    missing = next(e for e in E.library(sig, only=["column:nothere"]) if e.name == "column:nothere")
+
+    class Context:
+        signals = sig
+
+    assert missing.applicable(Context()) == "the log has no column 'nothere'"

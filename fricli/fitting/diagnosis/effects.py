@@ -438,6 +438,10 @@ def library(signals: dict[str, np.ndarray], only: list[str] | None = None) -> li
     if only:
         keep = {N.canonical(name) for name in only}
         out = [e for e in out if e.name in keep or (e.name.startswith(N.COLUMN_PREFIX) and N.COLUMN in keep)]
+        named = {e.name for e in out}
+        # a column asked for by name that the log lacks stays a candidate: it is reported as skipped
+        out += [Column(name[len(N.COLUMN_PREFIX):]) for name in sorted(keep)
+                if name.startswith(N.COLUMN_PREFIX) and name not in named]
     return out
 
 
