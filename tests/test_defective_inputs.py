@@ -421,3 +421,21 @@ def test_units_of_t_q_and_qd_that_disagree_are_flagged(t_scale, q_unit, qd_unit,
         assert not flagged, messages
     else:
         assert len(flagged) == 1 and f"qd is {ratio:.3g} times the rate of change of q over t" in flagged[0], messages
+
+
+@pytest.mark.parametrize("arch", ["dissipative", "mlp"])
+@pytest.mark.parametrize("value", [None, "x", -1.0])
+def test_a_network_models_training_entry_of_the_wrong_type_is_a_damaged_model(arch, value, tmp_path):
+    """A network model whose recorded learning rate is not a positive number: every command refuses
+    the file as damaged (exit 4) instead of failing inside export's description of it."""
+    from conftest import SAMPLE
+
+    good, bad = tmp_path / "good.npz", tmp_path / "bad.npz"
+    log = str(SAMPLE / "joint2_base.parquet")
+    assert invoke("train-base", log, "-o", good, "--arch", arch, "--steps", "20", "-q").exit_code == 0
+    meta, arrays = modelfile.read(str(good))
+    meta["model"]["params"]["training"]["lr"] = value
+    modelfile.write(str(bad), meta, arrays)
+    for args in (("export", bad, "-o", tmp_path / "m.h"), ("predict", bad, log, "-o", tmp_path / "p.parquet")):
+        done = invoke(*args)
+        assert done.exit_code == 4 and "damaged" in done.output and "lr" in done.output, done.output

@@ -81,7 +81,7 @@ from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
-                                  training_arrays, training_params)
+                                  training_arrays, training_options, training_params)
 from fricli.numerics import physics
 from fricli.numerics.nn import activations as acts
 from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
@@ -459,13 +459,9 @@ class DissipativeFriction(FrictionModel):
 
     @classmethod
     def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "DissipativeFriction":
-        tr = params.get("training", {})
         model = cls(hidden_sizes=params["hidden_sizes"], activation=params.get("activation", "elu"),
-                    steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
-                    batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"),
-                    velocity_scale=params.get("velocity_scale", "auto"),
-                    presliding_speed=params.get("presliding_speed", "auto"),
-                    schedule=tr.get("schedule", "constant"), patience=tr.get("patience"))
+                    units=params.get("units"), velocity_scale=params.get("velocity_scale", "auto"),
+                    presliding_speed=params.get("presliding_speed", "auto"), **training_options(params))
         scales = params["scales"]
         for key in cls._SCALARS:
             value = scales[key]

@@ -84,6 +84,28 @@ def training_arrays(model) -> dict[str, np.ndarray]:
             for name in ("history_train", "history_val")}
 
 
+def training_options(params: dict) -> dict:
+    """The training hyperparameters of a model file's params (its ``training`` entry) as keyword
+    arguments of the model's constructor; ValueError when one has another type."""
+    tr = params.get("training", {})
+    if not isinstance(tr, dict):
+        raise ValueError("the training entry is not an object")
+    out = {"steps": tr.get("steps"), "epochs": tr.get("epochs"), "lr": tr.get("lr", 0.01),
+           "batch_size": tr.get("batch_size", 0), "eval_every": tr.get("eval_every"),
+           "schedule": tr.get("schedule", "constant"), "patience": tr.get("patience")}
+    counts = ("steps", "epochs", "eval_every", "patience", "batch_size")
+    bad = [k for k in counts if out[k] is not None and (not isinstance(out[k], int) or isinstance(out[k], bool)
+                                                        or out[k] < 0)]
+    if not (isinstance(out["lr"], (int, float)) and not isinstance(out["lr"], bool) and np.isfinite(out["lr"])
+            and out["lr"] > 0):
+        bad.append("lr")
+    if not isinstance(out["schedule"], str):
+        bad.append("schedule")
+    if bad:
+        raise ValueError(f"training {bad[0]} {tr.get(bad[0])!r} is not a valid value")
+    return out
+
+
 def load_training(model, params: dict, arrays: dict) -> None:
     """Set the fitted training attributes of ``model`` from a model file's params and arrays."""
     model.history_train_ = arrays.get("history_train", np.empty(0))
@@ -240,11 +262,8 @@ class NeuralFriction(FrictionModel):
 
     @classmethod
     def from_parts(cls, params: dict, arrays: dict[str, np.ndarray], children: dict) -> "NeuralFriction":
-        tr = params.get("training", {})
         model = cls(inputs=params["inputs"], skip=params.get("skip", ()), hidden=[tuple(h) for h in params["hidden"]],
-                    steps=tr.get("steps"), epochs=tr.get("epochs"), lr=tr.get("lr", 0.01),
-                    batch_size=tr.get("batch_size", 0), eval_every=tr.get("eval_every"), units=params.get("units"),
-                    schedule=tr.get("schedule", "constant"), patience=tr.get("patience"))
+                    units=params.get("units"), **training_options(params))
         velocity = params.get("velocity")
         if velocity is not None:
             v0 = velocity.get("v0")
