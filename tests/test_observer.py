@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from fricli.applying import observer
-from fricli.core.errors import DataError
+from fricli.core.errors import DataError, LogError
 
 DT = 0.001
 
@@ -123,7 +123,7 @@ def test_thresholds_calibration_and_file(tmp_path):
     assert back.threshold[0] == thr.threshold[0] and back.form == "urdf" and back.joints == ["2"]
     assert back.static_friction[0] == band[0]
     path.write_text("{}")
-    with pytest.raises(DataError):
+    with pytest.raises(LogError):
         observer.Thresholds.read(str(path))
     with pytest.raises(DataError):
         observer.Observer(1, adaptation=observer.Adaptation())   # no thresholds: no adaptation
@@ -195,5 +195,5 @@ def test_level_share_and_a_thresholds_file_of_before(tmp_path):
     assert old.persistence == 1 and np.all(old.shares == 0.0)
     data["persistence"] = 0
     path.write_text(json.dumps(data))
-    with pytest.raises(DataError):
+    with pytest.raises(LogError):
         observer.Thresholds.read(str(path))

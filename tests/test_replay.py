@@ -66,7 +66,11 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     # bad input: one line and the exit code
     assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "-o", out).exit_code == 2
     thr.write_text("[1]")
-    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out).exit_code == 6
+    assert invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out).exit_code == 3
+    newer = observer.Thresholds.read(str(before)).as_json() | {"version": 2}
+    thr.write_text(__import__("json").dumps(newer))
+    refused = invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--thresholds", thr, "-o", out)
+    assert refused.exit_code == 3 and "version 2" in refused.output
     missing = invoke("replay", folder, tmp_path / "none.parquet", "-o", out)
     assert missing.exit_code == 3 and missing.output.count("\n") == 1 and "Traceback" not in missing.output
 

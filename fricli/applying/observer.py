@@ -60,7 +60,7 @@ import math
 
 import numpy as np
 
-from fricli.core.errors import DataError
+from fricli.core.errors import DataError, LogError
 
 DEFAULT_GAIN = 50.0            # K [1/s]: the observer's bandwidth (time constant 20 ms)
 DEFAULT_QUANTILE = 0.999       # of |r| over the calibration logs' rows
@@ -71,6 +71,7 @@ DEFAULT_PERSISTENCE = 3        # samples beyond the threshold, of one sign, befo
 FORGET_MIN = 1e-12             # least forgetting factor: a gap of over 27.6 T forgets as much (the
                                # covariance cap binds; exp underflows to 0 past 745 T)
 THRESHOLDS_FORMAT = "fricli.thresholds"
+THRESHOLDS_VERSION = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -105,7 +106,7 @@ class Thresholds:
     logs: list = dataclasses.field(default_factory=list)
 
     def as_json(self) -> dict:
-        return {"format": THRESHOLDS_FORMAT, "version": 1, "gain": self.gain, "quantile": self.quantile,
+        return {"format": THRESHOLDS_FORMAT, "version": THRESHOLDS_VERSION, "gain": self.gain, "quantile": self.quantile,
                 "margin": self.margin, "release": self.release, "moving_speed": self.moving_speed,
                 "form": self.form, "logs": self.logs, "persistence": int(self.persistence),
                 "joints": {str(j): {"threshold": float(self.threshold[i]),
@@ -119,6 +120,9 @@ class Thresholds:
         try:
             if data.get("format") != THRESHOLDS_FORMAT:
                 raise KeyError("format")
+            if data.get("version", 1) != THRESHOLDS_VERSION:
+                raise LogError(f"{name}: a thresholds file of version {data.get('version')!r}; this fricli reads "
+                               f"version {THRESHOLDS_VERSION} (calibrate again with fricli thresholds)")
             joints = list(data["joints"])
             thr = np.array([float(data["joints"][j]["threshold"]) for j in joints])
             rest = np.array([float(data["joints"][j]["static_friction"]) for j in joints])
@@ -133,11 +137,11 @@ class Thresholds:
                       moving_speed=float(data["moving_speed"]), form=str(data["form"]),
                       logs=list(data.get("logs", [])))
         except (KeyError, TypeError, ValueError, AttributeError):
-            raise DataError(f"{name}: not a thresholds file of fricli thresholds") from None
+            raise LogError(f"{name}: not a thresholds file of fricli thresholds") from None
         if not (all(np.all(np.isfinite(x)) and np.all(x > 0) for x in (thr, rest, scale))
                 and np.all(np.isfinite(share)) and np.all(share >= 0)
                 and 0 < out.release < 1 and out.gain > 0 and out.moving_speed >= 0):
-            raise DataError(f"{name}: thresholds and friction scales must be positive numbers, shares at least 0, "
+            raise LogError(f"{name}: thresholds and friction scales must be positive numbers, shares at least 0, "
                             "release in (0, 1)")
         return out
 
@@ -147,11 +151,11 @@ class Thresholds:
             with open(path, encoding="utf-8") as fh:
                 data = json.load(fh)
         except FileNotFoundError:
-            raise DataError(f"{path}: no such file") from None
+            raise LogError(f"{path}: no such file") from None
         except (OSError, UnicodeDecodeError, ValueError) as exc:
-            raise DataError(f"{path}: cannot read a thresholds file ({str(exc).splitlines()[0]})") from None
+            raise LogError(f"{path}: cannot read a thresholds file ({str(exc).splitlines()[0]})") from None
         if not isinstance(data, dict):
-            raise DataError(f"{path}: not a thresholds file of fricli thresholds")
+            raise LogError(f"{path}: not a thresholds file of fricli thresholds")
         return cls.from_json(data, path)
 
     def for_joints(self, joints: list, name: str) -> "Thresholds":

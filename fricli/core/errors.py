@@ -51,7 +51,8 @@ TABLE: tuple[ExitCode, ...] = (
              "a log cannot be read or breaks the [log contract](log-format.md); `--joint` that the log "
              "does not hold, or on a log without a `joint` column; several joints where one is needed "
              "([joints](joints.md)); for `fricli import`: a recording with fewer than 3 usable rows or with time "
-             "going back, or a [mapping](robot-import.md) file that is missing or wrong (no `--mapping` at all: 2 (USAGE))"),
+             "going back, or a [mapping](robot-import.md) file that is missing or wrong (no `--mapping` at all: 2 (USAGE)); "
+             "a thresholds file (`--thresholds`) that is missing, not one of `fricli thresholds` or of another version"),
     ExitCode(MODEL, "MODEL", "a model file that cannot be loaded or does not fit the log",
              "a model file cannot be loaded (missing, truncated, not a fricli model, unknown version, "
              "pickled content) or does not fit the log: other units, or fitted on another joint than the "
