@@ -439,3 +439,23 @@ def test_a_network_models_training_entry_of_the_wrong_type_is_a_damaged_model(ar
     for args in (("export", bad, "-o", tmp_path / "m.h"), ("predict", bad, log, "-o", tmp_path / "p.parquet")):
         done = invoke(*args)
         assert done.exit_code == 4 and "damaged" in done.output and "lr" in done.output, done.output
+
+
+def test_predict_gives_a_joints_bad_row_as_the_files_row(tmp_path):
+    """predict reads a log of several joints in batches, each joint's rows apart: a NaN in joint
+    3's sixth row is the file's row 505, as the commands that read the log whole say."""
+    from fricli import models
+    from fricli.models.lugre import LuGreModel
+
+    folder = tmp_path / "models"
+    folder.mkdir()
+    good = two_joints(make_table())
+    for j in (2, 3):
+        log = logs.from_table(good, name="good", joint=j)
+        models.save_for_log(str(folder / f"j{j}.npz"), LuGreModel(5.0, 6.0, 0.05, 1.0, 10.0), log, rows_used=500)
+    b = make_table()
+    tau = b.column("tau_m").to_numpy().copy()
+    tau[5] = np.nan
+    bad = write(two_joints(b.set_column(3, "tau_m", pa.array(tau))), tmp_path / "bad.parquet")
+    done = invoke("predict", folder, bad, "-o", tmp_path / "out.parquet")
+    assert done.exit_code == 3 and "first at row 505" in done.output and "counted from" not in done.output, done.output

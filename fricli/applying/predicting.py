@@ -377,11 +377,12 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     if jfield is not None:
         jcol = table.column(jpos)
         table = table.remove_column(jpos)
+    rows = table.column(_ROW).to_numpy() if _ROW in table.column_names else None   # the file's, of a joint's rows
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
-                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero)
+                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows)
     except LogError as exc:
-        if reason is None and (offset or table.num_rows < total):
+        if reason is None and rows is None and (offset or table.num_rows < total):
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
         raise
     log.joint = st.joint

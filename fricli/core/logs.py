@@ -496,13 +496,17 @@ def select_joint_rows(table: pa.Table, joint, name: str) -> tuple[pa.Table, obje
 
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
-               cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=()) -> Log:
+               cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=(),
+               rows: np.ndarray | None = None) -> Log:
     """Check ``table`` against the contract and build a ``Log`` for one joint. ``zero``: robot-model
     columns (tau_g, tau_dyn) declared zero when the log lacks them (``declared_zero``); they are
-    filled with zeros in ``signals``, with a note through ``warn``. ``Log.reading`` keeps these
-    options (the names of the options of ``fricli.fitting.optionspec.READING``)."""
+    filled with zeros in ``signals``, with a note through ``warn``. ``rows``: the file's row number
+    of each row of ``table`` (for messages), when it holds one joint's rows of a larger file.
+    ``Log.reading`` keeps these options (the names of the options of
+    ``fricli.fitting.optionspec.READING``)."""
     joint_given, declared = joint, tuple(zero)
-    table, joint, rows = select_joint_rows(table, joint, name)
+    table, joint, selected = select_joint_rows(table, joint, name)
+    rows = selected if selected is not None or rows is None else np.asarray(rows)
     axis = axis_of(table.schema, name)
     note = unitless_note(table.schema, name)
     if note and warn:
