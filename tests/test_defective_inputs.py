@@ -459,3 +459,23 @@ def test_predict_gives_a_joints_bad_row_as_the_files_row(tmp_path):
     bad = write(two_joints(b.set_column(3, "tau_m", pa.array(tau))), tmp_path / "bad.parquet")
     done = invoke("predict", folder, bad, "-o", tmp_path / "out.parquet")
     assert done.exit_code == 3 and "first at row 505" in done.output and "counted from" not in done.output, done.output
+
+
+def test_predict_reads_a_log_whose_file_name_is_not_utf8(tmp_path):
+    """A file name of bytes that are not UTF-8 (an old file system's Latin-1 name): predict reads
+    it as identify does, instead of calling it "not a Parquet file"."""
+    import os
+    import shutil
+
+    from conftest import SAMPLE
+    from fricli import models
+    from fricli.models.lugre import LuGreModel
+
+    src = str(SAMPLE / "joint2_base.parquet")
+    model = str(tmp_path / "m.npz")
+    log = logs.load_log(src)
+    models.save_for_log(model, LuGreModel(5.0, 6.0, 0.05, 1.0, 10.0), log, rows_used=len(log))
+    odd = os.path.join(os.fsencode(str(tmp_path)), b"we\x80ird.parquet")
+    shutil.copy(src, odd)
+    done = invoke("predict", model, os.fsdecode(odd), "-o", tmp_path / "out.parquet", "-q")
+    assert done.exit_code == 0, done.output

@@ -101,7 +101,12 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
         return logs.stdin_parquet(), "stdin"
     files.check_regular(path, LogError, "file", "log")
     try:
-        pf = pq.ParquetFile(path, **logs.STREAMING)
+        path.encode("utf-8")
+        source = path
+    except UnicodeEncodeError:   # a name of bytes that are not UTF-8 (Arrow takes UTF-8 paths): open it here
+        source = open(path, "rb")
+    try:
+        pf = pq.ParquetFile(source, **logs.STREAMING)
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
     except IsADirectoryError:
