@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import queue
 import threading
 from concurrent.futures import ThreadPoolExecutor
