@@ -7,6 +7,7 @@ import collections
 import contextlib
 import hashlib
 import os
+import signal
 import sys
 import tempfile
 import weakref
@@ -68,11 +69,19 @@ def stdin_parquet() -> pq.ParquetFile:
     is at the end), so stdin is spooled to a temporary file in $TMPDIR rather than held in
     memory. pyarrow reads it as its own file (not through a Python file object, as in
     ``parquet_file``); the name is removed as soon as it is open, so nothing is left behind."""
+    # SIGTERM or Ctrl-C between the file's creation and the try below would leave it behind:
+    # held until the try (the handlers then run inside it, where the name is removed)
+    mask = getattr(signal, "pthread_sigmask", None)
+    held = mask(signal.SIG_BLOCK, {signal.SIGTERM, signal.SIGINT}) if mask else None
     try:
         fd, spool = tempfile.mkstemp(prefix="fricli-stdin-")
     except OSError as exc:
+        if held is not None:
+            mask(signal.SIG_SETMASK, held)
         raise LogError(f"stdin: cannot spool the input to a temporary file ({exc.strerror or exc})") from None
     try:
+        if held is not None:
+            mask(signal.SIG_SETMASK, held)
         with os.fdopen(fd, "wb") as out:
             size = 0
             while chunk := sys.stdin.buffer.read(files.CHUNK):
