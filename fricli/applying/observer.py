@@ -61,6 +61,7 @@ import math
 import numpy as np
 
 from fricli.core.errors import DataError, LogError
+from fricli.core.jsontext import is_count
 
 DEFAULT_GAIN = 50.0            # K [1/s]: the observer's bandwidth (time constant 20 ms)
 DEFAULT_QUANTILE = 0.999       # of |r| over the calibration logs' rows
@@ -129,7 +130,7 @@ class Thresholds:
             scale = np.array([float(data["joints"][j]["friction_scale"]) for j in joints])
             share = np.array([float(data["joints"][j].get("share", 0.0)) for j in joints])
             persistence = data.get("persistence", 1)
-            if not isinstance(persistence, int) or isinstance(persistence, bool) or persistence < 1:
+            if not is_count(persistence, 1):
                 raise ValueError("persistence")
             out = cls(joints, thr, rest, scale, share=share, persistence=persistence,
                       gain=float(data["gain"]), quantile=float(data["quantile"]),

@@ -17,6 +17,16 @@ def json_safe(obj):
     return obj
 
 
+def is_finite_number(value) -> bool:
+    """Whether a value read from JSON is a finite number (not a bool)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def is_count(value, least: int = 0) -> bool:
+    """Whether a value read from JSON is an integer (not a bool) of at least ``least``."""
+    return isinstance(value, int) and not isinstance(value, bool) and value >= least
+
+
 def dumps(obj) -> str:
     """The JSON text of ``obj`` (``json_safe``), indented by 2, keys sorted, ending in a newline."""
     return json.dumps(json_safe(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"

@@ -24,6 +24,7 @@ import json
 import numpy as np
 from fricli.core import joints
 from fricli.core.errors import DataError, LogError
+from fricli.core.jsontext import is_finite_number
 # reading and writing Parquet, and the motion's filter and derivatives, importable from here as before
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
                                  read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
@@ -342,8 +343,7 @@ def robot_record(schema: pa.Schema) -> dict:
 def _record_fits(record: dict) -> bool:
     """Whether a robot-model record's gravity (3 finite numbers) and held joints (names) are as fricli writes them."""
     gravity, held = record.get("gravity"), record.get("held")
-    numbers = isinstance(gravity, list) and len(gravity) == 3 and all(
-        isinstance(g, (int, float)) and not isinstance(g, bool) and np.isfinite(g) for g in gravity)
+    numbers = isinstance(gravity, list) and len(gravity) == 3 and all(is_finite_number(g) for g in gravity)
     return ((gravity is None or numbers)
             and (held is None or (isinstance(held, list) and all(isinstance(h, str) for h in held))))
 
@@ -384,7 +384,8 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
     if "t" not in sig:
         raise LogError(f"{name}: missing required column 't'{_other_case(sig, 't')}")
     if "tau_m" not in sig:
-        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt){_other_case(sig, 'tau_m', 'i_m')}")
+        raise LogError(f"{name}: missing required column 'tau_m' (or 'i_m' with --kt)"
+                       f"{_other_case(sig, 'tau_m', 'i_m')}")
     if "q" not in sig and "qd" not in sig:
         raise LogError(f"{name}: needs at least one of the columns 'q', 'qd'{_other_case(sig, 'q', 'qd')}")
     n = len(sig["t"])
@@ -512,7 +513,8 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     if note and warn:
         warn(note)
     sig = table_signals(table, axis, name, kt=kt, drop_invalid=drop_invalid, rows=rows)
-    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn, rows=rows, time_stored=_time_stored(table, name))
+    mask = check_signals(sig, name, drop_invalid=drop_invalid, warn=warn, rows=rows,
+                         time_stored=_time_stored(table, name))
     if mask is not None:
         table = take_rows(table, mask)
     # the first 100,000 steps tell the sample period (and cost a millisecond on a log of any length)

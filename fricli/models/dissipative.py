@@ -78,6 +78,7 @@ import numpy as np
 
 from fricli.core import metrics
 from fricli.core.errors import DataError
+from fricli.core.jsontext import is_count, is_finite_number
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
@@ -474,7 +475,7 @@ class DissipativeFriction(FrictionModel):
         if not isinstance(model.load_, bool):
             raise ValueError(f"damaged load flag {model.load_!r}")
         members = params.get("members", 1)
-        if not isinstance(members, int) or isinstance(members, bool) or members < 1:
+        if not is_count(members, 1):
             raise ValueError(f"damaged member count {members!r}")
         nets = []
         for k in range(members):
@@ -500,13 +501,12 @@ class DissipativeFriction(FrictionModel):
         bristles = params.get("bristles")
         if bristles is not None:
             sigma0 = bristles.get("sigma0") if isinstance(bristles, dict) else None
-            if not (isinstance(sigma0, (int, float)) and not isinstance(sigma0, bool) and np.isfinite(sigma0)
-                    and sigma0 > 0):
+            if not (is_finite_number(sigma0) and sigma0 > 0):
                 raise ValueError(f"damaged bristle parameters {bristles!r}")
             model.sigma0_ = float(sigma0)
         prior = params.get("prior")
         if prior is not None:
-            if not (isinstance(prior, dict) and all(_number(prior.get(k)) for k in PRIOR_KEYS + ("blend",))
+            if not (isinstance(prior, dict) and all(is_finite_number(prior.get(k)) for k in PRIOR_KEYS + ("blend",))
                     and min(prior[k] for k in PRIOR_KEYS) >= 0 and prior["vs"] > 0 and prior["delta"] > 0
                     and 0 <= prior["blend"] <= 1):
                 raise ValueError(f"damaged prior {prior!r}")
@@ -568,12 +568,6 @@ def _member(k: int) -> str:
     return f"M{k}_" if k else ""
 
 
-def _number(value) -> bool:
-    """A finite number (not a bool)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
-
-
 def _pair(value) -> bool:
     """Two finite numbers."""
-    return (isinstance(value, list) and len(value) == 2
-            and all(isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in value))
+    return isinstance(value, list) and len(value) == 2 and all(is_finite_number(x) for x in value)

@@ -28,6 +28,7 @@ import numpy as np
 
 from fricli.core import logs, metrics
 from fricli.core.errors import DataError
+from fricli.core.jsontext import is_count, is_finite_number
 from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.numerics.nn import activations as acts
@@ -94,10 +95,8 @@ def training_options(params: dict) -> dict:
            "batch_size": tr.get("batch_size", 0), "eval_every": tr.get("eval_every"),
            "schedule": tr.get("schedule", "constant"), "patience": tr.get("patience")}
     counts = ("steps", "epochs", "eval_every", "patience", "batch_size")
-    bad = [k for k in counts if out[k] is not None and (not isinstance(out[k], int) or isinstance(out[k], bool)
-                                                        or out[k] < 0)]
-    if not (isinstance(out["lr"], (int, float)) and not isinstance(out["lr"], bool) and np.isfinite(out["lr"])
-            and out["lr"] > 0):
+    bad = [k for k in counts if out[k] is not None and not is_count(out[k])]
+    if not (is_finite_number(out["lr"]) and out["lr"] > 0):
         bad.append("lr")
     if not isinstance(out["schedule"], str):
         bad.append("schedule")
