@@ -129,7 +129,8 @@ def _layer(i: int, w: np.ndarray, act, src: str, fan_in: int, name: str, fused: 
     in_passes = only is not None and isinstance(ACTIVATIONS.get(_name(only), _identity)(only, "j"), list)
     padded = units + (-units) % LANES if in_passes else units
     lines = [f"    double h{i}[{padded}];"]
-    for b, m in _blocks(units, FUSED_BLOCK if fused else BLOCK):               # a block of units at a time, their sums in registers
+    # a block of units at a time, their sums in registers
+    for b, m in _blocks(units, FUSED_BLOCK if fused else BLOCK):
         acc = [f"a{k}" for k in range(m)]
         lines += ["    {",
                   "        double " + ", ".join(f"{a} = {name}_W{i}[{fan_in * units + b + k}]"

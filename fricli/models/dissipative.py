@@ -333,16 +333,19 @@ class DissipativeFriction(FrictionModel):
         return physics.lugre_friction(qd, g, 0.0, sigma0, 0.0, dt, z0)
 
     def fit_bristles(self, sig: dict[str, np.ndarray], target: np.ndarray, rows: np.ndarray,
-                     slow: np.ndarray | None = None, min_gain: float = 0.01) -> float:
+                     slow: np.ndarray | None = None, min_gain: float | None = None) -> float:
         """Set ``sigma0_`` [Nm/rad] to the least mean squared error of tau_f against ``target`` (n,)
         [Nm] over ``rows`` (indices), the state run over every row of ``sig`` in order: a grid of
         bristle deflections g_typ / sigma0 over DEFLECTION_RANGE (g_typ the median magnitude over
         ``rows``), refined by a bounded scalar search. When that error is not ``min_gain`` below
         the stiffest state's (``rows`` do not show the stiffness: the state has settled on them),
         it is fitted again over ``rows`` and ``slow`` (indices of rows of slow motion, where a
-        reversal passes), if given. Returns that error, rooted [Nm]."""
+        reversal passes), if given (then with ``min_gain``: train-base's, ``learning.MIN_GAIN``).
+        Returns that error, rooted [Nm]."""
+        if slow is not None and min_gain is None:
+            raise ValueError("fit_bristles: slow rows need min_gain")
         rmse, ratio = self._fit_bristles(sig, target, rows)
-        if ratio > 1.0 - min_gain and slow is not None and len(slow):
+        if slow is not None and len(slow) and ratio > 1.0 - min_gain:
             rmse = self._fit_bristles(sig, target, np.union1d(rows, slow))[0]
         return rmse
 
