@@ -107,8 +107,8 @@ class Thresholds:
     logs: list = dataclasses.field(default_factory=list)
 
     def as_json(self) -> dict:
-        return {"format": THRESHOLDS_FORMAT, "version": THRESHOLDS_VERSION, "gain": self.gain, "quantile": self.quantile,
-                "margin": self.margin, "release": self.release, "moving_speed": self.moving_speed,
+        return {"format": THRESHOLDS_FORMAT, "version": THRESHOLDS_VERSION, "gain": self.gain,
+                "quantile": self.quantile, "margin": self.margin, "release": self.release, "moving_speed": self.moving_speed,
                 "form": self.form, "logs": self.logs, "persistence": int(self.persistence),
                 "joints": {str(j): {"threshold": float(self.threshold[i]),
                                     "share": float(self.shares[i]),
@@ -143,7 +143,7 @@ class Thresholds:
                 and np.all(np.isfinite(share)) and np.all(share >= 0)
                 and 0 < out.release < 1 and out.gain > 0 and out.moving_speed >= 0):
             raise LogError(f"{name}: thresholds and friction scales must be positive numbers, shares at least 0, "
-                            "release in (0, 1)")
+                           "release in (0, 1)")
         return out
 
     @classmethod

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import mmap
 import queue
 import threading
 from concurrent.futures import ThreadPoolExecutor
@@ -100,12 +101,7 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
         return logs.stdin_parquet(), "stdin"
     files.check_regular(path, LogError, "file", "log")
     try:
-        path.encode("utf-8")
-        source = path
-    except UnicodeEncodeError:   # a name of bytes that are not UTF-8 (Arrow takes UTF-8 paths): open it here
-        source = open(path, "rb")
-    try:
-        pf = pq.ParquetFile(source, **logs.STREAMING)
+        pf = pq.ParquetFile(_source(path), **logs.STREAMING)
     except FileNotFoundError:
         raise LogError(f"{path}: no such file") from None
     except IsADirectoryError:
@@ -116,6 +112,18 @@ def open_log(path: str) -> tuple[pq.ParquetFile, str]:
         with open(path, "rb") as fh:
             raise LogError(logs.not_parquet(path, fh.read(4))) from None
     return logs.unique_columns(pf, path), path
+
+
+def _source(path: str):
+    """``path`` itself for Arrow, which takes UTF-8 paths; a name of other bytes is mapped into
+    memory here and read from there (not through a Python file object, which Arrow's reader
+    threads must not use)."""
+    try:
+        path.encode("utf-8")
+        return path
+    except UnicodeEncodeError:
+        with open(path, "rb") as fh:
+            return pa.BufferReader(pa.py_buffer(mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)))
 
 
 def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
