@@ -268,7 +268,8 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
     return cols, table.num_rows
 
 
-_NUMBER = r"^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$"
+# a field that reads as a number (also import --template's rule)
+NUMBER = r"^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$"
 
 
 def _not_a_number(text: str, column: str) -> str:
@@ -316,10 +317,10 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     texts = {i: pc.utf8_trim_whitespace(table.column(names[i])) for i in wanted}
     ok = np.ones(len(numbers), dtype=bool)
     for text in texts.values():
-        ok &= np.asarray(pc.match_substring_regex(text, _NUMBER).to_numpy(zero_copy_only=False), dtype=bool)
+        ok &= np.asarray(pc.match_substring_regex(text, NUMBER).to_numpy(zero_copy_only=False), dtype=bool)
     if not ok.all():
         row = int(np.flatnonzero(~ok)[0])
-        bad = next(i for i, text in texts.items() if not re.match(_NUMBER, text[row].as_py() or ""))
+        bad = next(i for i, text in texts.items() if not re.match(NUMBER, text[row].as_py() or ""))
         defect("non_numeric", int(numbers[row]), int((~ok).sum()), _not_a_number(texts[bad][row].as_py() or "", label(bad)))
     keep = pa.array(ok)
     cols = {i: pc.cast(pc.filter(text, keep), pa.float64()).to_numpy() for i, text in texts.items()}
@@ -331,7 +332,7 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
     if len(fields) != n_fields:
         return "field_count", []
     texts = [fields[i].strip().decode("ascii", "replace") for i in wanted]
-    if not all(re.match(_NUMBER, text) for text in texts):
+    if not all(re.match(NUMBER, text) for text in texts):
         return "non_numeric", []
     return None, [float(text) for text in texts]
 
@@ -355,7 +356,7 @@ def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple
     fields as the line after it, which holds numbers (``numpy.savetxt(header=...)`` writes
     '# t,q,tau' above the rows)."""
     def number(text: bytes) -> bool:
-        return bool(re.match(_NUMBER, text.strip().decode("ascii", "replace")))
+        return bool(re.match(NUMBER, text.strip().decode("ascii", "replace")))
 
     if comments:
         names, row = _fields(line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip(), delimiter), \

@@ -14,6 +14,7 @@ import re
 import xml.etree.ElementTree as ET
 
 from fricli.core.errors import LogError, ModelFileError, one_line
+from fricli.robot.recording import NUMBER
 
 _WORDS = {  # signal: words in a column name, most specific first
     "q": ("position", "pos", "angle", "q"),
@@ -52,7 +53,7 @@ def header_fields(data: bytes, name: str) -> tuple[list[str] | None, int, str]:
         raise LogError(f"{name}: empty input, no first line to read the columns from")
     delimiter = max((",", ";", "\t", " "), key=first.count)
     fields = [f.strip().strip('"') for f in first.split(delimiter)]
-    number = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
+    number = re.compile(NUMBER)   # a field of numbers, as the import reads it
     if all(number.fullmatch(f) for f in fields if f):
         named = [f.strip().strip('"') for f in (comment or "").split(delimiter)]
         if len(named) == len(fields) > 1 and not any(number.fullmatch(f) for f in named):
