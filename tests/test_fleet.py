@@ -378,6 +378,23 @@ def test_a_robot_joint_without_logs_is_named(tmp_path):
     assert res.returncode == 0 and "warning: robot r2 joint 1: no log matches r2/*-j1.parquet" in res.stderr
 
 
+def test_two_logs_of_one_name_for_one_joint_stop_the_run(tmp_path):
+    """Logs of one robot joint found by two globs under the same file name would write one model
+    file: each night the two jobs would overwrite each other's model and neither would be up to date."""
+    for folder in ("incoming", "archive"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "2026-05-04-j1.parquet").write_bytes(folder.encode())
+    (tmp_path / "m.toml").write_text('[[robot]]\nname = "r1"\njoints = [1]\n'
+                                     'logs = ["incoming/*-j{joint}.parquet", "archive/*-j{joint}.parquet"]\n')
+    with pytest.raises(manifest.ManifestError) as info:
+        manifest.load(str(tmp_path / "m.toml"))
+    text = str(info.value)
+    assert "robot r1 joint 1" in text and "archive/2026-05-04-j1.parquet" in text
+    assert "incoming/2026-05-04-j1.parquet" in text and "2026-05-04-j1.npz" in text
+    res = invoke("fleet", "m.toml", "--list", cwd=tmp_path)
+    assert res.returncode == errors.NOTHING_RAN and len(res.stderr.splitlines()) == 1
+
+
 # A fleet job and the command make the same model from the same log and options: every pipeline,
 # every joint of a two-joint log (the command writes the joints into a folder).
 SAME_RUNS = {"identify": ({"hold": 0.3}, ["--hold", "0.3"]),

@@ -196,10 +196,16 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
             if not files:
                 unmatched.append(f"robot {name}{f' joint {jname}' if jname else ''}: no log matches "
                                  + " or ".join(_fill(p, name, jname) for p in patterns))
+            written = {}
             for log in files:
                 confine(f"robot {name}'s log", log)
                 stem = os.path.splitext(os.path.basename(log))[0]
                 model = os.path.join(models_dir, name, f"joint{jname}" if jname else "joint", f"{stem}.npz")
+                if model in written:
+                    raise ManifestError(f"{where}{f' joint {jname}' if jname else ''}: logs {written[model]} and "
+                                        f"{log} have one name, so both would write the model {model}; rename one "
+                                        "or match one of them only")
+                written[model] = log
                 base = robot.get("base")
                 if base:
                     confine(f"robot {name}'s base", os.path.join(root, _fill(base, name, jname)))
