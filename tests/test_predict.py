@@ -237,6 +237,29 @@ def test_drop_invalid_in_batches(tmp_path, model_file):
     assert read(str(tmp_path / "p.parquet")).num_rows == 297
 
 
+def test_drop_invalid_over_a_whole_batch_gives_what_one_batch_gives(tmp_path, model_file):
+    """A batch whose rows are all invalid is dropped like any invalid rows: the result does not depend
+    on how the log is cut into batches (a log with no valid row at all is refused either way)."""
+    table = log_table(n=300)
+    tau = table.column("tau_m").to_numpy().copy()
+    tau[100:200] = np.nan
+    table = table.set_column(table.schema.get_field_index("tau_m"), table.schema.field("tau_m"), pa.array(tau))
+    src = write(table, tmp_path / "l.parquet")
+    outs = {}
+    for rows in (100, 1000):
+        outs[rows] = tmp_path / f"p{rows}.parquet"
+        res = invoke("predict", model_file, src, "-o", outs[rows], "--batch-rows", rows, "--drop-invalid")
+        assert res.exit_code == 0, res.output
+        assert res.stderr.count("dropped 100 rows") == 1
+    assert read(str(outs[100])).num_rows == 200
+    assert read(str(outs[100])).equals(read(str(outs[1000])))
+    tau[:] = np.nan
+    table = table.set_column(table.schema.get_field_index("tau_m"), table.schema.field("tau_m"), pa.array(tau))
+    src = write(table, tmp_path / "none.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "n.parquet", "--batch-rows", 100, "--drop-invalid")
+    assert res.exit_code == errors.INPUT and "no valid rows" in res.stderr and len(res.stderr.splitlines()) == 1
+
+
 def test_estimate_ext(tmp_path, model_file):
     table = log_table(with_ext=True)
     src = write(table, tmp_path / "l.parquet")

@@ -29,7 +29,7 @@ import numpy as np
 from fricli import models
 from fricli.core import files, joints, lazy, logs, timewindow
 from fricli.core.atomic import atomic_open
-from fricli.core.errors import DataError, LogError, ModelFileError
+from fricli.core.errors import DataError, LogError, ModelFileError, NoValidRows
 from fricli.models import coupled
 from fricli.models.base import FrictionModel
 from fricli.numerics.nn.network import prediction_threads
@@ -228,6 +228,7 @@ class _Stream:
     t_last: float | None = None
     outside: int = 0
     rows: int = 0
+    read: int = 0                  # rows of the log read for this joint (valid or not)
     fric: ErrorSums = dataclasses.field(default_factory=ErrorSums)
     ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
 
@@ -329,6 +330,10 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                         continue
                     out, n_in = _predict_part(st, part, offset, name, total, reason, reading, outputs, warn,
                                               warnings, table)
+                    st.read += n_in
+                    if out is None:            # every row of the piece dropped (--drop-invalid)
+                        dropped += n_in
+                        continue
                     unit = unit or out.schema.field("tau_f_pred").metadata[b"unit"].decode()
                     dropped += n_in - out.num_rows
                     outs.append(out)
@@ -344,6 +349,10 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                 pending = io.submit(writer.write_table, out)
                 rows += out.num_rows
                 batches += 1
+            for st in streams.values():
+                if st.read and not st.rows:
+                    of = f" of joint {st.joint}" if several else ""
+                    raise LogError(f"{name}: no valid rows{of} left after dropping invalid ones")
             if writer is None:
                 raise LogError(f"{name}: the log is empty")
             pending.result()
@@ -379,8 +388,9 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
 
 
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, reading: Reading,
-                  outputs: Outputs, warn, warnings: list, whole: pa.Table) -> tuple[pa.Table, int]:
-    """One joint's rows of one batch with tau_f_pred (and ``outputs``) added; the rows it had.
+                  outputs: Outputs, warn, warnings: list, whole: pa.Table) -> tuple[pa.Table | None, int]:
+    """One joint's rows of one batch with tau_f_pred (and ``outputs``) added (None when
+    ``--drop-invalid`` left none of them); the rows it had.
     ``whole``: the batch's rows of every joint (where the velocities of a coupled group's other
     joints come from)."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
@@ -393,6 +403,8 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
                               drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows)
+    except NoValidRows:        # the rows of the other batches may be valid: judged once all are read
+        return None, table.num_rows
     except LogError as exc:
         if reason is None and rows is None and (offset or table.num_rows < total):
             raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None

@@ -133,6 +133,10 @@ class LogError(FricliError):
     exit_code = INPUT
 
 
+class NoValidRows(LogError):
+    """--drop-invalid left no row of a table (a batch of a log read in batches may be all invalid)."""
+
+
 class ModelFileError(FricliError):
     exit_code = MODEL
 

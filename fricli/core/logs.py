@@ -23,7 +23,7 @@ import json
 
 import numpy as np
 from fricli.core import joints
-from fricli.core.errors import DataError, LogError
+from fricli.core.errors import DataError, LogError, NoValidRows
 from fricli.core.jsontext import is_finite_number
 # reading and writing Parquet, and the motion's filter and derivatives, importable from here as before
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
@@ -418,7 +418,7 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
         for column in sig:
             sig[column] = sig[column][mask]
         if len(sig["t"]) == 0:
-            raise LogError(f"{name}: no valid rows left after dropping invalid ones")
+            raise NoValidRows(f"{name}: no valid rows left after dropping invalid ones")
     dt = np.diff(sig["t"])
     for what, wrong in (("duplicate timestamps", dt == 0), ("'t' is not increasing", dt < 0)):
         if wrong.any():
