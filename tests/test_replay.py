@@ -7,6 +7,8 @@ import subprocess
 import sys
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 
@@ -214,3 +216,32 @@ def test_a_pause_far_longer_than_the_adaptation_memory_forgets_without_failing(f
     assert invoke("thresholds", folder, paused, "-o", thr, "-q").exit_code == 0
     assert invoke("replay", folder, paused, "-o", out, "--adapt", "--thresholds", thr, "-q").exit_code == 0
     assert np.isfinite(pq.read_table(out).column("tau_ext_pred").to_numpy()).all()
+
+
+def test_invalid_rows_of_one_joint_are_named_by_their_row_in_the_file(folder, tmp_path):
+    """A NaN motor torque of one joint of an arm's log: replay and thresholds name its row in the
+    file (the joints' rows interleave) and do not advise --drop-invalid, which they do not take."""
+    table = pq.read_table(f"{ROOT}/{SAMPLE}").slice(0, 400)
+    table = table.drop_columns(["joint"])
+    two = []
+    for j in (2, 3):
+        part = table.append_column("joint", pa.array(np.full(len(table), j, dtype=np.int64)))
+        two.append(part.append_column("order", pa.array(2 * np.arange(len(table)) + (j - 2))))
+    arm = pa.concat_tables(two)
+    arm = arm.take(pc.sort_indices(arm.column("order"))).drop_columns(["order"])
+    tau = arm.column("tau_m").to_numpy().copy()
+    tau[11] = np.nan                      # joint 3's row 5
+    arm = arm.set_column(arm.column_names.index("tau_m"), arm.schema.field("tau_m"), pa.array(tau))
+    log, models_dir = tmp_path / "arm.parquet", tmp_path / "models"
+    pq.write_table(arm, log)
+    models_dir.mkdir()
+    model, _ = models.load(str(folder / "joint_2.npz"))
+    for j in (2, 3):
+        part = logs.from_table(pq.read_table(f"{ROOT}/{SAMPLE}").drop_columns(["joint"]), name="x")
+        part.joint = j
+        models.save_for_log(str(models_dir / f"joint_{j}.npz"), model, part, rows_used=400, seed=1)
+    for args in (("replay", models_dir, log, "-o", tmp_path / "out.parquet"),
+                 ("thresholds", models_dir, log, "-o", tmp_path / "t.json")):
+        refused = invoke(*args)
+        assert refused.exit_code == 3 and refused.output.count("\n") == 1, refused.output
+        assert "first at row 11," in refused.output and "--drop-invalid" not in refused.output

@@ -133,6 +133,15 @@ class LogError(FricliError):
     exit_code = INPUT
 
 
+class InvalidRows(LogError):
+    """Rows with missing, NaN, infinite or absurd values, refused; ``what`` says so without the
+    advice of --drop-invalid (for a command that does not drop rows)."""
+
+    def __init__(self, what: str, advice: str):
+        super().__init__(f"{what}; {advice}")
+        self.what = what
+
+
 class NoValidRows(LogError):
     """--drop-invalid left no row of a table (a batch of a log read in batches may be all invalid)."""
 

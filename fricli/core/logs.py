@@ -23,7 +23,7 @@ import json
 
 import numpy as np
 from fricli.core import joints
-from fricli.core.errors import DataError, LogError, NoValidRows
+from fricli.core.errors import DataError, InvalidRows, LogError, NoValidRows
 from fricli.core.jsontext import is_finite_number
 # reading and writing Parquet, and the motion's filter and derivatives, importable from here as before
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
@@ -225,8 +225,8 @@ def _numeric(table: pa.Table, column: str, name: str, rows: np.ndarray | None = 
 
             return float64_values(pc.fill_null(col.cast(pa.float64()), np.nan))
         first = _log_row(rows, int(np.flatnonzero(np.asarray(col.is_null()))[0]))
-        raise LogError(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first}); "
-                       "use --drop-invalid to drop their rows")
+        raise InvalidRows(f"{name}: column {column!r} has {col.null_count} missing values (first at row {first})",
+                          "use --drop-invalid to drop their rows")
     return float64_values(col)
 
 
@@ -409,8 +409,8 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
         cols = sorted(cols)
         what = f"NaN, infinite or absurd values (beyond {MAGNITUDE_LIMIT:g} in magnitude)"
         if not drop_invalid:
-            raise LogError(f"{name}: {int(bad.sum())} rows hold {what} "
-                           f"(first at row {first}, columns {', '.join(cols)}); use --drop-invalid to drop them")
+            raise InvalidRows(f"{name}: {int(bad.sum())} rows hold {what} (first at row {first}, columns "
+                              f"{', '.join(cols)})", "use --drop-invalid to drop them")
         mask = ~bad
         rows = np.flatnonzero(mask) if rows is None else rows[mask]
         if warn:

@@ -23,7 +23,7 @@ from fricli.applying import observer
 from fricli.core import joints as joint_rule
 from fricli.core import lazy, logs, metrics, modelset
 from fricli.core.atomic import atomic_open, atomic_write_bytes
-from fricli.core.errors import DataError, LogError, ModelFileError
+from fricli.core.errors import DataError, InvalidRows, LogError, ModelFileError
 from fricli.models import coupled
 
 pa = lazy.module("pyarrow")
@@ -72,7 +72,10 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
             jcol = table.column("joint")
             mask = pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)
             part, idx = table.filter(pa.array(mask)), index[mask]
-        log = logs.from_table(part, name=name, zero=zero)
+        try:
+            log = logs.from_table(part, name=name, zero=zero, rows=idx)
+        except InvalidRows as exc:
+            raise LogError(f"{exc.what}: a replay runs every row as the controller would and drops none") from None
         log.joint = j
         coupled.add_partners(model, log, table, zero=zero)
         models.check_log(meta, log, path)
