@@ -245,3 +245,39 @@ def test_invalid_rows_of_one_joint_are_named_by_their_row_in_the_file(folder, tm
         refused = invoke(*args)
         assert refused.exit_code == 3 and refused.output.count("\n") == 1, refused.output
         assert "first at row 11," in refused.output and "--drop-invalid" not in refused.output
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_the_arm_header_of_a_folder_with_a_coupled_group_equals_replay(tmp_path):
+    """A folder of per-joint models and a coupled wrist's model (identify --coupling): replay applies
+    the group to each of its joints through its member; the arm header does the same (each member
+    reads its partners' velocities) and gives replay's numbers."""
+    from fricli.sim.coupled import simulate_coupled
+
+    run = simulate_coupled(duration=4.0, rate_hz=500.0, rng=np.random.default_rng(3))
+    log = tmp_path / "arm.parquet"
+    logs.write_table(run.table, str(log))
+    folder, thr, header = tmp_path / "models", tmp_path / "t.json", tmp_path / "arm.h"
+    assert invoke("identify", log, "--coupling", "--kind", "linear", "-o", f"{folder}/", "-q").exit_code == 0
+    assert (folder / "joints_5_6.npz").exists()
+    assert invoke("thresholds", folder, log, "-o", thr, "-q").exit_code == 0
+    done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header)
+    assert done.exit_code == 0, done.output
+    arm = replay.read_arm(str(folder), str(log))
+    want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    assert np.ptp(want.scale) > 0
+    paths = []                         # each joint's model as the header steps it: the members apart
+    for j in arm.joints:
+        model, _ = models.load(str(folder / ("joints_5_6.npz" if j in (5, 6) else f"joint_{j}.npz")))
+        paths.append(str(tmp_path / f"m{j}.npz"))
+        sig = logs.from_table(run.table, name="x", joint=j)
+        models.save_for_log(paths[-1], model.member(j) if hasattr(model, "member") else model, sig, rows_used=1)
+    text = header.read_text()
+    assert "Joints, in the order of every array below: 1, 2, 3, 4, 5, 6." in text
+    assert "arm_joints_5_6_joint_6_step_array(&s->friction_5" in text
+    exe = observer_check.build(str(header), "arm", paths, str(tmp_path))
+    got = observer_check.run(exe, observer_check.rows(arm, paths), len(arm.joints), str(tmp_path))
+    n = len(arm.joints)
+    assert np.max(np.abs(got[:, :n] - want.tau_f)) < 1e-9
+    assert np.max(np.abs(got[:, n:2 * n] - want.tau_ext)) < 1e-9
+    assert np.array_equal(got[:, 2 * n:].astype(bool), want.contact)

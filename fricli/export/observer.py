@@ -8,6 +8,7 @@ w = g(q) - C(q, qd)^T qd, or the per-joint form p = 0, w = tau_g + tau_dyn (docs
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 from fricli.applying import observer
@@ -17,6 +18,16 @@ from fricli.export import c
 
 def _joint_of(entry: c.Entry):
     return entry.meta.get("joint")
+
+
+def _joints(entry: c.Entry) -> list[c.Entry]:
+    """The entry of each joint ``entry`` covers: a coupled group's model gives its members
+    (``PREFIX_<file>_joint_<joint>_*``, reading the partners' velocities as ``fricli replay`` applies it),
+    any other model itself."""
+    if not hasattr(entry.model, "member"):
+        return [entry]
+    return [dataclasses.replace(entry, model=entry.model.member(j), meta=dict(entry.meta, joint=j),
+                                prefix=f"{entry.prefix}_{c.identifier(f'joint_{j}')}") for j in entry.model.joints]
 
 
 def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: observer.Thresholds | None,
@@ -140,10 +151,11 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
 def export(source: str, prefix: str, gain: float, thresholds: observer.Thresholds | None,
            adaptation: observer.Adaptation | None) -> str:
     """The header of ``fricli export MODELS --observer``: each joint's friction functions
-    (``PREFIX_<file>_*``, as ``fricli export``) and the arm's (``PREFIX_arm_*``)."""
+    (``PREFIX_<file>_*``, as ``fricli export``; a coupled group's, one per member: ``_joints``) and the arm's
+    (``PREFIX_arm_*``)."""
     c.check_prefix(prefix)
     paths, _ = c.model_paths(source)
-    entries = c.entries_for(paths, prefix, per_joint=True)
+    entries = [joint for entry in c.entries_for(paths, prefix, per_joint=True) for joint in _joints(entry)]
     text = c.header(entries, prefix)
     end = f"#endif /* FRICLI_{prefix.upper()}_H */"
     arm = arm_code(entries, prefix, gain, thresholds, adaptation)
