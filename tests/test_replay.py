@@ -281,3 +281,29 @@ def test_the_arm_header_of_a_folder_with_a_coupled_group_equals_replay(tmp_path)
     assert np.max(np.abs(got[:, :n] - want.tau_f)) < 1e-9
     assert np.max(np.abs(got[:, n:2 * n] - want.tau_ext)) < 1e-9
     assert np.array_equal(got[:, 2 * n:].astype(bool), want.contact)
+
+
+def test_one_joints_model_replays_with_the_urdf_terms_of_the_whole_arm(tmp_path):
+    """The URDF form for some joints of an arm's log: M(q), C and g depend on every joint's position,
+    which the log holds; the joints replayed get the terms of the whole arm (it was refused as a
+    log without the other joints' positions, advising --hold, which replay does not take)."""
+    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
+    urdf = shared_data("ur10e/ur10e.urdf")
+    log = tmp_path / "j2.parquet"
+    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
+                  "-o", log, "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(log)
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for j in range(1, 7):
+        part = logs.from_table(table, name="x", joint=j)
+        models.save_for_log(str(folder / f"joint_{j}.npz"), LuGreModel(2.0, 3.0, 0.05, 1.0, 5.0, sigma0=1e4,
+                                                                       sigma1=1.0), part, rows_used=len(part))
+    whole = replay.read_arm(str(folder), str(log), str(urdf))
+    one = replay.read_arm(str(folder / "joint_3.npz"), str(log), str(urdf))
+    assert one.joints == [3]
+    np.testing.assert_array_equal(one.p[:, 0], whole.p[:, 2])
+    np.testing.assert_array_equal(one.w[:, 0], whole.w[:, 2])
+    done = invoke("replay", folder / "joint_3.npz", log, "--urdf", urdf, "-o", tmp_path / "out.parquet", "-q")
+    assert done.exit_code == 0, done.output

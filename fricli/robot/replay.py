@@ -66,16 +66,10 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     for j, path in pairs:
         model, meta = models.load(path)
         model = models.set_precision(coupled.view(model, j), "double")
-        if j is None:
-            part, idx = table, index
-        else:
+        log, idx = _joint_rows(table, j, name, zero), index
+        if j is not None:
             jcol = table.column("joint")
-            mask = pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)
-            part, idx = table.filter(pa.array(mask)), index[mask]
-        try:
-            log = logs.from_table(part, name=name, zero=zero, rows=idx)
-        except InvalidRows as exc:
-            raise LogError(f"{exc.what}: a replay runs every row as the controller would and drops none") from None
+            idx = index[pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)]
         log.joint = j
         coupled.add_partners(model, log, table, zero=zero)
         models.check_log(meta, log, path)
@@ -102,14 +96,41 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     if urdf is None:
         p, wr, form = np.zeros((len(t), len(jnames))), stack(w), "per-joint"
     else:
-        p, wr = momentum_terms(urdf, table.schema, jnames, {j: tables[j] for j in jnames}, name)
+        positions = {}              # every joint of the log, in its order: those without a model set the
+        for j in found or jnames:   # arm's configuration too
+            mine = [k for k in jnames if joint_rule.same(j, k)]
+            if mine:
+                positions[mine[0]] = tables[mine[0]]
+                continue
+            other = _joint_rows(table, j, name, zero).signals
+            if len(other["t"]) != len(t) or not np.array_equal(other["t"], t):
+                raise LogError(f"{name}: joint {j} has other time stamps than joint {jnames[0]}: the robot "
+                               "model needs every joint's position at each time")
+            positions[j] = other
+        p, wr = momentum_terms(urdf, table.schema, list(positions), positions, name, replayed=jnames)
         form = "urdf"
     return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit,
                [tables[j] for j in jnames])
 
 
-def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str) -> tuple[np.ndarray, np.ndarray]:
-    """(p, w) per row and log joint: p = M(q) qd, w = g(q) - C(q, qd)^T qd, with Pinocchio."""
+def _joint_rows(table, joint, name: str, zero) -> logs.Log:
+    """Joint ``joint``'s rows of the log's ``table`` (every row for None), rows named by their row in the file."""
+    rows = None
+    if joint is not None:
+        jcol = table.column("joint")
+        mask = pc.equal(jcol, pa.scalar(joint, jcol.type)).to_numpy(zero_copy_only=False)
+        table, rows = table.filter(pa.array(mask)), np.flatnonzero(mask)
+    try:
+        return logs.from_table(table, name=name, zero=zero, rows=rows)
+    except InvalidRows as exc:
+        raise LogError(f"{exc.what}: a replay runs every row as the controller would and drops none") from None
+
+
+def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str,
+                   replayed: list | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(p, w) per row and joint of ``replayed`` (default: every joint of ``jnames``): p = M(q) qd,
+    w = g(q) - C(q, qd)^T qd, with Pinocchio, in the configuration of the log joints ``jnames``
+    (signals ``sig``)."""
     from fricli.robot import dynamics
     from fricli.robot.mapping import Payload
 
@@ -121,6 +142,8 @@ def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str) -> tup
                                 payload=Payload(**payload) if isinstance(payload, dict) else None,
                                 held=tuple(record.get("held") or ()))
     if named:
+        replayed = jnames if replayed is None else replayed
+        jnames = [j for j in jnames if str(j) in named or j in replayed]   # a joint the URDF does not model
         missing = [j for j in jnames if str(j) not in named]
         if missing:
             raise DataError(f"{name}: the log records no URDF joint for joint {missing[0]}")
@@ -148,7 +171,8 @@ def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str) -> tup
         c = pin.computeCoriolisMatrix(model, data, config[i], qd[i])
         ctq[i] = c.T @ qd[i]
     w = g - ctq
-    return np.ascontiguousarray(p[:, idx]), np.ascontiguousarray(w[:, idx])
+    keep = [idx[jnames.index(j)] for j in (jnames if replayed is None else replayed)]
+    return np.ascontiguousarray(p[:, keep]), np.ascontiguousarray(w[:, keep])
 
 
 def run(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
