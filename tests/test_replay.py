@@ -218,9 +218,8 @@ def test_a_pause_far_longer_than_the_adaptation_memory_forgets_without_failing(f
     assert np.isfinite(pq.read_table(out).column("tau_ext_pred").to_numpy()).all()
 
 
-def test_invalid_rows_of_one_joint_are_named_by_their_row_in_the_file(folder, tmp_path):
-    """A NaN motor torque of one joint of an arm's log: replay and thresholds name its row in the
-    file (the joints' rows interleave) and do not advise --drop-invalid, which they do not take."""
+def _two_joints():
+    """The sample log's first 400 rows as joints 2 and 3, their rows alternating."""
     table = pq.read_table(f"{ROOT}/{SAMPLE}").slice(0, 400)
     table = table.drop_columns(["joint"])
     two = []
@@ -228,7 +227,30 @@ def test_invalid_rows_of_one_joint_are_named_by_their_row_in_the_file(folder, tm
         part = table.append_column("joint", pa.array(np.full(len(table), j, dtype=np.int64)))
         two.append(part.append_column("order", pa.array(2 * np.arange(len(table)) + (j - 2))))
     arm = pa.concat_tables(two)
-    arm = arm.take(pc.sort_indices(arm.column("order"))).drop_columns(["order"])
+    return arm.take(pc.sort_indices(arm.column("order"))).drop_columns(["order"])
+
+
+def test_models_that_do_not_match_the_logs_joints_are_refused_without_advising_joint(folder, tmp_path):
+    """replay and thresholds take no --joint: a model of no joint on an arm's log, or a folder without a
+    model of one of its joints, is refused naming what to give instead."""
+    log = tmp_path / "arm.parquet"
+    pq.write_table(_two_joints(), log)
+    model, _ = models.load(str(folder / "joint_2.npz"))
+    unnamed = tmp_path / "unnamed.npz"
+    part = logs.from_table(pq.read_table(f"{ROOT}/{SAMPLE}").drop_columns(["joint"]), name="x")
+    models.save_for_log(str(unnamed), model, part, rows_used=400)
+    for source in (unnamed, folder):
+        for args in (("replay", source, log, "-o", tmp_path / "out.parquet"),
+                     ("thresholds", source, log, "-o", tmp_path / "t.json")):
+            refused = invoke(*args)
+            assert refused.exit_code in (3, 4) and refused.output.count("\n") == 1, refused.output
+            assert "--joint" not in refused.output and "model" in refused.output, refused.output
+
+
+def test_invalid_rows_of_one_joint_are_named_by_their_row_in_the_file(folder, tmp_path):
+    """A NaN motor torque of one joint of an arm's log: replay and thresholds name its row in the
+    file (the joints' rows interleave) and do not advise --drop-invalid, which they do not take."""
+    arm = _two_joints()
     tau = arm.column("tau_m").to_numpy().copy()
     tau[11] = np.nan                      # joint 3's row 5
     arm = arm.set_column(arm.column_names.index("tau_m"), arm.schema.field("tau_m"), pa.array(tau))

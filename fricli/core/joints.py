@@ -113,12 +113,14 @@ class Source:
         return None
 
 
-def pair(source: Source, log_joints: list | None, requested, log_name: str) -> list[tuple[object, str]]:
+def pair(source: Source, log_joints: list | None, requested, log_name: str,
+         joint_option: bool = True) -> list[tuple[object, str]]:
     """(joint of the log, model file) for every joint a run that applies models covers.
 
     A single model file: on a log of several joints it covers its own joint (or ``--joint``); its
     joint must match. A model set: every covered joint needs its model; on a log without a joint
-    column the set must hold exactly one model."""
+    column the set must hold exactly one model. ``joint_option``: whether the command takes
+    ``--joint`` (the messages advise it only then)."""
     covered = select(log_joints, requested, log_name)
     if not source.folder and len(source.paths) > 1:   # one file of a coupled group: each of its joints
         if covered == [None]:
@@ -134,7 +136,8 @@ def pair(source: Source, log_joints: list | None, requested, log_name: str) -> l
         (model_joint, path), = source.paths.items()
         if log_joints is not None and requested is None and len(log_joints) > 1:
             if model_joint is None:
-                raise several(log_joints, log_name, "choose one with --joint, or give a model folder")
+                raise several(log_joints, log_name, "choose one with --joint, or give a model folder" if joint_option
+                              else "give a model folder (one model per joint) or a model fitted on one of them")
             found = [j for j in log_joints if same(j, model_joint)]
             if not found:
                 raise JointMismatch(f"{source.name}: the model was fitted on joint {model_joint}, but {log_name} "
@@ -153,7 +156,8 @@ def pair(source: Source, log_joints: list | None, requested, log_name: str) -> l
         found = source.model_for(joint)
         if found is None:
             held = listed(source.paths)
-            hint = f"--joint {held} applies it alone" if len(source.paths) == 1 else "--joint J chooses one of them"
+            hint = (f"--joint {held} applies it alone" if len(source.paths) == 1 else "--joint J chooses one of them") \
+                if joint_option else "give a model of every joint, or one joint's model file"
             raise JointMismatch(f"{source.name}: no model for joint {joint} of {log_name} (the folder holds "
                                 f"joints {held}; {hint})")
         out.append((joint, found[1]))

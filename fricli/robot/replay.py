@@ -59,7 +59,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     table, _digest = logs.read_table(log_path)
     name = "stdin" if log_path == "-" else log_path
     found = logs.joints_of(table, name)
-    pairs = joint_rule.pair(modelset.source(model_path), found, None, name)
+    pairs = joint_rule.pair(modelset.source(model_path), found, None, name, joint_option=False)
     jnames, f0, tau_m, qd, t, target, rows, tables, w = [], [], [], [], None, [], [], {}, []
     index = np.arange(table.num_rows)
     unit = "Nm"
