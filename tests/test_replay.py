@@ -329,3 +329,36 @@ def test_one_joints_model_replays_with_the_urdf_terms_of_the_whole_arm(tmp_path)
     np.testing.assert_array_equal(one.w[:, 0], whole.w[:, 2])
     done = invoke("replay", folder / "joint_3.npz", log, "--urdf", urdf, "-o", tmp_path / "out.parquet", "-q")
     assert done.exit_code == 0, done.output
+
+
+def test_the_rotors_cross_inertia_the_import_recorded_is_in_the_momentum(tmp_path):
+    """A coupled wrist imported with its motors' inertias: the import adds their cross-inertia
+    (off the diagonal, joints x joints) to tau_dyn and records it; the observer's momentum p = M(q) qd
+    must hold it too, or the residual carries its torque J qdd."""
+    import json
+
+    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_5.csv")
+    urdf = shared_data("ur10e/ur10e.urdf")
+    log = tmp_path / "j5.parquet"
+    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
+                  "-o", log, "-q")
+    assert done.exit_code == 0, done.output
+    table = pq.read_table(log)
+    meta = dict(table.schema.metadata)
+    record = json.loads(meta[b"fricli.import"])
+    cross = np.zeros((6, 6))
+    cross[4, 5] = cross[5, 4] = 0.05                  # joints 5 and 6 (kg m^2), in the import's joint order
+    record["robot"]["cross_inertia"] = cross.tolist()
+    meta[b"fricli.import"] = json.dumps(record).encode()
+    coupled_log = tmp_path / "coupled.parquet"
+    pq.write_table(table.replace_schema_metadata(meta), coupled_log)
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for j in range(1, 7):
+        part = logs.from_table(table, name="x", joint=j)
+        models.save_for_log(str(folder / f"joint_{j}.npz"), LuGreModel(2.0, 3.0, 0.05, 1.0, 5.0, sigma0=1e4,
+                                                                       sigma1=1.0), part, rows_used=len(part))
+    plain = replay.read_arm(str(folder), str(log), str(urdf))
+    coupled = replay.read_arm(str(folder), str(coupled_log), str(urdf))
+    np.testing.assert_allclose(coupled.p - plain.p, plain.qd @ cross.T, rtol=1e-12, atol=1e-12)
+    np.testing.assert_array_equal(coupled.w, plain.w)

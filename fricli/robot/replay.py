@@ -5,7 +5,8 @@ The friction model of each joint reads the log's columns as its exported step fu
 them from the controller (docs/deploy.md); its output is causal (each model is a recurrence over
 the rows). The rigid-body terms of the observer come from a URDF through Pinocchio (``urdf``):
 p = M(q) qd = RNEA(q, 0, qd) without gravity (with the armature: the URDF's rotor_params, else the
-rotor inertias the log's import recorded, and the transmission's cross-inertia), g(q) by RNEA,
+rotor inertias the log's import recorded, and the cross-inertia of a coupled group's rotors, the URDF's
+or the import's), g(q) by RNEA,
 C(q, qd) by ``computeCoriolisMatrix``; with the gravity, payload and held joints the log's
 import recorded, and its joints matched to the URDF's by the names it recorded. Without a URDF the
 observer takes the per-joint form on the log's tau_g and tau_dyn.
@@ -163,6 +164,9 @@ def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str,
     config = robot.configuration(q)
     zeros = np.zeros_like(q)
     p = dynamics._rnea(robot._no_g, config, zeros, qd) + qd * rotor + qd @ robot.cross_inertia.T
+    cross = _recorded_cross_inertia(record, named, robot)
+    if cross is not None:
+        p += qd @ cross.T
     g = dynamics._rnea(robot._with_g, config, zeros, zeros)
     model = robot.pin_model
     data = model.createData()
@@ -173,6 +177,27 @@ def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str,
     w = g - ctq
     keep = [idx[jnames.index(j)] for j in (jnames if replayed is None else replayed)]
     return np.ascontiguousarray(p[:, keep]), np.ascontiguousarray(w[:, keep])
+
+
+def _recorded_cross_inertia(record: dict, named: dict, robot) -> np.ndarray | None:
+    """The rotors' cross-inertia (nv, nv) [kg m^2] in the URDF's joint order that the import added to
+    tau_dyn (a coupled group's motors: ``cross_inertia`` over the import's joints, in the order of
+    its joint names), or None."""
+    cross = record.get("cross_inertia")
+    if cross is None or not named:
+        return None
+    try:
+        cross = np.asarray(cross, dtype=np.float64)
+    except (TypeError, ValueError):
+        cross = None
+    if cross is None or cross.shape != (len(named), len(named)) or not np.all(np.isfinite(cross)):
+        raise DataError("the log's import record holds a cross_inertia that is not one number per pair of its "
+                        f"{len(named)} joints")
+    pos = [robot.joints.index(u) if u in robot.joints else -1 for u in named.values()]
+    keep = [k for k, i in enumerate(pos) if i >= 0]
+    out = np.zeros((len(robot.joints), len(robot.joints)))
+    out[np.ix_([pos[k] for k in keep], [pos[k] for k in keep])] = cross[np.ix_(keep, keep)]
+    return out
 
 
 def run(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
