@@ -362,3 +362,26 @@ def test_the_rotors_cross_inertia_the_import_recorded_is_in_the_momentum(tmp_pat
     coupled = replay.read_arm(str(folder), str(coupled_log), str(urdf))
     np.testing.assert_allclose(coupled.p - plain.p, plain.qd @ cross.T, rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(coupled.w, plain.w)
+
+
+def test_thresholds_on_logs_that_list_the_same_joints_in_another_order(folder, tmp_path):
+    """Calibration logs with the same joints whose rows come in another order (joint 3's rows first):
+    the same thresholds as from the logs in one order, instead of a refusal."""
+    arm = _two_joints()
+    tau = arm.column("tau_m").to_numpy() + np.where(arm.column("joint").to_numpy() == 3, 0.7, 0.0)   # joints differ
+    arm = arm.set_column(arm.column_names.index("tau_m"), arm.schema.field("tau_m"), pa.array(tau))
+    log, other = tmp_path / "arm.parquet", tmp_path / "other.parquet"
+    pq.write_table(arm, log)
+    swapped = np.arange(len(arm)).reshape(-1, 2)[:, ::-1].ravel()       # each time: joint 3, then joint 2
+    pq.write_table(arm.take(pa.array(swapped)), other)
+    models_dir = tmp_path / "models"
+    models_dir.mkdir()
+    model, _ = models.load(str(folder / "joint_2.npz"))
+    for j in (2, 3):
+        part = logs.from_table(arm, name="x", joint=j)
+        models.save_for_log(str(models_dir / f"joint_{j}.npz"), model, part, rows_used=400, seed=1)
+    want = replay.calibrate(str(models_dir), [str(log), str(log)])
+    got = replay.calibrate(str(models_dir), [str(log), str(other)])
+    assert [str(j) for j in got.joints] == ["2", "3"]
+    assert got.as_json()["joints"] == want.as_json()["joints"]
+    assert want.threshold[0] != want.threshold[1]

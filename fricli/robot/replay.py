@@ -247,10 +247,11 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
     logs with those thresholds (``observer.level_share``)."""
     arms = [read_arm(model_path, path, urdf, zero) for path in log_paths]
     names = [str(j) for j in arms[0].joints]
-    for arm in arms[1:]:
-        if [str(j) for j in arm.joints] != names:
+    for k, arm in enumerate(arms[1:], 1):
+        if sorted(str(j) for j in arm.joints) != sorted(names):
             raise DataError(f"{arm.name}: joints {', '.join(map(str, arm.joints))}, but {arms[0].name} has "
                             f"{', '.join(names)}: calibrate on logs of the same joints")
+        arms[k] = _in_order(arm, names)
     observer.check_settings(quantile, margin, release, moving_speed, persistence)
     joints = list(arms[0].joints)
     band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
@@ -265,6 +266,17 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
         return thr
     adapted = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, thr, observer.Adaptation()) for a in arms]
     return observer.level_share([r.scale for r in adapted], [a.qd for a in arms], thr)
+
+
+def _in_order(arm: Arm, names: list[str]) -> Arm:
+    """``arm`` with its joints in the order of ``names`` (the joints as text): a log may list them in
+    another order than the first calibration log."""
+    idx = [[str(j) for j in arm.joints].index(n) for n in names]
+    if idx == list(range(len(idx))):
+        return arm
+    return dataclasses.replace(arm, joints=[arm.joints[i] for i in idx], f0=arm.f0[:, idx], tau_m=arm.tau_m[:, idx],
+                               p=arm.p[:, idx], w=arm.w[:, idx], qd=arm.qd[:, idx], target=arm.target[:, idx],
+                               rows=[arm.rows[i] for i in idx], signals=[arm.signals[i] for i in idx])
 
 
 def write_thresholds(thresholds: observer.Thresholds, path: str) -> None:
