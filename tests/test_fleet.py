@@ -378,21 +378,30 @@ def test_a_robot_joint_without_logs_is_named(tmp_path):
     assert res.returncode == 0 and "warning: robot r2 joint 1: no log matches r2/*-j1.parquet" in res.stderr
 
 
-def test_two_logs_of_one_name_for_one_joint_stop_the_run(tmp_path):
+def test_two_logs_of_one_name_for_one_joint_fail_naming_each_other(tmp_path):
     """Logs of one robot joint found by two globs under the same file name would write one model
-    file: each night the two jobs would overwrite each other's model and neither would be up to date."""
+    file: each night the two jobs would overwrite each other's model and neither would be up to date.
+    Both jobs fail, each naming the other log; the robot's other jobs are not touched."""
+    from fricli.fleet import pipelines
+
     for folder in ("incoming", "archive"):
         (tmp_path / folder).mkdir()
         (tmp_path / folder / "2026-05-04-j1.parquet").write_bytes(folder.encode())
+    (tmp_path / "incoming" / "2026-05-05-j1.parquet").write_bytes(b"x")
     (tmp_path / "m.toml").write_text('[[robot]]\nname = "r1"\njoints = [1]\n'
                                      'logs = ["incoming/*-j{joint}.parquet", "archive/*-j{joint}.parquet"]\n')
-    with pytest.raises(manifest.ManifestError) as info:
-        manifest.load(str(tmp_path / "m.toml"))
-    text = str(info.value)
-    assert "robot r1 joint 1" in text and "archive/2026-05-04-j1.parquet" in text
-    assert "incoming/2026-05-04-j1.parquet" in text and "2026-05-04-j1.npz" in text
+    jobs = manifest.load(str(tmp_path / "m.toml")).jobs
+    assert [os.path.relpath(j.log, tmp_path) for j in jobs] == [
+        "archive/2026-05-04-j1.parquet", "incoming/2026-05-04-j1.parquet", "incoming/2026-05-05-j1.parquet"]
+    assert [os.path.relpath(j.clash, tmp_path) if j.clash else "" for j in jobs] == [
+        "incoming/2026-05-04-j1.parquet", "archive/2026-05-04-j1.parquet", ""]
+    for job in jobs[:2]:
+        res = pipelines.run(job)
+        assert res["status"] == "failed" and job.clash in res["reason"] and "same file name" in res["reason"]
+        assert not os.path.exists(job.model)
+    assert "same file name" not in pipelines.run(jobs[2])["reason"]
     res = invoke("fleet", "m.toml", "--list", cwd=tmp_path)
-    assert res.returncode == errors.NOTHING_RAN and len(res.stderr.splitlines()) == 1
+    assert res.returncode == 0 and res.stdout.count("2026-05-04-j1") == 4
 
 
 # A fleet job and the command make the same model from the same log and options: every pipeline,

@@ -61,6 +61,7 @@ class Job:
     options: tuple         # sorted (name, value) pairs of the pipeline's options
     base: str | None = None
     diagnose: bool = False  # also look for effects the new model misses (fricli diagnose)
+    clash: str = ""         # the other logs of this robot joint whose model is this job's file: it fails
 
     @property
     def key(self) -> str:
@@ -196,16 +197,11 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
             if not files:
                 unmatched.append(f"robot {name}{f' joint {jname}' if jname else ''}: no log matches "
                                  + " or ".join(_fill(p, name, jname) for p in patterns))
-            written = {}
+            first = len(jobs)
             for log in files:
                 confine(f"robot {name}'s log", log)
                 stem = os.path.splitext(os.path.basename(log))[0]
                 model = os.path.join(models_dir, name, f"joint{jname}" if jname else "joint", f"{stem}.npz")
-                if model in written:
-                    raise ManifestError(f"{where}{f' joint {jname}' if jname else ''}: logs {written[model]} and "
-                                        f"{log} have one name, so both would write the model {model}; rename one "
-                                        "or match one of them only")
-                written[model] = log
                 base = robot.get("base")
                 if base:
                     confine(f"robot {name}'s base", os.path.join(root, _fill(base, name, jname)))
@@ -213,7 +209,19 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
                                 model=model, options=tuple(sorted(options.items())),
                                 base=os.path.join(root, _fill(base, name, jname)) if base else None,
                                 diagnose=diagnose))
+            jobs[first:] = _clashes(jobs[first:])
     return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs), unmatched=tuple(unmatched))
+
+
+def _clashes(jobs: list[Job]) -> list[Job]:
+    """``jobs`` (one robot joint's) with ``clash`` set where logs of one file name (in two folders the
+    globs match, or ``a.parquet`` and ``a.pq``) would write one model file: run, each would overwrite
+    the other's model every night and neither would be up to date."""
+    by_model: dict = {}
+    for job in jobs:
+        by_model.setdefault(job.model, []).append(job.log)
+    return [dataclasses.replace(job, clash=", ".join(log for log in by_model[job.model] if log != job.log))
+            if len(by_model[job.model]) > 1 else job for job in jobs]
 
 
 def _known(where: str, what: str, found: set, allowed: set, listed: str) -> None:

@@ -40,6 +40,9 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
     out = {"status": "failed", "reason": "", "kind": None, "parameters": {}, "errors": {}, "sha256": "",
            "effects": [], "warnings": []}
     try:
+        if job.clash:
+            raise errors.LogError(f"{job.log}: {job.clash} has the same file name, so both would write the model "
+                                  f"{job.model}; rename one of them or match only one")
         opts = options_of(job)
         try:
             os.makedirs(os.path.dirname(job.model), exist_ok=True)
