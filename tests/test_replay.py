@@ -385,3 +385,21 @@ def test_thresholds_on_logs_that_list_the_same_joints_in_another_order(folder, t
     assert [str(j) for j in got.joints] == ["2", "3"]
     assert got.as_json()["joints"] == want.as_json()["joints"]
     assert want.threshold[0] != want.threshold[1]
+
+
+def test_a_joint_missing_a_sample_is_named_with_the_time(folder, tmp_path):
+    """One joint of an arm's log without its row at one time: the refusal says where."""
+    arm = _two_joints()
+    log = tmp_path / "arm.parquet"
+    pq.write_table(arm.take(pa.array([i for i in range(len(arm)) if i != 21])), log)   # joint 3's 11th sample
+    models_dir = tmp_path / "models"
+    models_dir.mkdir()
+    model, _ = models.load(str(folder / "joint_2.npz"))
+    for j in (2, 3):
+        models.save_for_log(str(models_dir / f"joint_{j}.npz"), model, logs.from_table(arm, name="x", joint=j),
+                            rows_used=400)
+    t = pq.read_table(f"{ROOT}/{SAMPLE}").column("t").to_numpy()
+    refused = invoke("replay", models_dir, log, "-o", tmp_path / "out.parquet")
+    assert refused.exit_code == 3 and refused.output.count("\n") == 1
+    assert f"joint 3 has other time stamps than joint 2 (sample 11: t = {t[11]:.15g} s against {t[10]:.15g} s)" \
+        in refused.output, refused.output

@@ -78,8 +78,8 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
         if t is None:
             t = sig["t"]
         elif len(sig["t"]) != len(t) or not np.array_equal(sig["t"], t):
-            raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}: the replay of an arm "
-                           "needs one sample of every joint per time")
+            raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}{_first_apart(sig['t'], t)}: "
+                           "the replay of an arm needs one sample of every joint per time")
         try:
             tau, _ = model.predict(sig, None)
         except DataError as exc:
@@ -105,13 +105,23 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
                 continue
             other = _joint_rows(table, j, name, zero).signals
             if len(other["t"]) != len(t) or not np.array_equal(other["t"], t):
-                raise LogError(f"{name}: joint {j} has other time stamps than joint {jnames[0]}: the robot "
-                               "model needs every joint's position at each time")
+                raise LogError(f"{name}: joint {j} has other time stamps than joint {jnames[0]}"
+                               f"{_first_apart(other['t'], t)}: the robot model needs every joint's position at each time")
             positions[j] = other
         p, wr = momentum_terms(urdf, table.schema, list(positions), positions, name, replayed=jnames)
         form = "urdf"
     return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit,
                [tables[j] for j in jnames])
+
+
+def _first_apart(a: np.ndarray, b: np.ndarray) -> str:
+    """Where two joints' time stamps (n,) [s] first differ, for a message."""
+    n = min(len(a), len(b))
+    apart = np.flatnonzero(a[:n] != b[:n])
+    if len(apart):
+        k = int(apart[0])
+        return f" (sample {k + 1}: t = {a[k]:.15g} s against {b[k]:.15g} s)"
+    return f" ({len(a)} samples against {len(b)}, alike up to t = {a[n - 1]:.15g} s)" if n else ""
 
 
 def _joint_rows(table, joint, name: str, zero) -> logs.Log:
