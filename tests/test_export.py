@@ -408,3 +408,36 @@ def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
     double = models.set_precision(model, "double").predict(sig)[0]
     assert model.base.precision == "double" and model.base.net_.dtype == np.float32   # the file's weights stay
     assert 0 < np.max(np.abs(double - models.set_precision(model, "single").predict(sig)[0])) < 1e-3
+
+
+@needs_cc
+@pytest.mark.parametrize("cxx", [False, True])
+def test_signals_named_like_the_step_functions_own_names_compile(cxx, tmp_path):
+    """Log columns a model reads by name become the step function's parameters: a column named as the
+    function's state (s), its locals (in, in_), its output (model_error), a C++ keyword (and, not),
+    a macro of <math.h> (HUGE_VAL) or a reserved name (__x, _Y) still gives a header that compiles
+    (C and C++, warnings as errors) and equals fricli predict."""
+    import pyarrow as pa
+
+    names = ["s", "in", "in_", "model_error", "and", "not", "HUGE_VAL", "__x", "_Y"]
+    table = pq.read_table(str(SAMPLE / "joint2_extended_asym.parquet"))
+    rng = np.random.default_rng(4)
+    for name in names:
+        table = table.append_column(name, pa.array(rng.normal(size=table.num_rows)))
+    log_path = str(tmp_path / "columns.parquet")
+    pq.write_table(table, log_path)
+    log = logs.load_log(log_path)
+    terms = [{"name": n, "factors": [{"f": "signal", "name": n}]} for n in names]
+    model = AugmentedModel(LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, sigma0=1.7e4, sigma1=0.5), terms,
+                           np.linspace(0.1, 0.9, len(names)), effects=[f"column:{n}" for n in names])
+    path = str(tmp_path / "columns.npz")
+    models.save_for_log(path, model, log, rows_used=len(log))
+    header = str(tmp_path / "fr.h")
+    assert invoke("export", path, "-o", header, "--prefix", "fr", "-q").exit_code == 0
+    exe = str(tmp_path / "fr_driver")
+    assert check.build(header, "fr", exe, cxx=cxx) == ""
+    out = tmp_path / "pred.parquet"
+    assert invoke("predict", path, log_path, "-o", out, "--precision", "double", "-q").exit_code == 0
+    ref = pq.read_table(out).column("tau_f_pred").to_numpy()
+    got = check.run(exe, check.signal_matrix(log.signals, c.signals_of(model)))
+    assert np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))) <= 1.0

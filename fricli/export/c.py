@@ -42,7 +42,17 @@ SIGNAL_INFO = {"t": ("s", "time"), "q": ("q", "position"), "qd": ("qd", "velocit
                "tau_dyn": ("tau", "rigid-body dynamics torque"), "temp": ("degC", "temperature")}
 _C_KEYWORDS = set("""auto break case char const continue default do double else enum extern float for goto if
 inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
-volatile while bool class delete new operator private protected public template this throw try virtual""".split())
+volatile while bool class delete new operator private protected public template this throw try virtual
+and and_eq bitand bitor compl not not_eq or or_eq xor xor_eq asm catch const_cast dynamic_cast explicit export
+false friend mutable namespace reinterpret_cast static_cast true typeid typename using wchar_t alignas alignof
+char8_t char16_t char32_t concept consteval constexpr constinit co_await co_return co_yield decltype noexcept
+nullptr requires static_assert thread_local""".split())
+# names <math.h> (and <errno.h>, which it may include) defines as macros
+_C_MACROS = set("""HUGE_VAL HUGE_VALF HUGE_VALL INFINITY NAN FP_INFINITE FP_NAN FP_NORMAL FP_SUBNORMAL FP_ZERO
+FP_FAST_FMA FP_FAST_FMAF FP_FAST_FMAL FP_ILOGB0 FP_ILOGBNAN MATH_ERRNO MATH_ERREXCEPT math_errhandling errno EDOM
+ERANGE EILSEQ""".split())
+# the names a public step function gives its state, its locals and its output (model_code)
+_STEP_NAMES = {"s", "in", "in_", "model_error"}
 
 
 AVX2 = "FRICLI_AVX2"   # macro: 1 when the networks' AVX2 and FMA copies are built (see PRELUDE)
@@ -79,9 +89,11 @@ def array(values, per_line: int = 4) -> str:
 
 
 def identifier(text: str) -> str:
-    """``text`` as a C identifier: other characters become '_', never a keyword or a leading digit."""
+    """``text`` as a C identifier: other characters become '_', never a C or C++ keyword, a macro of
+    <math.h>, a reserved name (__x, _X) or a leading digit."""
     out = re.sub(r"[^A-Za-z0-9_]", "_", str(text))
-    if not out or out[0].isdigit() or out in _C_KEYWORDS:
+    if (not out or out[0].isdigit() or out in _C_KEYWORDS or out in _C_MACROS or out.startswith("__")
+            or re.match(r"_[A-Z]", out)):
         out = "x_" + out
     return out
 
@@ -114,6 +126,8 @@ class Context:
             raise ModelFileError(f"the model reads the reference column {name!r}, which a controller does not have")
         if name not in self.fields:
             field = identifier(name)
+            if field in _STEP_NAMES:       # a parameter of the public step function: not its own names
+                field = "x_" + field
             if field in self.fields.values():
                 raise ModelFileError(f"two of the model's signal names give the C name {field!r}")
             self.fields[name] = field
