@@ -415,11 +415,13 @@ def test_set_precision_reaches_every_network_of_a_model_tree(sim_models):
 def test_signals_named_like_the_step_functions_own_names_compile(cxx, tmp_path):
     """Log columns a model reads by name become the step function's parameters: a column named as the
     function's state (s), its locals (in, in_), its output (model_error), a C++ keyword (and, not),
-    a macro of <math.h> (HUGE_VAL) or a reserved name (__x, _Y) still gives a header that compiles
-    (C and C++, warnings as errors) and equals fricli predict."""
+    a macro of <math.h> (HUGE_VAL), a reserved name (__x, _Y) or a name of the header's own (fr_in,
+    fr_m_step, FRICLI_AVX2) still gives a header that compiles (C and C++, warnings as errors) and
+    equals fricli predict."""
     import pyarrow as pa
 
-    names = ["s", "in", "in_", "model_error", "and", "not", "HUGE_VAL", "__x", "_Y"]
+    names = ["s", "in", "in_", "model_error", "and", "not", "HUGE_VAL", "__x", "_Y", "fr_in", "fr_m_step",
+             "fr_sgn", "FRICLI_AVX2"]
     table = pq.read_table(str(SAMPLE / "joint2_extended_asym.parquet"))
     rng = np.random.default_rng(4)
     for name in names:

@@ -126,7 +126,8 @@ class Context:
             raise ModelFileError(f"the model reads the reference column {name!r}, which a controller does not have")
         if name not in self.fields:
             field = identifier(name)
-            if field in _STEP_NAMES:       # a parameter of the public step function: not its own names
+            # a parameter of the public step function: none of its own names nor the header's
+            if field in _STEP_NAMES or field.startswith((self.sgn[:-3], "FRICLI_")):
                 field = "x_" + field
             if field in self.fields.values():
                 raise ModelFileError(f"two of the model's signal names give the C name {field!r}")
