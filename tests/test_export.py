@@ -443,3 +443,20 @@ def test_signals_named_like_the_step_functions_own_names_compile(cxx, tmp_path):
     ref = pq.read_table(out).column("tau_f_pred").to_numpy()
     got = check.run(exe, check.signal_matrix(log.signals, c.signals_of(model)))
     assert np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))) <= 1.0
+
+
+@pytest.mark.parametrize("files, observer", [(["joint_1.npz", "joint_1_m.npz"], False), (["arm.npz"], True)])
+def test_model_files_whose_c_names_would_collide_are_refused(files, observer, tmp_path):
+    """The C names of a folder's models are PREFIX_<file name>_*, each model's parts under them: a file
+    named like another's part (joint_1_m beside joint_1) or like the arm's functions (arm with --observer
+    --prefix arm) would define one name twice, a header that does not compile. Refused naming the files."""
+    log = logs.load_log(str(SAMPLE / "joint2_base.parquet"))
+    folder = tmp_path / "models"
+    folder.mkdir()
+    for name in files:
+        models.save_for_log(str(folder / name), LuGreModel(7.0, 9.0, 0.04, 1.2, 12.0, sigma0=1.7e4, sigma1=0.5), log,
+                            rows_used=len(log))
+    header = tmp_path / "arm.h"
+    res = invoke("export", folder, "--prefix", "arm", "-o", header, *(["--observer"] if observer else []))
+    assert res.exit_code == 4 and res.output.count("\n") == 1 and not header.exists(), res.output
+    assert all(name in res.output for name in files) and "rename" in res.output

@@ -313,6 +313,23 @@ def _code(entry: Entry, sgn: str) -> str:
     return model_code(entry.model, entry.meta, entry.prefix, sgn)
 
 
+def names_of(prefix: str, code: str) -> set[str]:
+    """The C names ``code`` uses under ``prefix`` (PREFIX_*): those it defines, since each model's code
+    refers to no other model's."""
+    return set(re.findall(rf"\b{re.escape(prefix)}_\w+", code))
+
+
+def check_names(parts: list[tuple[str, str, str]]) -> None:
+    """ModelFileError when two of the (source, prefix, code) ``parts`` use one C name (a file named like
+    another's part: joint_1_m beside joint_1), which would be defined twice."""
+    seen: dict[str, str] = {}
+    for source, prefix, code in parts:
+        for name in names_of(prefix, code) | {prefix}:
+            other = seen.setdefault(name, source)
+            if other != source:
+                raise ModelFileError(f"{other} and {source} give the same C name {name}: rename one of the files")
+
+
 def header(entries: list[Entry], guard: str) -> str:
     """The whole header for one or several models (one per joint)."""
     for entry in entries:
@@ -333,6 +350,7 @@ def header(entries: list[Entry], guard: str) -> str:
                  "/* sign(v): -1, 0 or 1 */",
                  f"static inline double {sgn}(double v) {{ return v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0); }}", ""]
     codes = [_code(entry, sgn) for entry in entries]
+    check_names([(entry.source, entry.prefix, code) for entry, code in zip(entries, codes)])
     if any(AVX2 in code for code in codes):
         out.append(PRELUDE)
     for entry, code in zip(entries, codes):

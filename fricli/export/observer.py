@@ -159,6 +159,13 @@ def export(source: str, prefix: str, gain: float, thresholds: observer.Threshold
     text = c.header(entries, prefix)
     end = f"#endif /* FRICLI_{prefix.upper()}_H */"
     arm = arm_code(entries, prefix, gain, thresholds, adaptation)
+    own = f"{prefix}_arm"
+    for entry in entries:   # the arm's functions take PREFIX_arm_*: a model file named arm would define them too
+        clash = sorted(n for n in c.names_of(entry.prefix, text) | {entry.prefix}
+                       if n == own or n.startswith(own + "_"))
+        if clash:
+            raise ModelFileError(f"{entry.source} gives the C name {clash[0]}, which the arm's functions of --observer "
+                                 "use: rename the file")
     top = ("/* The arm's observer, adaptation and contact detection (fricli export --observer) follow the joints' "
            "friction\n * functions: " + os.path.basename(source.rstrip("/")) + ". See docs/contact-detection.md. */\n")
     return text.replace(end, top + arm + "\n" + end)
