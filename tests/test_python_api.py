@@ -83,3 +83,12 @@ def test_every_public_name_is_there():
     assert set(fricli.__all__) <= set(dir(fricli))
     with pytest.raises(AttributeError):
         fricli.train_base
+
+
+def test_read_log_reads_stdin_as_the_commands_do():
+    """``read_log("-")`` reads the log from stdin (as LOG "-" of every command), named stdin."""
+    code = "import fricli; log = fricli.read_log('-'); print(log.name, len(log.signals['t']))"
+    with open(SAMPLE / "joint2_adapt.parquet", "rb") as fh:
+        out = subprocess.run([sys.executable, "-c", code], stdin=fh, capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["stdin", "3582"]
