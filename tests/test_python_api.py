@@ -92,3 +92,16 @@ def test_read_log_reads_stdin_as_the_commands_do():
         out = subprocess.run([sys.executable, "-c", code], stdin=fh, capture_output=True, text=True, cwd=ROOT)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["stdin", "3582"]
+
+
+def test_every_command_is_a_call_or_listed_without_one():
+    """Each command is in the page's table of calls or in its list of commands without a call (estimate-ext
+    in both: its arrays are ``external_torque``, its file to file is the command's)."""
+    from fricli.cli import COMMANDS
+
+    text = PAGE.read_text()
+    table = set(re.findall(r"^\|[^|]*\| `fricli ([a-z-]+)", text, re.M)) | {"fit-arm"}
+    without = re.search(r"The other commands have no call in `fricli` yet: (.*?)\.\n", text, re.S).group(1)
+    listed = set(re.findall(r"`([a-z-]+)`", without))
+    assert table | listed == set(COMMANDS), sorted(set(COMMANDS) ^ (table | listed))
+    assert table & listed == {"estimate-ext"}
