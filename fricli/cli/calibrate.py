@@ -52,7 +52,7 @@ class PriorStrength(click.ParamType):
 @click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
-              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's); "
+              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's 50); "
                    "no effect on a log that holds both.")
 @click.option("--report", "report_file", default=None, metavar="REPORT.json",
               help="Where to write the report (default: OUT.calibration.json beside the URDF; none with -o -).")

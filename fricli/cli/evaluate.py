@@ -9,8 +9,8 @@ import click
 from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
-from fricli.cli.options import (Folder, Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
-                                reading_kwargs, say, warn)
+from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag, log_reading,
+                                read_log, reading_kwargs, say, warn)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -33,7 +33,7 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 @click.option("--log", "log_specs", multiple=True, required=True, metavar="[NAME=]LOG.parquet",
               help="A log to evaluate on (repeatable).")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
-              help="Zero-phase low-pass [Hz] on the external-torque estimate.")
+              help=LOWPASS_HELP)
 @log_reading
 @json_flag
 @common
@@ -81,8 +81,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @click.argument("log")
 @click.option("-o", "--output", required=True, type=Folder(), help="Folder for the figures and index.html.")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
-              help="Zero-phase low-pass [Hz] on the external-torque estimate (default: none, as in evaluate and "
-                   "estimate-ext; --lowpass 5 smooths it).")
+              help=LOWPASS_HELP)
 @log_reading
 @common
 def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, zero, window, quiet):

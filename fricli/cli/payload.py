@@ -13,7 +13,7 @@ from fricli.cli.options import Number, common, emit_json, read_log, say, window_
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="The robot description (default: the one the log was imported with).")
 @click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
-              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's).")
+              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's 50).")
 @click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
