@@ -25,7 +25,7 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
     A point mass and its centre of mass in FRAME's coordinates are fitted to what the robot model
     leaves of tau_m, with each joint's linear friction alongside (rows in motion). A payload the
     import declared is left out of the model, so the whole payload is identified. Prints the
-    import options that declare it. See docs/calibration.md.
+    import options that declare it. See docs/payload.md.
 
     \b
     Example:
