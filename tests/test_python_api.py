@@ -105,3 +105,15 @@ def test_every_command_is_a_call_or_listed_without_one():
     listed = set(re.findall(r"`([a-z-]+)`", without))
     assert table | listed == set(COMMANDS), sorted(set(COMMANDS) ^ (table | listed))
     assert table & listed == {"estimate-ext"}
+
+
+def test_inspect_of_a_file_is_load_models_meta(folder):
+    """What python-api.md says: ``fricli inspect FILE`` prints ``load_model(FILE).meta``."""
+    import json
+
+    from conftest import invoke
+
+    fricli.Linear().fit(folder / "sample_data" / "joint2_base.parquet").save(folder / "inspected.npz")
+    done = invoke("inspect", folder / "inspected.npz")
+    assert done.exit_code == 0
+    assert json.loads(done.stdout) == json.loads(json.dumps(fricli.load_model(folder / "inspected.npz").meta))
