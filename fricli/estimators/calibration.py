@@ -53,7 +53,7 @@ def _calibrate_spec() -> dict:
         Option("consistency", "choice", "enforce", "enforce: fit again over physically consistent parameters; "
                                                    "check: refuse an inconsistent estimate.",
                choices=("enforce", "check")),
-        Option("edge", "float", 0.5, "Seconds left out at each end of every stretch of the log [s].", unit="s", low=0),
+        Option("edge", "float", 0.5, "Seconds dropped at each end of the log (filter and difference transients in qdd) [s].", unit="s", low=0),
         Option("cutoff", "float", None, "Low-pass cut-off [Hz] when qd/qdd are derived from q.", unit="Hz",
                low=0, low_open=True),
         Option("match", "choice", None, "How the log's joints are matched to the URDF's: name or order.",
