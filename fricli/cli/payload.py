@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fricli.cli.options import Number, common, emit_json, read_log, say, window_options
+from fricli.cli.options import Number, common, emit_json, say, warn, window_options
 
 
 @click.command("payload")
@@ -32,11 +32,11 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
       fricli payload loaded.parquet --frame tool0
       fricli import loaded.csv --mapping map.toml --urdf arm.urdf --payload-mass 2.47 --payload-com 0.03 0.17 0.05 --payload-frame tool0
     """
-    from fricli.robot import payload
+    from fricli.estimators import identify_payload
 
-    table, _ = read_log(log, window)
+    found = identify_payload(log, frame, urdf=urdf, cutoff=cutoff, edge=edge, time_from=window.start,
+                             time_until=window.stop, warn=warn)
     name = "stdin" if log == "-" else log
-    found = payload.identify_log(table, name, frame, urdf=urdf, cutoff_hz=cutoff, edge_s=edge)
     for line in summary(found):
         say(line, quiet)
     if as_json:

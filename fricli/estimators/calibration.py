@@ -179,3 +179,33 @@ def summary_lines(report: dict) -> list[str]:
         lines += [f"  motor of joint {joint}: {m['prior']:.4g} -> {m['identified']:.4g}"
                   for joint, m in report["motors"].items()]
     return lines
+
+
+def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0.5, time_from=None, time_until=None,
+                     warn=None):
+    """``fricli payload LOG --frame FRAME``: the point mass [kg] and centre of mass [m, in FRAME's
+    coordinates] a whole-arm log's joints carry at ``frame``, with each joint's linear friction
+    alongside; ``urdf`` (default: the one the log's import recorded), ``cutoff`` [Hz], ``edge`` [s],
+    ``time_from``/``time_until`` as the command's options. Returns the command's result
+    (``fricli.robot.payload.IdentifiedPayload``: ``mass``, ``com``, ``stderr``, ``verdict``,
+    ``report()`` as ``--json`` prints it without ``log``); ``warn(line)`` gets the command's notes."""
+    from fricli.fitting.optionspec import OptionError
+    from fricli.robot import payload
+
+    checks = {"cutoff": cutoff is None or (isinstance(cutoff, (int, float)) and cutoff > 0),
+              "edge": isinstance(edge, (int, float)) and not isinstance(edge, bool) and edge >= 0}
+    for option, ok in checks.items():
+        if not ok:
+            raise OptionError(f"identify_payload option {option} = {locals()[option]!r}: expected a number "
+                              f"{'> 0' if option == 'cutoff' else '>= 0'}", option)
+    bounds = []
+    for option, bound in (("time_from", time_from), ("time_until", time_until)):
+        try:
+            bounds.append(_bound(bound))
+        except ValueError as exc:
+            raise OptionError(f"identify_payload option {option}: {exc}", option) from None
+    name = "stdin" if log == "-" else os.fspath(log)
+    table, _ = logs.read_table("-" if log == "-" else name)
+    table = timewindow.slice_table(table, timewindow.Window(*bounds), name, warn=warn)
+    return payload.identify_log(table, name, frame, urdf=None if urdf is None else os.fspath(urdf),
+                                cutoff_hz=None if cutoff is None else float(cutoff), edge_s=float(edge))
