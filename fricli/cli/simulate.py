@@ -7,6 +7,7 @@ import click
 from fricli.cli import cli
 from fricli.cli.options import Number, common, say
 from fricli.sim import effects as fx
+from fricli.sim import fleet
 from fricli.sim import simulator
 
 _EFFECT_HELP = "; ".join(f"{name} [{fx.EFFECTS[name].unit}]" for name in sorted(fx.EFFECTS))
@@ -56,7 +57,8 @@ def _fleet_size(ctx, param, value):
                    "See docs/simulator.md.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed.")
 @click.option("--rate", type=Number(min=1.0, max=10000.0), default=100.0, show_default=True,
-              help="Output sample rate [Hz] (friction is integrated at >= 1 kHz).")
+              help="Output sample rate [Hz] (friction is integrated at >= 1 kHz); with --fleet the default is "
+                   f"{fleet.DEFAULT_RATE:g}.")
 @click.option("--duration", type=Number(min=10.0, max=36000.0), default=None,
               help="Length of the extended scenario [s] (default 120).")
 @click.option("--friction-state", type=click.Choice(["base", "shifted"]), default=None,
@@ -119,8 +121,6 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
 def _fleet(size, wearing, seed, rate, output, quiet):
     import concurrent.futures
     import os
-
-    from fricli.sim import fleet
 
     ctx = click.get_current_context()
     given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
