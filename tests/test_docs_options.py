@@ -80,7 +80,8 @@ def test_the_check_finds_an_option_no_page_names():
 
 def test_every_option_says_what_it_does():
     ctx = click.Context(cli)
-    silent = [f"{name} {param.opts[0]}" for name in cli.list_commands(ctx) for param in cli.get_command(ctx, name).params
+    silent = [f"{name} {param.opts[0]}" for name in cli.list_commands(ctx)
+              for param in cli.get_command(ctx, name).params
               if isinstance(param, click.Option) and not (param.help or "").strip()]
     assert silent == []
 
@@ -88,8 +89,8 @@ def test_every_option_says_what_it_does():
 def test_every_page_a_help_text_names_exists():
     """The docs/ files the --help texts point to are there."""
     ctx = click.Context(cli)
-    texts = [cli.help] + [t for name in cli.list_commands(ctx) for t in
-                          (cli.get_command(ctx, name).help, *(getattr(p, "help", "") for p in cli.get_command(ctx, name).params))]
+    commands = [cli.get_command(ctx, name) for name in cli.list_commands(ctx)]
+    texts = [cli.help] + [t for c in commands for t in (c.help, *(getattr(p, "help", "") for p in c.params))]
     named = {m.rstrip(".") for t in texts if t for m in re.findall(r"docs/[\w./-]+", t)}
     assert len(named) > 10
     assert sorted(n for n in named if not (ROOT / n).is_file()) == []

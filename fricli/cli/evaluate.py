@@ -9,8 +9,8 @@ import click
 from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
-from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag, log_reading,
-                                read_log, reading_kwargs, say, warn)
+from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag,
+                                log_reading, read_log, reading_kwargs, say, warn)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:

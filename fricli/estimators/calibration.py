@@ -111,8 +111,9 @@ class Calibration(_Params):
             say(line)
         enforced = report["consistency_enforced"]
         if enforced:
-            warn(f"warning: the linear estimate was physically inconsistent ({'; '.join(enforced['inconsistent_before'])}): "
-                 "fitted again over consistent parameters only")
+            before = "; ".join(enforced["inconsistent_before"])
+            warn(f"warning: the linear estimate was physically inconsistent ({before}): fitted again over consistent "
+                 "parameters only")
         for line in cb.warnings(report):
             warn(f"warning: {line}")
         cb.refuse_inconsistent(cal)
