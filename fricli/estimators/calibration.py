@@ -190,23 +190,16 @@ def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0
     ``time_from``/``time_until`` as the command's options. Returns the command's result
     (``fricli.robot.payload.IdentifiedPayload``: ``mass``, ``com``, ``stderr``, ``verdict``,
     ``report()`` as ``--json`` prints it without ``log``); ``warn(line)`` gets the command's notes."""
-    from fricli.fitting.optionspec import OptionError
+    from fricli.fitting.optionspec import check_values
     from fricli.robot import payload
 
-    checks = {"cutoff": cutoff is None or (isinstance(cutoff, (int, float)) and cutoff > 0),
-              "edge": isinstance(edge, (int, float)) and not isinstance(edge, bool) and edge >= 0}
-    for option, ok in checks.items():
-        if not ok:
-            raise OptionError(f"identify_payload option {option} = {locals()[option]!r}: expected a number "
-                              f"{'> 0' if option == 'cutoff' else '>= 0'}", option)
-    bounds = []
-    for option, bound in (("time_from", time_from), ("time_until", time_until)):
-        try:
-            bounds.append(_bound(bound))
-        except ValueError as exc:
-            raise OptionError(f"identify_payload option {option}: {exc}", option) from None
+    spec = _calibrate_spec()
+    opts = check_values({"cutoff": cutoff, "edge": edge, "time_from": time_from, "time_until": time_until},
+                        {name: spec[name] for name in ("cutoff", "edge", "time_from", "time_until")},
+                        "identify_payload")
+    bounds = [_bound(opts["time_from"]), _bound(opts["time_until"])]
     name = "stdin" if log == "-" else os.fspath(log)
     table, _ = logs.read_table("-" if log == "-" else name)
     table = timewindow.slice_table(table, timewindow.Window(*bounds), name, warn=warn)
     return payload.identify_log(table, name, frame, urdf=None if urdf is None else os.fspath(urdf),
-                                cutoff_hz=None if cutoff is None else float(cutoff), edge_s=float(edge))
+                                cutoff_hz=opts["cutoff"], edge_s=opts["edge"])
