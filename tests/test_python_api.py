@@ -117,3 +117,28 @@ def test_inspect_of_a_file_is_load_models_meta(folder):
     done = invoke("inspect", folder / "inspected.npz")
     assert done.exit_code == 0
     assert json.loads(done.stdout) == json.loads(json.dumps(fricli.load_model(folder / "inspected.npz").meta))
+
+
+def test_evaluate_is_the_command(folder):
+    """``fricli.evaluate`` gives what ``fricli evaluate --json`` prints, the table it prints, and its errors."""
+    import json
+
+    from conftest import invoke
+
+    base, ext = folder / "sample_data" / "joint2_base.parquet", folder / "sample_data" / "joint2_extended_asym.parquet"
+    fricli.Linear().fit(base).save(folder / "linear-eval.npz")
+    done = invoke("evaluate", "--model", f"lin={folder / 'linear-eval.npz'}", "--log", f"asym={ext}", "--lowpass", "5",
+                  "--until", "50%", "--json")
+    assert done.exit_code == 0, done.output
+    run = fricli.evaluate({"lin": folder / "linear-eval.npz"}, {"asym": ext}, lowpass_hz=5, time_until="50%")
+    assert json.loads(json.dumps(run.to_json())) == json.loads(done.stdout)
+    assert run.results[0].friction["n"] == 6000          # --until 50% of the 12,001 rows
+    table = invoke("evaluate", "--model", f"lin={folder / 'linear-eval.npz'}", "--log", f"asym={ext}", "--lowpass", "5",
+                   "--until", "50%")
+    assert run.markdown() in table.stdout
+    for wrong in ({"lowpass_hz": 0}, {"cutoff": -1}, {"time_until": "150%"}, {"speed": 1}):
+        with pytest.raises(fricli.OptionError):
+            fricli.evaluate({"lin": folder / "linear-eval.npz"}, {"asym": ext}, **wrong)
+    with pytest.raises(fricli.FricliError) as missing:
+        fricli.evaluate({"lin": folder / "nope.npz"}, {"asym": ext})
+    assert missing.value.exit_code == invoke("evaluate", "--model", folder / "nope.npz", "--log", ext).exit_code

@@ -6,7 +6,6 @@ import os
 
 import click
 
-from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
 from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag,
@@ -54,15 +53,16 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
       fricli evaluate --model lugre=lugre.npz --model adapted=adapted.npz \\
           --log asym=sample_data/joint2_extended_asym.parquet --json
     """
-    model_paths = _named(model_specs, "model")
-    log_paths = _named(log_specs, "log")
-    results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
-                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid, zero),
-                                  read=lambda log: read_log(log, window))
+    from fricli.estimators import evaluate
+
+    run = evaluate(_named(model_specs, "model"), _named(log_specs, "log"), lowpass_hz=lowpass, joint=joint, kt=kt,
+                   cutoff=cutoff, drop_invalid=drop_invalid, no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero,
+                   time_from=window.start, time_until=window.stop, warn=warn)
+    results = run.results
     if as_json:
-        emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
+        emit_json(run.to_json())
     else:
-        click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+        click.echo(run.markdown())
     several = len({str(r.joint) for r in results}) > 1
     checked = [r for r in results if r.extrapolation is not None]
     outside = [r for r in checked if r.extrapolation["rows"]]
