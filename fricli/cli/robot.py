@@ -217,27 +217,12 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.core.logs import gravity_of, held_of, read_table, write_table
-    from fricli.robot import mapping as mp
-    from fricli.robot.dynamics import load_model
-    from fricli.robot.logterms import add_terms
+    from fricli.robot.logterms import add_dynamics
 
-    if match is None:
-        raise click.UsageError("choose how the log's joints match the URDF's: --match name|order")
-    names = urdf_joint_names(urdf_pairs)
-    payload = None
-    if payload_mass is not None or payload_com is not None or payload_frame is not None:
-        payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
-    table, _ = read_table(log)
+    _, record = add_dynamics(log, urdf, output, match=match, urdf_joints=urdf_joint_names(urdf_pairs),
+                             rotor_inertia=inertia_pairs, gravity=gravity, payload_mass=payload_mass,
+                             payload_com=payload_com, payload_frame=payload_frame, held=held, cutoff_hz=cutoff)
     name = "stdin" if log == "-" else log
-    robot = mp.Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity), payload=payload,
-                       held=tuple(held) or held_of(table.schema))
-    model = load_model(urdf, robot)
-    table, record = add_terms(table, model, name, match=match, urdf_names=names,
-                              rotor_inertia=inertia_pairs,
-                              gravity=robot.gravity, payload=payload,
-                              cutoff_hz=cutoff)
-    write_table(table, output)
     where = "stdout" if output == "-" else output
     for line in _robot_notes(record, name):
         say(line, quiet)
