@@ -138,5 +138,6 @@ def _fleet(size, wearing, seed, rate, output, quiet):
                                       wearing=wearing, seed=seed, rate=rate,
                                       map_fn=lambda f, tasks: pool.map(f, tasks, chunksize=8))
     wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
-    say(f"simulated a fleet of {robots} robots x {joints_per_robot} joints x {days} days "
+    say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
+        f"{'s' * (joints_per_robot != 1)} x {days} day{'s' * (days != 1)} "
         f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)
