@@ -3,7 +3,9 @@
 The library (docs/python-api.md): ``read_log`` reads a log as the commands do, the estimators
 (``LuGre``, ``Linear``, ``GMS``, ``Network``, ``Residual``, ``Diagnosis``, ``Calibration``) fit
 what the commands fit, ``load_model`` reads a model file, ``fit_arm`` runs ``fricli fit-arm``,
-``diagnose_arm`` runs ``fricli diagnose`` on a log's models (``--fix``, ``--calibrate``).
+``diagnose_arm`` runs ``fricli diagnose`` on a log's models (``--fix``, ``--calibrate``),
+``identify_payload`` runs ``fricli payload``, ``evaluate`` runs ``fricli evaluate``, ``import_log``
+runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``.
 The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
@@ -11,10 +13,12 @@ __version__ = "0.2.0"
 
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
            "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "fit_arm",
-           "diagnose_arm", "__version__"]
+           "diagnose_arm", "identify_payload", "evaluate", "Evaluation", "import_log", "add_dynamics",
+           "__version__"]
 
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
-         "diagnose_arm": "fricli.arm_diagnosis"}
+         "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
+         "add_dynamics": "fricli.robot.logterms"}
 
 
 def __getattr__(name: str):

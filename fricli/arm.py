@@ -36,6 +36,7 @@ import numpy as np
 from fricli.core import jobs, logs, metrics, modelset, timewindow
 from fricli.core.atomic import atomic_write_bytes
 from fricli.core.errors import LogError
+from fricli.fitting.optionspec import OptionError
 
 STEPS_FILE = "fit-arm.json"
 CUTOFF_HZ = 10.0        # Hz: the derived qd, qdd of the import (excitation of identification runs < 1 Hz)
@@ -74,14 +75,15 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
     mapping file ``mapping``; ``urdf``: the robot's (CAD) URDF; ``validate``: held-out recordings
     of the same robot, each read with the same mapping; ``holdout``: the share of the recording's
     time held out (default ``HOLDOUT`` without ``validate``, 0 with); ``prefix``: of the C names;
-    ``say(line)``: progress. LockedError when another run holds ``out``."""
+    ``say(line)``: progress. OptionError naming the option for ``holdout`` out of (0, 1) or given
+    with ``validate``; LogError naming an input file that is not there (nothing is written then);
+    LockedError when another run holds ``out``."""
+    if holdout is not None and validate:
+        raise OptionError("holdout applies without validate (the validation recordings are held out)", "holdout")
     share = (0.0 if validate else HOLDOUT) if holdout is None else float(holdout)
-    if not 0.0 <= share < 1.0:
-        raise ValueError(f"holdout {share}: expected a share in [0, 1)")
-    if share and validate:
-        raise ValueError("give validation recordings or a held-out share of the recording, not both")
-    if not share and not validate:
-        raise ValueError("nothing held out: give validation recordings or a held-out share above 0")
+    if not (0.0 < share < 1.0 or validate):
+        raise OptionError(f"fit_arm option holdout = {holdout!r}: expected a share in (0, 1)", "holdout")
+    check_inputs(list(recordings), mapping, urdf, list(validate))
     os.makedirs(out, exist_ok=True)
     run = _Steps(out, if_changed, say)
     with jobs.output_lock(os.path.join(out, STEPS_FILE)):

@@ -183,3 +183,24 @@ def test_a_full_device_is_an_output_error():
     with pytest.raises(OutputError, match="cannot write /dev/full: No space left on device"):
         atomic.atomic_write_bytes("/dev/full", b"x" * 100_000)
     assert stat.S_ISCHR(os.stat("/dev/full").st_mode)
+
+
+def test_an_output_that_is_a_symbolic_link_stays_one(tmp_path):
+    """-o onto a link writes the file it points to (atomically, beside it); the link is kept."""
+    data = tmp_path / "data"
+    data.mkdir()
+    target = data / "model.npz"
+    target.write_bytes(b"before")
+    link = tmp_path / "current.npz"
+    link.symlink_to(target)
+    atomic.atomic_write_bytes(str(link), b"after")
+    assert link.is_symlink() and os.readlink(link) == str(target)
+    assert target.read_bytes() == b"after"
+    assert sorted(p.name for p in data.iterdir()) == ["model.npz"]
+    dangling = tmp_path / "next.npz"
+    dangling.symlink_to(data / "new.npz")
+    atomic.atomic_write_bytes(str(dangling), b"new")
+    assert dangling.is_symlink() and (data / "new.npz").read_bytes() == b"new"
+    (tmp_path / "gone").symlink_to(tmp_path / "nope" / "x.npz")
+    with pytest.raises(OutputError, match="cannot write .*gone: folder .*nope does not exist"):
+        atomic.atomic_write_bytes(str(tmp_path / "gone"), b"")

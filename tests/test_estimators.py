@@ -5,6 +5,7 @@ model, a saved model loads and predicts the same, and save writes the bytes of t
 model file with the same options on the same log."""
 
 import hashlib
+import json
 import shutil
 
 import numpy as np
@@ -267,6 +268,11 @@ def test_calibration_writes_the_commands_urdf(tmp_path):
             "--from", "10%", "-o",
             tmp_path / "command.urdf", "-q")
     assert (tmp_path / "estimator.urdf").read_bytes() == (tmp_path / "command.urdf").read_bytes()
+    reports = [json.loads((tmp_path / f"{name}.calibration.json").read_text()) for name in ("estimator", "command")]
+    for report, name in zip(reports, ("estimator", "command")):      # the report beside the URDF, as the command's
+        assert report.pop("output") == str(tmp_path / f"{name}.urdf")
+        assert report.pop("report") == str(tmp_path / f"{name}.calibration.json")
+    assert reports[0] == reports[1]
     assert set(est.friction_) == {"1", "2", "3", "4"} and est.report_["consistency"]["ok"]
     for name, value in (("friction", "coulomb"), ("prior", "strong"), ("gravity", (0, 0)), ("edge", -1.0),
                         ("urdf_joints", ["j1"]), ("time_until", "120%")):

@@ -78,3 +78,18 @@ def test_validation_recordings_of_one_name_get_files_of_their_own():
     from fricli.arm import _names
 
     assert _names(["a/run.csv", "b/run.csv", "c/other.csv", "d/run.csv"]) == ["run", "run-2", "other", "run-3"]
+
+
+def test_the_python_call_refuses_what_the_command_refuses(tmp_path):
+    """fricli.fit_arm: the same errors as fit-arm, as exception types of the same exit codes."""
+    import fricli
+
+    with pytest.raises(fricli.OptionError) as both:
+        fricli.fit_arm(["run.csv"], MAPPING, "r.urdf", tmp_path / "o", validate=["day2.csv"], holdout=0.3)
+    assert both.value.option == "holdout" and both.value.exit_code == errors.USAGE
+    with pytest.raises(fricli.OptionError):
+        fricli.fit_arm(["run.csv"], MAPPING, "r.urdf", tmp_path / "o", holdout=0)
+    with pytest.raises(fricli.FricliError) as missing:
+        fricli.fit_arm([tmp_path / "nothing.csv"], MAPPING, MAPPING, tmp_path / "o")
+    assert missing.value.exit_code == errors.INPUT and "nothing.csv" in str(missing.value)
+    assert not (tmp_path / "o").exists()

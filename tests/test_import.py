@@ -524,3 +524,32 @@ def test_a_time_step_no_controller_samples_at_is_flagged(tmp_path):
     (tmp_path / "map.toml").write_text(MAPPING)
     res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
     assert res.returncode == 0 and "median time step" not in res.stderr
+
+
+def test_the_python_call_is_the_command(tmp_path, monkeypatch):
+    """``fricli.import_log`` writes the command's bytes, says what it says on stderr, and refuses
+    what it refuses (OptionError naming the option, before anything is written)."""
+    import fricli
+    from fricli.fitting.optionspec import OptionError
+
+    lines = rows()
+    lines[4] = "100.04,0.1"
+    (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", "cmd.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    monkeypatch.chdir(tmp_path)
+    done = fricli.import_log("rec.csv", "map.toml", kt={"1": 3.0}, output="call.parquet")
+    cmd = pq.read_table(tmp_path / "cmd.parquet")
+    call = pq.read_table(tmp_path / "call.parquet")
+    assert call.equals(cmd) and done.table.equals(cmd) and done.meta["rows"] == 39
+    assert call.schema.metadata == cmd.schema.metadata
+    assert [line for _, line in done.notices] == [line for line in res.stderr.splitlines() if line.startswith(
+        ("warning:", "note:"))]
+    for kwargs, option in (({"mapping": None}, "mapping"), ({"topic": "/joint_states"}, "topic"),
+                           ({"held": ("wrist",)}, "held"), ({"payload_mass": 2.0}, "payload_frame")):
+        args = {"mapping": str(tmp_path / "map.toml"), **kwargs}
+        with pytest.raises(OptionError) as err:
+            fricli.import_log(str(tmp_path / "rec.csv"), output=str(tmp_path / "refused.parquet"), **args)
+        assert err.value.option == option
+    assert not (tmp_path / "refused.parquet").exists()

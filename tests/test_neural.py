@@ -693,6 +693,20 @@ def test_what_is_kept_does_not_depend_on_which_training_runs_ahead(harmonic, mon
         np.testing.assert_array_equal(aa[key], ab[key])
 
 
+def test_what_the_steps_after_training_load_is_loaded_while_the_probe_trains(harmonic, monkeypatch):
+    """The prior fit's imports run in this process once the probe has started, before the model's
+    training (which waits on the probe anyway): called once, here, and the same network."""
+    import os
+
+    calls = []
+    monkeypatch.setattr(learning, "load_prior_fit", lambda: calls.append(os.getpid()))
+    model, summary = learning.train_base(load(harmonic["log"]), steps=300, seed=0)
+    assert calls == [os.getpid()]
+    np.testing.assert_array_equal(model.net_.theta, harmonic["model"].net_.theta)
+    learning.train_base(load(harmonic["log"]), steps=300, seed=0, prior=False)
+    assert calls == [os.getpid()]      # without the prior there is nothing to load
+
+
 def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(harmonic):
     """The probe ends once its held-out loss has not improved by 0.1 % over its patience (given,
     else PATIENCE_SHARE of the steps); the model trains on past the probe's best record and

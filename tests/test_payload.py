@@ -120,6 +120,14 @@ def test_the_printed_declaration_reproduces_the_torques(tmp_path):
     assert np.max(np.abs(rb(robot) - rb(truth))) < 1e-3 * np.max(np.abs(rb(truth)))
     window = fricli("payload", "dyn.parquet", "--frame", "flange", "--until", "50%", "--json", "-q", cwd=tmp_path)
     assert window.returncode == 0 and json.loads(window.stdout)["rows"] < report["rows"]
+    # the same from Python: fricli.identify_payload is the command (docs/python-api.md)
+    import fricli as library
+
+    found = library.identify_payload(tmp_path / "dyn.parquet", "flange", time_until="50%")
+    assert json.loads(json.dumps({"log": "dyn.parquet", **found.report()})) == json.loads(window.stdout)
+    with pytest.raises(library.OptionError) as err:
+        library.identify_payload(tmp_path / "dyn.parquet", "flange", edge=-1)
+    assert err.value.option == "edge"
 
 
 def test_bad_input_is_one_line(tmp_path):

@@ -83,3 +83,62 @@ def test_every_public_name_is_there():
     assert set(fricli.__all__) <= set(dir(fricli))
     with pytest.raises(AttributeError):
         fricli.train_base
+
+
+def test_read_log_reads_stdin_as_the_commands_do():
+    """``read_log("-")`` reads the log from stdin (as LOG "-" of every command), named stdin."""
+    code = "import fricli; log = fricli.read_log('-'); print(log.name, len(log.signals['t']))"
+    with open(SAMPLE / "joint2_adapt.parquet", "rb") as fh:
+        out = subprocess.run([sys.executable, "-c", code], stdin=fh, capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["stdin", "3582"]
+
+
+def test_every_command_is_a_call_or_listed_without_one():
+    """Each command is in the page's table of calls or in its list of commands without a call (estimate-ext
+    in both: its arrays are ``external_torque``, its file to file is the command's)."""
+    from fricli.cli import COMMANDS
+
+    text = PAGE.read_text()
+    table = set(re.findall(r"^\|[^|]*\| `fricli ([a-z-]+)", text, re.M)) | {"fit-arm"}
+    without = re.search(r"The other commands have no call in `fricli` yet: (.*?)\.\n", text, re.S).group(1)
+    listed = set(re.findall(r"`([a-z-]+)`", without))
+    assert table | listed == set(COMMANDS), sorted(set(COMMANDS) ^ (table | listed))
+    assert table & listed == {"estimate-ext"}
+
+
+def test_inspect_of_a_file_is_load_models_meta(folder):
+    """What python-api.md says: ``fricli inspect FILE`` prints ``load_model(FILE).meta``."""
+    import json
+
+    from conftest import invoke
+
+    fricli.Linear().fit(folder / "sample_data" / "joint2_base.parquet").save(folder / "inspected.npz")
+    done = invoke("inspect", folder / "inspected.npz")
+    assert done.exit_code == 0
+    assert json.loads(done.stdout) == json.loads(json.dumps(fricli.load_model(folder / "inspected.npz").meta))
+
+
+def test_evaluate_is_the_command(folder):
+    """``fricli.evaluate`` gives what ``fricli evaluate --json`` prints, the table it prints, and its errors."""
+    import json
+
+    from conftest import invoke
+
+    base, ext = folder / "sample_data" / "joint2_base.parquet", folder / "sample_data" / "joint2_extended_asym.parquet"
+    fricli.Linear().fit(base).save(folder / "linear-eval.npz")
+    done = invoke("evaluate", "--model", f"lin={folder / 'linear-eval.npz'}", "--log", f"asym={ext}", "--lowpass", "5",
+                  "--until", "50%", "--json")
+    assert done.exit_code == 0, done.output
+    run = fricli.evaluate({"lin": folder / "linear-eval.npz"}, {"asym": ext}, lowpass_hz=5, time_until="50%")
+    assert json.loads(json.dumps(run.to_json())) == json.loads(done.stdout)
+    assert run.results[0].friction["n"] == 6000          # --until 50% of the 12,001 rows
+    table = invoke("evaluate", "--model", f"lin={folder / 'linear-eval.npz'}", "--log", f"asym={ext}", "--lowpass", "5",
+                   "--until", "50%")
+    assert run.markdown() in table.stdout
+    for wrong in ({"lowpass_hz": 0}, {"cutoff": -1}, {"time_until": "150%"}, {"speed": 1}):
+        with pytest.raises(fricli.OptionError):
+            fricli.evaluate({"lin": folder / "linear-eval.npz"}, {"asym": ext}, **wrong)
+    with pytest.raises(fricli.FricliError) as missing:
+        fricli.evaluate({"lin": folder / "nope.npz"}, {"asym": ext})
+    assert missing.value.exit_code == invoke("evaluate", "--model", folder / "nope.npz", "--log", ext).exit_code

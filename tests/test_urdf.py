@@ -355,7 +355,7 @@ def test_ur10e_import_with_urdf_as_documented(tmp_path):
     assert (folder / "ur10e.urdf").exists()
 
 
-def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
+def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng, monkeypatch):
     pytest.importorskip("pinocchio")
     t, q, qd, qdd = write_case(tmp_path, rng)
     assert run("import", "rec.csv", "--mapping", "map.toml", "-o", "plain.parquet", cwd=tmp_path).returncode == 0
@@ -370,6 +370,21 @@ def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng):
         values = table.column(column).to_numpy()
         close(np.column_stack([values[:n], values[n:]]), ref)
     assert json.loads(table.schema.metadata[b"fricli.dynamics"])["joints"] == {"a": "shoulder", "b": "elbow"}
+    # the Python call writes the command's file
+    import fricli
+    from fricli.fitting.optionspec import OptionError
+
+    monkeypatch.chdir(tmp_path)
+    made, record = fricli.add_dynamics("plain.parquet", "two_link.urdf", "call.parquet", match="name",
+                                       urdf_joints={"a": "shoulder", "b": "elbow"}, gravity=(0, -9.81, 0),
+                                       rotor_inertia={"a": 0.5, "b": 1.0})
+    assert pq.read_table(tmp_path / "call.parquet").equals(table, check_metadata=True)
+    assert made.equals(table, check_metadata=True)
+    assert record == json.loads(table.schema.metadata[b"fricli.dynamics"])
+    for kwargs, option in (({}, "match"), ({"match": "order", "payload_mass": 1.0}, "payload_frame")):
+        with pytest.raises(OptionError) as err:
+            fricli.add_dynamics("plain.parquet", "two_link.urdf", **kwargs)
+        assert err.value.option == option
     # joints sampled at different times cannot share one robot model
     shifted = table.set_column(0, table.schema.field("t"), [np.concatenate([t, t + 0.001])])
     pq.write_table(shifted, tmp_path / "shifted.parquet")

@@ -7,6 +7,7 @@ import click
 from fricli.cli import cli
 from fricli.cli.options import Cutoff, Folder, Number, common, emit_json, if_changed_option, json_flag, say, warn
 from fricli.core import errors
+from fricli.fitting.optionspec import OptionError
 
 
 @cli.command("fit-arm")
@@ -45,11 +46,12 @@ def fit_arm_cmd(recordings, mapping, urdf, output, validate, holdout, cutoff, pr
     """
     from fricli import arm
 
-    if holdout is not None and validate:
-        raise click.UsageError("--holdout applies without --validate (the validation recordings are held out)")
-    arm.check_inputs(list(recordings), mapping, urdf, list(validate))
-    report = arm.fit_arm(list(recordings), mapping, urdf, output, validate=list(validate), holdout=holdout,
-                         cutoff_hz=cutoff, prefix=prefix, if_changed=if_changed, say=lambda s: say(s, quiet))
+    try:
+        report = arm.fit_arm(list(recordings), mapping, urdf, output, validate=list(validate), holdout=holdout,
+                             cutoff_hz=cutoff, prefix=prefix, if_changed=if_changed, say=lambda s: say(s, quiet))
+    except OptionError as exc:
+        raise click.UsageError("--holdout applies without --validate (the validation recordings are held out)"
+                               if validate else f"--holdout: {exc}") from None
     for level, line in report.notices:
         if level == "warning":
             warn(line if line.startswith("warning") else f"warning: {line}")

@@ -15,10 +15,12 @@ from fricli.cli.options import Folder, common, say
               help="Folder for the models, tables and report.")
 @click.option("--data", default="sample_data", show_default=True, type=click.Path(file_okay=False),
               help="Folder with the sample logs; missing logs are simulated (same seeds, same data).")
-@click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True)
+@click.option("--joint", type=click.Choice(["2", "4"]), default="2", show_default=True,
+              help="Which joint's sample logs (joint2_*.parquet or joint4_*.parquet).")
 @click.option("--steps", type=click.IntRange(min=1), default=None,
               help="Adam steps for each base network [default: train-base's, with a cosine learning rate].")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of every network's training (train-base, adapt).")
 @common
 def demo_cmd(output, data, joint, steps, seed, quiet):
     """The whole method on the sample data: identify LuGre, train NN_base and the Selmic and

@@ -6,11 +6,10 @@ import os
 
 import click
 
-from fricli.applying import evaluation
 from fricli.core import logs
 from fricli.cli import cli
-from fricli.cli.options import (Folder, Number, common, emit_json, extrapolation_line, json_flag, log_reading, read_log,
-                                reading_kwargs, say, warn)
+from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag,
+                                log_reading, read_log, reading_kwargs, say, warn)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -33,7 +32,7 @@ def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
 @click.option("--log", "log_specs", multiple=True, required=True, metavar="[NAME=]LOG.parquet",
               help="A log to evaluate on (repeatable).")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
-              help="Zero-phase low-pass [Hz] on the external-torque estimate.")
+              help=LOWPASS_HELP)
 @log_reading
 @json_flag
 @common
@@ -54,15 +53,16 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
       fricli evaluate --model lugre=lugre.npz --model adapted=adapted.npz \\
           --log asym=sample_data/joint2_extended_asym.parquet --json
     """
-    model_paths = _named(model_specs, "model")
-    log_paths = _named(log_specs, "log")
-    results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass,
-                                  read_kwargs=reading_kwargs(joint, kt, cutoff, drop_invalid, zero),
-                                  read=lambda log: read_log(log, window))
+    from fricli.estimators import evaluate
+
+    run = evaluate(_named(model_specs, "model"), _named(log_specs, "log"), lowpass_hz=lowpass, joint=joint, kt=kt,
+                   cutoff=cutoff, drop_invalid=drop_invalid, no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero,
+                   time_from=window.start, time_until=window.stop, warn=warn)
+    results = run.results
     if as_json:
-        emit_json(evaluation.to_json(results, model_paths, log_paths, lowpass))
+        emit_json(run.to_json())
     else:
-        click.echo(evaluation.markdown_table(results, list(model_paths), list(log_paths)))
+        click.echo(run.markdown())
     several = len({str(r.joint) for r in results}) > 1
     checked = [r for r in results if r.extrapolation is not None]
     outside = [r for r in checked if r.extrapolation["rows"]]
@@ -81,8 +81,7 @@ def evaluate_cmd(model_specs, log_specs, lowpass, joint, kt, cutoff, drop_invali
 @click.argument("log")
 @click.option("-o", "--output", required=True, type=Folder(), help="Folder for the figures and index.html.")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
-              help="Zero-phase low-pass [Hz] on the external-torque estimate (default: none, as in evaluate and "
-                   "estimate-ext; --lowpass 5 smooths it).")
+              help=LOWPASS_HELP)
 @log_reading
 @common
 def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, zero, window, quiet):

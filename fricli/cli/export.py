@@ -5,7 +5,9 @@ from __future__ import annotations
 import click
 
 from fricli.cli import cli
+from fricli.applying.observer import Adaptation
 from fricli.cli.options import Number, common, output_option, say
+from fricli.cli.replay import GAIN_HELP, TIME_CONSTANT_HELP
 
 
 @cli.command("export")
@@ -23,9 +25,10 @@ from fricli.cli.options import Number, common, output_option, say
                                             "--thresholds), as fricli replay --adapt.")
 @click.option("--adapt-offset", is_flag=True, help="With --adapt: adapt an offset too, as fricli replay --adapt-offset.")
 @click.option("--time-constant", type=Number(min=0, min_open=True), default=None,
-              help="With --adapt: memory of the adaptation [s] (default: fricli replay's).")
+              help=f"With --adapt: {TIME_CONSTANT_HELP[0].lower()}{TIME_CONSTANT_HELP[1:]} Default: "
+                   f"{Adaptation().time_constant:g}, as fricli replay's.")
 @click.option("--gain", type=Number(min=0, min_open=True), default=None,
-              help="With --observer: observer gain [1/s] (default: the thresholds file's, else fricli replay's).")
+              help=f"With --observer: {GAIN_HELP[0].lower()}{GAIN_HELP[1:]}")
 @common
 def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_offset, time_constant, gain, quiet):
     """Export MODEL (a model file, or a folder with one .npz per joint) as dependency-free C99.

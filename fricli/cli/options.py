@@ -234,6 +234,10 @@ def progress_enabled(quiet: bool) -> bool:
     return not quiet and sys.stderr.isatty()
 
 
+LOWPASS_HELP = ("Zero-phase Butterworth low-pass (4th order) of the external-torque estimate tau_ext_pred at this "
+                "cut-off [Hz]; default: none (5 smooths it).")
+
+
 def read_log(log: str, window: timewindow.Window | None = None):
     """(table, sha256) of LOG (- for stdin) with the rows of ``window`` (--from/--until); the
     sha256 is the whole file's (the window is recorded with the options)."""

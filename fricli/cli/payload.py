@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fricli.cli.options import Number, common, emit_json, read_log, say, window_options
+from fricli.cli.options import Number, common, emit_json, say, warn, window_options
 
 
 @click.command("payload")
@@ -13,7 +13,7 @@ from fricli.cli.options import Number, common, emit_json, read_log, say, window_
 @click.option("--urdf", default=None, metavar="ROBOT.urdf",
               help="The robot description (default: the one the log was imported with).")
 @click.option("--cutoff", type=Number(min=0, min_open=True), default=None,
-              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's).")
+              help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's 50).")
 @click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
@@ -25,18 +25,18 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
     A point mass and its centre of mass in FRAME's coordinates are fitted to what the robot model
     leaves of tau_m, with each joint's linear friction alongside (rows in motion). A payload the
     import declared is left out of the model, so the whole payload is identified. Prints the
-    import options that declare it. See docs/calibration.md.
+    import options that declare it. See docs/payload.md.
 
     \b
     Example:
       fricli payload loaded.parquet --frame tool0
       fricli import loaded.csv --mapping map.toml --urdf arm.urdf --payload-mass 2.47 --payload-com 0.03 0.17 0.05 --payload-frame tool0
     """
-    from fricli.robot import payload
+    from fricli.estimators import identify_payload
 
-    table, _ = read_log(log, window)
+    found = identify_payload(log, frame, urdf=urdf, cutoff=cutoff, edge=edge, time_from=window.start,
+                             time_until=window.stop, warn=warn)
     name = "stdin" if log == "-" else log
-    found = payload.identify_log(table, name, frame, urdf=urdf, cutoff_hz=cutoff, edge_s=edge)
     for line in summary(found):
         say(line, quiet)
     if as_json:

@@ -7,8 +7,8 @@ import click
 from fricli.applying import predicting
 from fricli.core import modelset
 from fricli.cli import cli
-from fricli.cli.options import (Number, common, emit_json, extrapolation_line, json_flag, log_reading, output_option,
-                                progress_enabled, say, warn)
+from fricli.cli.options import (LOWPASS_HELP, Number, common, emit_json, extrapolation_line, json_flag, log_reading,
+                                output_option, progress_enabled, say, warn)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -123,7 +123,7 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, zero, windo
 @click.argument("log")
 @output_option(help="Output log (Parquet; - for stdout).")
 @click.option("--lowpass", type=Number(min=0, min_open=True), default=None,
-              help="Zero-phase Butterworth low-pass of tau_ext_pred at this cut-off [Hz] (reads the log whole).")
+              help=LOWPASS_HELP + " Reads the log whole.")
 @log_reading
 @batch_option
 @flag_option

@@ -16,10 +16,13 @@ def urdf_option(f):
                              "recorded. Without it: the per-joint form on the log's tau_g and tau_dyn.")(f)
 
 
+GAIN_HELP = (f"Observer gain K [1/s] (time constant 1/K). Default: the thresholds file's, else "
+             f"{observer.DEFAULT_GAIN:g}.")
+TIME_CONSTANT_HELP = "Memory of the adaptation [s]: forgetting factor exp(-dt / T)."
+
+
 def gain_option(f):
-    return click.option("--gain", type=Number(min=0, min_open=True), default=None,
-                        help=f"Observer gain K [1/s] (time constant 1/K). Default: the thresholds file's, else "
-                             f"{observer.DEFAULT_GAIN:g}.")(f)
+    return click.option("--gain", type=Number(min=0, min_open=True), default=None, help=GAIN_HELP)(f)
 
 
 def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: float | None, gain: float | None):
@@ -48,7 +51,7 @@ def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: fl
 @click.option("--thresholds", "thresholds_path", type=click.Path(), default=None,
               help="Contact thresholds of fricli thresholds: adds the flags and the events.")
 @click.option("--time-constant", type=Number(min=0, min_open=True), default=observer.Adaptation().time_constant,
-              show_default=True, help="Memory of the adaptation [s]: forgetting factor exp(-dt / T).")
+              show_default=True, help=TIME_CONSTANT_HELP)
 @gain_option
 @robot_model_flags
 @json_flag
@@ -96,7 +99,9 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
 @click.argument("logs", nargs=-1, required=True, type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output thresholds file (JSON).")
 @urdf_option
-@gain_option
+@click.option("--gain", type=Number(min=0, min_open=True), default=observer.DEFAULT_GAIN, show_default=True,
+              help="Observer gain K [1/s] (time constant 1/K) of the replay the thresholds are calibrated on; "
+                   "written into the file, where replay and export --observer take it from.")
 @click.option("--quantile", type=Number(min=0, max=1, min_open=True), default=observer.DEFAULT_QUANTILE,
               show_default=True, help="Quantile of |tau_ext_pred| over the logs' rows, per joint.")
 @click.option("--margin", type=Number(min=0, min_open=True), default=observer.DEFAULT_MARGIN, show_default=True,
@@ -128,7 +133,7 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
     """
     from fricli.robot import replay
 
-    thr = replay.calibrate(model, list(logs), urdf, gain if gain is not None else observer.DEFAULT_GAIN, quantile,
+    thr = replay.calibrate(model, list(logs), urdf, gain, quantile,
                            margin, release, moving_speed, zero=zero, persistence=persistence, level=not no_level)
     replay.write_thresholds(thr, output)
     if not quiet:

@@ -3,7 +3,6 @@ fricli dynamics: the URDF terms for a log that exists."""
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import click
 
@@ -153,9 +152,8 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
       fricli import rosbag2_2026_01_01-12_00_00 --urdf robot.urdf -o run.parquet
       fricli import positions.csv torques.csv --mapping wrist.toml -o arm.parquet   # motor side, docs/drives.md
     """
-    from fricli.core.logs import read_bytes, write_table
+    from fricli.core.logs import read_bytes
     from fricli.robot import importing
-    from fricli.robot import mapping as mp
 
     recording = recordings[0]
     if template:
@@ -174,34 +172,16 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
             atomic_write_bytes(output, text.encode())
             say(f"wrote a skeleton mapping for {urdf} -> {output}: fill in and check it (docs/robot-import.md)", quiet)
         return
+    result = importing.import_log(list(recordings), mapping_path, output=output, urdf=urdf, topic=topic,
+                                  kt=kt_pairs, rotor_inertia=inertia_pairs, match=match, gravity=gravity,
+                                  payload_mass=payload_mass, payload_com=payload_com, payload_frame=payload_frame,
+                                  held=held, cutoff_hz=cutoff, drop_backward=drop_backward)
     bag = importing.is_bag(recording)
-    if len(recordings) > 1 and (bag or mapping_path is None):
-        raise click.UsageError("several recordings are the files of one text recording: give --mapping MAP.toml "
-                               "with their 'files' (docs/robot-import.md)")
-    if mapping_path is None and not bag:
-        if recording != "-" and not Path(recording).exists():
-            raise LogError(f"{recording}: no such file, folder or bag")
-        raise click.UsageError("a text recording needs --mapping MAP.toml (docs/robot-import.md)")
-    if topic is not None and not bag:
-        raise click.UsageError("--topic applies to a ROS bag")
-    mapping = mp.load_mapping(mapping_path, bag=bag) if mapping_path else mp.Mapping(time=None, joints=[])
-    if (held or mapping.held) and urdf is None:
-        raise click.UsageError("--hold (robot.hold) names URDF joints: it applies with --urdf")
-    if len(recordings) > 1 or mapping.files:
-        importing.check_files(recordings, mapping, mapping_path)
-        if "-" in recordings:
-            raise click.UsageError("the files of a recording in several files cannot be read from stdin")
-    payload_given = payload_mass is not None or payload_com is not None or payload_frame is not None
-    payload = _payload(mp, mapping.payload, payload_mass, payload_com, payload_frame) if payload_given else None
-    result = importing.import_log(list(recordings), mapping, urdf=urdf, topic=topic, kt=kt_pairs,
-                                  rotor_inertia=inertia_pairs, match=match, gravity=gravity, payload=payload,
-                                  held=held, cutoff_hz=cutoff, drop_backward=drop_backward, mapping_name=mapping_path)
     for level, line in result.notices:
         if level == "warning":
             warn(line)
         else:
             say(line, quiet)
-    write_table(result.table, output)
     robot = result.meta["robot"]
     extra = ""
     if robot:
@@ -237,27 +217,12 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     Example:
       fricli dynamics run.parquet --urdf ur10e.urdf --match order --rotor-inertia 2=3.7434 -o run2.parquet
     """
-    from fricli.core.logs import gravity_of, held_of, read_table, write_table
-    from fricli.robot import mapping as mp
-    from fricli.robot.dynamics import load_model
-    from fricli.robot.logterms import add_terms
+    from fricli.robot.logterms import add_dynamics
 
-    if match is None:
-        raise click.UsageError("choose how the log's joints match the URDF's: --match name|order")
-    names = urdf_joint_names(urdf_pairs)
-    payload = None
-    if payload_mass is not None or payload_com is not None or payload_frame is not None:
-        payload = _payload(mp, None, payload_mass, payload_com, payload_frame)
-    table, _ = read_table(log)
+    _, record = add_dynamics(log, urdf, output, match=match, urdf_joints=urdf_joint_names(urdf_pairs),
+                             rotor_inertia=inertia_pairs, gravity=gravity, payload_mass=payload_mass,
+                             payload_com=payload_com, payload_frame=payload_frame, held=held, cutoff_hz=cutoff)
     name = "stdin" if log == "-" else log
-    robot = mp.Mapping(time=None, joints=[], gravity=gravity_of(table.schema, gravity), payload=payload,
-                       held=tuple(held) or held_of(table.schema))
-    model = load_model(urdf, robot)
-    table, record = add_terms(table, model, name, match=match, urdf_names=names,
-                              rotor_inertia=inertia_pairs,
-                              gravity=robot.gravity, payload=payload,
-                              cutoff_hz=cutoff)
-    write_table(table, output)
     where = "stdout" if output == "-" else output
     for line in _robot_notes(record, name):
         say(line, quiet)

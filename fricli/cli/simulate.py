@@ -7,6 +7,7 @@ import click
 from fricli.cli import cli
 from fricli.cli.options import Number, common, say
 from fricli.sim import effects as fx
+from fricli.sim import fleet
 from fricli.sim import simulator
 
 _EFFECT_HELP = "; ".join(f"{name} [{fx.EFFECTS[name].unit}]" for name in sorted(fx.EFFECTS))
@@ -52,11 +53,12 @@ def _fleet_size(ctx, param, value):
               help="External payload measured as tau_ext (not in tau_g): sym zero-mean, asym one-sided.")
 @click.option("--effect", "effect_specs", multiple=True, metavar="NAME[=STRENGTH]", callback=_effects,
               help=f"Add an undeclared effect (repeatable): {_EFFECT_HELP}; named as fricli diagnose names what it "
-                   f"finds ({', '.join(f'{a} is {n}' for a, n in fx.ALIASES.items())}, the older names, are "
-                   "accepted). See docs/simulator.md.")
+                   f"finds; the older names are accepted ({', '.join(f'{a} for {n}' for a, n in fx.ALIASES.items())}). "
+                   "See docs/simulator.md.")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed.")
 @click.option("--rate", type=Number(min=1.0, max=10000.0), default=100.0, show_default=True,
-              help="Output sample rate [Hz] (friction is integrated at >= 1 kHz).")
+              help="Output sample rate [Hz] (friction is integrated at >= 1 kHz); with --fleet the default is "
+                   f"{fleet.DEFAULT_RATE:g}.")
 @click.option("--duration", type=Number(min=10.0, max=36000.0), default=None,
               help="Length of the extended scenario [s] (default 120).")
 @click.option("--friction-state", type=click.Choice(["base", "shifted"]), default=None,
@@ -73,7 +75,7 @@ def _fleet_size(ctx, param, value):
 @click.option("--contact", "contacts", multiple=True, callback=_contacts,
               metavar="START,TORQUE,DURATION",
               help="An external torque of TORQUE [Nm] from START for DURATION [s] (repeatable): the joint keeps "
-                   "its path, the motor torque takes the push, tau_ext holds it (docs/contact-detection.md).")
+                   "its path, the motor torque takes the push, tau_ext holds it (docs/simulator.md, Contacts).")
 @click.option("-o", "--output", required=True, help="Output Parquet log (- for stdout); with --fleet a folder.")
 @common
 def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, friction_state, thin, fleet_size, wearing,
@@ -120,8 +122,6 @@ def _fleet(size, wearing, seed, rate, output, quiet):
     import concurrent.futures
     import os
 
-    from fricli.sim import fleet
-
     ctx = click.get_current_context()
     given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
                                                     "friction_state", "thin")
@@ -138,5 +138,6 @@ def _fleet(size, wearing, seed, rate, output, quiet):
                                       wearing=wearing, seed=seed, rate=rate,
                                       map_fn=lambda f, tasks: pool.map(f, tasks, chunksize=8))
     wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
-    say(f"simulated a fleet of {robots} robots x {joints_per_robot} joints x {days} days "
+    say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
+        f"{'s' * (joints_per_robot != 1)} x {days} day{'s' * (days != 1)} "
         f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)

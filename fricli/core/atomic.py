@@ -14,6 +14,8 @@ again under a new name. Each writer renames its own complete file, so the output
 complete file of the writer that renamed last. ``flock`` is local: writers on different machines
 sharing a network file system without it are not kept apart.
 
+An output that is a symbolic link stays one: the file it points to is replaced, the same way.
+
 The temporary file is created with mode 0o666 and the kernel applies the umask, so the output
 gets the usual permissions without the process umask being read or changed.
 """
@@ -113,9 +115,14 @@ def atomic_open(path: str, *, binary: bool = False) -> Iterator[BinaryIO]:
         except OSError as exc:
             raise OutputError(f"cannot write to stdout: {exc.strerror or exc}") from exc
         return
+    if os.path.islink(path):
+        # the link stays a link: its target is replaced (a dangling link's target is created)
+        shown, path = path, os.path.realpath(path)
+    else:
+        shown = path
     folder, name = os.path.split(os.path.abspath(path))
     if not os.path.isdir(folder):
-        raise OutputError(f"cannot write {path}: folder {folder} does not exist")
+        raise OutputError(f"cannot write {shown}: folder {folder} does not exist")
     if os.path.exists(path) and not os.path.isdir(path) and not stat.S_ISREG(os.stat(path).st_mode):
         yield from _write_through(path)     # a device or a FIFO: written as it is, never replaced
         return

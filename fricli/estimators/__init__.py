@@ -9,8 +9,10 @@ path (read as the commands read it). See docs/python-api.md.
 """
 
 from fricli.estimators.base import Model, NotFittedError, external_torque, load_model, read_log
-from fricli.estimators.calibration import Calibration
+from fricli.estimators.calibration import Calibration, identify_payload
+from fricli.estimators.evaluating import Evaluation, evaluate
 from fricli.estimators.jobs import GMS, Diagnosis, Linear, LuGre, Network, Residual
 
 __all__ = ["read_log", "load_model", "external_torque", "Model", "NotFittedError", "LuGre", "Linear", "GMS",
-           "Network", "Residual", "Diagnosis", "Calibration"]
+           "Network", "Residual", "Diagnosis", "Calibration", "identify_payload",
+           "evaluate", "Evaluation"]

@@ -54,7 +54,7 @@ def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_i
             raise OptionError(f"read_log option {option}: {exc}", option) from None
     window = timewindow.Window(*bounds)
     name = "stdin" if path == "-" else os.fspath(path)
-    table, digest = logs.read_table(name)
+    table, digest = logs.read_table("-" if path == "-" else name)
     table = timewindow.slice_table(table, window, name, warn=warn)
     data = runs.read(table, digest, name, opts, warn=warn)
     data.window = window.to_json() if window else None

@@ -37,8 +37,8 @@ def _urdf_joints(value):
 
 
 def _bound(value):
-    if value is None:
-        return None
+    if value is None or isinstance(value, timewindow.Bound):
+        return value
     try:
         return timewindow.Bound.parse(str(value))
     except ValueError as exc:
@@ -53,7 +53,7 @@ def _calibrate_spec() -> dict:
         Option("consistency", "choice", "enforce", "enforce: fit again over physically consistent parameters; "
                                                    "check: refuse an inconsistent estimate.",
                choices=("enforce", "check")),
-        Option("edge", "float", 0.5, "Seconds left out at each end of every stretch of the log [s].", unit="s", low=0),
+        Option("edge", "float", 0.5, "Seconds dropped at each end of the log (filter and difference transients in qdd) [s].", unit="s", low=0),
         Option("cutoff", "float", None, "Low-pass cut-off [Hz] when qd/qdd are derived from q.", unit="Hz",
                low=0, low_open=True),
         Option("match", "choice", None, "How the log's joints are matched to the URDF's: name or order.",
@@ -80,34 +80,126 @@ class Calibration(_Params):
         if not hasattr(self, "urdf_text_"):
             raise NotFittedError("this Calibration is not fitted yet: call fit(log) first")
 
-    def fit(self, log):
-        """Calibrate on the whole-arm log ``log`` (a path); returns self."""
+    def fit(self, log, say=None, warn=None):
+        """Calibrate on the whole-arm log ``log`` (a path; "-": stdin); returns self. ``say(line)``
+        gets the lines the command prints on stderr, ``warn(line)`` its notes and warnings; an
+        inconsistent estimate with ``consistency="check"`` raises FitError after them."""
         from fricli.robot import calibration as cb
         from fricli.robot.dynamics import load_model as load_robot
         from fricli.robot.mapping import Mapping
 
+        say, warn = say or (lambda line: None), warn or (lambda line: None)
         urdf = os.fspath(self.urdf)
-        name = os.fspath(log)
-        table, _ = logs.read_table(name)
-        table = timewindow.slice_table(table, timewindow.Window(_bound(self.time_from), _bound(self.time_until)), name)
+        name = "stdin" if log == "-" else os.fspath(log)
+        table, _ = logs.read_table("-" if log == "-" else name)
+        window = timewindow.Window(_bound(self.time_from), _bound(self.time_until))
+        table = timewindow.slice_table(table, window, name, warn=warn)
         gravity = _gravity(self.gravity)
         robot = load_robot(urdf, Mapping(time=None, joints=[], gravity=logs.gravity_of(table.schema, gravity),
                                          held=logs.held_of(table.schema)))
+        if self.cutoff is not None and {"qd", "qdd"} <= set(table.column_names):
+            warn(f"note: --cutoff has no effect: {name} holds qd and qdd (derive them again with fricli import "
+                 "--cutoff, or leave qdd out of the log)")
         names = {str(k): v for k, v in self.urdf_joints.items()} if self.urdf_joints else None
         motion = cb.read_motion(table, name, robot, match=self.match or ("name" if names else None), urdf_names=names,
                                 cutoff_hz=logs.DEFAULT_CUTOFF_HZ if self.cutoff is None else float(self.cutoff))
+        say(f"calibrating {len(robot.joints)} joints on {len(motion.t):,} samples of {name} ...")
         cal = cb.calibrate(robot, motion, prior=self.prior if self.prior == "auto" else float(self.prior),
                            edge_s=float(self.edge), enforce=self.consistency == "enforce", friction=self.friction)
+        report = {"log": name, "urdf": urdf, **cal.report}
+        for line in summary_lines(report):
+            say(line)
+        enforced = report["consistency_enforced"]
+        if enforced:
+            before = "; ".join(enforced["inconsistent_before"])
+            warn(f"warning: the linear estimate was physically inconsistent ({before}): fitted again over consistent "
+                 "parameters only")
+        for line in cb.warnings(report):
+            warn(f"warning: {line}")
         cb.refuse_inconsistent(cal)
         with open(urdf, encoding="utf-8") as fh:
             self.urdf_text_ = cb.calibrated_urdf(fh.read(), urdf, cal)
-        self.calibration_, self.report_ = cal, cal.report
+        self.calibration_, self.report_ = cal, report
         self.friction_ = cal.report["friction"]["joints"]
         return self
 
-    def save(self, path) -> None:
-        """Write the calibrated URDF (the file ``fricli calibrate -o`` writes)."""
-        from fricli.core.atomic import atomic_write_bytes
+    def save(self, path, report=None) -> dict:
+        """Write the calibrated URDF to ``path`` ("-": stdout) and the report to ``report`` (default
+        PATH.calibration.json beside it, none for "-"): the files ``fricli calibrate -o PATH
+        [--report REPORT]`` writes. Returns the report as written (its path as "report")."""
+        from fricli.robot import calibration as cb
 
         self._check_fitted()
-        atomic_write_bytes(os.fspath(path), self.urdf_text_.encode())
+        out = os.fspath(path)
+        written = {"log": self.report_["log"], "urdf": self.report_["urdf"], "output": out,
+                   **self.calibration_.report}
+        cb.write(self.urdf_text_, written, out, None if report is None else os.fspath(report))
+        return written
+
+
+def summary_lines(report: dict) -> list[str]:
+    """The lines ``fricli calibrate`` prints on stderr for a calibration's ``report``."""
+    ex = report["excitation"]
+    lines = [f"excitation: {ex['base_parameters']} base parameters of {ex['parameters']} "
+             f"({ex['structurally_unidentifiable']} combinations no joint-torque data can separate stay at CAD); "
+             f"condition number {ex['condition_number']:.3g} ({ex['condition_number_scaled']:.3g} with scaled columns)"]
+    if ex["undetermined"]:
+        lines.append(f"excitation: this run leaves {len(ex['undetermined'])} direction"
+                     f"{'s' if len(ex['undetermined']) != 1 else ''} undetermined (kept near CAD):")
+        for d in ex["undetermined"][:8]:
+            combo = " ".join(f"{p['weight']:+.2g} {p['parameter']}" for p in d["combination"])
+            lines.append(f"  {combo} (information {d['information']:.2g} x the prior's)")
+        if len(ex["undetermined"]) > 8:
+            lines.append(f"  ... and {len(ex['undetermined']) - 8} more (see the report)")
+    tied = ex.get("masses_not_determined_alone") or {}
+    if tied:
+        lines.append(f"excitation: the masses of {', '.join(m.removesuffix('.m') for m in tied)} are not determined "
+                     "alone (each trades with other parameters, see the report): the calibrated torques are what to "
+                     "trust, not each link's mass")
+    choice = report.get("prior_choice")
+    if choice:
+        held, weakest = choice["held_out_rms"], max(choice["grid"])
+        line = (f"prior: {report['prior']:g} x each parameter's scale (held-out weighted RMS "
+                f"{held[format(report['prior'], 'g')]:.4g}; {held[format(weakest, 'g')]:.4g} at the weakest, {weakest:g})")
+        if choice.get("per_group"):
+            per = choice["per_group"].values()
+            line += (f", then per body and armature {min(per):g} to {max(per):g} "
+                     f"(held-out {choice['held_out_rms_per_group']:.4g})")
+        lines.append(line + f"; chosen by {choice['folds']}-fold cross-validation over time (see the report)")
+    else:
+        lines.append(f"prior: {report['prior']:g} x each parameter's scale (--prior)")
+    lines.append("fit: RMS of tau_m minus the model over each joint's rows in motion [Nm], CAD + friction -> calibrated:")
+    for joint, f in report["fit"].items():
+        fr = report["friction"]["joints"][joint]
+        extra = f", Fs {fr['Fs']:.4g}, vs {fr['vs']:.3g}" if "Fs" in fr else ""
+        lines.append(f"  joint {joint}: {f['rms_before']:.4g} -> {f['rms_after']:.4g} on {f['rows_in_motion']:,} rows "
+                     f"({'motor: ' if fr.get('motor') else ''}Fv {fr['Fv']:.4g}, Fc {fr['Fc']:.4g}{extra}, "
+                     f"offset {fr['offset']:.4g})")
+    if report.get("motors"):
+        lines.append("motors (through the log's transmission): rotor inertia [kg m^2], prior -> identified:")
+        lines += [f"  motor of joint {joint}: {m['prior']:.4g} -> {m['identified']:.4g}"
+                  for joint, m in report["motors"].items()]
+    return lines
+
+
+def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0.5, time_from=None, time_until=None,
+                     warn=None):
+    """``fricli payload LOG --frame FRAME``: the point mass [kg] and centre of mass [m, in FRAME's
+    coordinates] a whole-arm log's joints carry at ``frame``, with each joint's linear friction
+    alongside; ``urdf`` (default: the one the log's import recorded), ``cutoff`` [Hz], ``edge`` [s],
+    ``time_from``/``time_until`` as the command's options. Returns the command's result
+    (``fricli.robot.payload.IdentifiedPayload``: ``mass``, ``com``, ``stderr``, ``verdict``,
+    ``report()`` as ``--json`` prints it without ``log``); ``warn(line)`` gets the command's notes."""
+    from fricli.fitting.optionspec import check_values
+    from fricli.robot import payload
+
+    spec = _calibrate_spec()
+    opts = check_values({"cutoff": cutoff, "edge": edge, "time_from": time_from, "time_until": time_until},
+                        {name: spec[name] for name in ("cutoff", "edge", "time_from", "time_until")},
+                        "identify_payload")
+    bounds = [_bound(opts["time_from"]), _bound(opts["time_until"])]
+    name = "stdin" if log == "-" else os.fspath(log)
+    table, _ = logs.read_table("-" if log == "-" else name)
+    table = timewindow.slice_table(table, timewindow.Window(*bounds), name, warn=warn)
+    return payload.identify_log(table, name, frame, urdf=None if urdf is None else os.fspath(urdf),
+                                cutoff_hz=opts["cutoff"], edge_s=opts["edge"])

@@ -46,7 +46,8 @@ def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray
 
 def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
                        target: np.ndarray, train: np.ndarray, val: np.ndarray, rng: np.random.Generator,
-                       on_eval: Callable | None = None) -> tuple[FrictionModel, FrictionModel, dict]:
+                       on_eval: Callable | None = None, meanwhile: Callable[[], None] | None = None
+                       ) -> tuple[FrictionModel, FrictionModel, dict]:
     """One network on every row (``train`` and ``val``, indices into ``sig`` and ``target`` (n,)
     [Nm]) stopped at the step that a probe network, trained on ``train`` alone, shows best on
     the held-out rows ``val``.
@@ -61,6 +62,9 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     best record and keeps the weights of that record. Which weights are kept depends on the
     probe's losses alone, not on which training runs ahead; so do the model's recorded steps (the
     probe's) and training losses (up to the record kept).
+    ``meanwhile`` (e.g. loading what the steps after training need) runs in this process once the
+    probe has started in its child, before the model's training: the model trains on until the probe
+    has finished, so it only waits less.
     Returns (model, probe, summary): the probe stays fitted for the choices made on its
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
     chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
@@ -88,8 +92,14 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         progress[-1](*args)
         return bool(board[0] and len(model.snapshots_) > board[1])
 
-    fit_model = partial(model.fit, subset(sig, rows), target[rows], rng=seeds[1], scales_from=model,
-                        on_eval=model_report, snapshots=True, stop=stop)
+    fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=seeds[1], scales_from=model,
+                       on_eval=model_report, snapshots=True, stop=stop)
+
+    def fit_model():
+        if meanwhile is not None:
+            meanwhile()
+        return fit_rows()
+
     if apart:
         # the probe in a child process (see fricli.numerics.forked: threads would share one lock)
         with single_threaded():

@@ -212,7 +212,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
         # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
         rows, train_rows = np.union1d(sel.train, sel.val), sel.train
-        model, probe, choice = chosen_on_held_out(new_model, steps, sig, target, sel.train, sel.val, rng, on_eval)
+        model, probe, choice = chosen_on_held_out(new_model, steps, sig, target, sel.train, sel.val, rng, on_eval,
+                                                  meanwhile=load_prior_fit if prior else None)
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
         block = training_data.time_block(moving.size)
         held = np.unique(block[choice.pop("val_rows")])
@@ -256,6 +257,14 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     if prior_summary is not None:
         summary["prior"] = prior_summary
     return model, summary
+
+
+def load_prior_fit() -> None:
+    """Import what ``fit_prior`` needs (identify, scipy's optimisers: about 0.3 s the first time)."""
+    import scipy.linalg  # noqa: F401
+    import scipy.optimize  # noqa: F401
+
+    import fricli.fitting.identify  # noqa: F401
 
 
 @pinned

@@ -59,3 +59,40 @@ def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[st
         table = logs.with_column(table, column, values, unit)
     meta = {**(table.schema.metadata or {}), META_KEY: json.dumps(record).encode()}
     return table.replace_schema_metadata(meta), record
+
+
+def add_dynamics(log: str, urdf: str, output: str | None = None, *, match: str | None = None,
+                 urdf_joints: dict | None = None, rotor_inertia: dict | None = None, gravity=None,
+                 payload_mass: float | None = None, payload_com=None, payload_frame: str | None = None, held=(),
+                 cutoff_hz: float | str | None = None):
+    """``fricli dynamics``: the long-format log file ``log`` (- for stdin) of every moving joint of
+    ``urdf`` with tau_g and tau_dyn from it, written to ``output`` when given (- for stdout).
+    ``match`` ("name" or "order") says how the log's joints match the URDF's; ``urdf_joints``
+    {log joint: URDF joint}, ``rotor_inertia`` {log joint: kg m^2}, ``gravity`` (3,) [m/s^2] (default:
+    what the log's import recorded), ``payload_mass`` [kg], ``payload_com`` (3,) [m],
+    ``payload_frame``, ``held`` URDF joints, ``cutoff_hz`` as the command's options. Returns (the
+    table, the record written under its ``fricli.dynamics`` metadata); options that do not go
+    together raise ``OptionError`` naming the option."""
+    from fricli.fitting.optionspec import OptionError
+    from fricli.robot import mapping as mp
+    from fricli.robot.dynamics import load_model
+
+    if match not in ("name", "order"):
+        raise OptionError("choose how the log's joints match the URDF's: --match name|order", "match")
+    payload = None
+    if payload_mass is not None or payload_com is not None or payload_frame is not None:
+        if payload_frame is None:
+            raise OptionError("--payload-mass/--payload-com need --payload-frame", "payload_frame")
+        payload = mp.merge_payload(None, payload_mass, payload_com, payload_frame)
+    table, _ = logs.read_table(log)
+    name = "stdin" if log == "-" else log
+    robot = Mapping(time=None, joints=[], gravity=logs.gravity_of(table.schema, gravity), payload=payload,
+                    held=tuple(held) or logs.held_of(table.schema))
+    model = load_model(urdf, robot)
+    table, record = add_terms(table, model, name, match=match, urdf_names={str(k): v for k, v in
+                                                                           (urdf_joints or {}).items()},
+                              rotor_inertia={str(k): v for k, v in (rotor_inertia or {}).items()},
+                              gravity=robot.gravity, payload=payload, cutoff_hz=cutoff_hz)
+    if output is not None:
+        logs.write_table(table, output)
+    return table, record

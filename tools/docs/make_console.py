@@ -5,7 +5,8 @@
 Each block holds commands (lines starting with ``$ ``, continued with a trailing ``\\``), each
 followed by its output (stdout and stderr as a terminal shows them). The commands run in order,
 in a scratch folder that sees the repository's ``sample_data``, with ``fricli`` on the PATH as
-``python -m fricli`` of this checkout; a command that fails stops the script and changes nothing.
+``python -m fricli`` of this checkout and ``python`` as the Python that runs this script; a command
+that fails stops the script and changes nothing.
 """
 
 from __future__ import annotations
@@ -64,9 +65,10 @@ def main(paths: list[str]) -> None:
         work, bin_dir = pathlib.Path(tmp), pathlib.Path(tmp, ".bin")
         (work / "sample_data").symlink_to(ROOT / "sample_data")
         bin_dir.mkdir()
-        shim = bin_dir / "fricli"
-        shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m fricli "$@"\n')
-        shim.chmod(0o755)
+        for name, command in (("fricli", f'"{sys.executable}" -m fricli'), ("python", f'"{sys.executable}"')):
+            shim = bin_dir / name
+            shim.write_text(f'#!/bin/sh\nexec {command} "$@"\n')
+            shim.chmod(0o755)
         env = dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ['PATH']}", COLUMNS="100", PYTHONUNBUFFERED="1",
                    PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
         new = {path: rewrite(pathlib.Path(path).read_text(), work, env) for path in paths}

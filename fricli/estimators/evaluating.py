@@ -1,0 +1,70 @@
+"""``evaluate``: ``fricli evaluate`` as one call (every model on every log, friction and
+external-torque errors)."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+from fricli.core import timewindow
+from fricli.estimators.base import READING
+from fricli.fitting import optionspec, runs
+
+
+LOWPASS = optionspec.Option("lowpass_hz", "float", None, "Zero-phase low-pass of the external-torque estimate [Hz].",
+                            unit="Hz", low=0, low_open=True)
+
+
+@dataclasses.dataclass
+class Evaluation:
+    """What ``evaluate`` found: ``results`` (a ``fricli.applying.evaluation.Result`` per model, log
+    and joint: ``friction``, ``external``, ``moving``, ``extrapolation``, ...), the ``models`` and
+    ``logs`` evaluated ({name: path}) and ``lowpass_hz``."""
+
+    results: list
+    models: dict
+    logs: dict
+    lowpass_hz: float | None
+
+    def to_json(self) -> dict:
+        """What ``fricli evaluate --json`` prints."""
+        from fricli.applying import evaluation
+
+        return evaluation.to_json(self.results, self.models, self.logs, self.lowpass_hz)
+
+    def markdown(self) -> str:
+        """The table ``fricli evaluate`` prints."""
+        from fricli.applying import evaluation
+
+        return evaluation.markdown_table(self.results, list(self.models), list(self.logs))
+
+
+def evaluate(models: dict, logs: dict, *, lowpass_hz: float | None = None, time_from=None, time_until=None, warn=None,
+             **reading) -> Evaluation:
+    """``fricli evaluate --model NAME=MODEL ... --log NAME=LOG ...``: ``models`` and ``logs`` are
+    {name: path} (a model file or a model folder; a Parquet log), ``lowpass_hz`` [Hz] is --lowpass,
+    ``time_from``/``time_until`` are --from/--until, ``reading`` are ``read_log``'s keywords (joint,
+    kt, cutoff, drop_invalid, no_gravity, no_dynamics); ``warn(line)`` gets the notes the command
+    prints. OptionError naming a wrong option; the command's errors for a log or model it cannot use."""
+    from fricli.applying import evaluation
+    from fricli.fitting import plan
+
+    opts = optionspec.check_values({**reading, "lowpass_hz": lowpass_hz}, {**READING, "lowpass_hz": LOWPASS}, "evaluate")
+    lowpass_hz = opts.pop("lowpass_hz")
+    bounds = []
+    for option, bound in (("time_from", time_from), ("time_until", time_until)):
+        try:
+            bounds.append(bound if bound is None or isinstance(bound, timewindow.Bound)
+                          else timewindow.Bound.parse(str(bound)))
+        except ValueError as exc:
+            raise optionspec.OptionError(f"evaluate option {option}: {exc}", option) from None
+    window = timewindow.Window(*bounds)
+    defaults = {name: option.default for name, option in READING.items()}
+    r = {**defaults, **opts}
+    read_kwargs = {"joint": r["joint"], "kt": r["kt"], "cutoff_hz": r["cutoff"], "drop_invalid": r["drop_invalid"],
+                   "warn": warn, "zero": runs.zero(r)}
+    model_paths = {str(k): os.fspath(v) for k, v in models.items()}
+    log_paths = {str(k): os.fspath(v) for k, v in logs.items()}
+    results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass_hz, read_kwargs=read_kwargs,
+                                  read=lambda path: plan.read_log(path, window, warn))
+    return Evaluation(results, model_paths, log_paths, lowpass_hz)
