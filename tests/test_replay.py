@@ -296,7 +296,7 @@ def test_the_arm_header_of_a_folder_with_a_coupled_group_equals_replay(tmp_path)
         models.save_for_log(paths[-1], model.member(j) if hasattr(model, "member") else model, sig, rows_used=1)
     text = header.read_text()
     assert "Joints, in the order of every array below: 1, 2, 3, 4, 5, 6." in text
-    assert "arm_joints_5_6_joint_6_step_array(&s->friction_5" in text
+    assert "arm_joints_5_6_joint_6_step_parts_array(&s->friction_5" in text
     exe = observer_check.build(str(header), "arm", paths, str(tmp_path))
     got = observer_check.run(exe, observer_check.rows(arm, paths), len(arm.joints), str(tmp_path))
     n = len(arm.joints)
@@ -403,3 +403,39 @@ def test_a_joint_missing_a_sample_is_named_with_the_time(folder, tmp_path):
     assert refused.exit_code == 3 and refused.output.count("\n") == 1
     assert f"joint 3 has other time stamps than joint 2 (sample 11: t = {t[11]:.15g} s against {t[10]:.15g} s)" \
         in refused.output, refused.output
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="no C compiler")
+def test_the_adapted_level_scales_the_friction_and_not_the_robot_model_error(tmp_path):
+    """A model of diagnose --fix with a robot-model error term (the logged gravity torque 15 % low):
+    the online adaptation learns the friction's level, so a scales the friction part alone; the error
+    part is the robot model's (it stays as fitted), in replay and in the arm header alike."""
+    from fricli.models.augmented import AugmentedModel
+    from fricli.models.base import predict_parts
+
+    log = logs.load_log(f"{ROOT}/{SAMPLE}")
+    base = LuGreModel(7.0 * 1.3, 9.0 * 1.3, 0.04, 1.2, 12.0 * 1.3, sigma0=1.7e4, sigma1=0.5)   # 30 % too high
+    gravity = [{"name": "tau_g", "factors": [{"f": "signal", "name": "tau_g"}]}]
+    model = AugmentedModel(base, [], np.zeros(0), error_terms=gravity, error_coef=np.array([0.15]),
+                           errors=["gravity"])
+    folder = tmp_path / "models"
+    folder.mkdir()
+    models.save_for_log(str(folder / "joint_2.npz"), model, log, rows_used=len(log))
+    thr = tmp_path / "t.json"
+    assert invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", thr, "-q").exit_code == 0
+    arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
+    settings = observer.Thresholds.read(str(thr))
+    out = replay.run(arm, settings.gain, settings, observer.Adaptation())
+    friction, error, _ = predict_parts(models.set_precision(model, "double"), arm.signals[0])
+    assert np.ptp(out.scale) > 0.05 and np.abs(error).max() > 1.0
+    np.testing.assert_allclose(out.tau_f[:, 0], out.scale[:, 0] * friction + out.offset[:, 0] + error,
+                               rtol=0, atol=1e-9)
+    header = tmp_path / "arm.h"
+    assert invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o",
+                  header).exit_code == 0
+    paths = [str(folder / "joint_2.npz")]
+    exe = observer_check.build(str(header), "arm", paths, str(tmp_path))
+    got = observer_check.run(exe, observer_check.rows(arm, paths), 1, str(tmp_path))
+    assert np.max(np.abs(got[:, 0] - out.tau_f[:, 0])) < 1e-9
+    assert np.max(np.abs(got[:, 1] - out.tau_ext[:, 0])) < 1e-9
+    assert np.array_equal(got[:, 2].astype(bool), out.contact[:, 0])

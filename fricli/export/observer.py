@@ -86,9 +86,10 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             f"    static const double share[{n}] = {table(share)};",
             f"    const double k = {c.num(gain)}, release = {c.num(release)}, speed = {c.num(speed)};",
             f"    const int persistence = {persist};",
-            f"    double f0[{n}], r[{n}], mag[{n}], lim[{n}];",
-            f"    int moves[{n}], j;"]
-    out += [f"    f0[{i}] = {e.prefix}_step_array(&s->friction_{i}, x[{i}]);" for i, e in enumerate(entries)]
+            f"    double f0[{n}], e[{n}], r[{n}], mag[{n}], lim[{n}];",
+            f"    int moves[{n}], j;",
+            "    /* f0: friction, scaled by the adapted level; e: the robot-model error part, the robot model's (with w) */"]
+    out += [f"    f0[{i}] = {e.prefix}_step_parts_array(&s->friction_{i}, x[{i}], &e[{i}]);" for i, e in enumerate(entries)]
     out += [f"    for (j = 0; j < {n}; ++j) tau_f[j] = s->a[j] * f0[j] + s->b[j] * scale[j];",
             "    if (!s->started) {",
             "        s->started = 1;",
@@ -96,7 +97,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             "    } else {",
             "        const double kd = k * (t - s->t);",
             f"        for (j = 0; j < {n}; ++j) {{",
-            "            s->y[j] = (s->y[j] - k * (p[j] - s->p[j]) + kd * (tau_m[j] - w[j])) / (1.0 + kd);",
+            "            s->y[j] = (s->y[j] - k * (p[j] - s->p[j]) + kd * (tau_m[j] - (w[j] + e[j]))) / (1.0 + kd);",
             "            s->f[j] = (s->f[j] + kd * f0[j]) / (1.0 + kd);",
             "        }", "    }",
             "    s->t = t;",
@@ -116,7 +117,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             "        s->run[j] = side == 0 ? 0 : (side == s->side[j] ? s->run[j] + 1 : 1);",
             "        s->side[j] = side;",
             "        s->contact[j] = s->contact[j] ? mag[j] >= release * lim[j] : s->run[j] >= persistence;",
-            "        tau_ext[j] = r[j];", "        contact[j] = s->contact[j];", "    }"]
+            "        tau_ext[j] = r[j];", "        contact[j] = s->contact[j];", "        tau_f[j] += e[j];", "    }"]
     if adaptation is not None:
         lo, hi = (c.num(v) for v in ad.scale_bounds)
         out += ["    if (!s->adapt_started) { s->adapt_started = 1; s->t_adapt = t; return; }",

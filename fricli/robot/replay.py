@@ -26,6 +26,7 @@ from fricli.core import lazy, logs, metrics, modelset
 from fricli.core.atomic import atomic_open, atomic_write_bytes
 from fricli.core.errors import DataError, InvalidRows, LogError, ModelFileError
 from fricli.models import coupled
+from fricli.models.base import predict_parts
 
 pa = lazy.module("pyarrow")
 pc = lazy.module("pyarrow.compute")
@@ -35,8 +36,8 @@ pq = lazy.module("pyarrow.parquet")
 @dataclasses.dataclass
 class Arm:
     """One log's rows as a controller sees them, per joint (n, J): time, the friction models'
-    output f0, tau_m, p, w (observer module), qd; the friction target for scoring; where each
-    joint's rows sit in the log's table."""
+    friction f0 (their robot-model error part apart: ``error``), tau_m, p, w (observer module), qd;
+    the friction target for scoring; where each joint's rows sit in the log's table."""
 
     name: str
     joints: list
@@ -52,6 +53,7 @@ class Arm:
     form: str
     unit: str
     signals: list = dataclasses.field(default_factory=list)   # per joint: the signals its model read
+    error: np.ndarray | None = None   # (n, J) the models' robot-model error part (diagnose --fix); f0 is friction
 
 
 def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -> Arm:
@@ -61,7 +63,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     name = "stdin" if log_path == "-" else log_path
     found = logs.joints_of(table, name)
     pairs = joint_rule.pair(modelset.source(model_path), found, None, name, joint_option=False)
-    jnames, f0, tau_m, qd, t, target, rows, tables, w = [], [], [], [], None, [], [], {}, []
+    jnames, f0, tau_m, qd, t, target, rows, tables, w, error = [], [], [], [], None, [], [], {}, [], []
     index = np.arange(table.num_rows)
     unit = "Nm"
     for j, path in pairs:
@@ -81,11 +83,12 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
             raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}{_first_apart(sig['t'], t)}: "
                            "the replay of an arm needs one sample of every joint per time")
         try:
-            tau, _ = model.predict(sig, None)
+            tau, err, _ = predict_parts(model, sig, None)
         except DataError as exc:
             raise DataError(f"{name}: {exc} ({path})") from None
         jnames.append(j)
         f0.append(np.asarray(tau, dtype=np.float64))
+        error.append(np.asarray(err, dtype=np.float64))
         tau_m.append(sig["tau_m"])
         qd.append(sig["qd"])
         target.append(logs.friction_target(sig))
@@ -111,7 +114,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
         p, wr = momentum_terms(urdf, table.schema, list(positions), positions, name, replayed=jnames)
         form = "urdf"
     return Arm(name, jnames, t, stack(f0), stack(tau_m), p, wr, stack(qd), stack(target), table, rows, form, unit,
-               [tables[j] for j in jnames])
+               [tables[j] for j in jnames], stack(error))
 
 
 def _first_apart(a: np.ndarray, b: np.ndarray) -> str:
@@ -217,7 +220,18 @@ def run(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
             raise DataError(f"the thresholds were calibrated on the {thresholds.form} observer, this replay runs the "
                             f"{arm.form} one ({'give --urdf' if thresholds.form == 'urdf' else 'leave out --urdf'})")
         thresholds = thresholds.for_joints(arm.joints, arm.name)
-    return observer.replay(arm.t, arm.f0, arm.tau_m, arm.p, arm.w, arm.qd, gain, thresholds, adaptation)
+    return _replay(arm, gain, thresholds, adaptation)
+
+
+def _replay(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
+            adaptation: observer.Adaptation | None = None) -> observer.Replayed:
+    """``observer.replay`` of ``arm``: the adapted level scales the friction alone; the models'
+    robot-model error part is the robot model's (with w, as the arm header takes it), added to
+    tau_f_pred unscaled."""
+    error = arm.error if arm.error is not None else np.zeros_like(arm.f0)
+    out = observer.replay(arm.t, arm.f0, arm.tau_m, arm.p, arm.w + error, arm.qd, gain, thresholds, adaptation)
+    out.tau_f = out.tau_f + error
+    return out
 
 
 def write(arm: Arm, out: observer.Replayed, path: str) -> None:
@@ -267,14 +281,14 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
     band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
     free = observer.Thresholds(joints, np.full(len(joints), np.inf), band, np.ones(len(joints)), gain=gain,
                                moving_speed=moving_speed, form=arms[0].form)
-    res = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, free) for a in arms]
+    res = [_replay(a, gain, free) for a in arms]
     thr = observer.calibrate([r.tau_ext for r in res], [a.f0 for a in arms], [a.qd for a in arms], joints, gain,
                              arms[0].form, band, quantile, margin, release, moving_speed,
                              logs=[os.path.basename(p) for p in log_paths])
     thr = dataclasses.replace(thr, persistence=int(persistence), share=np.zeros(len(joints)))
     if not level:
         return thr
-    adapted = [observer.replay(a.t, a.f0, a.tau_m, a.p, a.w, a.qd, gain, thr, observer.Adaptation()) for a in arms]
+    adapted = [_replay(a, gain, thr, observer.Adaptation()) for a in arms]
     return observer.level_share([r.scale for r in adapted], [a.qd for a in arms], thr)
 
 
@@ -286,7 +300,8 @@ def _in_order(arm: Arm, names: list[str]) -> Arm:
         return arm
     return dataclasses.replace(arm, joints=[arm.joints[i] for i in idx], f0=arm.f0[:, idx], tau_m=arm.tau_m[:, idx],
                                p=arm.p[:, idx], w=arm.w[:, idx], qd=arm.qd[:, idx], target=arm.target[:, idx],
-                               rows=[arm.rows[i] for i in idx], signals=[arm.signals[i] for i in idx])
+                               rows=[arm.rows[i] for i in idx], signals=[arm.signals[i] for i in idx],
+                               error=None if arm.error is None else arm.error[:, idx])
 
 
 def write_thresholds(thresholds: observer.Thresholds, path: str) -> None:

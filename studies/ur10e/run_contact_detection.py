@@ -152,7 +152,8 @@ def _continue(obs: observer.Observer, arm: replay.Arm, rows: range, tau_m: np.nd
     import copy
 
     obs = copy.deepcopy(obs)
-    return np.array([obs.step(float(arm.t[i]), arm.f0[i], tau_m[i], arm.p[i], arm.w[i], arm.qd[i])[2] for i in rows])
+    w = arm.w + arm.error     # the models' robot-model error part goes with the rigid-body terms (replay.run)
+    return np.array([obs.step(float(arm.t[i]), arm.f0[i], tau_m[i], arm.p[i], w[i], arm.qd[i])[2] for i in rows])
 
 
 def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Generator, adapt) -> dict:
@@ -172,6 +173,7 @@ def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Gen
         for i in (rng.choice(moving, size=min(ADDED_PER_RUN, len(moving)), replace=False) if len(moving) else []):
             plan.append((int(i), k, 1.0 if rng.random() < 0.5 else -1.0))
     snapshots = {}
+    w = arm.w + arm.error
     obs = observer.Observer(len(arm.joints), thr.gain, thr, adapt)
     wanted = sorted({i for i, _, _ in plan})
     for i in range(len(t)):
@@ -180,7 +182,7 @@ def added_contacts(arm: replay.Arm, thr: observer.Thresholds, rng: np.random.Gen
             wanted.pop(0)
             if not wanted:
                 break
-        obs.step(float(t[i]), arm.f0[i], arm.tau_m[i], arm.p[i], arm.w[i], arm.qd[i])
+        obs.step(float(t[i]), arm.f0[i], arm.tau_m[i], arm.p[i], w[i], arm.qd[i])
     out = {str(j): {"delays": [], "seen": {str(s): 0 for s in sizes}, "trials": 0, "limits": []}
            for j in arm.joints}
     for i, k, sign in plan:
@@ -211,12 +213,13 @@ def held_contact(arm: replay.Arm, thr: observer.Thresholds, adapt) -> dict:
     end = np.searchsorted(t, t[onset] + HOLD)
     if end >= len(t):
         return out
-    free = observer.replay(t, arm.f0, arm.tau_m, arm.p, arm.w, arm.qd, thr.gain, thr, adapt)
+    w = arm.w + arm.error
+    free = observer.replay(t, arm.f0, arm.tau_m, arm.p, w, arm.qd, thr.gain, thr, adapt)
     for k, j in enumerate(arm.joints):
         tau_m = arm.tau_m.copy()
         limit = float(np.max(free.threshold[onset:end, k]))
         tau_m[onset:end, k] -= 2.0 * limit
-        res = observer.replay(t, arm.f0, tau_m, arm.p, arm.w, arm.qd, thr.gain, thr, adapt)
+        res = observer.replay(t, arm.f0, tau_m, arm.p, w, arm.qd, thr.gain, thr, adapt)
         out[str(j)] = {"before": float(res.scale[onset, k]), "after": float(res.scale[end, k]), "size": 2.0 * limit,
                        "free_after": float(free.scale[end, k]),
                        "flagged_share": float(res.contact[onset:end, k].mean())}
