@@ -88,8 +88,9 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             f"    const int persistence = {persist};",
             f"    double f0[{n}], e[{n}], r[{n}], mag[{n}], lim[{n}];",
             f"    int moves[{n}], j;",
-            "    /* f0: friction, scaled by the adapted level; e: the robot-model error part, the robot model's (with w) */"]
-    out += [f"    f0[{i}] = {e.prefix}_step_parts_array(&s->friction_{i}, x[{i}], &e[{i}]);" for i, e in enumerate(entries)]
+            "    /* f0: friction, scaled by the adapted level; e: the robot-model error part (with w) */"]
+    out += [f"    f0[{i}] = {entry.prefix}_step_parts_array(&s->friction_{i}, x[{i}], &e[{i}]);"
+            for i, entry in enumerate(entries)]
     out += [f"    for (j = 0; j < {n}; ++j) tau_f[j] = s->a[j] * f0[j] + s->b[j] * scale[j];",
             "    if (!s->started) {",
             "        s->started = 1;",

@@ -80,8 +80,9 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
         if t is None:
             t = sig["t"]
         elif len(sig["t"]) != len(t) or not np.array_equal(sig["t"], t):
-            raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}{_first_apart(sig['t'], t)}: "
-                           "the replay of an arm needs one sample of every joint per time")
+            raise LogError(f"{name}: joint {j} has other time stamps than joint {pairs[0][0]}"
+                           f"{_first_apart(sig['t'], t)}: the replay of an arm needs one sample of every joint per "
+                           "time")
         try:
             tau, err, _ = predict_parts(model, sig, None)
         except DataError as exc:
@@ -109,7 +110,8 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
             other = _joint_rows(table, j, name, zero).signals
             if len(other["t"]) != len(t) or not np.array_equal(other["t"], t):
                 raise LogError(f"{name}: joint {j} has other time stamps than joint {jnames[0]}"
-                               f"{_first_apart(other['t'], t)}: the robot model needs every joint's position at each time")
+                               f"{_first_apart(other['t'], t)}: the robot model needs every joint's position at "
+                               "each time")
             positions[j] = other
         p, wr = momentum_terms(urdf, table.schema, list(positions), positions, name, replayed=jnames)
         form = "urdf"
