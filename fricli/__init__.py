@@ -5,7 +5,8 @@ The library (docs/python-api.md): ``read_log`` reads a log as the commands do, t
 what the commands fit, ``load_model`` reads a model file, ``fit_arm`` runs ``fricli fit-arm``,
 ``diagnose_arm`` runs ``fricli diagnose`` on a log's models (``--fix``, ``--calibrate``),
 ``identify_payload`` runs ``fricli payload``, ``evaluate`` runs ``fricli evaluate``, ``import_log``
-runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``.
+runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``,
+``calibrate_thresholds`` and ``replay_log`` run ``fricli thresholds`` and ``fricli replay``.
 The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
@@ -14,11 +15,12 @@ __version__ = "0.2.0"
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
            "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "fit_arm",
            "diagnose_arm", "identify_payload", "evaluate", "Evaluation", "import_log", "add_dynamics",
-           "__version__"]
+           "calibrate_thresholds", "replay_log", "__version__"]
 
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
          "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
-         "add_dynamics": "fricli.robot.logterms"}
+         "add_dynamics": "fricli.robot.logterms", "calibrate_thresholds": "fricli.robot.replay",
+         "replay_log": "fricli.robot.replay"}
 
 
 def __getattr__(name: str):

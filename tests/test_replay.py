@@ -439,3 +439,32 @@ def test_the_adapted_level_scales_the_friction_and_not_the_robot_model_error(tmp
     assert np.max(np.abs(got[:, 0] - out.tau_f[:, 0])) < 1e-9
     assert np.max(np.abs(got[:, 1] - out.tau_ext[:, 0])) < 1e-9
     assert np.array_equal(got[:, 2].astype(bool), out.contact[:, 0])
+
+
+def test_the_python_calls_are_the_commands(folder, tmp_path):
+    """``fricli.calibrate_thresholds`` and ``fricli.replay_log`` write the commands' files, give what
+    ``--json`` prints, and refuse what they refuse (OptionError naming the option)."""
+    import json
+
+    import fricli
+    from fricli.fitting.optionspec import OptionError
+
+    done = invoke("thresholds", folder, f"{ROOT}/{SAMPLE}", "-o", tmp_path / "cmd.json", "--margin", "2", "-q")
+    assert done.exit_code == 0, done.output
+    thr = fricli.calibrate_thresholds(str(folder), f"{ROOT}/{SAMPLE}", str(tmp_path / "call.json"), margin=2.0)
+    assert (tmp_path / "call.json").read_bytes() == (tmp_path / "cmd.json").read_bytes()
+    assert thr.as_json() == json.loads((tmp_path / "cmd.json").read_text())
+    done = invoke("replay", folder, f"{ROOT}/{HELD_OUT}", "--adapt", "--thresholds", tmp_path / "cmd.json",
+                  "-o", tmp_path / "cmd.parquet", "--json", "-q")
+    assert done.exit_code == 0, done.output
+    run = fricli.replay_log(str(folder), f"{ROOT}/{HELD_OUT}", str(tmp_path / "call.parquet"), adapt=True,
+                            thresholds=str(tmp_path / "call.json"))
+    assert pq.read_table(tmp_path / "call.parquet").equals(pq.read_table(tmp_path / "cmd.parquet"), check_metadata=True)
+    printed = json.loads(done.stdout)
+    assert {k: printed[k] for k in run.figures} == json.loads(json.dumps(run.figures)) and printed["gain"] == run.gain
+    for kwargs, option in (({"adapt": True}, "thresholds"), ({"adapt_offset": True}, "adapt_offset"),
+                           ({"thresholds": str(tmp_path / "call.json"), "gain": 10.0}, "gain")):
+        with pytest.raises(OptionError) as err:
+            fricli.replay_log(str(folder), f"{ROOT}/{HELD_OUT}", str(tmp_path / "refused.parquet"), **kwargs)
+        assert err.value.option == option
+    assert not (tmp_path / "refused.parquet").exists()

@@ -67,7 +67,7 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_of
 
 
 def _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain) -> str:
-    from fricli.cli.replay import settings
+    from fricli.robot.replay import settings
     from fricli.export import observer
 
     k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)

@@ -25,20 +25,6 @@ def gain_option(f):
     return click.option("--gain", type=Number(min=0, min_open=True), default=None, help=GAIN_HELP)(f)
 
 
-def settings(thresholds_path, adapt: bool, adapt_offset: bool, time_constant: float | None, gain: float | None):
-    """(gain, thresholds or None, adaptation or None) of replay's and export --observer's options."""
-    if adapt and thresholds_path is None:
-        raise click.UsageError("--adapt needs --thresholds: the adaptation stops while a contact is suspected")
-    if adapt_offset and not adapt:
-        raise click.UsageError("--adapt-offset goes with --adapt")
-    thr = observer.Thresholds.read(thresholds_path) if thresholds_path else None
-    if thr is not None and gain is not None and gain != thr.gain:
-        raise click.UsageError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}")
-    k = gain if gain is not None else (thr.gain if thr is not None else observer.DEFAULT_GAIN)
-    extra = {"time_constant": time_constant} if time_constant is not None else {}
-    return k, thr, (observer.Adaptation(offset=adapt_offset, **extra) if adapt else None)
-
-
 @cli.command("replay")
 @click.argument("model", type=click.Path())
 @click.argument("log", type=click.Path())
@@ -73,11 +59,10 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
     """
     from fricli.robot import replay
 
-    k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
-    arm = replay.read_arm(model, log, urdf, zero)
-    out = replay.run(arm, k, thr, adaptation)
-    replay.write(arm, out, output)
-    figures = replay.summary(arm, out)
+    done = replay.replay_log(model, log, output, urdf=urdf, thresholds=thresholds_path, adapt=adapt,
+                             adapt_offset=adapt_offset, time_constant=time_constant, gain=gain,
+                             no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
+    arm, k, figures = done.arm, done.gain, done.figures
     if not quiet:
         say(f"{figures['rows']:,} rows of joints {', '.join(map(str, arm.joints))} ({arm.form} observer, gain {k:g} "
             f"1/s{', adapted' if adapt else ''}) -> {output}")
@@ -133,9 +118,10 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
     """
     from fricli.robot import replay
 
-    thr = replay.calibrate(model, list(logs), urdf, gain, quantile,
-                           margin, release, moving_speed, zero=zero, persistence=persistence, level=not no_level)
-    replay.write_thresholds(thr, output)
+    thr = replay.calibrate_thresholds(model, list(logs), output, urdf=urdf, gain=gain, quantile=quantile,
+                                      margin=margin, release=release, moving_speed=moving_speed,
+                                      persistence=persistence, level_share=not no_level,
+                                      no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
     if not quiet:
         for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):
             say(f"  joint {j}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "

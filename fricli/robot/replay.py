@@ -332,3 +332,72 @@ def summary(arm: Arm, out: observer.Replayed) -> dict:
 def check_model_path(path: str) -> None:
     if not os.path.exists(path):
         raise ModelFileError(f"{path}: no such model file or folder")
+
+
+def settings(thresholds: str | None, adapt: bool = False, adapt_offset: bool = False,
+             time_constant: float | None = None, gain: float | None = None):
+    """(gain, thresholds or None, adaptation or None) of replay's and export --observer's options:
+    the gain given, else the thresholds file's, else ``observer.DEFAULT_GAIN``. Options that do not
+    go together raise ``OptionError``."""
+    from fricli.fitting.optionspec import OptionError
+
+    if adapt and thresholds is None:
+        raise OptionError("--adapt needs --thresholds: the adaptation stops while a contact is suspected", "thresholds")
+    if adapt_offset and not adapt:
+        raise OptionError("--adapt-offset goes with --adapt", "adapt_offset")
+    thr = observer.Thresholds.read(thresholds) if thresholds else None
+    if thr is not None and gain is not None and gain != thr.gain:
+        raise OptionError(f"--gain {gain:g}: the thresholds were calibrated with gain {thr.gain:g}", "gain")
+    k = gain if gain is not None else (thr.gain if thr is not None else observer.DEFAULT_GAIN)
+    extra = {"time_constant": time_constant} if time_constant is not None else {}
+    return k, thr, (observer.Adaptation(offset=adapt_offset, **extra) if adapt else None)
+
+
+@dataclasses.dataclass
+class Replay:
+    """A replay's result: ``arm`` (its joints, form, unit, rows), ``replayed`` (per row and joint:
+    tau_f, tau_ext, contact, the adapted scale and offset), ``gain`` [1/s] and ``figures`` (what
+    ``fricli replay --json`` prints of it: per joint the friction error, contact rows and level; events)."""
+
+    arm: Arm
+    replayed: observer.Replayed
+    gain: float
+    figures: dict
+
+
+def _zero(no_gravity: bool, no_dynamics: bool) -> tuple:
+    return tuple(c for c, declared in (("tau_g", no_gravity), ("tau_dyn", no_dynamics)) if declared)
+
+
+def replay_log(model: str, log: str, output: str | None = None, *, urdf: str | None = None,
+               thresholds: str | None = None, adapt: bool = False, adapt_offset: bool = False,
+               time_constant: float | None = None, gain: float | None = None, no_gravity: bool = False,
+               no_dynamics: bool = False) -> Replay:
+    """``fricli replay``: the log file ``log`` run row by row through what the controller runs with
+    the model file or folder ``model`` (``thresholds``: a thresholds file's path; ``adapt``,
+    ``adapt_offset``, ``time_constant`` [s], ``gain`` [1/s], ``no_gravity``, ``no_dynamics`` as the
+    command's options), written to ``output`` when given (the log with tau_f_pred, tau_ext_pred
+    and contact added)."""
+    k, thr, adaptation = settings(thresholds, adapt, adapt_offset, time_constant, gain)
+    arm = read_arm(model, log, urdf, _zero(no_gravity, no_dynamics))
+    out = run(arm, k, thr, adaptation)
+    if output is not None:
+        write(arm, out, output)
+    return Replay(arm, out, k, summary(arm, out))
+
+
+def calibrate_thresholds(model: str, logs_: str | list[str], output: str | None = None, *, urdf: str | None = None,
+                         gain: float = observer.DEFAULT_GAIN, quantile: float = observer.DEFAULT_QUANTILE,
+                         margin: float = observer.DEFAULT_MARGIN, release: float = observer.DEFAULT_RELEASE,
+                         moving_speed: float = observer.DEFAULT_MOVING_SPEED,
+                         persistence: int = observer.DEFAULT_PERSISTENCE, level_share: bool = True,
+                         no_gravity: bool = False, no_dynamics: bool = False) -> observer.Thresholds:
+    """``fricli thresholds``: contact thresholds calibrated from the collision-free log files
+    ``logs_`` replayed with ``model`` (``calibrate``), written to ``output`` when given (JSON);
+    the keywords are the command's options (``level_share`` False: ``--no-level-share``)."""
+    paths = [logs_] if isinstance(logs_, str) else list(logs_)
+    thr = calibrate(model, paths, urdf, gain, quantile, margin, release, moving_speed,
+                    zero=_zero(no_gravity, no_dynamics), persistence=persistence, level=level_share)
+    if output is not None:
+        write_thresholds(thr, output)
+    return thr
