@@ -226,5 +226,6 @@ def dynamics_cmd(log, urdf, urdf_pairs, match, inertia_pairs, gravity, payload_m
     where = "stdout" if output == "-" else output
     for line in _robot_notes(record, name):
         say(line, quiet)
+    pairs = ": " + ", ".join(f"{j}={u}" for j, u in record["joints"].items()) if match == "order" else ""
     say(f"added tau_g and tau_dyn from {urdf} to {len(record['joints'])} joints of {name} "
-        f"(matched by {match}{_derived_text(record)}) -> {where}", quiet)
+        f"(matched by {match}{pairs}{_derived_text(record)}) -> {where}", quiet)
