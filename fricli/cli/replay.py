@@ -21,6 +21,11 @@ GAIN_HELP = (f"Observer gain K [1/s] (time constant 1/K). Default: the threshold
 TIME_CONSTANT_HELP = "Memory of the adaptation [s]: forgetting factor exp(-dt / T)."
 
 
+def label(joint) -> str:
+    """How a joint is named on stderr: a log without a joint column has one joint, without a name."""
+    return "the joint" if joint in (None, "None") else f"joint {joint}"
+
+
 def gain_option(f):
     return click.option("--gain", type=Number(min=0, min_open=True), default=None, help=GAIN_HELP)(f)
 
@@ -64,16 +69,17 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
                              no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
     arm, k, figures = done.arm, done.gain, done.figures
     if not quiet:
-        say(f"{figures['rows']:,} rows of joints {', '.join(map(str, arm.joints))} ({arm.form} observer, gain {k:g} "
+        which = "the log's joint" if arm.joints == [None] else f"joints {', '.join(map(str, arm.joints))}"
+        say(f"{figures['rows']:,} rows of {which} ({arm.form} observer, gain {k:g} "
             f"1/s{', adapted' if adapt else ''}) -> {output}")
         for j, f in figures["joints"].items():
             level = f"; level: scale {f['scale']:.4g}, offset {f['offset']:.4g} {arm.unit}" if adapt else ""
             moving = f"{f['friction_rms_moving']:.4g}" if f["friction_rms_moving"] is not None else "-"
-            say(f"  joint {j}: friction RMS error in motion {moving} {arm.unit}, contact rows {f['contact_rows']}"
+            say(f"  {label(j)}: friction RMS error in motion {moving} {arm.unit}, contact rows {f['contact_rows']}"
                 + level)
         for e in figures["events"]:
             end = f"{e['end']:.3f}" if e["end"] is not None else "end of log"
-            say(f"  contact: joint {e['joint']} from t = {e['start']:.3f} s to {end}, peak {e['peak']:.4g} "
+            say(f"  contact: {label(e['joint'])} from t = {e['start']:.3f} s to {end}, peak {e['peak']:.4g} "
                 f"{arm.unit} at t = {e['peak_time']:.3f} s")
     if as_json:
         emit_json(figures | {"model": model, "log": log, "output": output, "gain": k, "adapt": adapt})
@@ -124,7 +130,7 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
                                       no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
     if not quiet:
         for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):
-            say(f"  joint {j}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "
+            say(f"  {label(j)}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "
                 f"{band:.4g}")
         say(f"wrote {output}")
     if as_json:
