@@ -468,3 +468,18 @@ def test_the_python_calls_are_the_commands(folder, tmp_path):
             fricli.replay_log(str(folder), f"{ROOT}/{HELD_OUT}", str(tmp_path / "refused.parquet"), **kwargs)
         assert err.value.option == option
     assert not (tmp_path / "refused.parquet").exists()
+
+
+def test_a_log_without_a_joint_column_is_not_called_joint_none(folder, tmp_path):
+    """A one-joint log without a joint column replays with a model of one joint; stderr names its
+    joint plainly, never "None"."""
+    table = pq.read_table(f"{ROOT}/{SAMPLE}")
+    plain = tmp_path / "plain.parquet"
+    pq.write_table(table.drop_columns(["joint"]) if "joint" in table.column_names else table, plain)
+    thr, out = tmp_path / "t.json", tmp_path / "out.parquet"
+    done = invoke("thresholds", folder / "joint_2.npz", plain, "-o", thr)
+    assert done.exit_code == 0, done.output
+    assert "the joint: threshold" in done.stderr and "None" not in done.stderr
+    done = invoke("replay", folder / "joint_2.npz", plain, "-o", out, "--thresholds", thr)
+    assert done.exit_code == 0, done.output
+    assert "rows of the log's joint" in done.stderr and "None" not in done.stderr
