@@ -484,3 +484,18 @@ def test_simulate_fleet_never_writes_over_a_users_folder(tmp_path):
         assert res.returncode == errors.OUTPUT and res.stderr.startswith("fricli: error: "), res.stderr
     assert (mine / "fleet.toml").read_text() == "my manifest" and sorted(p.name for p in mine.iterdir()) == ["fleet.toml"]
     assert (tmp_path / "a-file").read_text() == "mine too"
+
+
+def test_a_gms_models_history_keeps_its_steady_sliding_curve(fleet_dir, tmp_path):
+    """identify --kind gms in the fleet: the history's fc, fs are the model's steady-sliding levels
+    (``GMSModel.steady_parameters``), not the share of the Coulomb level a fit left outside the elements."""
+    from fricli.fleet import pipelines
+
+    folder = copy_of(fleet_dir, tmp_path)
+    (folder / "fleet.toml").write_text((folder / "fleet.toml").read_text() + '\n[options.identify]\nkind = "gms"\n')
+    job = manifest.load(str(folder / "fleet.toml")).jobs[0]
+    result = pipelines.run(job)
+    assert result["status"] == "ok" and result["kind"] == "gms", result
+    model, _ = models.load(job.model)
+    steady = model.steady_parameters()
+    assert result["parameters"] == steady and steady["fc"] >= model.fc + model.force.sum()

@@ -1,6 +1,7 @@
 """The Generalized Maxwell-slip kind: its fit on a joint with known Maxwell-slip elements."""
 
 import numpy as np
+import pytest
 
 from fricli.fitting import hysteresis
 from fricli.models.gms import GMSModel
@@ -153,3 +154,23 @@ def test_a_log_without_position_is_refused_with_one_line(tmp_path):
         assert res.exit_code == 6, (args[0], res.output)
         assert res.stderr.strip().splitlines()[-1].startswith("fricli: error: ") and "'q'" in res.stderr
         assert "internal error" not in res.stderr
+
+
+def test_the_steady_parameters_are_the_friction_of_steady_sliding():
+    """Once every element slips, sliding slowly one way over the whole travel, the friction is fc +
+    the Coulomb level along the travel + the break-away forces (+ fv qd): its mean over the travel is
+    the steady ``fc`` the fleet history keeps for a gms model, whatever the fit's split."""
+    model = GMSModel([0.002, 0.02], [1.5, 0.7], fc=0.4, fst=0.8, vs=0.01, fv=2.0, q_lo=0.0, q_hi=1.0,
+                     coulomb_pos=[0.2, 0.6, 0.1])
+    v = 0.2   # 20 vs: the Stribeck term has died away (exp(-400))
+    t = np.linspace(0.0, 1.0 / v, 200_001)
+    friction, _ = model.predict({"t": t, "q": v * t, "qd": np.full(t.size, v)})
+    sliding = t * v > 0.05   # past the largest deflection: every element slips
+    steady = model.steady_parameters()
+    q = v * t[sliding]
+    np.testing.assert_allclose(friction[sliding] - 2.0 * v, 2.2 + model.coulomb_level(q), atol=1e-9)
+    along = model.coulomb_level(np.linspace(0.0, 1.0, 100_001)) - 0.4   # the level's part along the travel
+    assert steady["fc"] == pytest.approx(0.4 + 2.2 + np.mean(along), rel=1e-6)
+    assert steady["fs"] == pytest.approx(steady["fc"] + 0.8) and steady["fv"] == 2.0
+    split = GMSModel([0.002, 0.02], [0.5, 0.7], fc=1.4, coulomb_pos=[0.2, 0.6, 0.1])
+    assert split.steady_parameters()["fc"] == pytest.approx(steady["fc"])

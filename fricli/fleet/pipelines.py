@@ -56,7 +56,9 @@ def run(job: Job, *, if_changed: bool = True) -> dict:
         if made is None:
             out["status"] = "unchanged"
             return out
-        params = made.model.parameters() if made.pipeline == "identify" else {}
+        params = {}
+        if made.pipeline == "identify":   # a gms model's in the LuGre model's terms (its sum of levels)
+            params = getattr(made.model, "steady_parameters", made.model.parameters)()
         out.update(status="ok", kind=made.model.kind, parameters=params, errors=runs.moving_errors(made),
                    warnings=list(made.summary.get("warnings", [])))
         if job.diagnose:

@@ -219,6 +219,17 @@ class GMSModel(FrictionModel):
         return {"fc": self.fc, "fst": self.fst, "vs": self.vs, "fv": self.fv, "kc": self.kc,
                 "q_lo": self.q_lo, "q_hi": self.q_hi}
 
+    def steady_parameters(self) -> dict[str, float]:
+        """The steady-sliding curve in the LuGre model's terms [Nm, rad/s]: ``fc`` the friction once
+        every element slips (the Coulomb level, its mean along the travel, and the elements'
+        break-away forces), ``fs`` = fc + fst, ``vs``, ``fv``, ``kc``. How the Coulomb level is shared
+        between the elements and fc is not well determined by a fit; their sum is."""
+        level = self.fc + float(np.sum(self.force))
+        if self.coulomb_k:
+            pos = np.asarray(self.coulomb_pos, dtype=np.float64)
+            level += float(np.sum(pos) - 0.5 * (pos[0] + pos[-1])) / self.coulomb_k
+        return {"fc": level, "fs": level + self.fst, "vs": self.vs, "fv": self.fv, "kc": self.kc}
+
     def get_params(self) -> dict:
         return {**self.parameters(), "axis": self.axis}
 
