@@ -6,7 +6,8 @@ what the commands fit, ``load_model`` reads a model file, ``fit_arm`` runs ``fri
 ``diagnose_arm`` runs ``fricli diagnose`` on a log's models (``--fix``, ``--calibrate``),
 ``identify_payload`` runs ``fricli payload``, ``evaluate`` runs ``fricli evaluate``, ``import_log``
 runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``,
-``calibrate_thresholds`` and ``replay_log`` run ``fricli thresholds`` and ``fricli replay``.
+``calibrate_thresholds`` and ``replay_log`` run ``fricli thresholds`` and ``fricli replay``,
+``export_header`` runs ``fricli export``.
 The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
@@ -15,12 +16,12 @@ __version__ = "0.2.0"
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
            "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "fit_arm",
            "diagnose_arm", "identify_payload", "evaluate", "Evaluation", "import_log", "add_dynamics",
-           "calibrate_thresholds", "replay_log", "__version__"]
+           "calibrate_thresholds", "replay_log", "export_header", "__version__"]
 
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
          "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
          "add_dynamics": "fricli.robot.logterms", "calibrate_thresholds": "fricli.robot.replay",
-         "replay_log": "fricli.robot.replay"}
+         "replay_log": "fricli.robot.replay", "export_header": "fricli.export.c"}
 
 
 def __getattr__(name: str):

@@ -460,3 +460,23 @@ def test_model_files_whose_c_names_would_collide_are_refused(files, observer, tm
     res = invoke("export", folder, "--prefix", "arm", "-o", header, *(["--observer"] if observer else []))
     assert res.exit_code == 4 and res.output.count("\n") == 1 and not header.exists(), res.output
     assert all(name in res.output for name in files) and "rename" in res.output
+
+
+def test_the_python_call_is_the_command(tmp_path):
+    """``fricli.export_header`` writes the command's header and refuses what it refuses."""
+    import fricli
+    from fricli.fitting.optionspec import OptionError
+
+    model = tmp_path / "lugre.npz"
+    fricli.LuGre().fit(SAMPLE / "joint2_base.parquet").save(model)
+    done = invoke("export", model, "--prefix", "arm", "-o", tmp_path / "cmd.h")
+    assert done.exit_code == 0, done.output
+    text = fricli.export_header(str(model), str(tmp_path / "call.h"), prefix="arm")
+    assert (tmp_path / "call.h").read_text() == (tmp_path / "cmd.h").read_text() == text
+    for kwargs, option in (({"prefix": "2arm"}, "prefix"), ({"adapt": True}, "observer")):
+        with pytest.raises(OptionError) as err:
+            fricli.export_header(str(model), str(tmp_path / "refused.h"), **kwargs)
+        assert err.value.option == option
+    assert not (tmp_path / "refused.h").exists()
+    refused = invoke("export", model, "--prefix", "2arm", "-o", tmp_path / "refused.h")
+    assert refused.exit_code == 2 and "--prefix" in refused.output

@@ -46,29 +46,10 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_of
       fricli export lugre.npz -o friction.h
       fricli export models/ --prefix arm -o arm_friction.h
     """
-    from fricli.core.atomic import atomic_write_bytes
     from fricli.export import c
 
-    try:
-        c.check_prefix(prefix)
-    except ValueError as exc:
-        raise click.BadParameter(str(exc), param_hint="--prefix") from None
-    if observer:
-        text = _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain)
-    elif thresholds_path or adapt or adapt_offset or time_constant is not None or gain is not None:
-        raise click.UsageError("--thresholds, --adapt, --adapt-offset, --time-constant and --gain go with --observer")
-    else:
-        text = c.export(model, prefix)
-    if output == "-":
-        click.echo(text, nl=False)
-    else:
-        atomic_write_bytes(output, text.encode("ascii"))
+    c.export_header(model, output, prefix=prefix, observer=observer, thresholds=thresholds_path, adapt=adapt,
+                    adapt_offset=adapt_offset, time_constant=time_constant, gain=gain)
+    if output != "-":
         say(f"wrote {output}", quiet)
 
-
-def _observer_header(model, prefix, thresholds_path, adapt, adapt_offset, time_constant, gain) -> str:
-    from fricli.robot.replay import settings
-    from fricli.export import observer
-
-    k, thr, adaptation = settings(thresholds_path, adapt, adapt_offset, time_constant, gain)
-    return observer.export(model, prefix, k, thr, adaptation)
