@@ -237,13 +237,20 @@ def test_kt_options_override_the_mapping():
 # ---------------------------------------------------------------------- the command
 
 
-def test_command_reports_defects_and_writes_atomically(tmp_path):
+def imported_with_a_short_row(tmp_path, output):
+    """rec.csv (a short row at line 5) and map.toml in ``tmp_path``, imported with --kt 1=3 to
+    ``output``: (the recording's lines, the command's result)."""
     lines = rows()
     lines[4] = "100.04,0.1"
     (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
     (tmp_path / "map.toml").write_text(MAPPING)
-    res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", "out.parquet", cwd=tmp_path)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", output, cwd=tmp_path)
     assert res.returncode == 0, res.stderr
+    return lines, res
+
+
+def test_command_reports_defects_and_writes_atomically(tmp_path):
+    lines, res = imported_with_a_short_row(tmp_path, "out.parquet")
     assert "warning: rec.csv: dropped 1 row with wrong number of fields (first at line 5: 2 fields, 8 expected)" \
         in res.stderr
     assert "imported 39 rows x 2 joints from rec.csv -> out.parquet" in res.stderr
@@ -532,12 +539,7 @@ def test_the_python_call_is_the_command(tmp_path, monkeypatch):
     import fricli
     from fricli.fitting.optionspec import OptionError
 
-    lines = rows()
-    lines[4] = "100.04,0.1"
-    (tmp_path / "rec.csv").write_text("\n".join(lines) + "\n")
-    (tmp_path / "map.toml").write_text(MAPPING)
-    res = run("import", "rec.csv", "--mapping", "map.toml", "--kt", "1=3", "-o", "cmd.parquet", cwd=tmp_path)
-    assert res.returncode == 0, res.stderr
+    _, res = imported_with_a_short_row(tmp_path, "cmd.parquet")
     monkeypatch.chdir(tmp_path)
     done = fricli.import_log("rec.csv", "map.toml", kt={"1": 3.0}, output="call.parquet")
     cmd = pq.read_table(tmp_path / "cmd.parquet")

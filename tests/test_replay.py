@@ -105,14 +105,29 @@ def test_the_exported_arm_header_equals_replay(folder, tmp_path):
         assert np.array_equal(got[:, 2].astype(bool), want.contact[:, 0])
 
 
-def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
-    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
+def imported_jointwise(tmp_path, joint: int):
+    """(the imported log, the URDF, its table) of the UR10e jointwise run of ``joint``, with the URDF's terms."""
+    data = shared_data(f"ur10e/jointwise_motion/ur-20_01_22-joint_{joint}.csv")
     urdf = shared_data("ur10e/ur10e.urdf")
-    log = tmp_path / "j2.parquet"
+    log = tmp_path / f"j{joint}.parquet"
     done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
                   "-o", log, "-q")
-    assert done.exit_code == 0, done.stderr
-    table = pq.read_table(log)
+    assert done.exit_code == 0, done.output
+    return log, urdf, pq.read_table(log)
+
+
+def lugre_per_joint(table, folder):
+    """A folder of one LuGre model per joint 1..6 of ``table`` (fixed parameters, saved for that joint's rows)."""
+    folder.mkdir()
+    for j in range(1, 7):
+        part = logs.from_table(table, name="x", joint=j)
+        models.save_for_log(str(folder / f"joint_{j}.npz"), LuGreModel(2.0, 3.0, 0.05, 1.0, 5.0, sigma0=1e4,
+                                                                       sigma1=1.0), part, rows_used=len(part))
+    return folder
+
+
+def test_urdf_momentum_terms_agree_with_the_logs_rigid_body_torques(tmp_path):
+    log, urdf, table = imported_jointwise(tmp_path, 2)
     sig = {j: logs.from_table(table, name="x", joint=j).signals for j in range(1, 7)}
     p, w = replay.momentum_terms(str(urdf), table.schema, list(range(1, 7)), sig, "x")
     t = sig[1]["t"]
@@ -309,19 +324,8 @@ def test_one_joints_model_replays_with_the_urdf_terms_of_the_whole_arm(tmp_path)
     """The URDF form for some joints of an arm's log: M(q), C and g depend on every joint's position,
     which the log holds; the joints replayed get the terms of the whole arm (it was refused as a
     log without the other joints' positions, advising --hold, which replay does not take)."""
-    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_2.csv")
-    urdf = shared_data("ur10e/ur10e.urdf")
-    log = tmp_path / "j2.parquet"
-    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
-                  "-o", log, "-q")
-    assert done.exit_code == 0, done.output
-    table = pq.read_table(log)
-    folder = tmp_path / "models"
-    folder.mkdir()
-    for j in range(1, 7):
-        part = logs.from_table(table, name="x", joint=j)
-        models.save_for_log(str(folder / f"joint_{j}.npz"), LuGreModel(2.0, 3.0, 0.05, 1.0, 5.0, sigma0=1e4,
-                                                                       sigma1=1.0), part, rows_used=len(part))
+    log, urdf, table = imported_jointwise(tmp_path, 2)
+    folder = lugre_per_joint(table, tmp_path / "models")
     whole = replay.read_arm(str(folder), str(log), str(urdf))
     one = replay.read_arm(str(folder / "joint_3.npz"), str(log), str(urdf))
     assert one.joints == [3]
@@ -337,13 +341,7 @@ def test_the_rotors_cross_inertia_the_import_recorded_is_in_the_momentum(tmp_pat
     must hold it too, or the residual carries its torque J qdd."""
     import json
 
-    data = shared_data("ur10e/jointwise_motion/ur-20_01_22-joint_5.csv")
-    urdf = shared_data("ur10e/ur10e.urdf")
-    log = tmp_path / "j5.parquet"
-    done = invoke("import", data, "--mapping", f"{ROOT}/docs/ur10e-mapping.toml", "--urdf", urdf, "--cutoff", "10",
-                  "-o", log, "-q")
-    assert done.exit_code == 0, done.output
-    table = pq.read_table(log)
+    log, urdf, table = imported_jointwise(tmp_path, 5)
     meta = dict(table.schema.metadata)
     record = json.loads(meta[b"fricli.import"])
     cross = np.zeros((6, 6))
@@ -352,12 +350,7 @@ def test_the_rotors_cross_inertia_the_import_recorded_is_in_the_momentum(tmp_pat
     meta[b"fricli.import"] = json.dumps(record).encode()
     coupled_log = tmp_path / "coupled.parquet"
     pq.write_table(table.replace_schema_metadata(meta), coupled_log)
-    folder = tmp_path / "models"
-    folder.mkdir()
-    for j in range(1, 7):
-        part = logs.from_table(table, name="x", joint=j)
-        models.save_for_log(str(folder / f"joint_{j}.npz"), LuGreModel(2.0, 3.0, 0.05, 1.0, 5.0, sigma0=1e4,
-                                                                       sigma1=1.0), part, rows_used=len(part))
+    folder = lugre_per_joint(table, tmp_path / "models")
     plain = replay.read_arm(str(folder), str(log), str(urdf))
     coupled = replay.read_arm(str(folder), str(coupled_log), str(urdf))
     np.testing.assert_allclose(coupled.p - plain.p, plain.qd @ cross.T, rtol=1e-12, atol=1e-12)
