@@ -21,7 +21,7 @@ __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS"
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
          "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
          "add_dynamics": "fricli.robot.logterms", "calibrate_thresholds": "fricli.robot.replay",
-         "replay_log": "fricli.robot.replay", "export_header": "fricli.export.c"}
+         "replay_log": "fricli.robot.replay", "export_header": "fricli.export.header"}
 
 
 def __getattr__(name: str):

@@ -46,9 +46,9 @@ def export_cmd(model, output, prefix, observer, thresholds_path, adapt, adapt_of
       fricli export lugre.npz -o friction.h
       fricli export models/ --prefix arm -o arm_friction.h
     """
-    from fricli.export import c
+    from fricli.export.header import export_header
 
-    c.export_header(model, output, prefix=prefix, observer=observer, thresholds=thresholds_path, adapt=adapt,
+    export_header(model, output, prefix=prefix, observer=observer, thresholds=thresholds_path, adapt=adapt,
                     adapt_offset=adapt_offset, time_constant=time_constant, gain=gain)
     if output != "-":
         say(f"wrote {output}", quiet)

@@ -396,33 +396,3 @@ def export(source: str, prefix: str = "friction") -> str:
     paths, per_joint = model_paths(source)
     return header(entries_for(paths, prefix, per_joint=per_joint), prefix)
 
-
-def export_header(model: str, output: str | None = None, *, prefix: str = "friction", observer: bool = False,
-                  thresholds: str | None = None, adapt: bool = False, adapt_offset: bool = False,
-                  time_constant: float | None = None, gain: float | None = None) -> str:
-    """``fricli export``: the C header of the model file or folder ``model`` (``export``), with
-    ``observer`` the arm's momentum observer and contact detection around it (``thresholds``,
-    ``adapt``, ``adapt_offset``, ``time_constant``, ``gain`` as ``fricli replay``'s), written to
-    ``output`` when given (- for stdout); returns its text. Options that do not go together, or a
-    prefix that is no C name, raise ``OptionError`` naming the option."""
-    from fricli.core.atomic import atomic_write_bytes
-    from fricli.fitting.optionspec import OptionError
-
-    try:
-        check_prefix(prefix)
-    except ValueError as exc:
-        raise OptionError(f"--prefix: {exc}", "prefix") from None
-    if observer:
-        from fricli.export import observer as arm
-        from fricli.robot.replay import settings
-
-        k, thr, adaptation = settings(thresholds, adapt, adapt_offset, time_constant, gain)
-        text = arm.export(model, prefix, k, thr, adaptation)
-    elif thresholds or adapt or adapt_offset or time_constant is not None or gain is not None:
-        raise OptionError("--thresholds, --adapt, --adapt-offset, --time-constant and --gain go with --observer",
-                          "observer")
-    else:
-        text = export(model, prefix)
-    if output is not None:
-        atomic_write_bytes(output, text.encode("ascii"))
-    return text
