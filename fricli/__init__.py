@@ -7,7 +7,8 @@ what the commands fit, ``load_model`` reads a model file, ``fit_arm`` runs ``fri
 ``identify_payload`` runs ``fricli payload``, ``evaluate`` runs ``fricli evaluate``, ``import_log``
 runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``,
 ``calibrate_thresholds`` and ``replay_log`` run ``fricli thresholds`` and ``fricli replay``,
-``export_header`` runs ``fricli export``.
+``export_header`` runs ``fricli export``, ``predict_file`` runs ``fricli predict`` and
+``fricli estimate-ext`` from file to file.
 The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
@@ -16,12 +17,14 @@ __version__ = "0.2.0"
 __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS", "Network", "Residual",
            "Diagnosis", "Calibration", "Model", "NotFittedError", "FricliError", "OptionError", "fit_arm",
            "diagnose_arm", "identify_payload", "evaluate", "Evaluation", "import_log", "add_dynamics",
-           "calibrate_thresholds", "replay_log", "export_header", "__version__"]
+           "calibrate_thresholds", "replay_log", "export_header", "predict_file",
+           "__version__"]
 
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
          "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
          "add_dynamics": "fricli.robot.logterms", "calibrate_thresholds": "fricli.robot.replay",
-         "replay_log": "fricli.robot.replay", "export_header": "fricli.export.header"}
+         "replay_log": "fricli.robot.replay", "export_header": "fricli.export.header",
+         "predict_file": "fricli.estimators.prediction"}
 
 
 def __getattr__(name: str):

@@ -95,8 +95,7 @@ def test_read_log_reads_stdin_as_the_commands_do():
 
 
 def test_every_command_is_a_call_or_listed_without_one():
-    """Each command is in the page's table of calls or in its list of commands without a call (estimate-ext
-    in both: its arrays are ``external_torque``, its file to file is the command's)."""
+    """Each command is in the page's table of calls or in its list of commands without a call, not in both."""
     from fricli.cli import COMMANDS
 
     text = PAGE.read_text()
@@ -104,7 +103,7 @@ def test_every_command_is_a_call_or_listed_without_one():
     without = re.search(r"The other commands have no call in `fricli` yet: (.*?)\.\n", text, re.S).group(1)
     listed = set(re.findall(r"`([a-z-]+)`", without))
     assert table | listed == set(COMMANDS), sorted(set(COMMANDS) ^ (table | listed))
-    assert table & listed == {"estimate-ext"}
+    assert table & listed == set()
 
 
 def test_inspect_of_a_file_is_load_models_meta(folder):
@@ -142,3 +141,34 @@ def test_evaluate_is_the_command(folder):
     with pytest.raises(fricli.FricliError) as missing:
         fricli.evaluate({"lin": folder / "nope.npz"}, {"asym": ext})
     assert missing.value.exit_code == invoke("evaluate", "--model", folder / "nope.npz", "--log", ext).exit_code
+
+
+def test_predict_file_is_the_command(folder):
+    """``fricli.predict_file`` writes what ``fricli predict`` and ``estimate-ext`` write, gives what
+    ``--json`` prints, and refuses options that do not go together."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    from conftest import invoke
+    from fricli.fitting.optionspec import OptionError
+
+    log = folder / "sample_data" / "joint2_extended_asym.parquet"
+    fricli.Linear().fit(folder / "sample_data" / "joint2_base.parquet").save(folder / "linear-pred.npz")
+    model = str(folder / "linear-pred.npz")
+    for command, kwargs in (("predict", {}), ("estimate-ext", {"external": True, "lowpass_hz": 5.0})):
+        extra = ["--lowpass", "5"] if kwargs else []
+        done = invoke(command, model, log, "-o", folder / f"{command}-cmd.parquet", "--until", "80%", "--json", *extra)
+        assert done.exit_code == 0, done.output
+        result = fricli.predict_file(model, str(log), str(folder / f"{command}-call.parquet"), time_until="80%",
+                                     **kwargs)
+        cmd, call = (pq.read_table(folder / f"{command}-{how}.parquet") for how in ("cmd", "call"))
+        assert call.equals(cmd, check_metadata=True)
+        printed = json.loads(done.stdout)
+        assert {k: printed[k] for k in result.as_json()} == json.loads(json.dumps(result.as_json()))
+    for kwargs, option in (({"lowpass_hz": 5.0}, "lowpass_hz"), ({"precision": "half"}, "precision"),
+                           ({"batch_rows": 0}, "batch_rows")):
+        with pytest.raises(OptionError) as err:
+            fricli.predict_file(model, str(log), str(folder / "refused.parquet"), **kwargs)
+        assert err.value.option == option
+    assert not (folder / "refused.parquet").exists()

@@ -5,8 +5,8 @@ from __future__ import annotations
 import click
 
 from fricli.applying import predicting
-from fricli.core import modelset
 from fricli.cli import cli
+from fricli.estimators.prediction import predict_file
 from fricli.cli.options import (LOWPASS_HELP, Number, common, emit_json, extrapolation_line, json_flag, log_reading,
                                 output_option, progress_enabled, say, warn)
 
@@ -37,15 +37,6 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
     if as_json and output == "-":
         raise click.UsageError("--json needs -o FILE: stdout carries the Parquet output")
 
-    from fricli import models
-
-    def load(path):
-        model, meta = models.load(path)
-        return models.set_precision(model, precision), meta
-
-    reading = predicting.Reading(joint=joint, kt=kt, cutoff_hz=cutoff, drop_invalid=drop_invalid,
-                                 window=window, batch_rows=batch_rows, zero=zero)
-    outputs = predicting.Outputs(external=external, lowpass_hz=lowpass, flag_extrapolation=flag_extrapolation)
     bar = None
     if progress_enabled(quiet):
         from tqdm import tqdm
@@ -57,8 +48,11 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
         bar.update(rows)
 
     try:
-        result = predicting.run_models(modelset.source(model_path), log, output, reading=reading, outputs=outputs,
-                                       warn=warn, on_rows=on_rows if bar is not None else None, load=load)
+        result = predict_file(model_path, log, output, external=external, lowpass_hz=lowpass,
+                              flag_extrapolation=flag_extrapolation, precision=precision, batch_rows=batch_rows,
+                              time_from=window.start, time_until=window.stop, warn=warn,
+                              on_rows=on_rows if bar is not None else None, joint=joint, kt=kt, cutoff=cutoff,
+                              drop_invalid=drop_invalid, no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
     finally:
         if bar is not None:
             bar.close()

@@ -81,6 +81,26 @@ def with_partners(model, data: logs.Log):
     return model
 
 
+def reading_of(command: str, reading: dict, time_from=None, time_until=None, extra: dict | None = None):
+    """The commands' reading options given as keywords (``read_log``'s, ``--from``/``--until`` as
+    ``time_from``/``time_until``, and ``extra`` {name: (Option, value)}) checked: (the values of
+    READING with their defaults, the extra values, the time window). OptionError naming a wrong one."""
+    from fricli.core import timewindow
+
+    extra = extra or {}
+    given = {**reading, **{name: value for name, (_, value) in extra.items()}}
+    opts = optionspec.check_values(given, {**READING, **{name: o for name, (o, _) in extra.items()}}, command)
+    values = {name: opts.pop(name) for name in extra}
+    bounds = []
+    for option, bound in (("time_from", time_from), ("time_until", time_until)):
+        try:
+            bounds.append(bound if bound is None or isinstance(bound, timewindow.Bound)
+                          else timewindow.Bound.parse(str(bound)))
+        except ValueError as exc:
+            raise optionspec.OptionError(f"{command} option {option}: {exc}", option) from None
+    return {**{name: option.default for name, option in READING.items()}, **opts}, values, timewindow.Window(*bounds)
+
+
 def _as_log(log, reading: dict | None = None) -> logs.Log:
     """``log`` itself, or the log at the path ``log`` read with ``reading`` (``read_log``'s options)."""
     if isinstance(log, logs.Log):

@@ -6,8 +6,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from fricli.core import timewindow
-from fricli.estimators.base import READING
+from fricli.estimators.base import reading_of
 from fricli.fitting import optionspec, runs
 
 
@@ -49,18 +48,8 @@ def evaluate(models: dict, logs: dict, *, lowpass_hz: float | None = None, time_
     from fricli.applying import evaluation
     from fricli.fitting import plan
 
-    opts = optionspec.check_values({**reading, "lowpass_hz": lowpass_hz}, {**READING, "lowpass_hz": LOWPASS}, "evaluate")
-    lowpass_hz = opts.pop("lowpass_hz")
-    bounds = []
-    for option, bound in (("time_from", time_from), ("time_until", time_until)):
-        try:
-            bounds.append(bound if bound is None or isinstance(bound, timewindow.Bound)
-                          else timewindow.Bound.parse(str(bound)))
-        except ValueError as exc:
-            raise optionspec.OptionError(f"evaluate option {option}: {exc}", option) from None
-    window = timewindow.Window(*bounds)
-    defaults = {name: option.default for name, option in READING.items()}
-    r = {**defaults, **opts}
+    r, extra, window = reading_of("evaluate", reading, time_from, time_until, {"lowpass_hz": (LOWPASS, lowpass_hz)})
+    lowpass_hz = extra["lowpass_hz"]
     read_kwargs = {"joint": r["joint"], "kt": r["kt"], "cutoff_hz": r["cutoff"], "drop_invalid": r["drop_invalid"],
                    "warn": warn, "zero": runs.zero(r)}
     model_paths = {str(k): os.fspath(v) for k, v in models.items()}
