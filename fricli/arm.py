@@ -160,7 +160,6 @@ class _Steps:
 
     def imported(self, name, recordings, mapping_path, urdf, cutoff_hz) -> str:
         from fricli.robot.importing import import_log
-        from fricli.robot.mapping import load_mapping
 
         path = os.path.join(self.out, name)
         key = {"recordings": [jobs.file_sha256(r) for r in recordings], "mapping": jobs.file_sha256(mapping_path),
@@ -169,12 +168,10 @@ class _Steps:
             return path
         self.say(f"import: {' + '.join(recordings)} with {urdf} -> {path}")
         os.makedirs(os.path.dirname(path), exist_ok=True)
-        done = import_log(list(recordings), load_mapping(mapping_path), urdf=urdf, cutoff_hz=cutoff_hz,
-                          mapping_name=mapping_path)
+        done = import_log(list(recordings), mapping_path, output=path, urdf=urdf, cutoff_hz=cutoff_hz)
         self.notices += done.notices
         for finding in (done.meta.get("robot") or {}).get("mapping_check", {}).get("findings", []):
             self.notices.append(("warning", f"{done.name}: the mapping disagrees with {urdf}: {finding['message']}"))
-        logs.write_table(done.table, path)
         self._done(name, key, [path])
         return path
 

@@ -177,6 +177,13 @@ def robot_model_flags(f):
     return f
 
 
+def zero_keywords(zero: tuple) -> dict:
+    """``robot_model_flags``' ``zero`` as the library's keywords: {"no_gravity": bool, "no_dynamics": bool}."""
+    from fricli.fitting.optionspec import ZERO_FLAGS
+
+    return {flag: column in zero for flag, column in ZERO_FLAGS.items()}
+
+
 def json_flag(f):
     return click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")(f)
 

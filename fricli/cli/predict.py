@@ -8,7 +8,7 @@ from fricli.applying import predicting
 from fricli.cli import cli
 from fricli.estimators.prediction import predict_file
 from fricli.cli.options import (LOWPASS_HELP, Number, common, emit_json, extrapolation_line, json_flag, log_reading,
-                                output_option, progress_enabled, say, warn)
+                                output_option, progress_enabled, say, warn, zero_keywords)
 
 
 def _figures(errs: dict, unit: str) -> str:
@@ -52,7 +52,7 @@ def _run(model_path, log, output, joint, kt, cutoff, drop_invalid, as_json, batc
                               flag_extrapolation=flag_extrapolation, precision=precision, batch_rows=batch_rows,
                               time_from=window.start, time_until=window.stop, warn=warn,
                               on_rows=on_rows if bar is not None else None, joint=joint, kt=kt, cutoff=cutoff,
-                              drop_invalid=drop_invalid, no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
+                              drop_invalid=drop_invalid, **zero_keywords(zero))
     finally:
         if bar is not None:
             bar.close()

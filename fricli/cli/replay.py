@@ -6,7 +6,7 @@ import click
 
 from fricli.applying import observer
 from fricli.cli import cli
-from fricli.cli.options import Number, common, emit_json, json_flag, robot_model_flags, say
+from fricli.cli.options import Number, common, emit_json, json_flag, robot_model_flags, say, zero_keywords
 
 
 def urdf_option(f):
@@ -66,7 +66,7 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
 
     done = replay.replay_log(model, log, output, urdf=urdf, thresholds=thresholds_path, adapt=adapt,
                              adapt_offset=adapt_offset, time_constant=time_constant, gain=gain,
-                             no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
+                             **zero_keywords(zero))
     arm, k, figures = done.arm, done.gain, done.figures
     if not quiet:
         which = "the log's joint" if arm.joints == [None] else f"joints {', '.join(map(str, arm.joints))}"
@@ -127,7 +127,7 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
     thr = replay.calibrate_thresholds(model, list(logs), output, urdf=urdf, gain=gain, quantile=quantile,
                                       margin=margin, release=release, moving_speed=moving_speed,
                                       persistence=persistence, level_share=not no_level,
-                                      no_gravity="tau_g" in zero, no_dynamics="tau_dyn" in zero)
+                                      **zero_keywords(zero))
     if not quiet:
         for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):
             say(f"  {label(j)}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "

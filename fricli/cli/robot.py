@@ -3,7 +3,6 @@ fricli dynamics: the URDF terms for a log that exists."""
 
 from __future__ import annotations
 
-
 import click
 
 from fricli.cli import cli
@@ -50,12 +49,6 @@ def urdf_options(f):
     ]):
         f = option(f)
     return f
-
-
-def _payload(mp, base, mass, com, frame):
-    if frame is None and base is None:
-        raise click.UsageError("--payload-mass/--payload-com need --payload-frame (or robot.payload in the mapping)")
-    return mp.merge_payload(base, mass, com, frame)
 
 
 def _derived_text(record: dict) -> str:
@@ -176,7 +169,6 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
                                   kt=kt_pairs, rotor_inertia=inertia_pairs, match=match, gravity=gravity,
                                   payload_mass=payload_mass, payload_com=payload_com, payload_frame=payload_frame,
                                   held=held, cutoff_hz=cutoff, drop_backward=drop_backward)
-    bag = importing.is_bag(recording)
     for level, line in result.notices:
         if level == "warning":
             warn(line)
@@ -187,7 +179,7 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     if robot:
         extra = f", tau_g and tau_dyn from {urdf} (joints matched by {robot['match']}{_derived_text(robot)})"
     where = "stdout" if output == "-" else output
-    rows = f"{result.meta['rows']:,} {'messages' if bag else 'rows'}"
+    rows = f"{result.meta['rows']:,} {'messages' if result.meta['counted_in'] == 'message' else 'rows'}"
     name = result.name
     for line in _robot_notes(robot, name):
         say(line, quiet)

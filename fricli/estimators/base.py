@@ -45,14 +45,7 @@ def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_i
     ``warn(line)`` gets the notes the commands print. ``Log.signals``: float64 arrays (n,)."""
     given = dict(joint=joint, kt=kt, cutoff=cutoff, drop_invalid=drop_invalid, no_gravity=no_gravity,
                  no_dynamics=no_dynamics)
-    opts = optionspec.check_values(given, READING, "read_log")
-    bounds = []
-    for option, bound in (("time_from", time_from), ("time_until", time_until)):
-        try:
-            bounds.append(None if bound is None else timewindow.Bound.parse(str(bound)))
-        except ValueError as exc:
-            raise OptionError(f"read_log option {option}: {exc}", option) from None
-    window = timewindow.Window(*bounds)
+    opts, _, window = reading_of("read_log", given, time_from, time_until)
     name = "stdin" if path == "-" else os.fspath(path)
     table, digest = logs.read_table("-" if path == "-" else name)
     table = timewindow.slice_table(table, window, name, warn=warn)
@@ -85,8 +78,6 @@ def reading_of(command: str, reading: dict, time_from=None, time_until=None, ext
     """The commands' reading options given as keywords (``read_log``'s, ``--from``/``--until`` as
     ``time_from``/``time_until``, and ``extra`` {name: (Option, value)}) checked: (the values of
     READING with their defaults, the extra values, the time window). OptionError naming a wrong one."""
-    from fricli.core import timewindow
-
     extra = extra or {}
     given = {**reading, **{name: value for name, (_, value) in extra.items()}}
     opts = optionspec.check_values(given, {**READING, **{name: o for name, (o, _) in extra.items()}}, command)
@@ -97,7 +88,7 @@ def reading_of(command: str, reading: dict, time_from=None, time_until=None, ext
             bounds.append(bound if bound is None or isinstance(bound, timewindow.Bound)
                           else timewindow.Bound.parse(str(bound)))
         except ValueError as exc:
-            raise optionspec.OptionError(f"{command} option {option}: {exc}", option) from None
+            raise OptionError(f"{command} option {option}: {exc}", option) from None
     return {**{name: option.default for name, option in READING.items()}, **opts}, values, timewindow.Window(*bounds)
 
 

@@ -54,16 +54,15 @@ def check_files(recordings: list[str], mapping: Mapping, mapping_name: str = "th
 
 def import_log(recordings: str | list[str], mapping: str | Mapping | None = None, *, output: str | None = None,
                urdf: str | None = None, topic: str | None = None, kt=None, rotor_inertia=None,
-               match: str | None = None, gravity=None, payload=None, payload_mass: float | None = None,
-               payload_com=None, payload_frame: str | None = None, held=(), cutoff_hz: float | str | None = None,
-               drop_backward: bool = False, mapping_name: str | None = None) -> Imported:
+               match: str | None = None, gravity=None, payload_mass: float | None = None, payload_com=None,
+               payload_frame: str | None = None, held=(), cutoff_hz: float | str | None = None,
+               drop_backward: bool = False) -> Imported:
     """``fricli import``: one long-format log of a recording, written to ``output`` when given
     (a Parquet file, - for stdout). ``recordings``: a ROS bag (read with ``topic``), the files of
     a recording in several files (the mapping's ``files``), or one delimited text file (- for
     stdin); ``mapping``: a TOML mapping file's path or a ``Mapping`` (optional for a bag). The
     command line's overrides as keywords: ``kt``, ``rotor_inertia`` {joint: value}, ``match``,
-    ``gravity``, ``payload_mass`` [kg], ``payload_com`` (3,) [m], ``payload_frame`` (or ``payload``,
-    a ``mapping.Payload``), ``held`` URDF joints; with ``urdf`` tau_g and tau_dyn are added
+    ``gravity``, ``payload_mass`` [kg], ``payload_com`` (3,) [m], ``payload_frame``, ``held`` URDF joints; with ``urdf`` tau_g and tau_dyn are added
     (``cutoff_hz``: of the derived qd, qdd). Options that do not go together raise ``OptionError``
     naming the option. ``Imported.notices`` holds the warnings and notes on what was dropped or
     assumed, in order (the command prints them on stderr)."""
@@ -85,23 +84,18 @@ def import_log(recordings: str | list[str], mapping: str | Mapping | None = None
         raise OptionError("a text recording needs a mapping (--mapping MAP.toml; docs/robot-import.md)", "mapping")
     if topic is not None and not bag:
         raise OptionError("--topic applies to a ROS bag", "topic")
+    mapping_name = mapping if isinstance(mapping, str) else "the mapping"
     if isinstance(mapping, str):
-        mapping_name = mapping_name or mapping
         mapping = mp.load_mapping(mapping, bag=bag)
     elif mapping is None:
         mapping = Mapping(time=None, joints=[])
-    mapping_name = mapping_name or "the mapping"
     if (held or mapping.held) and urdf is None:
         raise OptionError("--hold (robot.hold) names URDF joints: it applies with --urdf", "held")
     if len(recordings) > 1 or mapping.files:
         check_files(recordings, mapping, mapping_name)
         if "-" in recordings:
             raise OptionError("the files of a recording in several files cannot be read from stdin", "recordings")
-    if payload_mass is not None or payload_com is not None or payload_frame is not None:
-        if payload_frame is None and mapping.payload is None:
-            raise OptionError("--payload-mass/--payload-com need --payload-frame (or robot.payload in the mapping)",
-                              "payload_frame")
-        payload = mp.merge_payload(mapping.payload, payload_mass, payload_com, payload_frame)
+    payload = mp.payload_option(mapping.payload, payload_mass, payload_com, payload_frame)
     result = _import(recordings, mapping, bag, urdf=urdf, topic=topic, kt=kt, rotor_inertia=rotor_inertia,
                      match=match, gravity=gravity, payload=payload, held=held, cutoff_hz=cutoff_hz,
                      drop_backward=drop_backward)

@@ -79,11 +79,7 @@ def add_dynamics(log: str, urdf: str, output: str | None = None, *, match: str |
 
     if match not in ("name", "order"):
         raise OptionError("choose how the log's joints match the URDF's: --match name|order", "match")
-    payload = None
-    if payload_mass is not None or payload_com is not None or payload_frame is not None:
-        if payload_frame is None:
-            raise OptionError("--payload-mass/--payload-com need --payload-frame", "payload_frame")
-        payload = mp.merge_payload(None, payload_mass, payload_com, payload_frame)
+    payload = mp.payload_option(None, payload_mass, payload_com, payload_frame)
     table, _ = logs.read_table(log)
     name = "stdin" if log == "-" else log
     robot = Mapping(time=None, joints=[], gravity=logs.gravity_of(table.schema, gravity), payload=payload,

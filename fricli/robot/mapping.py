@@ -445,6 +445,19 @@ def merge_payload(base: Payload | None, mass=None, com=None, frame=None) -> Payl
                    frame=frame if frame is not None else base.frame)
 
 
+def payload_option(base: Payload | None, mass=None, com=None, frame=None) -> Payload | None:
+    """The payload of --payload-mass, --payload-com, --payload-frame over ``base`` (the mapping's,
+    or None): None when none of them is given; OptionError when no frame carries it."""
+    if mass is None and com is None and frame is None:
+        return None
+    if frame is None and base is None:
+        from fricli.fitting.optionspec import OptionError
+
+        raise OptionError("--payload-mass/--payload-com need --payload-frame (or robot.payload in the mapping)",
+                          "payload_frame")
+    return merge_payload(base, mass, com, frame)
+
+
 def apply_overrides(mapping: Mapping, *, kt=None, rotor_inertia=None, match=None, gravity=None,
                     payload: Payload | None = None, held=()) -> Mapping:
     """``mapping`` with options from the command line taking precedence (in place; returned)."""

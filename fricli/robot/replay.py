@@ -25,6 +25,7 @@ from fricli.core import joints as joint_rule
 from fricli.core import lazy, logs, metrics, modelset
 from fricli.core.atomic import atomic_open, atomic_write_bytes
 from fricli.core.errors import DataError, InvalidRows, LogError, ModelFileError
+from fricli.fitting import runs
 from fricli.models import coupled
 from fricli.models.base import predict_parts
 
@@ -365,10 +366,6 @@ class Replay:
     figures: dict
 
 
-def _zero(no_gravity: bool, no_dynamics: bool) -> tuple:
-    return tuple(c for c, declared in (("tau_g", no_gravity), ("tau_dyn", no_dynamics)) if declared)
-
-
 def replay_log(model: str, log: str, output: str | None = None, *, urdf: str | None = None,
                thresholds: str | None = None, adapt: bool = False, adapt_offset: bool = False,
                time_constant: float | None = None, gain: float | None = None, no_gravity: bool = False,
@@ -379,25 +376,26 @@ def replay_log(model: str, log: str, output: str | None = None, *, urdf: str | N
     command's options), written to ``output`` when given (the log with tau_f_pred, tau_ext_pred
     and contact added)."""
     k, thr, adaptation = settings(thresholds, adapt, adapt_offset, time_constant, gain)
-    arm = read_arm(model, log, urdf, _zero(no_gravity, no_dynamics))
+    arm = read_arm(model, log, urdf, runs.zero({"no_gravity": no_gravity, "no_dynamics": no_dynamics}))
     out = run(arm, k, thr, adaptation)
     if output is not None:
         write(arm, out, output)
     return Replay(arm, out, k, summary(arm, out))
 
 
-def calibrate_thresholds(model: str, logs_: str | list[str], output: str | None = None, *, urdf: str | None = None,
+def calibrate_thresholds(model: str, log_files: str | list[str], output: str | None = None, *, urdf: str | None = None,
                          gain: float = observer.DEFAULT_GAIN, quantile: float = observer.DEFAULT_QUANTILE,
                          margin: float = observer.DEFAULT_MARGIN, release: float = observer.DEFAULT_RELEASE,
                          moving_speed: float = observer.DEFAULT_MOVING_SPEED,
                          persistence: int = observer.DEFAULT_PERSISTENCE, level_share: bool = True,
                          no_gravity: bool = False, no_dynamics: bool = False) -> observer.Thresholds:
     """``fricli thresholds``: contact thresholds calibrated from the collision-free log files
-    ``logs_`` replayed with ``model`` (``calibrate``), written to ``output`` when given (JSON);
+    ``log_files`` replayed with ``model`` (``calibrate``), written to ``output`` when given (JSON);
     the keywords are the command's options (``level_share`` False: ``--no-level-share``)."""
-    paths = [logs_] if isinstance(logs_, str) else list(logs_)
-    thr = calibrate(model, paths, urdf, gain, quantile, margin, release, moving_speed,
-                    zero=_zero(no_gravity, no_dynamics), persistence=persistence, level=level_share)
+    paths = [log_files] if isinstance(log_files, str) else list(log_files)
+    zero = runs.zero({"no_gravity": no_gravity, "no_dynamics": no_dynamics})
+    thr = calibrate(model, paths, urdf, gain, quantile, margin, release, moving_speed, zero=zero,
+                    persistence=persistence, level=level_share)
     if output is not None:
         write_thresholds(thr, output)
     return thr
