@@ -479,3 +479,21 @@ def test_predict_reads_a_log_whose_file_name_is_not_utf8(tmp_path):
     shutil.copy(src, odd)
     done = invoke("predict", model, os.fsdecode(odd), "-o", tmp_path / "out.parquet", "-q")
     assert done.exit_code == 0, done.output
+
+
+def test_a_joints_dead_torque_names_the_joint_in_a_file_of_several():
+    """In a file of several joints, what one joint's rows show is said of that joint."""
+    b = make_table()
+    b = b.set_column(3, b.schema.field(3), pa.array(np.zeros(500)))
+    messages = []
+    logs.from_table(two_joints(b), name="x", joint=3, warn=messages.append)
+    assert [m for m in messages if "tau_m" in m][0].startswith("warning: x, joint 3: 'tau_m' is 0 Nm")
+
+
+def test_a_note_about_the_file_is_printed_once_for_all_its_joints(tmp_path):
+    log = write(two_joints(make_table()).drop_columns(["tau_g", "tau_dyn"]), tmp_path / "two.parquet")
+    result = invoke("identify", log, "--no-gravity", "--no-dynamics", "--kind", "linear", "-o", tmp_path / "m", "-q")
+    assert result.exit_code == 0, result.output
+    assert result.output.count("taken as 0, as declared") == 1
+    again = invoke("identify", log, "--no-gravity", "--no-dynamics", "--kind", "linear", "-o", tmp_path / "m2", "-q")
+    assert again.output.count("taken as 0, as declared") == 1   # once per command, not once per process

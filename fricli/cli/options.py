@@ -209,8 +209,16 @@ def say(message, quiet: bool = False) -> None:
 
 
 def warn(message) -> None:
-    """Warnings always reach stderr."""
-    click.echo(_printable(message), err=True)
+    """Warnings always reach stderr, each line once per command (a note about a file is not
+    repeated for each joint read from it)."""
+    line = _printable(message)
+    ctx = click.get_current_context(silent=True)
+    if ctx is not None:
+        seen = ctx.find_root().meta.setdefault("fricli.warned", set())
+        if line in seen:
+            return
+        seen.add(line)
+    click.echo(line, err=True)
 
 
 def _printable(message: str) -> str:

@@ -522,17 +522,18 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     if warn and step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
              "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
+    where = name if selected is None else f"{name}, joint {joint}"   # what one joint's rows show
     for column, note in not_measured(sig):
         del sig[column]
         if warn:
-            warn(f"note: {name}: {note}")
+            warn(f"note: {where}: {note}")
     mismatch = rate_mismatch(sig)
     if mismatch and warn:
-        warn(f"warning: {name}: {mismatch}")
+        warn(f"warning: {where}: {mismatch}")
     derived = derive_motion(sig, cutoff_hz)
     dead = dead_torque(sig, CANONICAL[axis]["tau"])
     if dead and warn:
-        warn(f"warning: {name}: {dead}")
+        warn(f"warning: {where}: {dead}")
     zero = tuple(c for c in declared_zero(table.schema, name, zero) if c not in sig)
     for column in zero:
         sig[column] = np.zeros(len(sig["t"]))
