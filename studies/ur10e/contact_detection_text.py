@@ -11,6 +11,13 @@ def _short(name: str) -> str:
     return name.removeprefix("ur-").removesuffix("-cal").removesuffix("-payload")
 
 
+def defaults(thr: dict) -> str:
+    """How the thresholds were calibrated: with the defaults, or with another gain."""
+    from fricli.applying.observer import DEFAULT_GAIN
+
+    return "with the defaults" if thr["gain"] == DEFAULT_GAIN else f"with the defaults but the gain, {thr['gain']:g} 1/s"
+
+
 def render(r: dict, names: list[str], joints, s: dict) -> str:
     thr = r["thresholds"]
     J = [str(j) for j in joints]
@@ -32,7 +39,7 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
            "",
            "- Models: the case study's (`fricli identify` and `fricli diagnose --fix --calibrate` on the fitting run "
            "`ur-20_02_19_14harm50sec`, docs/studies/case-study-ur10e.md), the calibrated URDF for every import and replay.",
-           "- Thresholds: calibrated on the fitting run only, with the defaults (`fricli thresholds`); nothing of the "
+           f"- Thresholds: calibrated on the fitting run only, {defaults(thr)} (`fricli thresholds`); nothing of the "
            "other runs enters them. Per joint the threshold in motion is base + share × |tau_f_pred| (the predicted "
            "friction at the adapted level, filtered as the residual): base = margin × quantile of |tau_ext_pred| of the "
            "static observer over the fitting run's rows, share = margin × quantile of |a - 1| over its rows in motion, a "

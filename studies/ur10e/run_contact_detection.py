@@ -301,7 +301,9 @@ def main(argv=None) -> None:
     ap.add_argument("--data", default=DEFAULT_DATA)
     ap.add_argument("--work", default=None, help="folder of the case study's work (made when absent)")
     ap.add_argument("--out", default=ROOT, help="where docs/ goes (default: this clone)")
+    ap.add_argument("--gain", type=float, help="the observer's gain [1/s] for both thresholds files (default: thresholds' own)")
     args = ap.parse_args(argv)
+    gain = [] if args.gain is None else ["--gain", f"{args.gain:g}"]
     started = time.time()
     work = args.work or tempfile.mkdtemp()
     os.makedirs(work, exist_ok=True)
@@ -316,11 +318,11 @@ def main(argv=None) -> None:
     jointwise = [imported(args.data, work, "jointwise_motion", f"ur-20_01_22-joint_{j}", cal) for j in JOINTS]
     collision = [imported(args.data, work, "collision", f"ur-20_01_22-push_pose_{k}", cal) for k in (1, 2)]
     thresholds = os.path.join(work, "thresholds.json")
-    fricli("thresholds", fixed, fit, "--urdf", cal, "-o", thresholds, "-q")
+    fricli("thresholds", fixed, fit, "--urdf", cal, *gain, "-o", thresholds, "-q")
     thr = observer.Thresholds.read(thresholds)
     # the constant thresholds of before (a flag on the first sample beyond, no share of the friction)
     constant = os.path.join(work, "thresholds-constant.json")
-    fricli("thresholds", fixed, fit, "--urdf", cal, "--persistence", "1", "--no-level-share", "-o", constant, "-q")
+    fricli("thresholds", fixed, fit, "--urdf", cal, *gain, "--persistence", "1", "--no-level-share", "-o", constant, "-q")
     replays: dict[str, dict] = {}
     for path in validation + loads + jointwise + collision:
         name = os.path.basename(path).removesuffix(".parquet")
