@@ -348,20 +348,17 @@ def up_to_date_line(out: str, digest: str, inputs: bool) -> str:
 
 
 def fit_joints(pipeline: str, log: str, output: str, report, *, window: timewindow.Window, if_changed: bool,
-               quiet: bool, source=None, read=None, progress=None, report_group=None, refit: bool = False,
-               opts: dict | None = None) -> tuple[dict, bool]:
-    """Make ``pipeline``'s models with the command's options (``fricli.fitting.plan.fit_log``) and
-    report each (``window``: --from/--until): ``report(made)`` prints a joint's model and returns its JSON result,
-    ``report_group(made, label)`` a coupled group's (--coupling). ``source``, ``read``,
-    ``progress`` and ``refit`` as ``fit_log`` takes them (``inputs``, ``read``, ``progress``,
-    ``refit``); ``opts``: the options when not the running command's (``command_options``).
+               quiet: bool, source=None, progress=None, report_group=None) -> tuple[dict, bool]:
+    """Make ``pipeline``'s models with the command's options (``fricli.estimators.whole_log.fit_joints``)
+    and report each (``window``: --from/--until): ``report(made)`` prints a joint's model and returns its
+    JSON result, ``report_group(made, label)`` a coupled group's (--coupling). ``source``: the input
+    models of adapt; ``progress``: the trainers' progress display.
 
     Returns ({joint or group label: result} for the models written, whether OUTPUT is a
     folder). An up-to-date output (--if-changed) is said and left untouched; exits UNCHANGED
     (9) when every output is up to date. LOCKED (8) when another job holds an output."""
-    from fricli.fitting import plan
+    from fricli.estimators import whole_log
 
-    opts = command_options(pipeline) if opts is None else opts
     results: dict = {}
 
     def done(outcome) -> None:
@@ -372,8 +369,9 @@ def fit_joints(pipeline: str, log: str, output: str, report, *, window: timewind
         else:
             results[outcome.label] = report(outcome.made)
 
-    run = plan.fit_log(pipeline, log, output, opts, inputs=source, read=read, window=window,
-                       if_changed=if_changed, refit=refit, warn=warn, progress=progress, done=done)
+    run = whole_log.fit_joints(pipeline, log, output, base=source, time_from=window.start, time_until=window.stop,
+                               if_changed=if_changed, warn=warn, progress=progress, done=done,
+                               **command_options(pipeline))
     if run.unchanged:
         click.get_current_context().exit(errors.UNCHANGED)
     return results, run.folder is not None
