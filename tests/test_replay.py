@@ -50,7 +50,8 @@ def test_replay_command_with_thresholds_and_adaptation(folder, tmp_path):
     for name in ("tau_f_pred", "tau_ext_pred", "contact"):
         assert name in table.column_names
     arm = replay.read_arm(str(folder), f"{ROOT}/{HELD_OUT}")
-    again = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    settings = observer.Thresholds.read(str(thr))
+    again = replay.run(arm, settings.gain, settings, observer.Adaptation())
     assert np.array_equal(table.column("tau_ext_pred").to_numpy(), again.tau_ext[:, 0])
     # the per-joint form: r is the low-pass of tau_g + tau_dyn + tau_f_pred - tau_m
     static = replay.run(arm, observer.DEFAULT_GAIN, None, None)
@@ -301,7 +302,8 @@ def test_the_arm_header_of_a_folder_with_a_coupled_group_equals_replay(tmp_path)
     done = invoke("export", folder, "--observer", "--thresholds", thr, "--adapt", "--prefix", "arm", "-o", header)
     assert done.exit_code == 0, done.output
     arm = replay.read_arm(str(folder), str(log))
-    want = replay.run(arm, observer.DEFAULT_GAIN, observer.Thresholds.read(str(thr)), observer.Adaptation())
+    settings = observer.Thresholds.read(str(thr))
+    want = replay.run(arm, settings.gain, settings, observer.Adaptation())
     assert np.ptp(want.scale) > 0
     paths = []                         # each joint's model as the header steps it: the members apart
     for j in arm.joints:
@@ -476,3 +478,19 @@ def test_a_log_without_a_joint_column_is_not_called_joint_none(folder, tmp_path)
     done = invoke("replay", folder / "joint_2.npz", plain, "-o", out, "--thresholds", thr)
     assert done.exit_code == 0, done.output
     assert "rows of the log's joint" in done.stderr and "None" not in done.stderr
+
+
+@pytest.mark.parametrize("rate, gain", [(1000.0, observer.FAST_GAIN), (200.0, observer.FAST_GAIN),
+                                        (100.0, observer.DEFAULT_GAIN)])
+def test_thresholds_choose_the_gain_by_the_sample_rate(tmp_path, rate, gain):
+    """K dt at most 0.5 at the fast gain (a wrong sample moves the residual by a third of its error at
+    most): the fast gain from 200 Hz on, the default below; --gain overrides it."""
+    log = tmp_path / "log.parquet"
+    assert invoke("simulate", "--scenario", "adapt", "--rate", rate, "-o", log, "-q").exit_code == 0
+    assert invoke("identify", log, "--kind", "linear", "-o", tmp_path / "m.npz", "-q").exit_code == 0
+    done = invoke("thresholds", tmp_path / "m.npz", log, "-o", tmp_path / "t.json")
+    assert done.exit_code == 0, done.output
+    assert observer.Thresholds.read(str(tmp_path / "t.json")).gain == gain
+    assert f"observer gain {gain:g} 1/s" in done.output
+    assert invoke("thresholds", tmp_path / "m.npz", log, "--gain", 70, "-o", tmp_path / "t.json", "-q").exit_code == 0
+    assert observer.Thresholds.read(str(tmp_path / "t.json")).gain == 70.0

@@ -64,6 +64,8 @@ from fricli.core.errors import DataError, LogError
 from fricli.core.jsontext import is_count
 
 DEFAULT_GAIN = 50.0            # K [1/s]: the observer's bandwidth (time constant 20 ms)
+FAST_GAIN = 100.0              # K [1/s] of thresholds calibrated on logs sampled at FAST_STEP or faster
+FAST_STEP = 0.5 / FAST_GAIN    # s: the sample interval up to which K dt stays at most 0.5 at FAST_GAIN
 DEFAULT_QUANTILE = 0.999       # of |r| over the calibration logs' rows
 DEFAULT_MARGIN = 1.5           # threshold = margin x that quantile
 DEFAULT_RELEASE = 0.5          # a flag is released below this share of the threshold
@@ -339,6 +341,15 @@ def replay(t: np.ndarray, f0: np.ndarray, tau_m: np.ndarray, p: np.ndarray, w: n
         out.tau_f[i], out.tau_ext[i], out.contact[i] = obs.step(float(t[i]), f0[i], tau_m[i], p[i], w[i], qd[i])
         out.threshold[i] = obs.threshold
     return out
+
+
+def default_gain(step: float) -> float:
+    """The observer gain [1/s] ``fricli thresholds`` calibrates with on logs sampled every ``step``
+    seconds: FAST_GAIN (a 10 ms time constant: a contact of twice the threshold flagged within 20
+    ms) where K dt stays at most 0.5 at it, else DEFAULT_GAIN. The backward-Euler residual takes
+    K dt / (1 + K dt) of each new sample: with K dt at most 0.5, one wrong sample of the measured
+    torque or velocity moves it by at most a third of its error."""
+    return FAST_GAIN if step <= FAST_STEP * (1 + 1e-9) else DEFAULT_GAIN
 
 
 def static_band(friction: list[np.ndarray], speeds: list[np.ndarray], moving_speed: float,

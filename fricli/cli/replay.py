@@ -90,9 +90,11 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
 @click.argument("logs", nargs=-1, required=True, type=click.Path())
 @click.option("-o", "--output", required=True, type=click.Path(), help="Output thresholds file (JSON).")
 @urdf_option
-@click.option("--gain", type=Number(min=0, min_open=True), default=observer.DEFAULT_GAIN, show_default=True,
+@click.option("--gain", type=Number(min=0, min_open=True), default=None,
               help="Observer gain K [1/s] (time constant 1/K) of the replay the thresholds are calibrated on; "
-                   "written into the file, where replay and export --observer take it from.")
+                   "written into the file, where replay and export --observer take it from. Default: "
+                   f"{observer.FAST_GAIN:g} for logs sampled every {1000 * observer.FAST_STEP:g} ms or faster, "
+                   f"else {observer.DEFAULT_GAIN:g}.")
 @click.option("--quantile", type=Number(min=0, max=1, min_open=True), default=observer.DEFAULT_QUANTILE,
               show_default=True, help="Quantile of |tau_ext_pred| over the logs' rows, per joint.")
 @click.option("--margin", type=Number(min=0, min_open=True), default=observer.DEFAULT_MARGIN, show_default=True,
@@ -129,6 +131,7 @@ def thresholds_cmd(model, logs, output, urdf, gain, quantile, margin, release, m
                                       persistence=persistence, level_share=not no_level,
                                       **zero_keywords(zero))
     if not quiet:
+        say(f"observer gain {thr.gain:g} 1/s (time constant {1000 / thr.gain:.3g} ms)")
         for j, value, share, band in zip(thr.joints, thr.threshold, thr.shares, thr.static_friction):
             say(f"  {label(j)}: threshold {value:.4g} + {share:.3g} x |tau_f_pred| in motion, static friction band "
                 f"{band:.4g}")

@@ -265,13 +265,14 @@ def moving(arm: Arm) -> np.ndarray:
     return np.column_stack([metrics.in_motion(arm.qd[:, j]) for j in range(len(arm.joints))])
 
 
-def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, gain: float = observer.DEFAULT_GAIN,
+def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, gain: float | None = None,
               quantile: float = observer.DEFAULT_QUANTILE, margin: float = observer.DEFAULT_MARGIN,
               release: float = observer.DEFAULT_RELEASE, moving_speed: float = observer.DEFAULT_MOVING_SPEED,
               zero=(), persistence: int = observer.DEFAULT_PERSISTENCE, level: bool = True) -> observer.Thresholds:
     """Thresholds from the static observer on collision-free logs (``observer.calibrate``); with
     ``level``, each joint's share of the friction from the online adaptation replayed on the same
-    logs with those thresholds (``observer.level_share``)."""
+    logs with those thresholds (``observer.level_share``). ``gain`` None: ``observer.default_gain``
+    of the logs' sample interval (the longest of their median intervals)."""
     arms = [read_arm(model_path, path, urdf, zero) for path in log_paths]
     names = [str(j) for j in arms[0].joints]
     for k, arm in enumerate(arms[1:], 1):
@@ -280,6 +281,8 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
                             f"{', '.join(names)}: calibrate on logs of the same joints")
         arms[k] = _in_order(arm, names)
     observer.check_settings(quantile, margin, release, moving_speed, persistence)
+    if gain is None:
+        gain = observer.default_gain(max(float(np.median(np.diff(a.t))) if len(a.t) > 1 else np.inf for a in arms))
     joints = list(arms[0].joints)
     band = observer.static_band([a.f0 for a in arms], [a.qd for a in arms], moving_speed, joints)
     free = observer.Thresholds(joints, np.full(len(joints), np.inf), band, np.ones(len(joints)), gain=gain,
@@ -384,14 +387,15 @@ def replay_log(model: str, log: str, output: str | None = None, *, urdf: str | N
 
 
 def calibrate_thresholds(model: str, log_files: str | list[str], output: str | None = None, *, urdf: str | None = None,
-                         gain: float = observer.DEFAULT_GAIN, quantile: float = observer.DEFAULT_QUANTILE,
+                         gain: float | None = None, quantile: float = observer.DEFAULT_QUANTILE,
                          margin: float = observer.DEFAULT_MARGIN, release: float = observer.DEFAULT_RELEASE,
                          moving_speed: float = observer.DEFAULT_MOVING_SPEED,
                          persistence: int = observer.DEFAULT_PERSISTENCE, level_share: bool = True,
                          no_gravity: bool = False, no_dynamics: bool = False) -> observer.Thresholds:
     """``fricli thresholds``: contact thresholds calibrated from the collision-free log files
     ``log_files`` replayed with ``model`` (``calibrate``), written to ``output`` when given (JSON);
-    the keywords are the command's options (``level_share`` False: ``--no-level-share``)."""
+    the keywords are the command's options (``level_share`` False: ``--no-level-share``; ``gain``
+    None: ``observer.default_gain`` of the logs' sample interval)."""
     paths = [log_files] if isinstance(log_files, str) else list(log_files)
     zero = runs.zero({"no_gravity": no_gravity, "no_dynamics": no_dynamics})
     thr = calibrate(model, paths, urdf, gain, quantile, margin, release, moving_speed, zero=zero,
