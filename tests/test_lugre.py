@@ -735,6 +735,29 @@ def test_identify_on_continuous_motion_without_holds():
     assert "joint" in fitted.fit_["stages"]
 
 
+def test_identify_on_continuous_motion_with_holds_at_one_speed():
+    """Continuous motion with a few constant-velocity holds, all at one speed (a joint that also runs a
+    fixed-speed move): the holds cannot separate Coulomb and viscous friction, the continuous-motion fit
+    can, and says why it was chosen."""
+    p = dict(fc=0.3, fs=0.45, vs=0.02, delta=1.0, fv=0.4, kc=0.0, ks=0.0, sigma0=3e3, sigma1=1.0)
+    rate, sub = 500.0, 4
+    t = np.arange(0.0, 60.0, 1.0 / (rate * sub))
+    v = 0.25 * np.sin(2 * np.pi * 0.6 * t) + 0.12 * np.sin(2 * np.pi * 1.37 * t + 0.7)
+    for start, speed in ((10.0, 0.3), (25.0, -0.3), (40.0, 0.3), (50.0, -0.3)):
+        v[(t >= start) & (t < start + 3.0)] = speed
+    q = np.cumsum(v) / (rate * sub)
+    sig = _friction_log(t, q, v, p, 0.0, sub, 0.02, np.random.default_rng(3))
+    sig["tau_m"] = sig["tau_m"] - sig["tau_dyn"]
+    sig["tau_dyn"] = np.zeros_like(sig["tau_m"])
+    with pytest.raises(DataError, match="cover only one speed"):
+        LuGreIdentifier(samples="steady").fit(sig)
+    fitted = LuGreIdentifier().fit(sig)
+    assert fitted.samples_ == "settled"
+    assert any(n.startswith("the constant-velocity holds are at one speed (about 0.3 rad/s)") for n in fitted.notes_)
+    got = fitted.model_.parameters()
+    assert got["fc"] == pytest.approx(p["fc"], rel=0.1) and got["fv"] == pytest.approx(p["fv"], rel=0.1)
+
+
 def test_parameters_at_a_bound_are_held_with_a_note():
     """A joint without viscous friction: the fit runs Fv to its bound 0; it is held at exactly 0,
     and a note says so (never a value such as 1e-16)."""

@@ -125,16 +125,20 @@ class LuGreIdentifier:
                                 "over the whole log: it moves too little to sample the static curve (a joint held "
                                 "still while others move?)")
             steady = settled_mask(sig["t"], v, settle=self.settle)
-        if self.samples == "auto" and self.samples_ == "steady" and not self._both_ways(steady, v):
-            # no constant-velocity holds to speak of: the continuous-motion fit (settled rows for the
-            # static curve, then every parameter on the simulated model output over the whole log)
+        holds_fit = self._both_ways(steady, v) and self._several_speeds(steady, v)
+        if self.samples == "auto" and self.samples_ == "steady" and not holds_fit:
+            # no constant-velocity holds to speak of, or holds at one speed only: the continuous-motion
+            # fit (settled rows for the static curve, then every parameter on the simulated model
+            # output over the whole log)
             settled = settled_mask(sig["t"], v, settle=self.settle)
-            if self._both_ways(settled, v):
+            if self._both_ways(settled, v) and (not self._both_ways(steady, v) or self._several_speeds(settled, v)):
+                why = (f"no constant-velocity holds (fewer than {MIN_STEADY_PER_DIRECTION} steady-state rows in a "
+                       "direction)" if not self._both_ways(steady, v) else
+                       f"the constant-velocity holds are at one speed (about {np.median(np.abs(v[steady])):.3g} {vu})")
                 self.samples_ = "settled"
                 self.continuous_ = True
                 steady = settled
-                self.notes_.append(f"no constant-velocity holds (fewer than {MIN_STEADY_PER_DIRECTION} steady-state "
-                                   "rows in a direction): continuous-motion fit, the static curve on every row "
+                self.notes_.append(f"{why}: continuous-motion fit, the static curve on every row "
                                    f"{self.settle:g} {units.get('q', '')} past a reversal, then all parameters on "
                                    "the simulated model output over the whole log")
         for name, side in (("positive", v > 0), ("negative", v < 0)):
@@ -144,12 +148,18 @@ class LuGreIdentifier:
                     f"too few steady-state samples with {name} velocity ({count}, need at least "
                     f"{MIN_STEADY_PER_DIRECTION}): the log needs constant-velocity motion held for at "
                     f"least {self.hold:g} s (--hold) or motion past reversals")
-        speeds = np.abs(v[steady])
-        lo, hi = np.percentile(speeds, [5, 95])
-        if hi < 1.5 * lo:
+        if not self._several_speeds(steady, v):
+            speeds = np.abs(v[steady])
             raise DataError(f"the steady-state samples cover only one speed (about {np.median(speeds):.3g} {vu}): "
                             "several velocity levels are needed to separate Coulomb and viscous friction")
         return steady
+
+    @staticmethod
+    def _several_speeds(rows: np.ndarray, v: np.ndarray) -> bool:
+        """Whether the speeds of ``rows`` span enough (95th percentile at least 1.5 times the 5th) to
+        separate Coulomb and viscous friction."""
+        lo, hi = np.percentile(np.abs(v[rows]), [5, 95])
+        return bool(hi >= 1.5 * lo)
 
     @staticmethod
     def _both_ways(rows: np.ndarray, v: np.ndarray) -> bool:
