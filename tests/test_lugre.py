@@ -766,3 +766,23 @@ def test_parameters_at_a_bound_are_held_with_a_note():
     fitted = LuGreIdentifier().fit(sig)
     assert fitted.model_.parameters()["fv"] == 0.0
     assert any(n.startswith("viscous friction Fv: the log does not determine it") for n in fitted.notes_)
+
+
+def test_a_bristle_deflection_held_at_its_smallest_is_named_the_lower_bound():
+    """Friction that turns with sign(qd) within a sample (no pre-sliding) drives sigma0 to its
+    upper bound, which is the bristle deflection g/sigma0's lower bound (1e-8): the note names the
+    deflection's side, not sigma0's."""
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 20.0, 0.002)
+    qd = 0.8 * np.sin(2 * np.pi * 0.3 * t) + 0.4 * np.sin(2 * np.pi * 0.77 * t + 1.0)
+    for centre in (3.0, 10.0, 17.0):   # rests, where the friction is 0
+        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
+    q = np.cumsum(qd) * 0.002
+    qdd = np.gradient(qd, t)
+    sig = {"t": t, "q": q, "qd": qd, "qdd": qdd, "tau_g": np.zeros_like(t), "tau_dyn": 0.5 * qdd}
+    sig["tau_m"] = sig["tau_dyn"] + 6.0 * np.sign(qd) + 3.0 * qd + rng.normal(0.0, 0.05, t.size)
+    fitted = LuGreIdentifier().fit(sig)
+    p = fitted.model_.parameters()
+    assert p["fs"] / p["sigma0"] == pytest.approx(1e-8, rel=1e-3)
+    notes = [n for n in fitted.notes_ if n.startswith("bristle deflection")]
+    assert notes and notes[0].startswith("bristle deflection g/sigma0 at its lower bound"), fitted.notes_

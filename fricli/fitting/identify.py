@@ -326,9 +326,11 @@ class LuGreIdentifier:
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
         sigma0, sigma1 = _bristles(res.x)
-        names = ("bristle deflection g/sigma0", "micro-damping time constant sigma1/sigma0")
-        for i, what in enumerate(names):
-            for bound, side in ((lb[i], "lower"), (ub[i], "upper")):
+        # x[0] is log(sigma0): its upper bound is the deflection g/sigma0's lower one
+        names = (("bristle deflection g/sigma0", ("upper", "lower")),
+                 ("micro-damping time constant sigma1/sigma0", ("lower", "upper")))
+        for i, (what, sides) in enumerate(names):
+            for bound, side in zip((lb[i], ub[i]), sides):
                 if abs(res.x[i] - bound) < 1e-3:
                     self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
                                        "(its default)")

@@ -22,6 +22,7 @@ class Context:
     column_units: dict[str, str] = dataclasses.field(default_factory=dict)
     residual_ms: float = 0.0       # mean square of the model's residual [Nm^2] (0: not known)
     min_gain: float = 0.1          # share of it an effect must be able to remove to be tested
+    presliding: float = 0.0        # the base model's pre-sliding travel [rad or m] (0: none, ``presliding_travel``)
 
     @property
     def tau_unit(self) -> str:
@@ -59,6 +60,20 @@ class Context:
         """A typical high speed: the 95th percentile of |qd| over the rows in motion [rad/s]."""
         v = np.abs(self.signals["qd"][self.moving()])
         return float(np.percentile(v, 95)) if len(v) else 0.0
+
+
+def presliding_travel(model, sig: dict[str, np.ndarray]) -> float:
+    """The travel [rad or m] over which ``model``'s friction turns over after a reversal: a LuGre
+    model's steady bristle deflection g/sigma0 at the log's median gravity load (g = fc + kc |tau_g|),
+    a dissipative network's y_scale/sigma0; an augmented or adapted model's base's. 0 for a model
+    without a pre-sliding state (its friction turns with sign(qd))."""
+    while getattr(model, "base", None) is not None:
+        model = model.base
+    if all(hasattr(model, k) for k in ("fc", "kc", "sigma0")):
+        load = float(np.median(np.abs(sig["tau_g"]))) if "tau_g" in sig else 0.0
+        return max(model.fc + model.kc * load, 0.0) / model.sigma0
+    sigma0 = getattr(model, "sigma0_", None)
+    return float(model.y_scale_) / sigma0 if sigma0 else 0.0
 
 
 def equivalent_levels(y: np.ndarray, qd: np.ndarray) -> dict[str, float]:

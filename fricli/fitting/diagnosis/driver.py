@@ -136,7 +136,7 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
                         "which it moves")
     p, r = residual(model, log)
     ctx = E.Context(sig, p, log.axis, column_units(log.table), residual_ms=float(np.mean(r * r)),
-                    min_gain=min_gain)
+                    min_gain=min_gain, presliding=E.presliding_travel(model, sig))
     lib = E.library(sig, only)
     skipped = {}
     usable = []

@@ -29,7 +29,7 @@ from fricli.core.logs import KNOWN
 from fricli.models import terms as T
 # the context and base class, and the robot-model effects, importable from here as before
 from fricli.fitting.diagnosis.context import (LEVEL_TERMS, Context, Effect, _fmt, _level_coefs, _par,  # noqa: F401
-                                              equivalent_levels)
+                                              equivalent_levels, presliding_travel)
 from fricli.fitting.diagnosis.torque_effects import (RATIO_BOUND, ROBOT_MODEL_TOLERANCE, Acceleration,  # noqa: F401
                                                      Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g,
                                                      _ratio_implausible, _ratio_reach, _ratio_text)

@@ -102,18 +102,52 @@ def _ratio_implausible(name: str, value: float | None, unit: str) -> str | None:
             f"the gear); the shape more likely comes from tau_g (a gravity or payload error) than from friction")
 
 
+#: the load term turns over the model's pre-sliding travel d only where the position's noise at rest,
+#: the 95th percentile of its steps there, stays below d / REST_NOISE_SHARE: it then moves the term of a
+#: joint at rest by a fifth of its range at most instead of flipping its sign
+REST_NOISE_SHARE = 5.0
+
+
+def load_travel(ctx: Context) -> float:
+    """The travel d [rad or m] over which the load term turns over after a reversal: the base
+    model's pre-sliding travel (``Context.presliding``), 0 (the sign of motion) for a model without
+    one or where the position's noise at rest would move the element across it."""
+    d = ctx.presliding
+    if not d > 0 or "q" not in ctx.signals:
+        return 0.0
+    rest = ~ctx.moving()
+    both = rest[1:] & rest[:-1]
+    if both.any():
+        noise = float(np.percentile(np.abs(np.diff(ctx.signals["q"])[both]), 95))
+        if d <= REST_NOISE_SHARE * noise:
+            return 0.0
+    return float(f"{d:.6g}")
+
+
 class Load(Effect):
+    """The Coulomb level grows with the gravity load on the gear, kc*|tau_g|. That friction turns
+    over after a reversal as the rest of the Coulomb friction does: within the base model's
+    pre-sliding travel d (a slip element of limit d), not at the sample where qd changes sign,
+    which a joint reversing slowly takes many samples to cover; without a pre-sliding travel, with
+    the direction of motion held through rests."""
+
     name = N.LOAD
+    # a level that grows with |tau_g| must explain more than a level that does not
+    rivals = ((N.LEVEL,),)
     description = "Coulomb level growing with |tau_g|, the gravity load on the gear (its normal force)"
 
     def applicable(self, ctx):
         return _needs_tau_g(ctx) or _ratio_reach(self, ctx, "|tau_g|*sign(qd)")
 
     def terms(self, ctx, residual):
+        d = load_travel(ctx)
+        if d:
+            return [T.term("|tau_g|*slip", T.abs_("tau_g"), T.slip_(d))]
         return [T.term("|tau_g|*sign", T.abs_("tau_g"), T.SIGN)]
 
     def params(self, coef, ctx):
-        return {"kc": _par(coef["|tau_g|*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+        kc = coef["|tau_g|*slip"] if "|tau_g|*slip" in coef else coef["|tau_g|*sign"]
+        return {"kc": _par(kc, f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def implausible(self, params, ctx):
         return _ratio_implausible("kc", params["kc"]["value"], params["kc"]["unit"])
