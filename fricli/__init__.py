@@ -28,7 +28,7 @@ _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.opt
          "add_dynamics": "fricli.robot.logterms", "calibrate_thresholds": "fricli.robot.replay",
          "replay_log": "fricli.robot.replay", "export_header": "fricli.export.header",
          "predict_file": "fricli.estimators.prediction", "write_report": "fricli.estimators.reporting",
-         "inspect_models": "fricli.estimators.reporting", "simulate_log": "fricli.sim.simulator",
+         "inspect_models": "fricli.estimators.reporting", "simulate_log": "fricli.sim.writing",
          "run_fleet": "fricli.fleet.run", "fleet_trend": "fricli.fleet.trend", "run_demo": "fricli.demo"}
 
 

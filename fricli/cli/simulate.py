@@ -93,6 +93,7 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
       fricli simulate --scenario adapt -o - | fricli predict lugre.npz - -o pred.parquet
     """
     from fricli.fitting.optionspec import OptionError
+    from fricli.sim.writing import simulate_log
 
     ctx = click.get_current_context()
     if fleet_size is not None:
@@ -108,7 +109,7 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
             raise click.UsageError("--fleet writes a folder: give -o FOLDER")
         if ctx.get_parameter_source("rate") is click.core.ParameterSource.DEFAULT:
             rate = None
-        joints = simulator.simulate_log(output, seed=seed, rate=rate, fleet=fleet_size, wearing=wearing)
+        joints = simulate_log(output, seed=seed, rate=rate, fleet=fleet_size, wearing=wearing)
         robots, joints_per_robot, days = fleet_size
         wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
         say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
@@ -122,7 +123,7 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     if thin and scenario != "base":
         raise click.UsageError("--thin applies to --scenario base only")
     try:
-        table = simulator.simulate_log(output, scenario=scenario, joint=int(joint), load=load, effects=effect_specs,
+        table = simulate_log(output, scenario=scenario, joint=int(joint), load=load, effects=effect_specs,
                                        seed=seed, rate=rate, duration=duration, friction_state=friction_state,
                                        thin=thin, contacts=contacts)
     except OptionError as exc:
