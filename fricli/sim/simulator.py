@@ -240,4 +240,3 @@ def metadata(table: pa.Table) -> dict | None:
     """The ``fricli.sim`` metadata of a simulated log (None for other logs)."""
     raw = (table.schema.metadata or {}).get(METADATA_KEY)
     return json.loads(raw) if raw else None
-
