@@ -159,3 +159,13 @@ def test_run_demo_refuses_a_wrong_option(tmp_path):
             fricli.run_demo(tmp_path / "demo", **wrong)
         assert err.value.option == option
     assert not (tmp_path / "demo").exists()
+
+
+@pytest.mark.slow
+def test_run_demo_is_the_command(tmp_path):
+    """Two short demos (about 5 s each): the call writes the command's files and gives its table."""
+    done = run_in(tmp_path, "demo", "--steps", "3", "--data", SAMPLE, "-o", "cmd")
+    assert done.returncode == 0, done.stderr
+    result = fricli.run_demo(tmp_path / "call", data=SAMPLE, steps=3)
+    assert result.table() + "\n" == done.stdout
+    assert files_of(tmp_path / "call") == files_of(tmp_path / "cmd")
