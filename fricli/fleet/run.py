@@ -248,10 +248,10 @@ def run_fleet(manifest: str, *, scheduler: str | None = None, connect_timeout: f
     """``fricli fleet MANIFEST``: every job of the manifest file ``manifest`` (docs/fleet.md) run on
     Dask (``scheduler`` an address, waited for ``connect_timeout`` [s] > 0; else a local cluster of
     ``workers`` >= 1 processes), each model refreshed unless up to date (``force``: every one), the
-    history appended (``on_done(0, jobs)`` first); with ``list_only`` the jobs only (no Dask needed). ``warn(line)`` gets the
-    manifest's warnings as it is read, ``on_done(done, total)`` the progress. Returns a ``FleetRun``
-    (``as_json()``, ``table()``, ``listing()``: what the command prints; ``exit_code``; the
-    warnings). OptionError naming a wrong option; ManifestError when no log matches."""
+    history appended (``on_done(0, jobs)`` first, then as jobs finish); with ``list_only`` the jobs
+    only (no Dask needed). ``warn(line)`` gets the manifest's warnings as it is read. Returns a
+    ``FleetRun`` (``as_json()``, ``table()``, ``listing()``: what the command prints; ``exit_code``;
+    the warnings). OptionError naming a wrong option; ManifestError when no log matches."""
     from fricli.fitting.optionspec import OptionError
     from fricli.fleet import manifest as mf
 

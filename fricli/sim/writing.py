@@ -58,10 +58,10 @@ def simulate_log(output: str, *, scenario: str = "base", joint: int = 2, load: s
         size = _fleet_size(fleet)
         if contacts:
             raise _option_error("contacts do not apply to a fleet", "contacts")
-        given = [name for name, value, default in (("scenario", scenario, "base"), ("joint", str(joint), "2"),
-                                                   ("load", load, "none"), ("effects", effects, []),
-                                                   ("duration", duration, None), ("friction_state", friction_state, None),
-                                                   ("thin", thin, False)) if value != default]
+        daily = (("scenario", scenario, "base"), ("joint", str(joint), "2"), ("load", load, "none"),
+                 ("effects", effects, []), ("duration", duration, None), ("friction_state", friction_state, None),
+                 ("thin", thin, False))
+        given = [name for name, value, default in daily if value != default]
         if given:
             raise _option_error(f"{given[0]} does not apply to a fleet (it simulates daily checks)", given[0])
         if output == "-":
