@@ -160,3 +160,29 @@ def format_table(summary: dict) -> str:
                  f"seed {summary['seed']}; "
                  f"NN_add adapted on {summary['adapt_seconds']:.1f} s of load-free data)")
     return "\n".join(lines)
+
+
+class DemoRun(dict):
+    """``run_demo``'s result: the figures of ``run`` (a dict) and ``table()``, the comparison the
+    command prints."""
+
+    def table(self) -> str:
+        return format_table(self)
+
+
+def run_demo(output: str = "demo-out", *, data: str = "sample_data", joint: int = 2, steps: int | None = None,
+             seed: int = 0, say: Callable[[str], None] | None = None) -> DemoRun:
+    """``fricli demo -o OUTPUT``: ``run`` into the folder ``output`` on the sample logs of ``joint``
+    (2 or 4) in the folder ``data`` (missing ones simulated), ``steps`` Adam steps per base network
+    (>= 1; None: train-base's default), ``seed`` of every network's training; ``say(line)`` gets the
+    progress lines. OptionError naming a wrong option."""
+    from fricli.fitting.optionspec import OptionError
+
+    if str(joint) not in ("2", "4") or isinstance(joint, bool):
+        raise OptionError(f"demo option joint: expected 2 or 4, got {joint!r}", "joint")
+    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 1):
+        raise OptionError(f"demo option steps: expected a whole number >= 1, got {steps!r}", "steps")
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise OptionError(f"demo option seed: expected a whole number, got {seed!r}", "seed")
+    return DemoRun(run(os.fspath(output), data=os.fspath(data), joint=int(joint), steps=steps, seed=seed,
+                       say=say or (lambda s: None)))

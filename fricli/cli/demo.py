@@ -35,9 +35,8 @@ def demo_cmd(output, data, joint, steps, seed, quiet):
       fricli demo -o demo-out
       fricli demo --joint 4 --steps 50000
     """
-    from fricli import demo  # loads matplotlib, scipy.optimize: only when run
+    from fricli.demo import run_demo  # loads matplotlib, scipy.optimize: only when run
 
-    summary = demo.run(output, data=data, joint=int(joint), steps=steps, seed=seed,
-                       say=lambda s: say(s, quiet))
-    click.echo(demo.format_table(summary))
+    result = run_demo(output, data=data, joint=int(joint), steps=steps, seed=seed, say=lambda s: say(s, quiet))
+    click.echo(result.table())
     say(f"models, results.json, table.md and report/ are in {os.path.abspath(output)}", quiet)

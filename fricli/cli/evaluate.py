@@ -6,10 +6,9 @@ import os
 
 import click
 
-from fricli.core import logs
 from fricli.cli import cli
 from fricli.cli.options import (LOWPASS_HELP, Folder, Number, common, emit_json, extrapolation_line, json_flag,
-                                log_reading, read_log, reading_kwargs, say, warn)
+                                log_reading, say, warn, zero_keywords)
 
 
 def _named(values: tuple[str, ...], what: str) -> dict[str, str]:
@@ -98,22 +97,11 @@ def report_cmd(model, log, output, lowpass, joint, kt, cutoff, drop_invalid, zer
     Example:
       fricli report adapted.npz sample_data/joint2_extended_asym.parquet -o report/
     """
-    from fricli import models
-    from fricli.applying import report
-    from fricli.core import modelset  # matplotlib loads only for this command
-    from fricli.models import coupled
+    from fricli.estimators.reporting import write_report  # matplotlib loads only for this command
 
-    source = modelset.source(model)
-    table, digest = read_log(log, window)
-    name = "stdin" if log == "-" else log
-    kwargs = reading_kwargs(None, kt, cutoff, drop_invalid, zero)
-    del kwargs["joint"]
-    runs = []
-    for j, path in modelset.paired(source, table, name, joint).items():
-        data = logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs)
-        coupled.add_partners(coupled.view(models.load(path)[0], j), data, table, **kwargs)
-        runs.append((path, data))
-    summaries = report.write_reports(runs, output, lowpass_hz=lowpass)
+    summaries = write_report(model, log, output, lowpass_hz=lowpass, time_from=window.start,
+                             time_until=window.stop, warn=warn, joint=joint, kt=kt, cutoff=cutoff,
+                             drop_invalid=drop_invalid, **zero_keywords(zero))
     if len(summaries) == 1:
         summary = next(iter(summaries.values()))
         say(f"wrote {len(summary['figures'])} figures and index.html to {output} "

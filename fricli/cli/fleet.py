@@ -41,51 +41,38 @@ def fleet_cmd(manifest, scheduler, connect_timeout, workers, force, list_only, a
       fricli fleet fleet/fleet.toml
       fricli fleet fleet.toml --scheduler tcp://127.0.0.1:8786
     """
-    from fricli.fleet import manifest as mf
-    from fricli.fleet import run
+    from fricli.fleet.run import run_fleet
 
-    m = mf.load(manifest, allow_outside=allow_outside)
-    for line in m.unmatched:     # a robot dropping out of a nightly run must not go unnoticed
-        warn(f"warning: {line}")
-    if list_only:
-        for job in m.jobs:
-            click.echo("\t".join(errors.one_line(str(x)) for x in (job.robot, job.joint, job.date, job.pipeline,
-                                                                    job.log, job.model)))
-        return
-    if not m.jobs:
-        raise mf.ManifestError(f"{manifest}: no log matches the manifest's globs")
     bar = None
-    if progress_enabled(quiet):
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(m.jobs), desc="fleet", unit="job", leave=False)
 
     def on_done(done, total):
+        nonlocal bar
+        if bar is None and progress_enabled(quiet):
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, desc="fleet", unit="job", leave=False)
         if bar is not None:
             bar.update(done - bar.n)
 
     try:
-        outcome = run.run(m, scheduler=scheduler, workers=workers, if_changed=not force, on_done=on_done,
-                          connect_timeout=connect_timeout)
+        result = run_fleet(manifest, scheduler=scheduler, connect_timeout=connect_timeout, workers=workers,
+                           force=force, list_only=list_only, allow_outside=allow_outside, warn=warn, on_done=on_done)
     finally:
         if bar is not None:
             bar.close()
+    if list_only:
+        if result.jobs:
+            click.echo(result.listing())
+        return
     if as_json:
-        emit_json({"run": outcome.run, "history": outcome.written, "exit_code": outcome.exit_code,
-                   "jobs": [{"robot": j.robot, "joint": j.joint, "date": j.date, "log": j.log, "model": j.model,
-                             "status": r["status"], "reason": r.get("reason", ""), "seconds": r.get("seconds"),
-                             "warnings": r.get("warnings", [])}
-                            for j, r in zip(outcome.jobs, outcome.results)]})
+        emit_json(result.as_json())
     else:
-        click.echo(run.table(outcome))
-    for line in outcome.warnings:
+        click.echo(result.table())
+    for line in result.warnings[len(result.manifest.unmatched):]:
         warn(line)
-    for job, res in zip(outcome.jobs, outcome.results):
-        for line in res.get("warnings", []):
-            warn(f"warning: {job.robot} joint {job.joint or '-'} {job.date}: {line}")
-    if outcome.written:
-        say(f"appended to {m.history} ({len(outcome.written)} files)", quiet)
-    click.get_current_context().exit(outcome.exit_code)
+    if result.outcome.written:
+        say(f"appended to {result.manifest.history} ({len(result.outcome.written)} files)", quiet)
+    click.get_current_context().exit(result.exit_code)
 
 
 @cli.command("trend")
@@ -117,44 +104,19 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
       fricli trend fleet/history
       fricli trend fleet/history --json --figures wear/
     """
-    from fricli.fleet import history as hist
-    from fricli.fleet import trend
+    from fricli.fitting.optionspec import OptionError
+    from fricli.fleet.trend import fleet_trend
 
-    allowed = set(hist.PARAMETERS)
-    bad = [p for p in params if p not in allowed]
-    if bad:
-        raise click.BadParameter(f"unknown parameter {bad[0]!r} (choose from {', '.join(hist.PARAMETERS)})",
-                                 param_hint="--param")
-    rule = trend.WearRule(params=tuple(params), baseline_days=baseline_days, window_days=window_days,
-                          max_level=max_level, max_growth=max_growth)
-    result = trend.trends(hist.read(history), rule)
-    flagged = [t for t in result if t.flagged]
-    if figures:
-        trend.figures(result, rule, figures)
+    try:
+        result = fleet_trend(history, params=params, baseline_days=baseline_days, window_days=window_days,
+                             max_level=max_level, max_growth=max_growth, figures=figures)
+    except OptionError as exc:
+        if exc.option != "params":
+            raise
+        raise click.BadParameter(str(exc), param_hint="--param") from None
     if as_json:
-        emit_json({"rule": {k: list(v) if isinstance(v, tuple) else v for k, v in vars(rule).items()},
-                   "flagged": [f"{t.robot}/{t.joint}" for t in flagged],
-                   "joints": [t.as_dict() for t in result]})
+        emit_json(result.as_json())
     else:
-        click.echo(trend_table(result, rule))
-    say(f"{len(flagged)} of {len(result)} joints flagged for wear", quiet)
-    click.get_current_context().exit(errors.WEAR if flagged else errors.OK)
-
-
-def trend_table(result, rule) -> str:
-    name = lambda x: errors.one_line(str(x))   # noqa: E731 - names quoted from the manifest, one line each
-    rw = max([12] + [len(name(t.robot)) for t in result])
-    jw = max([6] + [len(name(t.joint)) for t in result])
-    head = f"{'robot':<{rw}} {'joint':<{jw}} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
-                                                                   for p in rule.params) + "  flag"
-    lines = [head]
-    for t in result:
-        cells = []
-        for p in rule.params:
-            lv, gr = t.level.get(p), t.growth.get(p)
-            cells.append(f"{'-' if lv is None else f'{100 * lv:+.1f}%':>9} "
-                         f"{'-' if gr is None or gr != gr else f'{100 * gr:+.2f}%':>8}")
-        flag = "WEAR: " + "; ".join(t.reasons) if t.flagged else t.note
-        lines.append(f"{name(t.robot):<{rw}} {name(t.joint):<{jw}} {len(t.dates):>4}  " + "  ".join(cells)
-                     + f"  {name(flag)}".rstrip())
-    return "\n".join(lines)
+        click.echo(result.table())
+    say(f"{len(result.flagged)} of {len(result.joints)} joints flagged for wear", quiet)
+    click.get_current_context().exit(result.exit_code)

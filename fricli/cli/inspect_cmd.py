@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import click
 
-from fricli import models
-from fricli.core import modelset
 from fricli.cli import cli
 from fricli.cli.options import common, emit_json
 
@@ -24,6 +22,6 @@ def inspect_model(model: str, quiet: bool) -> None:
       fricli inspect lugre.npz
       fricli inspect lugre-arm/
     """
-    source = modelset.source(model)
-    metas = {str(joint): models.load(path)[1] for joint, path in source.paths.items()}
-    emit_json({"joints": metas} if source.folder else next(iter(metas.values())))
+    from fricli.estimators.reporting import inspect_models
+
+    emit_json(inspect_models(model))

@@ -92,10 +92,29 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
       fricli simulate --scenario extended --load asym --effect position --effect drift=0.5 -o ext.parquet
       fricli simulate --scenario adapt -o - | fricli predict lugre.npz - -o pred.parquet
     """
+    from fricli.fitting.optionspec import OptionError
+    from fricli.sim.writing import simulate_log
+
+    ctx = click.get_current_context()
     if fleet_size is not None:
         if contacts:
             raise click.UsageError("--contact does not apply to --fleet")
-        _fleet(fleet_size, wearing, seed, rate, output, quiet)
+        given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
+                                                        "friction_state", "thin")
+                 if ctx.get_parameter_source(p) is not click.core.ParameterSource.DEFAULT]
+        if given:
+            raise click.UsageError(f"{given[0].replace('-specs', '')} does not apply to --fleet (it simulates daily "
+                                   "checks)")
+        if output == "-":
+            raise click.UsageError("--fleet writes a folder: give -o FOLDER")
+        if ctx.get_parameter_source("rate") is click.core.ParameterSource.DEFAULT:
+            rate = None
+        joints = simulate_log(output, seed=seed, rate=rate, fleet=fleet_size, wearing=wearing)
+        robots, joints_per_robot, days = fleet_size
+        wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
+        say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
+            f"{'s' * (joints_per_robot != 1)} x {days} day{'s' * (days != 1)} "
+            f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)
         return
     if wearing:
         raise click.UsageError("--wearing applies to --fleet only")
@@ -104,40 +123,15 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     if thin and scenario != "base":
         raise click.UsageError("--thin applies to --scenario base only")
     try:
-        table = simulator.simulate(scenario, int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
-                                   duration=duration, friction_state=friction_state, thin=thin, contacts=contacts)
-    except ValueError as exc:
-        if not contacts or "contact" not in str(exc):
+        table = simulate_log(output, scenario=scenario, joint=int(joint), load=load, effects=effect_specs,
+                                       seed=seed, rate=rate, duration=duration, friction_state=friction_state,
+                                       thin=thin, contacts=contacts)
+    except OptionError as exc:
+        if exc.option != "contacts":
             raise
         raise click.BadParameter(str(exc), param_hint="--contact") from None
-    simulator.write(table, output)
     t = table.column("t")
     names = ", ".join(name if s is None else f"{name}={s:g}" for name, s in effect_specs) or "no effects"
     where = "stdout" if output == "-" else output
     say(f"simulated {'thin ' if thin else ''}{scenario} joint {joint} (load {load}, {names}, seed {seed}): {table.num_rows} rows, "
         f"{t[-1].as_py() - t[0].as_py():.1f} s at {rate:g} Hz -> {where}", quiet)
-
-
-def _fleet(size, wearing, seed, rate, output, quiet):
-    import concurrent.futures
-    import os
-
-    ctx = click.get_current_context()
-    given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
-                                                    "friction_state", "thin")
-             if ctx.get_parameter_source(p) is not click.core.ParameterSource.DEFAULT]
-    if given:
-        raise click.UsageError(f"{given[0].replace('-specs', '')} does not apply to --fleet (it simulates daily checks)")
-    if output == "-":
-        raise click.UsageError("--fleet writes a folder: give -o FOLDER")
-    if ctx.get_parameter_source("rate") is click.core.ParameterSource.DEFAULT:
-        rate = fleet.DEFAULT_RATE
-    robots, joints_per_robot, days = size
-    with concurrent.futures.ProcessPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
-        joints = fleet.simulate_fleet(output, robots=robots, joints_per_robot=joints_per_robot, days=days,
-                                      wearing=wearing, seed=seed, rate=rate,
-                                      map_fn=lambda f, tasks: pool.map(f, tasks, chunksize=8))
-    wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
-    say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
-        f"{'s' * (joints_per_robot != 1)} x {days} day{'s' * (days != 1)} "
-        f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)

@@ -202,3 +202,78 @@ def table(outcome: Outcome) -> str:
     lines.append(f"{len(outcome.jobs)} jobs: {outcome.count('ok')} ok, {outcome.count('unchanged')} unchanged, "
                  f"{outcome.count('failed')} failed")
     return "\n".join(lines)
+
+
+@dataclasses.dataclass
+class FleetRun:
+    """``run_fleet``'s result: the ``manifest``, its ``jobs``, the run's ``outcome`` (None with
+    ``list_only``) and the ``warnings`` (lines the command prints on stderr)."""
+
+    manifest: Manifest
+    outcome: Outcome | None
+    warnings: list
+
+    @property
+    def jobs(self) -> list:
+        return self.manifest.jobs
+
+    @property
+    def exit_code(self) -> int:
+        """The command's: OK, SOME_FAILED or NOTHING_RAN (OK for a listing)."""
+        return errors.OK if self.outcome is None else self.outcome.exit_code
+
+    def listing(self) -> str:
+        """What ``fricli fleet --list`` prints: a tab-separated line per job (robot, joint, date,
+        pipeline, log, model)."""
+        return "\n".join("\t".join(errors.one_line(str(x)) for x in (j.robot, j.joint, j.date, j.pipeline, j.log,
+                                                                      j.model)) for j in self.jobs)
+
+    def table(self) -> str:
+        """The table ``fricli fleet`` prints at the end of a run."""
+        return table(self.outcome)
+
+    def as_json(self) -> dict:
+        """What ``fricli fleet --json`` prints."""
+        o = self.outcome
+        return {"run": o.run, "history": o.written, "exit_code": o.exit_code,
+                "jobs": [{"robot": j.robot, "joint": j.joint, "date": j.date, "log": j.log, "model": j.model,
+                          "status": r["status"], "reason": r.get("reason", ""), "seconds": r.get("seconds"),
+                          "warnings": r.get("warnings", [])} for j, r in zip(o.jobs, o.results)]}
+
+
+def run_fleet(manifest: str, *, scheduler: str | None = None, connect_timeout: float = CONNECT_TIMEOUT,
+              workers: int | None = None, force: bool = False, list_only: bool = False, allow_outside: bool = False,
+              warn: Callable[[str], None] | None = None,
+              on_done: Callable[[int, int], None] | None = None) -> FleetRun:
+    """``fricli fleet MANIFEST``: every job of the manifest file ``manifest`` (docs/fleet.md) run on
+    Dask (``scheduler`` an address, waited for ``connect_timeout`` [s] > 0; else a local cluster of
+    ``workers`` >= 1 processes), each model refreshed unless up to date (``force``: every one), the
+    history appended (``on_done(0, jobs)`` first, then as jobs finish); with ``list_only`` the jobs
+    only (no Dask needed). ``warn(line)`` gets the manifest's warnings as it is read. Returns a
+    ``FleetRun`` (``as_json()``, ``table()``, ``listing()``: what the command prints; ``exit_code``;
+    the warnings). OptionError naming a wrong option; ManifestError when no log matches."""
+    from fricli.fitting.optionspec import OptionError
+    from fricli.fleet import manifest as mf
+
+    if isinstance(connect_timeout, bool) or not isinstance(connect_timeout, (int, float)) or not connect_timeout > 0:
+        raise OptionError(f"fleet option connect_timeout: expected a number > 0, got {connect_timeout!r}",
+                          "connect_timeout")
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise OptionError(f"fleet option workers: expected a whole number >= 1, got {workers!r}", "workers")
+    m = mf.load(os.fspath(manifest), allow_outside=allow_outside)
+    found = [f"warning: {line}" for line in m.unmatched]   # a robot dropping out of a nightly run must not go unnoticed
+    for line in found:
+        if warn:
+            warn(line)
+    if list_only:
+        return FleetRun(m, None, found)
+    if not m.jobs:
+        raise mf.ManifestError(f"{manifest}: no log matches the manifest's globs")
+    if on_done:
+        on_done(0, len(m.jobs))
+    outcome = run(m, scheduler=scheduler, workers=workers, if_changed=not force, on_done=on_done,
+                  connect_timeout=connect_timeout)
+    late = list(outcome.warnings) + [f"warning: {job.robot} joint {job.joint or '-'} {job.date}: {line}"
+                                     for job, res in zip(outcome.jobs, outcome.results)
+                                     for line in res.get("warnings", [])]
+    return FleetRun(m, outcome, found + late)

@@ -169,3 +169,83 @@ def figures(result: list[JointTrend], rule: WearRule, folder: str) -> list[str]:
     for t, path in zip([t for t in result if t.flagged], paths):
         figure(t, rule, path)
     return paths
+
+
+_write_figures = figures   # fleet_trend's keyword ``figures`` is the folder
+
+
+@dataclasses.dataclass
+class Trend:
+    """``fleet_trend``'s result: the ``rule``, every joint's ``JointTrend`` (``joints``, sorted by
+    robot and joint) and the figure files written."""
+
+    rule: WearRule
+    joints: list
+    figures: list = dataclasses.field(default_factory=list)
+
+    @property
+    def flagged(self) -> list:
+        """The flagged joints as "robot/joint"."""
+        return [f"{t.robot}/{t.joint}" for t in self.joints if t.flagged]
+
+    @property
+    def exit_code(self) -> int:
+        """The command's: WEAR when a joint is flagged, else OK."""
+        from fricli.core import errors
+
+        return errors.WEAR if self.flagged else errors.OK
+
+    def as_json(self) -> dict:
+        """What ``fricli trend --json`` prints."""
+        return {"rule": {k: list(v) if isinstance(v, tuple) else v for k, v in vars(self.rule).items()},
+                "flagged": self.flagged, "joints": [t.as_dict() for t in self.joints]}
+
+    def table(self) -> str:
+        """The table ``fricli trend`` prints: per joint the level and growth of each parameter, the flag."""
+        from fricli.core.errors import one_line as name
+
+        result, rule = self.joints, self.rule
+        rw = max([12] + [len(name(str(t.robot))) for t in result])
+        jw = max([6] + [len(name(str(t.joint))) for t in result])
+        head = f"{'robot':<{rw}} {'joint':<{jw}} {'days':>4}  " + "  ".join(f"{p + ' level':>9} {p + ' /day':>8}"
+                                                                       for p in rule.params) + "  flag"
+        lines = [head]
+        for t in result:
+            cells = []
+            for p in rule.params:
+                lv, gr = t.level.get(p), t.growth.get(p)
+                cells.append(f"{'-' if lv is None else f'{100 * lv:+.1f}%':>9} "
+                             f"{'-' if gr is None or gr != gr else f'{100 * gr:+.2f}%':>8}")
+            flag = "WEAR: " + "; ".join(t.reasons) if t.flagged else t.note
+            lines.append(f"{name(str(t.robot)):<{rw}} {name(str(t.joint)):<{jw}} {len(t.dates):>4}  "
+                         + "  ".join(cells) + f"  {name(flag)}".rstrip())
+        return "\n".join(lines)
+
+
+def fleet_trend(history: str, *, params=DEFAULT_PARAMS, baseline_days: int = 7, window_days: int = 14,
+                max_level: float = 0.15, max_growth: float = 0.01, figures: str | None = None) -> Trend:
+    """``fricli trend HISTORY``: every joint's friction over the days of the fleet history folder
+    ``history`` and its wear flag (see the module docstring): ``params`` the parameters watched
+    (fc, fs, fv, ...), ``baseline_days`` [days] (>= 1), ``window_days`` [days] (>= 2), ``max_level``
+    [-] and ``max_growth`` [1/day] (> 0); with ``figures`` a PNG per flagged joint written into that
+    folder. Returns a ``Trend`` (``as_json()`` what --json prints, ``table()`` what the command
+    prints, ``exit_code``). OptionError naming a wrong option."""
+    from fricli.fitting.optionspec import OptionError
+    from fricli.fleet import history as hist
+
+    params = (params,) if isinstance(params, str) else tuple(params)
+    bad = [p for p in params if p not in hist.PARAMETERS]
+    if bad:
+        raise OptionError(f"unknown parameter {bad[0]!r} (choose from {', '.join(hist.PARAMETERS)})", "params")
+    for option, value, low in (("baseline_days", baseline_days, 1), ("window_days", window_days, 2)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise OptionError(f"trend option {option}: expected a whole number >= {low}, got {value!r}", option)
+    for option, value in (("max_level", max_level), ("max_growth", max_growth)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
+            raise OptionError(f"trend option {option}: expected a number > 0, got {value!r}", option)
+    rule = WearRule(params=params, baseline_days=int(baseline_days), window_days=int(window_days),
+                    max_level=max_level, max_growth=max_growth)
+    result = Trend(rule, trends(hist.read(history), rule))
+    if figures:
+        result.figures = _write_figures(result.joints, rule, figures)
+    return result
