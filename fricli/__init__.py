@@ -10,7 +10,8 @@ runs ``fricli import``, ``add_dynamics`` runs ``fricli dynamics``,
 ``export_header`` runs ``fricli export``, ``predict_file`` runs ``fricli predict`` and
 ``fricli estimate-ext`` from file to file, ``write_report`` runs ``fricli report``,
 ``inspect_models`` ``fricli inspect``, ``simulate_log`` ``fricli simulate``, ``run_fleet`` and
-``fleet_trend`` run ``fricli fleet`` and ``fricli trend``, ``run_demo`` runs ``fricli demo``.
+``fleet_trend`` run ``fricli fleet`` and ``fricli trend``, ``run_demo`` runs ``fricli demo``,
+``fit_joints`` runs ``fricli identify``, ``train-base`` and ``adapt`` on every joint of a log.
 The names are imported on first use, so ``import fricli`` stays cheap.
 """
 
@@ -21,7 +22,7 @@ __all__ = ["read_log", "load_model", "external_torque", "LuGre", "Linear", "GMS"
            "diagnose_arm", "identify_payload", "evaluate", "Evaluation", "import_log", "add_dynamics",
            "calibrate_thresholds", "replay_log", "export_header", "predict_file",
            "write_report", "inspect_models", "simulate_log", "run_fleet", "fleet_trend", "run_demo",
-           "__version__"]
+           "fit_joints", "__version__"]
 
 _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.optionspec", "fit_arm": "fricli.arm",
          "diagnose_arm": "fricli.arm_diagnosis", "import_log": "fricli.robot.importing",
@@ -29,7 +30,8 @@ _FROM = {"FricliError": "fricli.core.errors", "OptionError": "fricli.fitting.opt
          "replay_log": "fricli.robot.replay", "export_header": "fricli.export.header",
          "predict_file": "fricli.estimators.prediction", "write_report": "fricli.estimators.reporting",
          "inspect_models": "fricli.estimators.reporting", "simulate_log": "fricli.sim.writing",
-         "run_fleet": "fricli.fleet.run", "fleet_trend": "fricli.fleet.trend", "run_demo": "fricli.demo"}
+         "run_fleet": "fricli.fleet.run", "fleet_trend": "fricli.fleet.trend", "run_demo": "fricli.demo",
+         "fit_joints": "fricli.estimators.whole_log"}
 
 
 def __getattr__(name: str):

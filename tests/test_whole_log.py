@@ -7,7 +7,7 @@ import pytest
 
 from conftest import invoke, write
 from fricli import sim
-from fricli.estimators.whole_log import fit_joints
+from fricli import fit_joints
 from fricli.fitting.optionspec import OptionError
 
 
