@@ -82,6 +82,13 @@ def reading_of(command: str, reading: dict, time_from=None, time_until=None, ext
     given = {**reading, **{name: value for name, (_, value) in extra.items()}}
     opts = optionspec.check_values(given, {**READING, **{name: o for name, (o, _) in extra.items()}}, command)
     values = {name: opts.pop(name) for name in extra}
+    return ({**{name: option.default for name, option in READING.items()}, **opts}, values,
+            window_of(command, time_from, time_until))
+
+
+def window_of(command: str, time_from=None, time_until=None) -> timewindow.Window:
+    """``--from``/``--until`` given as ``time_from``/``time_until`` (text such as "60%" or "12.5 s",
+    a number of seconds, or a ``timewindow.Bound``); OptionError naming a wrong one."""
     bounds = []
     for option, bound in (("time_from", time_from), ("time_until", time_until)):
         try:
@@ -89,7 +96,7 @@ def reading_of(command: str, reading: dict, time_from=None, time_until=None, ext
                           else timewindow.Bound.parse(str(bound)))
         except ValueError as exc:
             raise OptionError(f"{command} option {option}: {exc}", option) from None
-    return {**{name: option.default for name, option in READING.items()}, **opts}, values, timewindow.Window(*bounds)
+    return timewindow.Window(*bounds)
 
 
 def _as_log(log, reading: dict | None = None) -> logs.Log:

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from fricli.core import timewindow
+from fricli.estimators.base import window_of
 from fricli.fitting import plan
 from fricli.fitting.optionspec import OptionError
 
@@ -35,12 +35,5 @@ def fit_joints(command: str, log: str, output: str, *, base=None, time_from=None
     if (base is None) != (command != "adapt"):
         raise OptionError("base: adapt takes the input models as base, and only adapt" if base is not None
                           else "base: adapt needs the input models (a model file or folder)", "base")
-    bounds = []
-    for option, bound in (("time_from", time_from), ("time_until", time_until)):
-        try:
-            bounds.append(bound if bound is None or isinstance(bound, timewindow.Bound)
-                          else timewindow.Bound.parse(str(bound)))
-        except ValueError as exc:
-            raise OptionError(f"{command} option {option}: {exc}", option) from None
-    return plan.fit_log(command, log, output, options, inputs=base, window=timewindow.Window(*bounds),
+    return plan.fit_log(command, log, output, options, inputs=base, window=window_of(command, time_from, time_until),
                         if_changed=if_changed, warn=warn, progress=progress, done=done)
