@@ -176,13 +176,11 @@ def run_demo(output: str = "demo-out", *, data: str = "sample_data", joint: int 
     (2 or 4) in the folder ``data`` (missing ones simulated), ``steps`` Adam steps per base network
     (>= 1; None: train-base's default), ``seed`` of every network's training; ``say(line)`` gets the
     progress lines. OptionError naming a wrong option."""
-    from fricli.fitting.optionspec import OptionError
+    from fricli.fitting.optionspec import Option, OptionError, check_values
 
     if str(joint) not in ("2", "4") or isinstance(joint, bool):
         raise OptionError(f"demo option joint: expected 2 or 4, got {joint!r}", "joint")
-    if steps is not None and (isinstance(steps, bool) or not isinstance(steps, int) or steps < 1):
-        raise OptionError(f"demo option steps: expected a whole number >= 1, got {steps!r}", "steps")
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise OptionError(f"demo option seed: expected a whole number, got {seed!r}", "seed")
+    check_values({"steps": steps, "seed": seed},
+                 {"steps": Option("steps", "int", low=1), "seed": Option("seed", "int", default=0)}, "demo")
     return DemoRun(run(os.fspath(output), data=os.fspath(data), joint=int(joint), steps=steps, seed=seed,
                        say=say or (lambda s: None)))

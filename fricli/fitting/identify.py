@@ -125,15 +125,16 @@ class LuGreIdentifier:
                                 "over the whole log: it moves too little to sample the static curve (a joint held "
                                 "still while others move?)")
             steady = settled_mask(sig["t"], v, settle=self.settle)
-        holds_fit = self._both_ways(steady, v) and self._several_speeds(steady, v)
+        held_both_ways = self._both_ways(steady, v)
+        holds_fit = held_both_ways and self._several_speeds(steady, v)
         if self.samples == "auto" and self.samples_ == "steady" and not holds_fit:
             # no constant-velocity holds to speak of, or holds at one speed only: the continuous-motion
             # fit (settled rows for the static curve, then every parameter on the simulated model
             # output over the whole log)
             settled = settled_mask(sig["t"], v, settle=self.settle)
-            if self._both_ways(settled, v) and (not self._both_ways(steady, v) or self._several_speeds(settled, v)):
+            if self._both_ways(settled, v) and (not held_both_ways or self._several_speeds(settled, v)):
                 why = (f"no constant-velocity holds (fewer than {MIN_STEADY_PER_DIRECTION} steady-state rows in a "
-                       "direction)" if not self._both_ways(steady, v) else
+                       "direction)" if not held_both_ways else
                        f"the constant-velocity holds are at one speed (about {np.median(np.abs(v[steady])):.3g} {vu})")
                 self.samples_ = "settled"
                 self.continuous_ = True

@@ -252,14 +252,12 @@ def run_fleet(manifest: str, *, scheduler: str | None = None, connect_timeout: f
     only (no Dask needed). ``warn(line)`` gets the manifest's warnings as it is read. Returns a
     ``FleetRun`` (``as_json()``, ``table()``, ``listing()``: what the command prints; ``exit_code``;
     the warnings). OptionError naming a wrong option; ManifestError when no log matches."""
-    from fricli.fitting.optionspec import OptionError
+    from fricli.fitting.optionspec import Option, check_values
     from fricli.fleet import manifest as mf
 
-    if isinstance(connect_timeout, bool) or not isinstance(connect_timeout, (int, float)) or not connect_timeout > 0:
-        raise OptionError(f"fleet option connect_timeout: expected a number > 0, got {connect_timeout!r}",
-                          "connect_timeout")
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
-        raise OptionError(f"fleet option workers: expected a whole number >= 1, got {workers!r}", "workers")
+    check_values({"connect_timeout": connect_timeout, "workers": workers},
+                 {"connect_timeout": Option("connect_timeout", "float", CONNECT_TIMEOUT, low=0.0, low_open=True),
+                  "workers": Option("workers", "int", low=1)}, "fleet")
     m = mf.load(os.fspath(manifest), allow_outside=allow_outside)
     found = [f"warning: {line}" for line in m.unmatched]   # a robot dropping out of a nightly run must not go unnoticed
     for line in found:

@@ -222,6 +222,14 @@ class Trend:
         return "\n".join(lines)
 
 
+def _spec() -> dict:
+    from fricli.fitting.optionspec import Option
+
+    return {o.name: o for o in (Option("baseline_days", "int", 7, low=1), Option("window_days", "int", 14, low=2),
+                                Option("max_level", "float", 0.15, low=0.0, low_open=True),
+                                Option("max_growth", "float", 0.01, low=0.0, low_open=True))}
+
+
 def fleet_trend(history: str, *, params=DEFAULT_PARAMS, baseline_days: int = 7, window_days: int = 14,
                 max_level: float = 0.15, max_growth: float = 0.01, figures: str | None = None) -> Trend:
     """``fricli trend HISTORY``: every joint's friction over the days of the fleet history folder
@@ -230,21 +238,16 @@ def fleet_trend(history: str, *, params=DEFAULT_PARAMS, baseline_days: int = 7, 
     [-] and ``max_growth`` [1/day] (> 0); with ``figures`` a PNG per flagged joint written into that
     folder. Returns a ``Trend`` (``as_json()`` what --json prints, ``table()`` what the command
     prints, ``exit_code``). OptionError naming a wrong option."""
-    from fricli.fitting.optionspec import OptionError
+    from fricli.fitting.optionspec import OptionError, check_values
     from fricli.fleet import history as hist
 
     params = (params,) if isinstance(params, str) else tuple(params)
     bad = [p for p in params if p not in hist.PARAMETERS]
     if bad:
         raise OptionError(f"unknown parameter {bad[0]!r} (choose from {', '.join(hist.PARAMETERS)})", "params")
-    for option, value, low in (("baseline_days", baseline_days, 1), ("window_days", window_days, 2)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-            raise OptionError(f"trend option {option}: expected a whole number >= {low}, got {value!r}", option)
-    for option, value in (("max_level", max_level), ("max_growth", max_growth)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0:
-            raise OptionError(f"trend option {option}: expected a number > 0, got {value!r}", option)
-    rule = WearRule(params=params, baseline_days=int(baseline_days), window_days=int(window_days),
-                    max_level=max_level, max_growth=max_growth)
+    checked = check_values({"baseline_days": baseline_days, "window_days": window_days, "max_level": max_level,
+                            "max_growth": max_growth}, _spec(), "trend")
+    rule = WearRule(params=params, **checked)
     result = Trend(rule, trends(hist.read(history), rule))
     if figures:
         result.figures = _write_figures(result.joints, rule, figures)

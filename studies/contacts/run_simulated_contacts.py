@@ -179,7 +179,7 @@ def document(results: list[dict], seconds: float) -> str:
             f"**{('met' if met else 'not met') if fast else 'not measured in this run'}**."
             + (" At 100 Hz: " + ", ".join(f"joint {r['joint']} median {ms(float(np.median(delays_of(r))))} ms"
                                          for r in slow) + "." if slow else "")
-            + (" " + late_text(of) if late_text(of) else ""), ""]
+            + (" " + late if (late := late_text(of)) else ""), ""]
     lines += [
         "The delay is the observer's low-pass (a step of twice the threshold crosses it after ln 2 / K: about "
         "14 ms at K = 50, 7 ms at K = 100) plus the persistence of 3 samples (2 ms at 1 kHz, 4 ms at 500 Hz, 20 ms "
