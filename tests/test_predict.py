@@ -134,6 +134,19 @@ def test_batches_do_not_change_the_result(tmp_path, model_file, command, added):
             assert other[key]["max"] == pytest.approx(figures[-1][key]["max"], rel=1e-9)
 
 
+def test_units_that_disagree_are_flagged_once_whatever_the_batches(tmp_path, model_file):
+    """The units of t, q and qd are checked on a file's first record batch: the note is the same
+    whether the log is read in one batch or in many."""
+    table = log_table()
+    k = table.schema.get_field_index("t")
+    table = table.set_column(k, table.schema.field(k), pa.array(table.column("t").to_numpy() * 1e3))
+    src = write(table, tmp_path / "log.parquet")
+    for rows in (300, 100_000):
+        res = invoke("predict", model_file, src, "-o", tmp_path / f"p{rows}.parquet", "--batch-rows", rows)
+        assert res.exit_code == 0, res.output
+        assert res.stderr.count("times the rate of change of q over t") == 1, res.stderr
+
+
 def test_json_figures_match_metrics(tmp_path, model_file):
     table = log_table()
     src = write(table, tmp_path / "log.parquet")

@@ -402,7 +402,8 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     rows = table.column(_ROW).to_numpy() if _ROW in table.column_names else None   # the file's, of a joint's rows
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
-                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows)
+                              drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows,
+                              later_batch=st.t_last is not None)
     except NoValidRows:        # the rows of the other batches may be valid: judged once all are read
         return None, table.num_rows
     except LogError as exc:

@@ -498,11 +498,13 @@ def select_joint_rows(table: pa.Table, joint, name: str) -> tuple[pa.Table, obje
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
                cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=(),
-               rows: np.ndarray | None = None) -> Log:
+               rows: np.ndarray | None = None, later_batch: bool = False) -> Log:
     """Check ``table`` against the contract and build a ``Log`` for one joint. ``zero``: robot-model
     columns (tau_g, tau_dyn) declared zero when the log lacks them (``declared_zero``); they are
     filled with zeros in ``signals``, with a note through ``warn``. ``rows``: the file's row number
     of each row of ``table`` (for messages), when it holds one joint's rows of a larger file.
+    ``later_batch``: ``table`` follows an earlier record batch of the same file and joint, whose
+    reading checked the units of t, q and qd (the file-wide notes are not repeated per batch).
     ``Log.reading`` keeps these options (the names of the options of
     ``fricli.fitting.optionspec.READING``)."""
     joint_given, declared = joint, tuple(zero)
@@ -518,7 +520,7 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     if mask is not None:
         table = take_rows(table, mask)
     # the first 100,000 steps tell the sample period (and cost a millisecond on a log of any length)
-    step = float(np.median(np.diff(sig["t"][:100_001]))) if len(sig["t"]) > 1 else None
+    step = float(np.median(np.diff(sig["t"][:100_001]))) if len(sig["t"]) > 1 and not later_batch else None
     if warn and step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
              "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
@@ -527,7 +529,7 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         del sig[column]
         if warn:
             warn(f"note: {where}: {note}")
-    mismatch = rate_mismatch(sig)
+    mismatch = None if later_batch else rate_mismatch(sig)
     if mismatch and warn:
         warn(f"warning: {where}: {mismatch}")
     derived = derive_motion(sig, cutoff_hz)
