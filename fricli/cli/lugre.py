@@ -78,10 +78,9 @@ def identify_cmd(log: str, output: str, kind: str, coupling: bool, motor_stribec
 
 
 def _report_linear(data, model, fit, out, quiet: bool) -> dict:
-    from fricli.models import gms, linear
+    from fricli.models import gms, linear as plain
 
-    if model.kind == "gms":
-        linear = gms
+    linear = gms if model.kind == "gms" else plain
     for note in fit.get("notes", []):
         say(f"note: {note}", quiet)
 

@@ -75,7 +75,7 @@ def arm_code(entries: list[c.Entry], prefix: str, gain: float, thresholds: obser
             "        s->suspected[j] = -HUGE_VAL;",
             f"        s->P11[j] = {c.num(ad.initial_covariance)}; s->P12[j] = 0.0; s->P22[j] = {c.num(ad.initial_covariance)};",
             "    }", "}", "",
-            f"/* One sample at time t [s]. x[j]: joint j's friction signals (its PREFIX_step_array order); tau_m, qd, p",
+            "/* One sample at time t [s]. x[j]: joint j's friction signals (its PREFIX_step_array order); tau_m, qd, p",
             " * (= M(q) qd, or 0) and w (= g(q) - C(q, qd)^T qd, or tau_g + tau_dyn) per joint. Writes per joint the",
             " * friction tau_f (compensation), the external torque tau_ext and the contact flag (0/1). */",
             f"static inline void {a}_step({a}_state *s, double t, const double *const *x, const double *tau_m,",

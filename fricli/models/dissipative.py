@@ -199,11 +199,11 @@ class DissipativeFriction(FrictionModel):
             xv = self._rows(val_sig)
             tv = (np.asarray(val_target, dtype=np.float64) / self.y_scale_)[None, :]
         self.snapshots_ = []
-        record = on_eval
-        if snapshots:
-            def record(*args):
-                self.snapshots_.append(net.theta.copy())
-                return None if on_eval is None else on_eval(*args)
+        def with_snapshot(*args):
+            self.snapshots_.append(net.theta.copy())
+            return None if on_eval is None else on_eval(*args)
+
+        record = with_snapshot if snapshots else on_eval
         trainer = Trainer(steps=self.steps if self.epochs is None else None, epochs=self.epochs, lr=self.lr,
                           batch_size=self.batch_size, eval_every=self.eval_every, on_eval=record,
                           schedule=self.schedule, patience=self.patience, stop=stop, keep_best=not snapshots)
