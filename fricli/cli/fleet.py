@@ -68,7 +68,7 @@ def fleet_cmd(manifest, scheduler, connect_timeout, workers, force, list_only, a
         emit_json(result.as_json())
     else:
         click.echo(result.table())
-    for line in result.warnings[len(result.manifest.unmatched):]:
+    for line in result.run_warnings:
         warn(line)
     if result.outcome.written:
         say(f"appended to {result.manifest.history} ({len(result.outcome.written)} files)", quiet)

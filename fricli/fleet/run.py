@@ -218,6 +218,12 @@ class FleetRun:
         return self.manifest.jobs
 
     @property
+    def run_warnings(self) -> list:
+        """The warnings of the jobs' run: those after the manifest's, which ``run_fleet`` handed to
+        ``warn`` as it read the manifest."""
+        return self.warnings[len(self.manifest.unmatched):]
+
+    @property
     def exit_code(self) -> int:
         """The command's: OK, SOME_FAILED or NOTHING_RAN (OK for a listing)."""
         return errors.OK if self.outcome is None else self.outcome.exit_code
