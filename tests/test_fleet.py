@@ -117,7 +117,7 @@ def test_run_skip_and_one_corrupt_log(fleet_dir, tmp_path):
     assert "4 jobs: 0 ok, 3 unchanged, 1 failed" in third.stdout
     failed = [line for line in third.stdout.splitlines() if " failed " in line and "jobs:" not in line]
     assert len(failed) == 1 and failed[0].startswith("robot002     2 "), third.stdout
-    assert failed[0].endswith(f"{bad}: not a Parquet file"), failed[0]
+    assert failed[0].endswith(f"{bad}: not a Parquet file: damaged (truncated, or written only in part)"), failed[0]
     assert "Traceback" not in third.stdout + third.stderr
     rows = history.read(str(folder / "history")).to_pylist()
     assert [(r["robot"], r["joint"], r["status"]) for r in rows if r["status"] != "ok"] == [

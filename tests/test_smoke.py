@@ -197,6 +197,7 @@ def test_a_csv_log_points_to_fricli_import(tmp_path):
     damaged.write_bytes(b"PAR1 cut short")
     res = runner.invoke(cli, ["identify", str(damaged), "-o", str(tmp_path / "m.npz")])
     assert res.exit_code == errors.INPUT and "fricli import" not in res.stderr   # Parquet, only damaged
+    assert "damaged (truncated, or written only in part)" in res.stderr, res.stderr
 
 
 def test_an_unknown_payload_frame_lists_the_frames():

@@ -54,7 +54,7 @@ def unique_columns(pf: pq.ParquetFile, name: str) -> pq.ParquetFile:
 def not_parquet(name: str, head: bytes) -> str:
     """The message for input that is not Parquet; ``head``: its first bytes."""
     if head == b"PAR1":   # a damaged Parquet file, not another format
-        return f"{name}: not a Parquet file"
+        return f"{name}: not a Parquet file: damaged (truncated, or written only in part)"
     return f"{name}: not a Parquet file (convert a CSV or other text recording with fricli import, docs/robot-import.md)"
 
 
