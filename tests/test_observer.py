@@ -140,6 +140,26 @@ def test_at_rest_the_estimate_is_the_torque_outside_the_static_friction_band():
     assert out.contact[-1, 0] and not out.contact[t < 1.0, 0].any()
 
 
+def test_at_rest_the_static_band_is_at_the_adapted_level():
+    """A joint whose friction is 1.3 times its model's holds up to 1.3 F_s at rest: once --adapt has
+    learned the scale in motion, a held friction of 1.25 F_s is no external torque; the static
+    observer reports what lies beyond F_s."""
+    t, f0, tau_m, p, w, qd, _, _ = joint(seconds=30.0, scale=1.3)
+    stop = np.flatnonzero((qd[:-1, 0] > 0) & (qd[1:, 0] <= 0))[-1] + 1   # rest from the last reversal on
+    band, held = 1.5, 1.25 * 1.5
+    rest = np.arange(len(t)) >= stop
+    for x in (f0, p, qd):
+        x[rest] = 0.0
+    tau_m[rest] = held
+    thr = thresholds(value=5.0, band=band)
+    static = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr)
+    adapted = observer.replay(t, f0, tau_m, p, w, qd, thresholds=thr, adaptation=observer.Adaptation())
+    late = rest & (t > t[stop] + 0.5)
+    assert adapted.scale[stop, 0] == pytest.approx(1.3, abs=0.05)
+    assert static.tau_ext[late, 0] == pytest.approx(band - held, abs=1e-6)    # clip(y, -F_s, F_s) - y
+    assert np.max(np.abs(adapted.tau_ext[late, 0])) == 0.0                     # within a F_s
+
+
 def test_persistence_leaves_out_a_single_wrong_sample_and_flags_a_lasting_contact():
     t = np.arange(0.0, 1.0, 0.01)
     r = np.zeros_like(t)

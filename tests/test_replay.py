@@ -98,6 +98,8 @@ def test_the_exported_arm_header_equals_replay(folder, tmp_path):
             want = replay.run(arm, observer.DEFAULT_GAIN, settings, observer.Adaptation(offset=offset))
             assert want.contact.any() and np.ptp(want.scale) > 0   # the comparison covers flags and adaptation
             assert (np.ptp(want.offset) > 0) == offset
+            at_rest = np.abs(arm.qd[:, 0]) <= settings.moving_speed
+            assert (at_rest & (want.scale[:, 0] != 1.0)).any()      # and the static band at an adapted level
         assert done.exit_code == 0, done.output
         exe = observer_check.build(str(header), "arm", paths, str(tmp_path), cxx=cxx)
         got = observer_check.run(exe, data, 1, str(tmp_path))

@@ -47,9 +47,10 @@ friction itself (``level_share`` calibrates the share); at rest it is base. At r
 indeterminate: a held joint keeps whatever friction torque it came to rest with, anywhere within
 its static band [-F_s, F_s], which no model of the state predicts, and an external torque within
 that band does not reach the motor. With thresholds, the estimate at rest is therefore the part of
-the measured torque outside the band: tau_ext_pred = clip(y, -F_s, F_s) - y (``static_friction``:
-F_s per joint, the largest friction the model gives just above ``moving_speed`` on the calibration
-logs); in motion it is r.
+the measured torque outside the band: tau_ext_pred = clip(y, b - a F_s, b + a F_s) - y
+(``static_friction``: F_s per joint, the largest friction the model gives just above
+``moving_speed`` on the calibration logs; a and b the adapted scale and offset, 1 and 0 without
+adaptation: the band is friction, at the level the joint's friction has); in motion it is r.
 """
 
 from __future__ import annotations
@@ -260,9 +261,9 @@ class Observer:
             threshold = self._threshold[j]
             if moves:
                 threshold += self._share[j] * abs(level)
-            elif self._band is not None:
-                band, y = self._band[j], self._y[j]
-                r = min(max(y, -band), band) - y
+            elif self._band is not None:     # the static band at the adapted level: a [-F_s, F_s] + offset
+                band, y = self._a[j] * self._band[j], self._y[j]
+                r = min(max(y, offset - band), offset + band) - y
             mag = abs(r)
             side = 1 if r > threshold else (-1 if r < -threshold else 0)
             self._run[j] = 0 if side == 0 else (self._run[j] + 1 if side == self._side[j] else 1)

@@ -65,7 +65,10 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
            "beyond the threshold for up to two samples (2 left several of them flagged; no other value was tried); and "
            "the share of the friction, whose estimator (margin × quantile of the adapted scale's departure on the "
            "fitting run, the quantile and margin of the base) was fixed from the fitting run alone; its effect on these "
-           "runs was looked at once, and nothing was changed after.",
+           "runs was looked at once, and nothing was changed after. Last, with `--adapt` the static band follows "
+           "the adapted level (a × F_s, and the offset), as the friction in motion does: a consistency of the model, "
+           "made without a false alarm to remove (the one left is the same with it); it changed only rows at rest "
+           "of the adapted replays (the payload run's, the held contacts').",
            "",
            "## Static and online friction on the runs of other days",
            "",
