@@ -4,7 +4,7 @@
 
 Each block holds commands (lines starting with ``$ ``, continued with a trailing ``\\``), each
 followed by its output (stdout and stderr as a terminal shows them). The commands run in order,
-in a scratch folder that sees the repository's ``sample_data``, with ``fricli`` on the PATH as
+in a scratch folder that sees the repository's ``sample_data`` and ``benchmarks``, with ``fricli`` on the PATH as
 ``python -m fricli`` of this checkout and ``python`` as the Python that runs this script; a command
 that fails stops the script and changes nothing.
 """
@@ -63,7 +63,8 @@ def rewrite(text: str, cwd: pathlib.Path, env: dict) -> str:
 def main(paths: list[str]) -> None:
     with tempfile.TemporaryDirectory(prefix="fricli-console-") as tmp:
         work, bin_dir = pathlib.Path(tmp), pathlib.Path(tmp, ".bin")
-        (work / "sample_data").symlink_to(ROOT / "sample_data")
+        for shared in ("sample_data", "benchmarks"):
+            (work / shared).symlink_to(ROOT / shared)
         bin_dir.mkdir()
         for name, command in (("fricli", f'"{sys.executable}" -m fricli'), ("python", f'"{sys.executable}"')):
             shim = bin_dir / name
