@@ -499,3 +499,41 @@ def test_a_gms_models_history_keeps_its_steady_sliding_curve(fleet_dir, tmp_path
     model, _ = models.load(job.model)
     steady = model.steady_parameters()
     assert result["parameters"] == steady and steady["fc"] >= model.fc + model.force.sum()
+
+
+@needs_dask
+@pytest.mark.skipif(importlib.util.find_spec("pty") is None or not hasattr(os, "fork"), reason="no pseudo-terminal")
+def test_on_a_terminal_the_progress_bar_is_drawn_and_cleared_before_the_table(fleet_dir, tmp_path):
+    """Run in a pseudo-terminal of 100 columns (stdout and stderr a terminal): the bar over the jobs
+    is drawn on stderr and wiped before the table, which starts a clean line."""
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    folder = copy_of(fleet_dir, tmp_path)
+    pid, fd = pty.fork()
+    if pid == 0:   # the child: a terminal of 24 x 100, then the command
+        try:
+            fcntl.ioctl(1, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))
+            os.chdir(folder)
+            os.execve(sys.executable, [sys.executable, "-m", "fricli", "fleet", "fleet.toml"], ENV)
+        finally:
+            os._exit(127)
+    out = bytearray()
+    while True:
+        try:
+            data = os.read(fd, 4096)
+        except OSError:    # the child closed the terminal
+            break
+        if not data:
+            break
+        out.extend(data)
+    _, status = os.waitpid(pid, 0)
+    text = out.decode("utf-8", "replace")
+    assert os.waitstatus_to_exitcode(status) == errors.OK, text
+    bar, table = text.split("robot        joint", 1)
+    assert "fleet:" in bar and "/4 [" in bar and "job/s" in bar, text    # tqdm's bar over the 4 jobs
+    pieces = bar.split("\r")
+    assert pieces[-1] == "" and pieces[-2].strip() == "" and len(pieces[-2]) >= 50, repr(bar[-200:])   # wiped
+    assert "4 jobs: 4 ok" in table and "fleet:" not in table
