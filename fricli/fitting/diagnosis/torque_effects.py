@@ -159,7 +159,8 @@ class Load(Effect):
 class Payload(Effect):
     """A payload the robot model lacks loads the gear: the friction's load dependence follows the
     torque through the gear, |tau_l| with tau_l = tau_m - tau_dyn - p (motor torque minus inertia and friction),
-    where the model sees only |tau_g|."""
+    where the model sees only |tau_g|. That friction turns over after a reversal as ``Load``'s does:
+    within the base model's pre-sliding travel, else with the direction of motion."""
 
     name = N.PAYLOAD
     description = "friction growing with |tau_l| - |tau_g|: the gear carries a load tau_g lacks (a payload)"
@@ -171,10 +172,14 @@ class Payload(Effect):
                 or _ratio_reach(self, ctx, "(|tau_l| - |tau_g|)*sign(qd)"))
 
     def terms(self, ctx, residual):
+        d = load_travel(ctx)
+        if d:
+            return [T.term("(|tau_l|-|tau_g|)*slip", T.OVERLOAD, T.slip_(d))]
         return [T.term("(|tau_l|-|tau_g|)*sign", T.OVERLOAD, T.SIGN)]
 
     def params(self, coef, ctx):
-        return {"kc": _par(coef["(|tau_l|-|tau_g|)*sign"], f"{ctx.tau_unit}/{ctx.tau_unit}")}
+        kc = coef["(|tau_l|-|tau_g|)*slip"] if "(|tau_l|-|tau_g|)*slip" in coef else coef["(|tau_l|-|tau_g|)*sign"]
+        return {"kc": _par(kc, f"{ctx.tau_unit}/{ctx.tau_unit}")}
 
     def implausible(self, params, ctx):
         kc = params["kc"]["value"]
