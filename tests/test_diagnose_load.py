@@ -1,6 +1,6 @@
-"""diagnose's load effect on a joint whose friction turns over a pre-sliding travel after each
-reversal: the load's share of the Coulomb level turns with the rest of it, not at the sample
-where qd changes sign."""
+"""diagnose's load, payload and direction effects on a joint whose friction turns over a
+pre-sliding travel after each reversal: the terms turn with the rest of the Coulomb friction, not
+at the sample where qd changes sign."""
 
 from __future__ import annotations
 
@@ -102,3 +102,39 @@ def test_a_payload_the_robot_model_lacks_turns_over_the_pre_sliding_travel_too()
     assert d.added[0] == "payload", [(e.name, round(e.gain, 3)) for e in d.effects]
     assert d.effects[0].params["kc"]["value"] == pytest.approx(KC, rel=0.03)
     assert "load" not in d.added and "drift" not in d.added
+
+
+R = 0.2            # the direction asymmetry: levels x (1 + R) moving forward, x (1 - R) backward
+
+
+def _direction_log(seed: int):
+    """The same motion; LuGre friction whose Stribeck curve and viscous slope are (1 + R sign(qd))
+    times the base model's: the bristles turn over to the new direction's level over TRAVEL."""
+    from fricli.numerics import physics
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 30.0, 0.002)
+    qd = 0.35 * np.sin(2 * np.pi * 0.11 * t + 0.3) + 0.25 * np.sin(2 * np.pi * 0.27 * t + 1.0)
+    for centre in (3.0, 10.0, 17.0, 24.0):
+        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
+    q = np.cumsum(qd) * 0.002
+    tau_g = 40.0 * np.cos(q)
+    k = 1 + R * np.sign(qd)
+    g = (6.0 + 2.0 * physics.stribeck_shape(qd, 0.03, 2.0)) * k
+    friction, _ = physics.lugre_friction(qd, g, 9.0 * k, 6.0 / TRAVEL, 0.0, physics.intervals(t))
+    cols = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": tau_g,
+            "tau_m": tau_g + friction + NOISE * rng.standard_normal(t.size)}
+    units = {"t": "s", "q": "rad", "qd": "rad/s", "qdd": "rad/s^2", "tau_m": "Nm", "tau_g": "Nm"}
+    return logs.from_table(logs.table_from_arrays(cols, units), name="direction", zero=("tau_dyn",))
+
+
+def test_a_direction_asymmetry_turns_over_the_pre_sliding_travel_too():
+    """The positive direction's level switched off at the sample where qd changed sign: 0.22 Nm of
+    MAE was left (the noise's: 0.12), and two of the levels came out 3.5 and 6 % off; turning over the travel the
+    four levels come within 2 % and the noise is what is left."""
+    d = diagnose(_base(), _direction_log(1))
+    assert d.added == ["direction"], [(e.name, round(e.gain, 3)) for e in d.effects]
+    levels = d.effects[0].params
+    for name, true in (("Fc+", 6.0 * (1 + R)), ("Fc-", 6.0 * (1 - R)), ("Fv+", 9.0 * (1 + R)), ("Fv-", 9.0 * (1 - R))):
+        assert levels[name]["value"] == pytest.approx(true, rel=0.02), (name, levels[name]["value"])
+    assert d.mae_after < 1.1 * NOISE * np.sqrt(2.0 / np.pi)

@@ -31,7 +31,7 @@ from fricli.models import terms as T
 from fricli.fitting.diagnosis.context import (LEVEL_TERMS, Context, Effect, _fmt, _level_coefs, _par,  # noqa: F401
                                               equivalent_levels, presliding_travel)
 from fricli.fitting.diagnosis.torque_effects import (RATIO_BOUND, ROBOT_MODEL_TOLERANCE, Acceleration,  # noqa: F401
-                                                     Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g,
+                                                     Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g, load_travel,
                                                      _ratio_implausible, _ratio_reach, _ratio_text)
 
 
@@ -78,6 +78,9 @@ class Direction(Effect):
         return None
 
     def terms(self, ctx, residual):
+        d = load_travel(ctx)
+        if d:   # p [dir > 0] = (p + p z/d) / 2 with the element z turning over the pre-sliding travel
+            return LEVEL_TERMS + [T.term("p*slip", T.P, T.slip_(d)), T.term("qd*pos", T.sig_("qd"), T.POS)]
         return LEVEL_TERMS + [T.term("p*pos", T.P, T.POS), T.term("qd*pos", T.sig_("qd"), T.POS)]
 
     def params(self, coef, ctx):
