@@ -31,8 +31,8 @@ from fricli.models import terms as T
 from fricli.fitting.diagnosis.context import (LEVEL_TERMS, Context, Effect, _fmt, _level_coefs, _par,  # noqa: F401
                                               equivalent_levels, presliding_travel)
 from fricli.fitting.diagnosis.torque_effects import (RATIO_BOUND, ROBOT_MODEL_TOLERANCE, Acceleration,  # noqa: F401
-                                                     Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g, load_travel,
-                                                     _ratio_implausible, _ratio_reach, _ratio_text)
+                                                     Gravity, Load, Payload, Quadrant, _constant, _needs_tau_g,
+                                                     _ratio_implausible, _ratio_reach, _ratio_text, load_travel)
 
 
 class Offset(Effect):
