@@ -110,9 +110,8 @@ REST_NOISE_SHARE = 5.0
 
 def load_travel(ctx: Context) -> float:
     """The travel d [rad or m] over which the load, payload and direction terms turn over after a
-    reversal: the base
-    model's pre-sliding travel (``Context.presliding``), 0 (the sign of motion) for a model without
-    one or where the position's noise at rest would move the element across it."""
+    reversal: the base model's pre-sliding travel (``Context.presliding``), 0 (the sign of motion)
+    for a model without one or where the position's noise at rest would move the element across it."""
     d = ctx.presliding
     if not d > 0 or "q" not in ctx.signals:
         return 0.0
