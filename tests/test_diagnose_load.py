@@ -33,16 +33,22 @@ def _elastoplastic(q: np.ndarray, d: float) -> np.ndarray:
 NOISE = 0.15       # Nm, the standard deviation of tau_m's noise
 
 
+def _motion() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, q, qd) (n,): 30 s at 500 Hz of slow harmonic motion (reversals at a few tenths of
+    rad/s^2) with four rests."""
+    t = np.arange(0.0, 30.0, 0.002)
+    qd = 0.35 * np.sin(2 * np.pi * 0.11 * t + 0.3) + 0.25 * np.sin(2 * np.pi * 0.27 * t + 1.0)
+    for centre in (3.0, 10.0, 17.0, 24.0):
+        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
+    return t, np.cumsum(qd) * 0.002, qd
+
+
 def _log(seed: int, q_noise: float = 0.0):
     """30 s at 500 Hz of slow harmonic motion (reversals at a few tenths of rad/s^2) with four
     rests, under a varying gravity load; the friction of ``_base`` plus KC |tau_g| turning over
     TRAVEL."""
     rng = np.random.default_rng(seed)
-    t = np.arange(0.0, 30.0, 0.002)
-    qd = 0.35 * np.sin(2 * np.pi * 0.11 * t + 0.3) + 0.25 * np.sin(2 * np.pi * 0.27 * t + 1.0)
-    for centre in (3.0, 10.0, 17.0, 24.0):
-        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
-    q = np.cumsum(qd) * 0.002
+    t, q, qd = _motion()
     tau_g = 40.0 * np.cos(q) + 15.0 * np.cos(q + 0.8 * np.sin(2 * np.pi * 0.03 * t))
     sig = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": tau_g}
     friction = _base().predict(sig)[0] + KC * np.abs(tau_g) * _elastoplastic(q, TRAVEL)
@@ -77,11 +83,7 @@ def _payload_log(seed: int):
     by a tau_ext sensor): the base model's friction (kc = ks = KC) at the load the gear holds,
     |tau_g + payload|, turning over TRAVEL as the bristles do."""
     rng = np.random.default_rng(seed)
-    t = np.arange(0.0, 30.0, 0.002)
-    qd = 0.35 * np.sin(2 * np.pi * 0.11 * t + 0.3) + 0.25 * np.sin(2 * np.pi * 0.27 * t + 1.0)
-    for centre in (3.0, 10.0, 17.0, 24.0):
-        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
-    q = np.cumsum(qd) * 0.002
+    t, q, qd = _motion()
     tau_g = 40.0 * np.cos(q) + 15.0 * np.cos(q + 0.8 * np.sin(2 * np.pi * 0.03 * t))
     payload = 25.0 * np.cos(q + 0.4)
     sig = {"t": t, "q": q, "qd": qd, "qdd": np.gradient(qd, t), "tau_g": tau_g}
@@ -113,11 +115,7 @@ def _direction_log(seed: int):
     from fricli.numerics import physics
 
     rng = np.random.default_rng(seed)
-    t = np.arange(0.0, 30.0, 0.002)
-    qd = 0.35 * np.sin(2 * np.pi * 0.11 * t + 0.3) + 0.25 * np.sin(2 * np.pi * 0.27 * t + 1.0)
-    for centre in (3.0, 10.0, 17.0, 24.0):
-        qd *= 1 - np.exp(-(((t - centre) / 0.35) ** 8))
-    q = np.cumsum(qd) * 0.002
+    t, q, qd = _motion()
     tau_g = 40.0 * np.cos(q)
     k = 1 + R * np.sign(qd)
     g = (6.0 + 2.0 * physics.stribeck_shape(qd, 0.03, 2.0)) * k
