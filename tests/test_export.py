@@ -284,10 +284,12 @@ def test_a_folder_gives_one_function_set_per_joint(sim_models, tmp_path):
     folder.mkdir()
     for joint, kind in (("joint2", "lugre-loaded"), ("joint4", "mlp")):
         (folder / f"{joint}.npz").write_bytes(Path(sim_models[kind]).read_bytes())
+    (folder / "._joint2.npz").write_bytes(b"\x00\x05\x16\x07")   # what a copy to another file system leaves
     header = tmp_path / "arm.h"
     res = invoke("export", folder, "--prefix", "arm", "-o", header)
     assert res.exit_code == 0, res.output
     text = header.read_text()
+    assert "._joint2" not in text
     assert "arm_joint2_step(arm_joint2_state *s, double t, double qd, double tau_g)" in text
     assert "arm_joint4_step(arm_joint4_state *s, double qd, double tau_g)" in text
     main = tmp_path / "main.c"

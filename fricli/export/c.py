@@ -383,7 +383,8 @@ def entries_for(paths: list[str], prefix: str, *, per_joint: bool) -> list[Entry
 def model_paths(source: str) -> tuple[list[str], bool]:
     """(model files, one per joint?) for a model file or a folder of them (one .npz per joint)."""
     if os.path.isdir(source):
-        paths = sorted(os.path.join(source, f) for f in os.listdir(source) if f.endswith(".npz"))
+        paths = sorted(os.path.join(source, f) for f in os.listdir(source) if f.endswith(".npz")
+                       and not f.startswith("."))   # hidden files (a copy's ._NAME.npz) as a model set skips them
         if not paths:
             raise ModelFileError(f"{source}: no .npz model files in the folder")
         return paths, True
