@@ -341,7 +341,7 @@ def test_cli_writes_parquet_to_stdout():
     (["--effect", "inertia=1.5"], "inertia must be below 1"),
     (["--effect", "temperature=-500"], "the joint would end at -480 degC; a gear runs between -40 and 120 degC"),
     (["--effect", "column=5"], "|k| must be below 0.0833 1/%"),
-    (["--duration", "30"], "--duration applies to --scenario extended only"),
+    (["--duration", "30"], "duration applies to the extended scenario only"),
     (["--joint", "3"], "'3' is not one of"),
 ])
 def test_cli_usage_errors(tmp_path, args, message):

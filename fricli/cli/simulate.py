@@ -95,41 +95,34 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     from fricli.fitting.optionspec import OptionError
     from fricli.sim.writing import simulate_log
 
+    def simulated(**kwargs):
+        try:
+            return simulate_log(output, **kwargs)
+        except OptionError as exc:   # named as the command line names it
+            flag = {"contacts": "--contact", "effects": "--effect", "output": "-o"}.get(
+                exc.option, "--" + exc.option.replace("_", "-"))
+            raise click.BadParameter(str(exc), param_hint=flag) from None
+
     ctx = click.get_current_context()
     if fleet_size is not None:
-        if contacts:
-            raise click.UsageError("--contact does not apply to --fleet")
+        # simulate_log refuses values other than the defaults; an option given at its default is refused here
         given = [f"--{p.replace('_', '-')}" for p in ("scenario", "joint", "load", "effect_specs", "duration",
                                                         "friction_state", "thin")
                  if ctx.get_parameter_source(p) is not click.core.ParameterSource.DEFAULT]
         if given:
             raise click.UsageError(f"{given[0].replace('-specs', '')} does not apply to --fleet (it simulates daily "
                                    "checks)")
-        if output == "-":
-            raise click.UsageError("--fleet writes a folder: give -o FOLDER")
         if ctx.get_parameter_source("rate") is click.core.ParameterSource.DEFAULT:
             rate = None
-        joints = simulate_log(output, seed=seed, rate=rate, fleet=fleet_size, wearing=wearing)
+        joints = simulated(seed=seed, rate=rate, fleet=fleet_size, wearing=wearing, contacts=contacts)
         robots, joints_per_robot, days = fleet_size
         wear = ", ".join(f"{j.robot}/{j.number}" for j in joints if j.wears) or "none"
         say(f"simulated a fleet of {robots} robot{'s' * (robots != 1)} x {joints_per_robot} joint"
             f"{'s' * (joints_per_robot != 1)} x {days} day{'s' * (days != 1)} "
             f"({robots * joints_per_robot * days} logs, seed {seed}) -> {output}/fleet.toml; wearing: {wear}", quiet)
         return
-    if wearing:
-        raise click.UsageError("--wearing applies to --fleet only")
-    if duration is not None and scenario != "extended":
-        raise click.UsageError("--duration applies to --scenario extended only")
-    if thin and scenario != "base":
-        raise click.UsageError("--thin applies to --scenario base only")
-    try:
-        table = simulate_log(output, scenario=scenario, joint=int(joint), load=load, effects=effect_specs,
-                                       seed=seed, rate=rate, duration=duration, friction_state=friction_state,
-                                       thin=thin, contacts=contacts)
-    except OptionError as exc:
-        if exc.option != "contacts":
-            raise
-        raise click.BadParameter(str(exc), param_hint="--contact") from None
+    table = simulated(scenario=scenario, joint=int(joint), load=load, effects=effect_specs, seed=seed, rate=rate,
+                      duration=duration, friction_state=friction_state, thin=thin, contacts=contacts, wearing=wearing)
     t = table.column("t")
     names = ", ".join(name if s is None else f"{name}={s:g}" for name, s in effect_specs) or "no effects"
     where = "stdout" if output == "-" else output
