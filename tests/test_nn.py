@@ -172,6 +172,31 @@ def test_repeated_inputs_are_computed_once_with_the_same_loss_and_gradient(name,
     np.testing.assert_allclose(results[1][1], results[0][1], rtol=1e-10, atol=1e-13)
 
 
+def test_wide_batches_run_in_column_pieces_with_the_same_outputs_and_gradient(rng):
+    """The default dissipative network on 2,500 columns: the layers' products run over pieces of
+    columns (faster small-matrix kernels); the outputs are the same bits as one product over all
+    columns, the gradient the same sums added in pieces."""
+    net = HeadedNetwork(2, [(30, acts.ELU()), (30, acts.ELU())], DissipativeHead(), constant_outputs=(1,))
+    net.init(rng)
+    n = 2500
+    x = np.vstack([rng.normal(size=(2, n)), np.tanh(rng.normal(size=(1, n))), rng.uniform(0, 2, size=(1, n))])
+    t = rng.normal(size=(1, n)).astype(np.float32)
+    whole, pieces = net.workspace(n), net.workspace(n)
+    whole.pieces = None
+    assert [(p.start, p.stop) for p in pieces.pieces] == [(0, 1024), (1024, 2048), (2048, 2500)]
+    grads = []
+    for ws in (whole, pieces):
+        ws.set_inputs(x)
+        grad = np.empty_like(net.theta)
+        _sse_and_grad(net, ws, t, grad, 2.0 / n)
+        grads.append(grad)
+    assert all(np.array_equal(a, b) for a, b in zip(whole.a + whole.h + whole.g, pieces.a + pieces.h + pieces.g))
+    np.testing.assert_allclose(grads[1], grads[0], rtol=2e-5, atol=1e-6 * np.abs(grads[0]).max())
+    assert not np.array_equal(grads[1], grads[0])      # the pieces did run: another order of the sums
+    assert network_module.column_pieces(Network(2, [(64, acts.ELU())] * 2), n) is None   # too wide a layer
+    assert network_module.column_pieces(net, 1024) is None
+
+
 def test_groups_are_bit_for_bit(rng):
     key = np.array([[0.0, -0.0, 1.0, np.nan, 0.0, 1.0, np.nan],
                     [2.0, 2.0, 3.0, 4.0, 2.0, 3.0, 4.0]], dtype=np.float32)

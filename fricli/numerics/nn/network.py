@@ -37,6 +37,7 @@ from fricli.numerics.nn.activations import Activation
 
 PREDICT_CHUNK = 16384     # columns per forward pass when predicting (fastest file to file on 2 cores: docs/performance.md)
 REPEATS_WORTHWHILE = 0.5  # a fixed-input workspace groups samples when at most this share of columns is distinct
+SMALL_PRODUCT = 1_000_000  # m n k of a matrix product up to which OpenBLAS runs its faster small-matrix kernels
 _PREDICT_THREADS = contextvars.ContextVar("predict_threads", default=2)
 
 
@@ -166,7 +167,7 @@ class Network:
     def forward(self, ws: "Workspace") -> np.ndarray:
         """Outputs (n_out, n) for the inputs already in ``ws.x`` (and ``ws.s``)."""
         for (_, act), w, a, h, d, a_next in zip(self.hidden, self.weights, ws.a, ws.h, ws.d, ws.a[1:]):
-            np.matmul(w, a, out=h)
+            _product(w, a, h, ws.pieces)
             if ws.backward:
                 act.forward(h, a_next[:h.shape[0]], d)
             else:
@@ -189,7 +190,7 @@ class Network:
             dy = ws.dy_cols
         upstream, row_scale = dy, None
         for i in range(len(self.weights) - 1, -1, -1):
-            np.matmul(upstream, ws.a[i].T, out=gw[i])
+            _gradient_product(upstream, ws.a[i], gw[i], ws.pieces)
             if row_scale is not None:
                 gw[i] *= row_scale[:, None]
             if i == 0:
@@ -204,7 +205,7 @@ class Network:
                 if row_scale is not None:
                     w = w * row_scale[:, None]
                     row_scale = None
-                np.matmul(w.T, upstream, out=g)
+                _product(w.T, upstream, g, ws.pieces)
                 np.multiply(g, ws.d[i - 1], out=g)
             upstream = g
 
@@ -225,6 +226,36 @@ class Network:
     def predict_rows(self) -> int:
         """Rows of what ``forward`` returns."""
         return self.n_out
+
+
+def _product(w: np.ndarray, a: np.ndarray, out: np.ndarray, pieces: list[slice] | None) -> None:
+    """out = w @ a, over the column ``pieces`` when the whole product is too large for the small-matrix
+    kernels (each column of out is the same dot products, so the same bits either way)."""
+    if pieces is None or w.shape[0] * w.shape[1] * a.shape[1] <= SMALL_PRODUCT:
+        np.matmul(w, a, out=out)
+    else:
+        for cols in pieces:
+            np.matmul(w, a[:, cols], out=out[:, cols])
+
+
+def _gradient_product(g: np.ndarray, a: np.ndarray, out: np.ndarray, pieces: list[slice] | None) -> None:
+    """out = g @ a.T, summed over the column ``pieces`` when the whole product is too large for the
+    small-matrix kernels."""
+    if pieces is None or g.shape[0] * a.shape[0] * a.shape[1] <= SMALL_PRODUCT:
+        np.matmul(g, a.T, out=out)
+    else:
+        np.matmul(g[:, pieces[0]], a[:, pieces[0]].T, out=out)
+        for cols in pieces[1:]:
+            out += g[:, cols] @ a[:, cols].T
+
+
+def column_pieces(net: "Network", cols: int) -> list[slice] | None:
+    """Slices of ``cols`` columns, each small enough for the small-matrix kernels in every layer's
+    product (in widths of a multiple of 256); None when no useful width exists."""
+    width = SMALL_PRODUCT // max(r * c for r, c in net.shapes) // 256 * 256
+    if width < 512 or cols <= width:
+        return None
+    return [slice(start, min(start + width, cols)) for start in range(0, cols, width)]
 
 
 class Groups:
@@ -250,10 +281,11 @@ class Workspace:
     ``cols`` columns: n, or one per group with ``groups``.
 
     a[l]  (units_l + 1 [+ n_skip], cols)  layer inputs, with the row of ones (skip rows last)
-    h[l]  (units, cols)                   pre-activations of hidden layer l
+    h[l]  (units, cols)                   pre-activations of hidden layer l (one buffer for all l)
     d[l]  (units, cols)                   activation derivatives of hidden layer l (without
                                           ``backward``, scratch: forward computes values only)
-    g[l]  (units, cols)                   back-propagated gradients of hidden layer l
+    g[l]  (units, cols)                   back-propagated gradients of hidden layer l (g[l] shares
+                                          h's buffer or a second one, alternately)
     y     (n_out, n)                      outputs (``y_cols`` (n_out, cols) before the copy-out)
     x, s  views of a[0] and of the skip rows, where inputs are written
     """
@@ -269,15 +301,20 @@ class Workspace:
             a = np.empty((r + 1 + extra, cols), dtype=dt)
             a[r] = 1
             self.a.append(a)
-        self.h = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
-        self.d = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
-        self.g = [np.empty((units, cols), dtype=dt) for units, _ in net.hidden]
+        # h and g of every layer in two buffers, so that a step's arrays stay in the cache: h is not
+        # needed after the forward pass, and g[l] only until g[l - 1] is made from it
+        units = [n for n, _ in net.hidden]
+        first, second = (np.empty((max(units, default=0), cols), dtype=dt) for _ in range(2))
+        self.h = [first[:n] for n in units]
+        self.d = [np.empty((n, cols), dtype=dt) for n in units]
+        self.g = [(second if (len(units) - 1 - l) % 2 == 0 else first)[:n] for l, n in enumerate(units)]
         self.y = np.empty((net.n_out, n), dtype=dt)
         self.y_cols = self.y
         if groups is not None:
             self.y_cols = np.empty((net.n_out, cols), dtype=dt)
             self.dy_cols = np.empty((net.n_out, cols), dtype=dt)
             self.dy_sorted = np.empty((net.n_out, n), dtype=dt)
+        self.pieces = column_pieces(net, cols)
         self.x = self.a[0][:net.n_in]
         self.s = self.a[-1][rows[-1] + 1:]
         self.n_in = net.n_in
