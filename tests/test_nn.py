@@ -197,6 +197,27 @@ def test_wide_batches_run_in_column_pieces_with_the_same_outputs_and_gradient(rn
     assert network_module.column_pieces(net, 1024) is None
 
 
+@pytest.mark.parametrize("name", ["dissipative", "skip"])
+def test_prediction_runs_piece_by_piece_with_the_same_bits(name, rng):
+    """Without backward, forward runs every layer on one piece of columns at a time: the same
+    outputs, bit for bit, as over all columns at once."""
+    if name == "dissipative":
+        net = HeadedNetwork(2, [(30, acts.ELU()), (30, acts.ELU())], DissipativeHead(), constant_outputs=(1,))
+        extra = np.vstack([np.tanh(rng.normal(size=(1, 2500))), rng.uniform(0, 2, size=(1, 2500))])
+    else:
+        net = Network(3, [(30, acts.ELU()), (30, acts.Sigmoid())], n_skip=2)
+        extra = rng.integers(0, 2, size=(2, 2500)).astype(float)
+    net.init(rng)
+    x = np.vstack([rng.normal(size=(net.n_in, 2500)), extra])
+    pieces, whole = net.workspace(2500, backward=False), net.workspace(2500, backward=False)
+    assert sorted(pieces.part) == [452, 1024] and net.workspace(2500).part is None
+    whole.part = whole.pieces = None
+    for ws in (pieces, whole):
+        ws.set_inputs(x)
+    assert np.array_equal(net.forward(pieces), net.forward(whole))
+    assert np.array_equal(net.predict(x, chunk=2500), net.forward(whole))
+
+
 def test_groups_are_bit_for_bit(rng):
     key = np.array([[0.0, -0.0, 1.0, np.nan, 0.0, 1.0, np.nan],
                     [2.0, 2.0, 3.0, 4.0, 2.0, 3.0, 4.0]], dtype=np.float32)

@@ -166,6 +166,20 @@ class Network:
 
     def forward(self, ws: "Workspace") -> np.ndarray:
         """Outputs (n_out, n) for the inputs already in ``ws.x`` (and ``ws.s``)."""
+        if ws.part is None:
+            self._layers(ws)
+        else:   # values only: piece by piece through every layer, each piece's buffers in the cache
+            for cols in ws.pieces:
+                part = ws.part[cols.stop - cols.start]
+                part.x[...] = ws.x[:, cols]
+                part.s[...] = ws.s[:, cols]
+                ws.y_cols[:, cols] = self._layers(part)
+        if ws.groups is not None:
+            np.take(ws.y_cols, ws.groups.index, axis=1, out=ws.y)
+        return ws.y
+
+    def _layers(self, ws: "Workspace") -> np.ndarray:
+        """The layers over the columns of ``ws``: ``ws.y_cols`` (n_out, cols)."""
         for (_, act), w, a, h, d, a_next in zip(self.hidden, self.weights, ws.a, ws.h, ws.d, ws.a[1:]):
             _product(w, a, h, ws.pieces)
             if ws.backward:
@@ -173,9 +187,7 @@ class Network:
             else:
                 act.value(h, a_next[:h.shape[0]], d)
         np.matmul(self.weights[-1], ws.a[-1], out=ws.y_cols)
-        if ws.groups is not None:
-            np.take(ws.y_cols, ws.groups.index, axis=1, out=ws.y)
-        return ws.y
+        return ws.y_cols
 
     def backward(self, ws: "Workspace", dy: np.ndarray, grad: np.ndarray) -> None:
         """Write d(loss)/d(theta) into ``grad`` (flat, like theta), given dy = d(loss)/dy
@@ -288,6 +300,9 @@ class Workspace:
                                           h's buffer or a second one, alternately)
     y     (n_out, n)                      outputs (``y_cols`` (n_out, cols) before the copy-out)
     x, s  views of a[0] and of the skip rows, where inputs are written
+    pieces  column slices the layers' large products run over (``column_pieces``), or None
+    part  without ``backward``, when there are pieces: a workspace for each width of piece, that
+          ``forward`` runs every layer on, piece by piece (else None)
     """
 
     def __init__(self, net: Network, n: int, groups: Groups | None = None, backward: bool = True):
@@ -315,6 +330,9 @@ class Workspace:
             self.dy_cols = np.empty((net.n_out, cols), dtype=dt)
             self.dy_sorted = np.empty((net.n_out, n), dtype=dt)
         self.pieces = column_pieces(net, cols)
+        # without backward the layers' buffers are needed one piece at a time: workspaces of a piece
+        self.part = None if backward or self.pieces is None else {
+            width: Workspace(net, width, backward=False) for width in {p.stop - p.start for p in self.pieces}}
         self.x = self.a[0][:net.n_in]
         self.s = self.a[-1][rows[-1] + 1:]
         self.n_in = net.n_in
