@@ -58,7 +58,7 @@ class DissipativeHead:
         _softplus(raw, tmp)
         c = aux[0]
         tmp[1:] *= aux[1:]                   # softplus(r1) g
-        np.sum(tmp, axis=0, out=y[0])        # the magnitude, >= 0
+        np.add(tmp[0], tmp[1], out=y[0])     # the magnitude, >= 0
         y[0] *= c
         if fac is not None:
             _sigmoid(raw, fac)
@@ -109,6 +109,7 @@ class HeadedNetwork(Network):
         self.frozen = np.zeros(self.n_params, dtype=bool)
         for k in self.constant_outputs:
             self.views(self.frozen)[-1][k, :-1] = True
+        self._frozen_at = np.flatnonzero(self.frozen)
 
     def init(self, rng: np.random.Generator) -> "HeadedNetwork":
         super().init(rng)
@@ -139,7 +140,7 @@ class HeadedNetwork(Network):
         np.multiply(ws.fac, dy, out=ws.draw)
         super().backward(ws, ws.draw, grad)
         if self.constant_outputs:
-            grad[self.frozen] = 0
+            grad[self._frozen_at] = 0
 
     @property
     def predict_rows(self) -> int:
