@@ -7,7 +7,7 @@ import click
 
 from fricli.core import errors
 from fricli.cli import cli
-from fricli.cli.options import Number, common, emit_json, json_flag, progress_enabled, say, warn
+from fricli.cli.options import Number, bad_parameter, common, emit_json, json_flag, progress_enabled, say, warn
 
 
 @cli.command("fleet")
@@ -113,7 +113,7 @@ def trend_cmd(history, params, baseline_days, window_days, max_level, max_growth
     except OptionError as exc:
         if exc.option != "params":
             raise
-        raise click.BadParameter(str(exc), param_hint="--param") from None
+        raise bad_parameter(exc, {"params": "--param"}) from None
     if as_json:
         emit_json(result.as_json())
     else:

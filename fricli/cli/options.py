@@ -338,8 +338,14 @@ def command_options(pipeline: str) -> dict:
     try:
         return runs.options(pipeline, given)
     except optionspec.OptionError as exc:
-        message = str(exc).split(": ", 1)[-1]
-        raise click.BadParameter(message, param_hint="--" + exc.option.replace("_", "-")) from None
+        raise bad_parameter(exc, message=str(exc).split(": ", 1)[-1]) from None
+
+
+def bad_parameter(exc, flags: dict | None = None, message: str | None = None) -> click.BadParameter:
+    """A Python call's ``OptionError`` as click's error on the option it names: --name-with-dashes,
+    or ``flags[name]`` where the command line spells it otherwise; ``message`` (default: the error's)."""
+    flag = (flags or {}).get(exc.option, "--" + exc.option.replace("_", "-"))
+    return click.BadParameter(str(exc) if message is None else message, param_hint=flag)
 
 
 def up_to_date_line(out: str, digest: str, inputs: bool) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import click
 
 from fricli.cli import cli
-from fricli.cli.options import Number, common, say
+from fricli.cli.options import Number, bad_parameter, common, say
 from fricli.sim import effects as fx
 from fricli.sim import fleet
 from fricli.sim import simulator
@@ -98,10 +98,8 @@ def simulate_cmd(scenario, joint, load, effect_specs, seed, rate, duration, fric
     def simulated(**kwargs):
         try:
             return simulate_log(output, **kwargs)
-        except OptionError as exc:   # named as the command line names it
-            flag = {"contacts": "--contact", "effects": "--effect", "output": "-o"}.get(
-                exc.option, "--" + exc.option.replace("_", "-"))
-            raise click.BadParameter(str(exc), param_hint=flag) from None
+        except OptionError as exc:
+            raise bad_parameter(exc, {"contacts": "--contact", "effects": "--effect", "output": "-o"}) from None
 
     ctx = click.get_current_context()
     if fleet_size is not None:

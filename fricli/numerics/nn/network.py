@@ -172,7 +172,8 @@ class Network:
             for cols in ws.pieces:
                 part = ws.part[cols.stop - cols.start]
                 part.x[...] = ws.x[:, cols]
-                part.s[...] = ws.s[:, cols]
+                if ws.s.shape[0]:
+                    part.s[...] = ws.s[:, cols]
                 ws.y_cols[:, cols] = self._layers(part)
         if ws.groups is not None:
             np.take(ws.y_cols, ws.groups.index, axis=1, out=ws.y)
