@@ -32,13 +32,17 @@ import tempfile
 import threading
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(HERE)
+for _path in (ROOT, HERE):
+    if _path not in sys.path:
+        sys.path.insert(0, _path)
 
 import numpy as np  # noqa: E402
 
-from fricli.core import logs
+import plain_pyarrow  # noqa: E402
+
+from fricli.core import logs  # noqa: E402
 from fricli.fitting import heldout, learning
 from fricli.numerics import forked, physics  # noqa: E402
 from fricli.models.lugre import LuGreModel  # noqa: E402
@@ -527,21 +531,18 @@ def bench_startup(add, reps: int) -> None:
 def plain_pyarrow_s(src: str, dst: str, batch_rows: int = 1 << 20, fricli_options: bool = False) -> float:
     """Read ``src`` in record batches, append one float64 column, write with zstd (pyarrow's
     defaults, or with ``fricli_options`` as fricli writes logs, ``logs.parquet_options``): the
-    Parquet I/O a file-to-file prediction cannot avoid. Wall time [s]."""
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
+    Parquet I/O a file-to-file prediction cannot avoid (``benchmarks/plain_pyarrow.py``), in this
+    warm process. Wall time [s]."""
     start = time.perf_counter()
-    pf = pq.ParquetFile(src)
-    writer = None
-    for batch in pf.iter_batches(batch_size=batch_rows):
-        table = pa.Table.from_batches([batch])
-        table = table.append_column("tau_f_pred", pa.array(np.asarray(table.column("qd")) * 0.5))
-        if writer is None:
-            options = logs.parquet_options(table.schema) if fricli_options else {"compression": "zstd"}
-            writer = pq.ParquetWriter(dst, table.schema, **options)
-        writer.write_table(table)
-    writer.close()
+    plain_pyarrow.copy_with_column(src, dst, batch_rows, logs.parquet_options if fricli_options else None)
+    return time.perf_counter() - start
+
+
+def plain_pyarrow_process_s(src: str, dst: str) -> float:
+    """The same as its own process, ``python benchmarks/plain_pyarrow.py SRC DST``, started as a
+    fricli command is (``run_cli``): wall time [s], start-up included."""
+    start = time.perf_counter()
+    subprocess.run([sys.executable, os.path.join(HERE, "plain_pyarrow.py"), src, dst], check=True)
     return time.perf_counter() - start
 
 

@@ -119,6 +119,10 @@ def test_twice_the_speed_is_flagged_exactly(files, tmp_path, command):
     table = pq.read_table(out)
     assert table.column_names[-1] == "extrapolating"
     np.testing.assert_array_equal(table.column("extrapolating").to_numpy(zero_copy_only=False), expected)
+    # without the column the rows are counted all the same (after each batch's prediction)
+    result = run(command, files["model"], files["fast"], "-o", out, "--json", "--batch-rows", 777)
+    assert json.loads(result.stdout)["extrapolation"] == report
+    assert "extrapolating" not in pq.read_table(out).column_names
 
 
 def test_evaluate_reports_the_share(files):

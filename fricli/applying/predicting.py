@@ -320,7 +320,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                     table = timewindow.slice_batch(table, *limits)
                 if several:
                     table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
-                outs = []
+                outs, tallies = [], []
                 for j, st in streams.items():
                     part = table
                     if several or filtered:
@@ -329,7 +329,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                     if part.num_rows == 0:
                         continue
                     out, n_in = _predict_part(st, part, offset, name, total, reason, reading, outputs, warn,
-                                              warnings, table)
+                                              warnings, table, tallies)
                     st.read += n_in
                     if out is None:            # every row of the piece dropped (--drop-invalid)
                         dropped += n_in
@@ -346,7 +346,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                     writer = pq.ParquetWriter(fh, out.schema, **logs.parquet_options(out.schema))
                 if pending is not None:
                     pending.result()
-                pending = io.submit(writer.write_table, out)
+                pending = io.submit(_tally_and_write, tallies, writer, out)
                 rows += out.num_rows
                 batches += 1
             for st in streams.values():
@@ -387,10 +387,21 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                                                           "share": n_outside / rows if rows else 0.0})
 
 
+def _tally_and_write(tallies: list[Callable[[], None]], writer, out: pa.Table) -> None:
+    """Run a batch's ``tallies`` (error sums, rows outside the envelope) and write ``out``: on the
+    writer's thread, which has time to spare while the next batch is predicted."""
+    for tally in tallies:
+        tally()
+    writer.write_table(out)
+
+
 def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, reading: Reading,
-                  outputs: Outputs, warn, warnings: list, whole: pa.Table) -> tuple[pa.Table | None, int]:
+                  outputs: Outputs, warn, warnings: list, whole: pa.Table,
+                  tallies: list) -> tuple[pa.Table | None, int]:
     """One joint's rows of one batch with tau_f_pred (and ``outputs``) added (None when
-    ``--drop-invalid`` left none of them); the rows it had.
+    ``--drop-invalid`` left none of them); the rows it had. What only adds to the figures (the
+    stream's error sums and rows outside its envelope) is appended to ``tallies``, to run before
+    the batch is written.
     ``whole``: the batch's rows of every joint (where the velocities of a coupled group's other
     joints come from)."""
     # the rows are this joint's already: set the joint column aside (cheaper to check)
@@ -437,22 +448,28 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
         out = out.add_column(jpos, jfield, jcol if same else
                              pa.repeat(pa.scalar(st.joint, jfield.type), out.num_rows))
     out = logs.with_column(out, "tau_f_pred", tau_f, unit)
-    st.fric.add(logs.friction_target(sig), tau_f)
+    tallies.append(lambda: st.fric.add(logs.friction_target(sig), tau_f))
     if outputs.external:
         est = external_estimate(sig, tau_f, outputs.lowpass_hz, warn)
         out = logs.with_column(out, "tau_ext_pred", est, unit)
         if "tau_ext" in sig:
-            st.ext.add(sig["tau_ext"], est)
+            tallies.append(lambda: st.ext.add(sig["tau_ext"], est))
     if st.env is not None:
-        outside = st.env.outside(sig)
-        st.outside += int(outside.sum())
         if outputs.flag_extrapolation:
+            outside = st.env.outside(sig)
             out = out.append_column(pa.field("extrapolating", pa.bool_()), pa.array(outside))
+            tallies.append(lambda: _count_outside(st, outside))
+        else:
+            tallies.append(lambda: _count_outside(st, st.env.outside(sig)))
     if _ROW in out.column_names:   # keep it last, where the joints' pieces expect it
         col = out.column(_ROW)
         out = out.drop_columns([_ROW]).append_column(_ROW, col)
     st.rows += out.num_rows
     return out, table.num_rows
+
+
+def _count_outside(st: _Stream, outside: np.ndarray) -> None:
+    st.outside += int(np.count_nonzero(outside))
 
 
 def external_estimate(signals: dict[str, np.ndarray], tau_f_pred: np.ndarray, lowpass_hz: float | None = None,

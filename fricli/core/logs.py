@@ -393,12 +393,12 @@ def check_signals(sig: dict[str, np.ndarray], name: str, drop_invalid: bool = Fa
         raise LogError(f"{name}: the log is empty")
     bad = np.zeros(n, dtype=bool)
     cols = []
-    with np.errstate(over="ignore", invalid="ignore"):   # huge finite values may overflow the sum
+    with np.errstate(invalid="ignore"):
         for column, values in sig.items():
             # t may be large (absolute time stamps) but not infinite
             limit = np.finfo(np.float64).max if column == "t" else MAGNITUDE_LIMIT
-            # a finite sum holds no NaN or inf; only then look row by row
-            if not np.isfinite(np.sum(values)) or values.max() > limit or values.min() < -limit:
+            # max and min propagate NaN, which fails both comparisons; only then look row by row
+            if not (values.max() <= limit and values.min() >= -limit):
                 invalid = ~(np.abs(values) <= limit)
                 if invalid.any():
                     bad |= invalid

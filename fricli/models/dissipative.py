@@ -142,9 +142,10 @@ class DissipativeFriction(FrictionModel):
         hidden = [(int(n), acts.from_spec(self.activation)) for n in self.hidden_sizes]
         return HeadedNetwork(2, hidden, DissipativeHead(), constant_outputs=(1,))
 
-    def _rows(self, sig: dict[str, np.ndarray], dtype=np.float64) -> np.ndarray:
-        """Network inputs and aux rows (4, n) float64: u, sign(qd), tanh(qd / v_ps), |tau_g| / g_scale;
-        the tanh computed in ``dtype``, the precision of the network that reads the rows."""
+    def _rows(self, sig: dict[str, np.ndarray], dtype=np.float64, sliding: bool = False) -> np.ndarray:
+        """Network inputs and aux rows (4, n) float64: u, sign(qd), c, |tau_g| / g_scale with
+        c = tanh(qd / v_ps) computed in ``dtype``, the precision of the network that reads the rows
+        (``sliding``: c = 1)."""
         if "qd" not in sig:
             raise DataError("the log has no column 'qd'")
         qd = np.asarray(sig["qd"], dtype=np.float64)
@@ -158,7 +159,10 @@ class DissipativeFriction(FrictionModel):
         out[0] -= self.u_mean_
         out[0] /= self.u_scale_
         np.sign(qd, out=out[1])
-        np.tanh(qd / self.v_ps_, out=out[2], dtype=dtype)
+        if sliding:
+            out[2] = 1.0
+        else:
+            np.tanh(qd / self.v_ps_, out=out[2], dtype=dtype)
         np.abs(g, out=out[3])
         out[3] *= (1.0 / self.g_scale_) if self.load_ else 0.0
         return out
@@ -394,12 +398,8 @@ class DissipativeFriction(FrictionModel):
             for start, stop in part:
                 rows = {k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}
                 if uses_net or not sliding:
-                    x = self._rows(rows, nets[0].dtype)
-                    if sliding:
-                        x[2] = 1.0
-                    c = x[2]
-                else:                               # blend 0: the prior alone, c = 1
-                    c = 1.0
+                    x = self._rows(rows, nets[0].dtype, sliding)
+                c = 1.0 if sliding else x[2]
                 if not uses_net:
                     out[start:stop] = 0.0
                 for k, net in enumerate(nets if uses_net else ()):
@@ -414,8 +414,8 @@ class DissipativeFriction(FrictionModel):
                     out[start:stop] /= len(nets)
                 if slopes:
                     qd = signals["qd"][start:stop]
-                    beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
-                    if (beyond > 0).any():
+                    if qd.max() > self.v_max_[0] or qd.min() < -self.v_max_[1]:   # a row beyond v_max
+                        beyond = np.abs(qd) - self._by_direction(qd, self.v_max_)
                         grow = self._by_direction(qd, self.slope_) * np.maximum(beyond, 0.0) * self.y_scale_
                         out[start:stop] += grow * c
                 if uses_prior:
