@@ -41,7 +41,8 @@ import numpy as np
 from fricli.core.errors import DataError
 from fricli.models import register
 from fricli.models.base import FrictionModel, parameter_info
-from fricli.models.terms import held_sign, stop
+from fricli.models.terms import held_sign
+from fricli.numerics.physics import stop
 
 # name -> (unit on a rotary axis, unit on a linear axis, meaning)
 PARAM_INFO = parameter_info("fc", "fst", "vs", "fv", "kc", "q_lo", "q_hi",

@@ -48,6 +48,7 @@ import numpy as np
 
 from fricli.core import logs
 from fricli.core.errors import DataError, ModelFileError
+from fricli.numerics.physics import stop
 
 
 def factor_inputs(factor: dict) -> set[str]:
@@ -108,27 +109,6 @@ def last_moving(qd: np.ndarray) -> np.ndarray | None:
 def hold(x: np.ndarray, last: np.ndarray | None, x0: float) -> np.ndarray:
     """x (n,) taken at ``last`` (``last_moving``), x0 where it is -1; x itself when ``last`` is None."""
     return x if last is None else np.where(last >= 0, x[np.maximum(last, 0)], x0)
-
-
-def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
-    """Deflections z (n, N) [rad or m] of Maxwell-slip elements of limits d (N,) > 0 over positions
-    q (n,) (the stop operator): z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 (N,) at
-    position q0. Stepped in plain floats, element by element (a row-by-row loop over arrays of a few
-    elements would pay numpy's cost per call)."""
-    q = np.asarray(q, dtype=np.float64)
-    d = np.atleast_1d(np.asarray(d, dtype=np.float64))
-    out = np.empty((len(q), len(d)))
-    if not len(q):
-        return out
-    dq = np.diff(q, prepend=float(q0)).tolist()
-    starts = np.broadcast_to(np.asarray(z0, dtype=np.float64), d.shape).tolist()
-    for i, (limit, z) in enumerate(zip(d.tolist(), starts)):
-        column = []
-        for step in dq:
-            z = min(max(z + step, -limit), limit)
-            column.append(z)
-        out[:, i] = column
-    return out
 
 
 class Columns:

@@ -141,3 +141,95 @@ def intervals(t: np.ndarray, t_prev: float | None = None) -> np.ndarray:
     else:
         dt[0] = dt[1] if len(t) > 1 else 0.0
     return dt
+
+
+STOP_BLOCK = 64   # rows per block of the stop operator's vector passes
+
+
+def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
+    """Deflections z (n, N) [rad or m] of Maxwell-slip elements of limits d (N,) > 0 over positions
+    q (n,) (the stop operator): z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 (N,) at
+    position q0.
+
+    The same bits as stepping row by row in plain floats, faster: the rows are cut into blocks of
+    STOP_BLOCK, every block is stepped at once from a guess of its first state (numpy over the
+    blocks), and a block is stepped again from its predecessor's last state until the two agree;
+    a clip forgets the guess, so blocks where an element slips agree at once. Stretches where it
+    does not slip are summed exactly as the steps go (``np.add.accumulate``), then checked."""
+    q = np.asarray(q, dtype=np.float64)
+    d = np.atleast_1d(np.asarray(d, dtype=np.float64))
+    out = np.empty((len(q), len(d)))
+    n = len(q)
+    if not n:
+        return out
+    dq = np.diff(q, prepend=float(q0))
+    starts = np.broadcast_to(np.asarray(z0, dtype=np.float64), d.shape).tolist()
+    blocks = -(-n // STOP_BLOCK)
+    if blocks < 4:
+        for i, (limit, z) in enumerate(zip(d.tolist(), starts)):
+            out[:, i] = _stop_steps(dq, limit, z)
+        return out
+    padded = np.zeros(blocks * STOP_BLOCK)   # zero steps after the last row change nothing
+    padded[:n] = dq
+    steps = np.ascontiguousarray(padded.reshape(blocks, STOP_BLOCK).T)   # (B, blocks): block b in column b
+    for i, (limit, z) in enumerate(zip(d.tolist(), starts)):
+        out[:, i] = _stop_element(padded, steps, limit, z).T.reshape(-1)[:n]
+    return out
+
+
+def _stop_steps(dq: np.ndarray, limit: float, z: float) -> list[float]:
+    """The stop operator stepped row by row in plain floats (the reference order of operations)."""
+    column = []
+    for step in dq.tolist():
+        z = min(max(z + step, -limit), limit)
+        column.append(z)
+    return column
+
+
+def _stop_blocks(steps: np.ndarray, z: np.ndarray, limit: float, out: np.ndarray) -> None:
+    """out (B, k): each column of ``steps`` (B, k) stepped from its first state z (k,)."""
+    for j in range(steps.shape[0]):
+        z = np.add(z, steps[j], out=out[j])
+        np.maximum(z, -limit, out=z)
+        np.minimum(z, limit, out=z)
+
+
+def _stop_element(padded: np.ndarray, steps: np.ndarray, limit: float, z0: float) -> np.ndarray:
+    """States (B, blocks) of one element of ``limit`` over ``steps`` (B, blocks), ``padded`` the
+    same steps in row order, from z0."""
+    size, blocks = steps.shape
+    first = np.zeros(blocks)      # the first state each block was stepped from
+    first[0] = z0
+    z = np.empty((size, blocks))
+    _stop_blocks(steps, first, limit, z)
+    todo = 2 * blocks
+    while True:   # step again the blocks whose first state was not their predecessor's last
+        wrong = np.flatnonzero(z[-1, :-1] != first[1:]) + 1
+        if not wrong.size or wrong.size > todo * 9 // 10:   # long stretches without a slip: below
+            break
+        todo = wrong.size
+        first[wrong] = z[-1, wrong - 1]
+        part = np.empty((size, wrong.size))
+        _stop_blocks(steps[:, wrong], first[wrong], limit, part)
+        z[:, wrong] = part
+    wrong = np.flatnonzero(z[-1, :-1] != first[1:]) + 1
+    b, run = (int(wrong[0]) if wrong.size else blocks), 1
+    while b < blocks:
+        prev = z[-1, b - 1]
+        if first[b] == prev:
+            b, run = b + 1, 1
+            continue
+        # sum the steps from prev over ``run`` blocks; the rows before the first clip are exact
+        sums = np.add.accumulate(np.concatenate(([prev], padded[b * size:min(blocks, b + run) * size])))[1:]
+        over = np.flatnonzero(np.abs(sums) > limit)
+        clean = (int(over[0]) if over.size else sums.size) // size
+        run = 1 if over.size else 2 * run
+        if clean:
+            z[:, b:b + clean] = sums[:clean * size].reshape(clean, size).T
+            first[b] = prev
+            first[b + 1:b + clean] = z[-1, b:b + clean - 1]
+            b += clean
+        else:
+            z[:, b], first[b] = _stop_steps(steps[:, b], limit, float(prev)), prev
+            b += 1
+    return z
