@@ -216,17 +216,24 @@ class Columns:
         raise ValueError(f"unknown term factor {f!r}")
 
     def value(self, term: dict) -> np.ndarray:
-        """The term's column (n,)."""
-        out = np.ones(len(self.sig["t"]))
+        """The term's column (n,): the product of its factors, in their order (a new array)."""
+        n = len(self.sig["t"])
+        out = None
         for factor in term["factors"]:
-            out *= self.factor(factor)
-        return out
+            x = self.factor(factor)
+            if out is None:
+                out = np.array(np.broadcast_to(x, (n,)), dtype=np.float64)   # 1 x = x: no pass over ones
+            else:
+                out *= x
+        return np.ones(n) if out is None else out
 
     def combination(self, terms: list[dict], coef: np.ndarray) -> np.ndarray:
         """``matrix(terms) @ coef`` (n,), one column at a time."""
         out = np.zeros(len(self.sig["t"]))
         for term, c in zip(terms, coef):
-            out += c * self.value(term)
+            column = self.value(term)
+            column *= c
+            out += column
         return out
 
     def matrix(self, terms: list[dict]) -> np.ndarray:
