@@ -16,6 +16,9 @@ That is a linear recurrence z[k] = a[k] z[k-1] + b[k], solved in one call as a u
 bidiagonal system (BLAS ``dtbsv`` through ``scipy.linalg.blas``, ``recurrence``), with no
 Python loop over samples. These functions are the one implementation of the equations: the LuGre model, the
 simulator and identification call them.
+
+Maxwell-slip elements (the ``gms`` kind, the ``slip`` term factor): the stop operator, ``stop``,
+z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d) for each element of deflection limit d.
 """
 
 from __future__ import annotations
@@ -144,6 +147,7 @@ def intervals(t: np.ndarray, t_prev: float | None = None) -> np.ndarray:
 
 
 STOP_BLOCK = 64   # rows per block of the stop operator's vector passes
+STOP_PASSES = 16  # at most this many passes over the blocks, then block by block
 
 
 def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
@@ -203,9 +207,9 @@ def _stop_element(padded: np.ndarray, steps: np.ndarray, limit: float, z0: float
     z = np.empty((size, blocks))
     _stop_blocks(steps, first, limit, z)
     todo = 2 * blocks
-    while True:   # step again the blocks whose first state was not their predecessor's last
+    for sweep in range(STOP_PASSES):   # step again the blocks whose first state was not their predecessor's last
         wrong = np.flatnonzero(z[-1, :-1] != first[1:]) + 1
-        if not wrong.size or wrong.size > todo * 9 // 10:   # long stretches without a slip: below
+        if not wrong.size or (sweep >= 3 and wrong.size > todo * 9 // 10):   # long stretches without a slip: below
             break
         todo = wrong.size
         first[wrong] = z[-1, wrong - 1]
