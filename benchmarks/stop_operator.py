@@ -38,7 +38,7 @@ def main(argv=None) -> None:
         dq = np.diff(q, prepend=q[0])
         for d in (0.004, 0.05, 0.5, 10.0):
             rows = physics._stop_steps(dq, d, 0.0)
-            same = np.array_equal(physics.stop(q, d, 0.0, q[0])[:, 0], rows)
+            same = np.array_equal(physics.stop(q, d, 0.0, q[0])[:, 0].view(np.int64), np.array(rows).view(np.int64))
             ref = per_row_ns(lambda: physics._stop_steps(dq, d, 0.0), n)
             new = per_row_ns(lambda: physics.stop(q, d, 0.0, q[0]), n)
             print(f"{name:6s} d = {d:<6g}: row by row {ref:6.1f} ns a row, in blocks {new:6.1f} ns a row"

@@ -48,16 +48,18 @@ def test_the_slip_factor_is_the_stop_operator_of_q_and_carries_its_deflection_ac
 def test_the_stop_operator_in_blocks_is_the_row_by_row_one_bit_for_bit(rng, n):
     """Limits that slip at every reversal, now and then, and never; elements that start deflected."""
     limits = np.array([1e-6, 0.004, 0.05, 0.5, 10.0])
-    for noise in (0.002, 1e-5, 0.0):
-        q = np.cumsum(rng.normal(0.0, noise, n)) + 0.5 * np.sin(np.arange(n) * 0.005)
-        z0 = rng.uniform(-1.0, 1.0, limits.size) * limits
-        got = physics.stop(q, limits, z0, 0.1)
+    at_rest = np.where(rng.random(n) < 0.5, -0.0, 0.0)   # signed zeros: equal as floats, not as bits
+    for noise in (0.002, 1e-5, 0.0, None):
+        q = at_rest if noise is None else np.cumsum(rng.normal(0.0, noise, n)) + 0.5 * np.sin(np.arange(n) * 0.005)
+        z0 = rng.uniform(-1.0, 1.0, limits.size) * limits if noise is not None else -0.0 * limits
+        q0 = 0.1 if noise is not None else -0.0
+        got = physics.stop(q, limits, z0, q0)
         for i, d in enumerate(limits):
             z, want = z0[i], []
             for k in range(n):
-                z = min(max(z + (q[k] - (q[k - 1] if k else 0.1)), -d), d)
+                z = min(max(z + (q[k] - (q[k - 1] if k else q0)), -d), d)
                 want.append(z)
-            np.testing.assert_array_equal(got[:, i], want)
+            np.testing.assert_array_equal(got[:, i].view(np.int64), np.array(want).view(np.int64))
 
 
 def test_a_slip_element_needs_a_positive_limit():

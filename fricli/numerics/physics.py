@@ -205,22 +205,24 @@ def _stop_element(padded: np.ndarray, steps: np.ndarray, limit: float, z0: float
     first = np.zeros(blocks)      # the first state each block was stepped from
     first[0] = z0
     z = np.empty((size, blocks))
+    # states compared bit for bit (as integers): 0.0 and -0.0 are equal as floats, not as bits
+    first_bits, last_bits = first.view(np.int64), z[-1].view(np.int64)
     _stop_blocks(steps, first, limit, z)
     todo = 2 * blocks
-    for sweep in range(STOP_PASSES):   # step again the blocks whose first state was not their predecessor's last
-        wrong = np.flatnonzero(z[-1, :-1] != first[1:]) + 1
-        if not wrong.size or (sweep >= 3 and wrong.size > todo * 9 // 10):   # long stretches without a slip: below
+    for done in range(STOP_PASSES):   # step again the blocks whose first state was not their predecessor's last
+        wrong = np.flatnonzero(last_bits[:-1] != first_bits[1:]) + 1
+        if not wrong.size or (done >= 3 and wrong.size > todo * 9 // 10):   # long stretches without a slip: below
             break
         todo = wrong.size
         first[wrong] = z[-1, wrong - 1]
         part = np.empty((size, wrong.size))
         _stop_blocks(steps[:, wrong], first[wrong], limit, part)
         z[:, wrong] = part
-    wrong = np.flatnonzero(z[-1, :-1] != first[1:]) + 1
+    wrong = np.flatnonzero(last_bits[:-1] != first_bits[1:]) + 1
     b, run = (int(wrong[0]) if wrong.size else blocks), 1
     while b < blocks:
         prev = z[-1, b - 1]
-        if first[b] == prev:
+        if first_bits[b] == last_bits[b - 1]:
             b, run = b + 1, 1
             continue
         # sum the steps from prev over ``run`` blocks; the rows before the first clip are exact
