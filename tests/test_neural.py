@@ -491,7 +491,8 @@ def test_train_base_says_it_trains_on_the_moving_rows(harmonic, tmp_path):
     result = run("train-base", harmonic["log"], "-o", tmp_path / "m.npz", "--steps", 20)
     assert result.exit_code == 0, result.stderr
     assert "rows in motion" in result.stderr and "no steady velocity levels" in result.stderr
-    assert "one network on all of them" in result.stderr and "2 of 10 time blocks held out" in result.stderr
+    assert "one network on all of them" in result.stderr
+    assert "the 10 time blocks held out by halves from 2 networks, each trained on the other half" in result.stderr
     assert len(models.load(str(tmp_path / "m.npz"))[0].nets_) == 1
     five = run("train-base", harmonic["log"], "-o", tmp_path / "five.npz", "--steps", 20, "--ensemble", 5, "--json")
     assert five.exit_code == 0, five.stderr
@@ -707,23 +708,45 @@ def test_what_the_steps_after_training_load_is_loaded_while_the_probe_trains(har
     assert calls == [os.getpid()]      # without the prior there is nothing to load
 
 
-def test_the_probe_stops_after_its_patience_and_the_model_at_its_best_record(harmonic):
-    """The probe ends once its held-out loss has not improved by 0.1 % over its patience (given,
-    else PATIENCE_SHARE of the steps); the model trains on past the probe's best record and
-    keeps that record's weights."""
+def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best_record(harmonic, monkeypatch):
+    """Two probes, each trained on one half of the time blocks and scored on the other, end once
+    their held-out loss has not improved by 0.1 % over their patience (given, else
+    PATIENCE_SHARE of the steps); the model trains on past the best record of their pooled curve
+    (weighted by their held-out rows) and keeps that record's weights."""
+    seen = {}
+    chosen = learning.chosen_on_held_out
+
+    def spy(new_model, steps, sig, target, splits, *args, **kwargs):
+        model, probes, summary = chosen(new_model, steps, sig, target, splits, *args, **kwargs)
+        seen.update(probes=probes, splits=splits)
+        return model, probes, summary
+
+    monkeypatch.setattr(learning, "chosen_on_held_out", spy)
     steps = 2000
     model, summary = learning.train_base(load(harmonic["log"]), steps=steps, seed=0, patience=40)
-    history = model.history_val_                     # the probe's held-out curve, one loss per record
+    probes, splits = seen["probes"], seen["splits"]
+    assert len(probes) == summary["held_out_choice"]["folds"] == 2
+    # the halves: every selected row held out by one probe, none by both, each trained on the rest
+    held = [val for _, val in splits]
+    assert not np.intersect1d(*held).size
+    assert np.array_equal(np.union1d(*held), np.union1d(*splits[0]))
+    for train, val in splits:
+        assert not np.intersect1d(train, val).size
     patience = 40 // model.eval_every_
-    best = int(np.argmin(history))
-    assert history.size < steps // model.eval_every_   # stopped early
-    level, since = np.inf, 0   # the trainer's plateau rule over the recorded losses
-    for k, loss in enumerate(history):
-        if loss < level * (1 - 1e-3):
-            level, since = loss, k
-    assert history.size - 1 - since == patience
+    for probe in probes:
+        history = probe.history_val_
+        assert history.size < steps // model.eval_every_   # stopped early
+        level, since = np.inf, 0   # the trainer's plateau rule over the recorded losses
+        for k, loss in enumerate(history):
+            if loss < level * (1 - 1e-3):
+                level, since = loss, k
+        assert history.size - 1 - since == patience
+    length = min(p.history_val_.size for p in probes)
+    pooled = np.average([p.history_val_[:length] for p in probes], axis=0, weights=[v.size for v in held])
+    np.testing.assert_array_equal(model.history_val_, pooled)
+    best = int(np.argmin(pooled))
     assert summary["best_step"] == (best + 1) * model.eval_every_
-    assert best * model.eval_every_ < summary["steps"] <= steps
+    assert summary["steps"] == max(p.steps_ for p in probes) and best * model.eval_every_ < summary["steps"] <= steps
 
 
 def test_a_best_step_early_in_the_planned_steps_is_a_warning_when_training_stopped_early(tmp_path):

@@ -52,8 +52,8 @@ def _rows_used(summary: dict, tau: str) -> str:
     choice = summary.get("held_out_choice")
     if mode == "moving" and choice is not None:
         return (f"{rows} (one network on all of them, stopped at step {choice['step']:,}: the best on "
-                f"{summary['groups']} of {training_data.PIECES} time blocks held out from a second network, "
-                f"held-out RMS {choice['held_out_rmse']:.3g} {tau}; {why})")
+                f"the {training_data.PIECES} time blocks held out by halves from {choice['folds']} networks, "
+                f"each trained on the other half, held-out RMS {choice['held_out_rmse']:.3g} {tau}; {why})")
     if mode == "moving":
         return (f"{rows} ({val} for validation in {summary['groups']} of "
                 f"{training_data.PIECES} time blocks; {why})")
@@ -129,8 +129,10 @@ def train_base(log, output, arch, coupling, if_changed, as_json, quiet, window, 
     level are held out for validation, and the weights with the lowest validation loss are kept.
     A log without velocity levels (continuous excitation, e.g. sums of harmonics) trains on its
     rows in motion instead and holds out whole blocks of time; stderr says which. There the
-    dissipative network is one network on every row, stopped at the step a second network shows
-    best on two held-out blocks (--ensemble N: the mean of N networks, one per fold of blocks).
+    dissipative network is one network on every row, stopped at the step that two probe networks,
+    each trained on half of the time blocks, show best on the other half; their held-out rows
+    also set the prior's share and the pre-sliding state (--ensemble N: the mean of N networks,
+    one per fold of blocks).
     On such a log the network's residual is then tested for friction with memory: Maxwell-slip
     elements (fricli diagnose's hysteresis effect) are added on top of the network, as an
     augmented model, when on held-out blocks of time they lower the error significantly more than

@@ -45,55 +45,68 @@ def subset(sig: dict[str, np.ndarray], rows: np.ndarray) -> dict[str, np.ndarray
 
 
 def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, sig: dict[str, np.ndarray],
-                       target: np.ndarray, train: np.ndarray, val: np.ndarray, rng: np.random.Generator,
+                       target: np.ndarray, splits: list[tuple[np.ndarray, np.ndarray]], rng: np.random.Generator,
                        on_eval: Callable | None = None, meanwhile: Callable[[], None] | None = None
-                       ) -> tuple[FrictionModel, FrictionModel, dict]:
-    """One network on every row (``train`` and ``val``, indices into ``sig`` and ``target`` (n,)
-    [Nm]) stopped at the step that a probe network, trained on ``train`` alone, shows best on
-    the held-out rows ``val``.
+                       ) -> tuple[FrictionModel, list[FrictionModel], dict]:
+    """One network on every row of ``splits`` (pairs (train, val) of indices into ``sig`` and
+    ``target`` (n,) [Nm]) stopped at the step that probe networks, one per pair trained on its
+    ``train`` rows, show best on their held-out rows ``val``, pooled.
 
-    Both train at once (the probe in a child process where ``forked`` can fork, else on
-    ``WORKERS`` threads), with the same scales (those of every row), the same learning-rate
-    schedule over ``steps`` and the same initial weights (generators of one seed drawn from
-    ``rng``): the model is the probe's network trained on more rows, so the probe's best step
-    carries over to it, early steps included. The probe stops once its held-out loss has not
-    improved by 0.1 % for its patience (the model's, else PATIENCE_SHARE of ``steps``); the
-    model records its weights at every loss record, trains on until it has passed the probe's
-    best record and keeps the weights of that record. Which weights are kept depends on the
-    probe's losses alone, not on which training runs ahead; so do the model's recorded steps (the
-    probe's) and training losses (up to the record kept).
+    The probes (each in a child process of its own where ``forked`` can fork, else one after
+    the other on a second of ``WORKERS`` threads) and the model train at once, with the same
+    scales (those of every row), the same learning-rate schedule over ``steps`` and the same
+    initial weights (generators of one seed drawn from ``rng``): the model is a probe's network
+    trained on more rows, so the probes' best step carries over to it, early steps included.
+    Their held-out losses are pooled as ``cross_validated_steps`` pools its folds' (weighted by
+    the held-out rows, over the records every probe reached). A probe stops once its held-out
+    loss has not improved by 0.1 % for its patience (the model's, else PATIENCE_SHARE of
+    ``steps``); the model records its weights at every loss record, trains on until it has
+    passed the pooled curve's best record and keeps the weights of that record. Which weights
+    are kept depends on the probes' losses alone, not on which training runs ahead; so do the
+    model's recorded steps and training losses (up to the record kept).
     ``meanwhile`` (e.g. loading what the steps after training need) runs in this process once the
-    probe has started in its child, before the model's training: the model trains on until the probe
-    has finished, so it only waits less.
-    Returns (model, probe, summary): the probe stays fitted for the choices made on its
+    probes have started, before the model's training: the model trains on until the probes have
+    finished, so it only waits less.
+    Returns (model, probes, summary): the probes stay fitted for the choices made on their
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
-    chosen), "held_out_rmse" [Nm] (the probe's at that step), "val_rows" (the held-out rows).
+    chosen), "held_out_rmse" [Nm] (the pooled curve's at that step) and "folds" (the probes).
     """
-    rows = np.union1d(train, val)
-    model, probe = new_model(steps), new_model(steps)
-    probe.patience = probe.patience or max(1, round(PATIENCE_SHARE * steps))
+    rows = np.union1d(np.concatenate([train for train, _ in splits]), np.concatenate([val for _, val in splits]))
+    model, probes = new_model(steps), [new_model(steps) for _ in splits]
+    for probe in probes:
+        probe.patience = probe.patience or max(1, round(PATIENCE_SHARE * steps))
     model.patience = None
     model.set_scales(subset(sig, rows), target[rows])
     seed = int(rng.integers(2 ** 63))
-    seeds = [np.random.default_rng(seed), np.random.default_rng(seed)]
     stop = threading.Event()
     apart = forked.AVAILABLE
-    progress = shared_progress(on_eval, steps if apart else 2 * steps, 1 if apart else 2, stop)
-    board = forked.shared_int64(2)   # [1 once the probe has finished, its best record]
-    probe_args = (subset(sig, train), target[train], subset(sig, val), target[val])
+    progress = shared_progress(on_eval, steps if apart else (len(splits) + 1) * steps, 1 if apart else 2, stop)
+    # the probes' held-out losses as they are recorded, in memory their processes share with this one
+    k_probes, weights = len(splits), [val.size for _, val in splits]
+    curves = forked.shared_float64(k_probes * (steps + 1)).reshape(k_probes, steps + 1)
+    counts, done = forked.shared_int64(k_probes), forked.shared_int64(k_probes)
 
-    def fit_probe(report: Callable | None, halt):
-        probe.fit(*probe_args, rng=seeds[0], scales_from=model, on_eval=report, stop=halt)
-        board[1] = int(np.argmin(probe.history_val_))
-        board[0] = 1
-        return _packed(probe)
+    def fit_probe(k: int, report: Callable | None, halt) -> FrictionModel:
+        def noted(step, total, train_loss, val_loss):
+            curves[k, counts[k]] = val_loss
+            counts[k] += 1
+            return None if report is None else report(step, total, train_loss, val_loss)
+
+        train, val = splits[k]
+        probes[k].fit(subset(sig, train), target[train], subset(sig, val), target[val],
+                      rng=np.random.default_rng(seed), scales_from=model, on_eval=noted, stop=halt)
+        done[k] = 1
+        return probes[k]
 
     def model_report(*args) -> bool:
         progress[-1](*args)
-        return bool(board[0] and len(model.snapshots_) > board[1])
+        if not done.all():
+            return False
+        best = int(np.argmin(np.average(curves[:, :counts.min()], axis=0, weights=weights)))
+        return len(model.snapshots_) > best
 
-    fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=seeds[1], scales_from=model,
-                       on_eval=model_report, snapshots=True, stop=stop)
+    fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=np.random.default_rng(seed),
+                       scales_from=model, on_eval=model_report, snapshots=True, stop=stop)
 
     def fit_model():
         if meanwhile is not None:
@@ -101,25 +114,42 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         return fit_rows()
 
     if apart:
-        # the probe in a child process (see fricli.numerics.forked: threads would share one lock)
+        # each probe in a child process (see fricli.numerics.forked: threads would share one lock)
+        parent = os.getpid()
+
+        def beside_the_rest(k: int) -> list:
+            if k == k_probes:
+                fit_model()
+                return []
+            parcel, rest = forked.beside(lambda: _packed(fit_probe(k, None, forked.Orphaned(parent))),
+                                         partial(beside_the_rest, k + 1))
+            return [parcel, *rest]
+
         with single_threaded():
-            parcel, _ = forked.beside(partial(fit_probe, None, forked.Orphaned(os.getpid())), fit_model)
-        probe = _unpacked(type(probe), parcel)
+            probes = [_unpacked(type(model), parcel) for parcel in beside_the_rest(0)]
     else:
-        run_parallel([partial(fit_probe, progress[0], stop), fit_model], stop)
-    record = min(int(np.argmin(probe.history_val_)), len(model.snapshots_) - 1)
+        run_parallel([lambda: [fit_probe(k, progress[0], stop) for k in range(k_probes)], fit_model], stop)
+    pooled = pooled_curve(probes, [val.size for _, val in splits])
+    record = min(int(np.argmin(pooled)), len(model.snapshots_) - 1)
     model.net_.theta[...] = model.snapshots_[record]
     model.snapshots_ = None
     model.set_members([model.net_], sig["qd"][rows])   # the extrapolation from the weights kept
     model.best_step_ = min((record + 1) * model.eval_every_, steps)
-    # how far the model ran past the probe's best record depends on which process ran ahead: what
-    # is kept depends on the probe's curve alone (the same bytes every run)
+    # how far the model ran past the best record depends on which process ran ahead: what is
+    # kept depends on the probes' curves alone (the same bytes every run)
     model.history_train_ = np.asarray(model.history_train_)[:record + 1]
-    model.steps_ = probe.steps_
-    model.history_val_ = np.asarray(probe.history_val_)
+    model.steps_ = max(probe.steps_ for probe in probes)
+    model.history_val_ = pooled
     model.n_val_ = 0
-    return model, probe, {"step": int(model.best_step_), "val_rows": val,
-                          "held_out_rmse": float(np.sqrt(probe.history_val_[record])) * probe.y_scale_}
+    return model, probes, {"step": int(model.best_step_), "folds": len(probes),
+                           "held_out_rmse": float(np.sqrt(pooled[record])) * model.y_scale_}
+
+
+def pooled_curve(fitted: list[FrictionModel], weights: list[int]) -> np.ndarray:
+    """The held-out loss records of networks of one scale (``history_val_``), averaged with
+    ``weights`` (their held-out rows) over the records all of them reached."""
+    length = min(len(m.history_val_) for m in fitted)
+    return np.average([np.asarray(m.history_val_)[:length] for m in fitted], axis=0, weights=weights)
 
 
 def _packed(model: FrictionModel) -> tuple[dict, dict[str, np.ndarray]]:

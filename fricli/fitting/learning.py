@@ -30,6 +30,11 @@ ARCHS = {"dissipative": DissipativeFriction, **_PAPER_ARCHS}
 DEFAULT_ARCH = "dissipative"
 DEFAULT_HIDDEN = {"dissipative": (30, 30), "mlp": (30, 30), "selmic": (30,), "nnacm": (50,)}
 DEFAULT_MAX_SAMPLES = 2500
+# the default network on a log without velocity levels: its step, prior share and pre-sliding
+# state are chosen by two probes, each trained on half of the time blocks and scored on the
+# other half, so that every block scores a choice (two blocks alone decided it badly: the
+# friction level of a real joint moves from block to block)
+PROBE_SHARE = 0.5
 #: fewer velocity levels than this (both directions counted: three speeds each way) leave a network
 #: no velocity dependence to learn (train-base warns)
 MIN_VELOCITY_LEVELS = 6
@@ -114,12 +119,13 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     slower than 0.1 % of the top speed left out; a log without levels (continuous excitation)
     trains on its rows in motion (``metrics.in_motion``) and validates on whole blocks of time
     (summary "velocity_groups": "moving"). There the dissipative network is one network trained
-    on every row in motion, at the step, prior share and pre-sliding choice that a network trained
-    on the rows outside the held-out blocks showed best on them (``chosen_on_held_out``; summary
-    "held_out_choice"); with ``ensemble`` N > 1 it is the mean of one network per fold of
-    ``training_data.time_folds`` (the first N folds), every one stopped at the step of the least
-    validation loss pooled over the folds (``cross_validated_steps``; summary "cross_validation").
-    The other networks validate on one fold. At rest the friction
+    on every row in motion, at the step, prior share and pre-sliding choice that two probe
+    networks, each trained on half of the time blocks (PROBE_SHARE), showed best on the other
+    half (``chosen_on_held_out``, ``held_out_choices``; summary "held_out_choice"); with
+    ``ensemble`` N > 1 it is the mean of one network per fold of ``training_data.time_folds`` (the
+    first N folds), every one stopped at the step of the least validation loss pooled over the
+    folds (``cross_validated_steps``; summary "cross_validation"). The other networks validate
+    on one fold. At rest the friction
     is held by the bristles and depends on the motion before, not on (tau_g, qd). ``velocity_input``
     "asinh" feeds the network asinh(qd / v0) with v0 = ``velocity_scale`` or, for None, a low
     quantile of the training speeds; "linear" feeds qd itself (not for ``dissipative``, which
@@ -197,34 +203,19 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         model.best_step_, model.steps_ = cv["step"], max(fold.steps_ for fold in members)
         model.eval_every_, model.n_train_, model.n_val_ = members[0].eval_every_, rows.size, 0
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
-        block = training_data.time_block(moving.size)
-        splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h)))
-                  for h in held]
-        if prior:
-            # each network's prior from the rows it trained on; the blend from the rows it did not
-            fold_rows = [np.setdiff1d(rows, np.flatnonzero(np.isin(block, h))) for h in held]
-            prior_summary = blend_prior(model, members, fold_rows, [h for _, h in splits], sig, target, rows, units)
-        if bristles != "off":
-            check = bristle_check(members, [(*split, slow[~np.isin(block[slow], h)]) for split, h in zip(splits, held)],
-                                  sig, target)
-            if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(moving), slow, MIN_GAIN)
+        prior_summary, check = held_out_choices(model, members, held, rows, sig, target, moving, slow, units,
+                                                prior, bristles)
     elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
-        # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
-        rows, train_rows = np.union1d(sel.train, sel.val), sel.train
-        model, probe, choice = chosen_on_held_out(new_model, steps, sig, target, sel.train, sel.val, rng, on_eval,
-                                                  meanwhile=load_prior_fit if prior else None)
+        # continuous excitation: one network on every row, with what it needs chosen on held-out blocks:
+        # two probes, each trained on one half of the time blocks and scored on the other
+        rows = np.union1d(sel.train, sel.val)
+        held = training_data.time_folds(PROBE_SHARE, rng)
+        splits = [(np.setdiff1d(rows, val), np.intersect1d(rows, val)) for _, val in held_out_splits(moving, held)]
+        model, probes, choice = chosen_on_held_out(new_model, steps, sig, target, splits, rng, on_eval,
+                                                   meanwhile=load_prior_fit if prior else None)
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
-        block = training_data.time_block(moving.size)
-        held = np.unique(block[choice.pop("val_rows")])
-        split = (np.flatnonzero(moving & ~np.isin(block, held)), np.flatnonzero(moving & np.isin(block, held)))
-        if prior:
-            # the prior share from the probe (its prior fitted on its training rows), held-out rows scoring
-            prior_summary = blend_prior(model, [probe], [train_rows], [split[1]], sig, target, rows, units)
-        if bristles != "off":
-            check = bristle_check([probe], [(*split, slow[~np.isin(block[slow], held)])], sig, target)
-            if bristles == "on" or check["helps"]:
-                model.fit_bristles(sig, target, np.flatnonzero(moving), slow, MIN_GAIN)
+        prior_summary, check = held_out_choices(model, probes, held, rows, sig, target, moving, slow, units,
+                                                prior, bristles)
     else:
         model = new_model(steps)
         model.fit(subset(sig, sel.train), target[sel.train], subset(sig, sel.val), target[sel.val], rng=rng,
@@ -257,6 +248,36 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     if prior_summary is not None:
         summary["prior"] = prior_summary
     return model, summary
+
+
+def held_out_splits(moving: np.ndarray, held: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+    """For each set of time blocks ``held[k]`` (``training_data.time_block`` of the log's rows), the
+    rows in motion (``moving``, bool (n,)) outside and inside them, as (train, val) indices."""
+    block = training_data.time_block(moving.size)
+    return [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h))) for h in held]
+
+
+def held_out_choices(model: DissipativeFriction, fitted: list[DissipativeFriction], held: list[np.ndarray],
+                     rows: np.ndarray, sig: dict[str, np.ndarray], target: np.ndarray, moving: np.ndarray,
+                     slow: np.ndarray, units: dict, prior: bool, bristles: str) -> tuple[dict | None, dict | None]:
+    """The prior's share and the pre-sliding state of ``model`` (trained on ``rows``), chosen on the
+    time blocks ``held[k]`` that network ``fitted[k]`` did not train on: each network gets its prior
+    from the rows it trained on and is scored on the rows in motion of its blocks (``blend_prior``,
+    with ``prior``); ``bristle_check`` scores the pre-sliding state the same way, and the model
+    gets it where ``bristles`` is "on" or the check finds it helps ("off": not checked). ``slow``:
+    the log's rows of slow motion. Returns the summaries ("prior", "bristles"), None where not made."""
+    block = training_data.time_block(moving.size)
+    splits = held_out_splits(moving, held)
+    prior_summary = check = None
+    if prior:
+        prior_summary = blend_prior(model, fitted, [np.setdiff1d(rows, val) for _, val in splits],
+                                    [val for _, val in splits], sig, target, rows, units)
+    if bristles != "off":
+        check = bristle_check(fitted, [(*split, slow[~np.isin(block[slow], h)]) for split, h in zip(splits, held)],
+                              sig, target)
+        if bristles == "on" or check["helps"]:
+            model.fit_bristles(sig, target, np.flatnonzero(moving), slow, MIN_GAIN)
+    return prior_summary, check
 
 
 def load_prior_fit() -> None:

@@ -169,17 +169,19 @@ TRAIN_BASE = (
            f"{learning.SCHEDULES['cosine'][1]:,} for the others; paper {learning.SCHEDULES['paper'][1]:,}].", low=1),
     Option("patience", "int", None,
            "Stop early when the validation loss has not improved by 0.1 % for STEPS steps [a log without levels: "
-           "the held-out probe's, by default after a quarter of --steps].", low=1, metavar="STEPS"),
+           "each held-out probe's, by default after a quarter of --steps].", low=1, metavar="STEPS"),
     Option("lr", "float", 0.01, "Adam learning rate.", low=0, low_open=True),
     Option("batch_size", "int", 0, "Samples per step; 0 = full batch.", low=0),
     Option("seed", "int", 0, "Seed for the row selection, the initial weights and the batches."),
     Option("val_fraction", "float", 0.2,
            "Share of every constant-velocity stretch held out for validation, in whole pieces (a log without "
-           "velocity levels: whole blocks of time).", low=0, high=0.9),
+           "velocity levels: whole blocks of time, a fold of --ensemble; the default network's choices are made on "
+           "halves of the blocks; 0: nothing held out).", low=0, high=0.9),
     Option("ensemble", "int", 1,
            "On a log without velocity levels: the mean of N networks, one per fold of time blocks, each validated "
            "on its fold (dissipative; N at most 1 / --val-fraction; trained two at a time). 1: one network "
-           "trained on every row, at the step, prior share and pre-sliding choice held-out blocks showed best.",
+           "trained on every row, at the step, prior share and pre-sliding choice that two networks, each trained "
+           "on half of the time blocks, showed best on the other half.",
            low=1, metavar="N"),
     Option("no_balance", "flag", False,
            "Train on every row instead of the same number of rows per velocity level."),

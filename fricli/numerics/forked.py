@@ -114,6 +114,11 @@ class Orphaned:
         return os.getppid() != self.parent
 
 
+def shared_float64(n: int) -> np.ndarray:
+    """n zeros (float64) in memory that a child forked afterwards shares with this process."""
+    return np.frombuffer(mmap.mmap(-1, 8 * max(n, 1)), dtype=np.float64)[:n]
+
+
 def shared_int64(n: int) -> np.ndarray:
     """n zeros (int64) in memory that a child forked afterwards shares with this process."""
     return np.frombuffer(mmap.mmap(-1, 8 * n), dtype=np.int64)
