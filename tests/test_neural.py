@@ -749,6 +749,38 @@ def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best
     assert summary["steps"] == max(p.steps_ for p in probes) and best * model.eval_every_ < summary["steps"] <= steps
 
 
+@pytest.mark.parametrize("moving_until", [4.0, 12.0])
+def test_a_half_of_the_time_blocks_without_motion_scores_no_choice(moving_until, monkeypatch):
+    """A log that moves in its first seconds only: a probe whose half of the time blocks leaves
+    fewer than MIN_RUN rows in motion to train or to score on is not trained; with no probe left,
+    the one network trains on every row without a held-out choice (as with --val-fraction 0)."""
+    rng, sig = harmonic_motion(5, 100.0, 40.0)
+    rest = sig["t"] > moving_until
+    sig["qd"][rest], sig["qdd"][rest], sig["q"][rest] = 0.0, 0.0, sig["q"][~rest][-1]
+    sig["tau_dyn"] = np.zeros_like(sig["t"])
+    target = static_friction(sig["qd"], sig["tau_g"]) + rng.normal(0, 0.2, sig["t"].size)
+    seen = []
+    chosen = learning.chosen_on_held_out
+
+    def spy(new_model, steps, sig_, target_, splits, *args, **kwargs):
+        seen.append([(train.size, val.size) for train, val in splits])
+        return chosen(new_model, steps, sig_, target_, splits, *args, **kwargs)
+
+    monkeypatch.setattr(learning, "chosen_on_held_out", spy)
+    for seed in range(4):
+        model, summary = learning.train(sig, target, name="x", units={"tau": "Nm", "qd": "rad/s"},
+                                        rng=np.random.default_rng(seed), steps=300)
+        assert np.isfinite(model.predict(sig)[0]).all()
+        if "held_out_choice" in summary:
+            assert summary["held_out_choice"]["folds"] == len(seen[-1]) >= 1
+            assert min(min(pair) for pair in seen[-1]) >= training_data.MIN_RUN
+            assert np.isfinite(summary["held_out_choice"]["held_out_rmse"])
+        else:
+            assert summary["val_rows"] == 0
+    # motion in the first block alone: no half of the blocks can both train and score
+    assert moving_until > 10 or not seen
+
+
 def test_a_best_step_early_in_the_planned_steps_is_a_warning_when_training_stopped_early(tmp_path):
     """The Franka joint's slow file (first 60 %): the probe's held-out loss is least within the first
     1 % of the 7,000 steps, and the probe stops a quarter of them later; the warning counts the

@@ -180,6 +180,19 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     cv = prior_summary = choice = None
     if ensemble < 1:
         raise ValueError("ensemble must be at least 1")
+    probing = bool(sel.mode == "moving" and sel.val.size and ensemble == 1 and arch == "dissipative")
+    if probing:
+        # continuous excitation, one network: two probes, each trained on one half of the time
+        # blocks and scored on the other, choose what it needs; a half with (almost) no motion
+        # trains or scores nothing
+        rows = np.union1d(sel.train, sel.val)
+        held = training_data.time_folds(PROBE_SHARE, rng)
+        splits = [(np.setdiff1d(rows, val), np.intersect1d(rows, val)) for _, val in held_out_splits(moving, held)]
+        kept = [k for k, (train, val) in enumerate(splits) if min(train.size, val.size) >= training_data.MIN_RUN]
+        held, splits = [held[k] for k in kept], [splits[k] for k in kept]
+        if not kept:   # the motion within one half of the blocks: one network on every row, unchecked
+            probing = False
+            sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=0)
     if sel.mode == "moving" and sel.val.size and ensemble > 1 and arch == "dissipative":
         # continuous excitation, an ensemble asked for: one network per fold of time blocks, all
         # stopped at the step of the least mean validation loss, and the model their mean
@@ -205,15 +218,12 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
         prior_summary, check = held_out_choices(model, members, held, rows, sig, target, moving, slow, units,
                                                 prior, bristles)
-    elif sel.mode == "moving" and sel.val.size and arch == "dissipative":
-        # continuous excitation: one network on every row, with what it needs chosen on held-out blocks:
-        # two probes, each trained on one half of the time blocks and scored on the other
-        rows = np.union1d(sel.train, sel.val)
-        held = training_data.time_folds(PROBE_SHARE, rng)
-        splits = [(np.setdiff1d(rows, val), np.intersect1d(rows, val)) for _, val in held_out_splits(moving, held)]
+    elif probing:
+        # continuous excitation: one network on every row, with what it needs chosen on held-out blocks
         model, probes, choice = chosen_on_held_out(new_model, steps, sig, target, splits, rng, on_eval,
                                                    meanwhile=load_prior_fit if prior else None)
-        sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode, groups=sel.groups)
+        sel = training_data.Selection(train=rows, val=rows[:0], blocks=sel.blocks, mode=sel.mode,
+                                      groups=int(held[0].size))
         prior_summary, check = held_out_choices(model, probes, held, rows, sig, target, moving, slow, units,
                                                 prior, bristles)
     else:
