@@ -64,9 +64,9 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     passed the pooled curve's best record and keeps the weights of that record. Which weights
     are kept depends on the probes' losses alone, not on which training runs ahead; so do the
     model's recorded steps and training losses (up to the record kept).
-    ``meanwhile`` (e.g. loading what the steps after training need) runs in this process once the
-    probes have started, before the model's training: the model trains on until the probes have
-    finished, so it only waits less.
+    ``meanwhile`` (e.g. loading what the steps after training need) runs in this process after the
+    model's training, while the probes train on (the model is the one that trains on the most
+    rows; the probes train on for their patience).
     Returns (model, probes, summary): the probes stay fitted for the choices made on their
     held-out rows (the prior's share, the pre-sliding state); summary holds "step" (the step
     chosen), "held_out_rmse" [Nm] (the pooled curve's at that step) and "folds" (the probes).
@@ -100,18 +100,26 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
 
     def model_report(*args) -> bool:
         progress[-1](*args)
-        if not done.all():
+        # the pooled curve ends with the shortest probe: once one has finished and the others
+        # have recorded as many losses, its best record is known (the others train on for the
+        # choices made on their own best weights)
+        finished = done.astype(bool)
+        if not finished.any():
             return False
-        best = int(np.argmin(np.average(curves[:, :counts.min()], axis=0, weights=weights)))
+        length = int(counts[finished].min())
+        if (counts[~finished] < length).any():
+            return False
+        best = int(np.argmin(np.average(curves[:, :length], axis=0, weights=weights)))
         return len(model.snapshots_) > best
 
     fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=np.random.default_rng(seed),
                        scales_from=model, on_eval=model_report, snapshots=True, stop=stop)
 
     def fit_model():
+        fitted = fit_rows()
         if meanwhile is not None:
             meanwhile()
-        return fit_rows()
+        return fitted
 
     if apart:
         # each probe in a child process (see fricli.numerics.forked: threads would share one lock)
