@@ -694,9 +694,9 @@ def test_what_is_kept_does_not_depend_on_which_training_runs_ahead(harmonic, mon
         np.testing.assert_array_equal(aa[key], ab[key])
 
 
-def test_what_the_steps_after_training_load_is_loaded_while_the_probe_trains(harmonic, monkeypatch):
-    """The prior fit's imports run in this process once the probe has started, before the model's
-    training (which waits on the probe anyway): called once, here, and the same network."""
+def test_what_the_steps_after_training_load_is_loaded_while_the_probes_train(harmonic, monkeypatch):
+    """The prior fit's imports run in this process after the model's training, while the probes
+    train on: called once, here, and the same network."""
     import os
 
     calls = []
