@@ -711,14 +711,25 @@ def test_what_the_steps_after_training_load_is_loaded_while_the_probes_train(har
 def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best_record(harmonic, monkeypatch):
     """Two probes, each trained on one half of the time blocks and scored on the other, end once
     their held-out loss has not improved by 0.1 % over their patience (given, else
-    PATIENCE_SHARE of the steps); the model trains on past the best record of their pooled curve
-    (weighted by their held-out rows) and keeps that record's weights."""
+    PATIENCE_SHARE of the steps), or once the other has ended and they have recorded as many
+    losses (the pooled curve, weighted by their held-out rows, ends there); the model and both
+    probes keep their weights of the pooled curve's best record."""
     seen = {}
     chosen = learning.chosen_on_held_out
 
     def spy(new_model, steps, sig, target, splits, *args, **kwargs):
         model, probes, summary = chosen(new_model, steps, sig, target, splits, *args, **kwargs)
-        seen.update(probes=probes, splits=splits)
+        # each probe's held-out loss with the weights it keeps, evaluated as its training did
+        from fricli.numerics.nn.training import Evaluator
+
+        losses = []
+        for p, (_, val) in zip(probes, splits):
+            limits, (p.v_max_, p.v_min_) = (p.v_max_, p.v_min_), (None, None)   # the inputs as training saw them
+            x = np.ascontiguousarray(p._rows({k: v[val] for k, v in sig.items()}), dtype=p.net_.dtype)
+            p.v_max_, p.v_min_ = limits
+            t = np.ascontiguousarray((target[val] / p.y_scale_)[None, :], dtype=p.net_.dtype)
+            losses.append(Evaluator(p.net_, x, t).sse() / t.size)
+        seen.update(probes=probes, splits=splits, losses=losses)
         return model, probes, summary
 
     monkeypatch.setattr(learning, "chosen_on_held_out", spy)
@@ -733,6 +744,7 @@ def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best
     for train, val in splits:
         assert not np.intersect1d(train, val).size
     patience = 40 // model.eval_every_
+    own = []   # whether each probe ended on its own patience
     for probe in probes:
         history = probe.history_val_
         assert history.size < steps // model.eval_every_   # stopped early
@@ -740,13 +752,20 @@ def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best
         for k, loss in enumerate(history):
             if loss < level * (1 - 1e-3):
                 level, since = loss, k
-        assert history.size - 1 - since == patience
+        own.append(history.size - 1 - since == patience)
     length = min(p.history_val_.size for p in probes)
+    first = [p.history_val_.size == length for p in probes]
+    # the probe that ended first ended on its patience; the other on it or on the first one's end
+    assert any(o and f for o, f in zip(own, first)) and all(o or f or p.history_val_.size >= length
+                                                             for o, f, p in zip(own, first, probes))
     pooled = np.average([p.history_val_[:length] for p in probes], axis=0, weights=[v.size for v in held])
     np.testing.assert_array_equal(model.history_val_, pooled)
     best = int(np.argmin(pooled))
     assert summary["best_step"] == (best + 1) * model.eval_every_
-    assert summary["steps"] == max(p.steps_ for p in probes) and best * model.eval_every_ < summary["steps"] <= steps
+    assert summary["steps"] == length * model.eval_every_ and best * model.eval_every_ < summary["steps"] <= steps
+    # the probes keep their weights of that record too (not their own best)
+    for probe, loss in zip(probes, seen["losses"]):
+        assert loss == pytest.approx(probe.history_val_[best], rel=1e-4)
 
 
 @pytest.mark.parametrize("moving_until", [4.0, 12.0])

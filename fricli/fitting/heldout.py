@@ -90,11 +90,16 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         def noted(step, total, train_loss, val_loss):
             curves[k, counts[k]] = val_loss
             counts[k] += 1
-            return None if report is None else report(step, total, train_loss, val_loss)
+            if report is not None:
+                report(step, total, train_loss, val_loss)
+            # the pooled curve ends with the probe that ends first: no record beyond it is used
+            ended = [int(counts[j]) for j in range(k_probes) if j != k and done[j]]
+            return bool(ended and counts[k] >= min(ended))
 
         train, val = splits[k]
         probes[k].fit(subset(sig, train), target[train], subset(sig, val), target[val],
-                      rng=np.random.default_rng(seed), scales_from=model, on_eval=noted, stop=halt)
+                      rng=np.random.default_rng(seed), scales_from=model, on_eval=noted, stop=halt,
+                      snapshots=True)
         done[k] = 1
         return probes[k]
 
@@ -139,14 +144,16 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         run_parallel([lambda: [fit_probe(k, progress[0], stop) for k in range(k_probes)], fit_model], stop)
     pooled = pooled_curve(probes, [val.size for _, val in splits])
     record = min(int(np.argmin(pooled)), len(model.snapshots_) - 1)
-    model.net_.theta[...] = model.snapshots_[record]
-    model.snapshots_ = None
-    model.set_members([model.net_], sig["qd"][rows])   # the extrapolation from the weights kept
+    # every network at that record: the model, and the probes for the choices made on their rows
+    for net, net_rows in ((model, rows), *((probe, train) for probe, (train, _) in zip(probes, splits))):
+        net.net_.theta[...] = net.snapshots_[record]
+        net.snapshots_ = None
+        net.set_members([net.net_], sig["qd"][net_rows])   # the extrapolation from the weights kept
     model.best_step_ = min((record + 1) * model.eval_every_, steps)
-    # how far the model ran past the best record depends on which process ran ahead: what is
-    # kept depends on the probes' curves alone (the same bytes every run)
+    # how far the model and the probes ran past the records used depends on which process ran
+    # ahead: what is kept depends on the probes' curves alone (the same bytes every run)
     model.history_train_ = np.asarray(model.history_train_)[:record + 1]
-    model.steps_ = max(probe.steps_ for probe in probes)
+    model.steps_ = min(pooled.size * model.eval_every_, steps)
     model.history_val_ = pooled
     model.n_val_ = 0
     return model, probes, {"step": int(model.best_step_), "folds": len(probes),
