@@ -83,8 +83,12 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     progress = shared_progress(on_eval, steps if apart else (len(splits) + 1) * steps, 1 if apart else 2, stop)
     # the probes' held-out losses as they are recorded, in memory their processes share with this one
     k_probes, weights = len(splits), [val.size for _, val in splits]
-    curves = forked.shared_float64(k_probes * (steps + 1)).reshape(k_probes, steps + 1)
-    counts, done = forked.shared_int64(k_probes), forked.shared_int64(k_probes)
+    curves = forked.shared_zeros(k_probes * (steps + 1), np.float64).reshape(k_probes, steps + 1)
+    counts, done = forked.shared_zeros(k_probes), forked.shared_zeros(k_probes)
+
+    def pooled(length: int) -> np.ndarray:
+        """The probes' held-out losses averaged, weighted by their held-out rows, over ``length`` records."""
+        return np.average(curves[:, :length], axis=0, weights=weights)
 
     def fit_probe(k: int, report: Callable | None, halt) -> FrictionModel:
         def noted(step, total, train_loss, val_loss):
@@ -114,8 +118,7 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         length = int(counts[finished].min())
         if (counts[~finished] < length).any():
             return False
-        best = int(np.argmin(np.average(curves[:, :length], axis=0, weights=weights)))
-        return len(model.snapshots_) > best
+        return len(model.snapshots_) > int(np.argmin(pooled(length)))
 
     fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=np.random.default_rng(seed),
                        scales_from=model, on_eval=model_report, snapshots=True, stop=stop)
@@ -142,8 +145,8 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
             probes = [_unpacked(type(model), parcel) for parcel in beside_the_rest(0)]
     else:
         run_parallel([lambda: [fit_probe(k, progress[0], stop) for k in range(k_probes)], fit_model], stop)
-    pooled = pooled_curve(probes, [val.size for _, val in splits])
-    record = min(int(np.argmin(pooled)), len(model.snapshots_) - 1)
+    curve = pooled(int(counts.min()))   # every probe has ended: the records all of them reached
+    record = min(int(np.argmin(curve)), len(model.snapshots_) - 1)
     # every network at that record: the model, and the probes for the choices made on their rows
     for net, net_rows in ((model, rows), *((probe, train) for probe, (train, _) in zip(probes, splits))):
         net.net_.theta[...] = net.snapshots_[record]
@@ -153,18 +156,11 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     # how far the model and the probes ran past the records used depends on which process ran
     # ahead: what is kept depends on the probes' curves alone (the same bytes every run)
     model.history_train_ = np.asarray(model.history_train_)[:record + 1]
-    model.steps_ = min(pooled.size * model.eval_every_, steps)
-    model.history_val_ = pooled
+    model.steps_ = min(curve.size * model.eval_every_, steps)
+    model.history_val_ = curve
     model.n_val_ = 0
     return model, probes, {"step": int(model.best_step_), "folds": len(probes),
-                           "held_out_rmse": float(np.sqrt(pooled[record])) * model.y_scale_}
-
-
-def pooled_curve(fitted: list[FrictionModel], weights: list[int]) -> np.ndarray:
-    """The held-out loss records of networks of one scale (``history_val_``), averaged with
-    ``weights`` (their held-out rows) over the records all of them reached."""
-    length = min(len(m.history_val_) for m in fitted)
-    return np.average([np.asarray(m.history_val_)[:length] for m in fitted], axis=0, weights=weights)
+                           "held_out_rmse": float(np.sqrt(curve[record])) * model.y_scale_}
 
 
 def _packed(model: FrictionModel) -> tuple[dict, dict[str, np.ndarray]]:

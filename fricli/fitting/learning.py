@@ -187,7 +187,8 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
         # trains or scores nothing
         rows = np.union1d(sel.train, sel.val)
         held = training_data.time_folds(PROBE_SHARE, rng)
-        splits = [(np.setdiff1d(rows, val), np.intersect1d(rows, val)) for _, val in held_out_splits(moving, held)]
+        block = training_data.time_block(moving.size)[rows]
+        splits = [(rows[~np.isin(block, h)], rows[np.isin(block, h)]) for h in held]
         kept = [k for k, (train, val) in enumerate(splits) if min(train.size, val.size) >= training_data.MIN_RUN]
         held, splits = [held[k] for k in kept], [splits[k] for k in kept]
         if not kept:   # the motion within one half of the blocks: one network on every row, unchecked
@@ -260,13 +261,6 @@ def train(sig: dict[str, np.ndarray], target: np.ndarray, *, name: str, units: d
     return model, summary
 
 
-def held_out_splits(moving: np.ndarray, held: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """For each set of time blocks ``held[k]`` (``training_data.time_block`` of the log's rows), the
-    rows in motion (``moving``, bool (n,)) outside and inside them, as (train, val) indices."""
-    block = training_data.time_block(moving.size)
-    return [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h))) for h in held]
-
-
 def held_out_choices(model: DissipativeFriction, fitted: list[DissipativeFriction], held: list[np.ndarray],
                      rows: np.ndarray, sig: dict[str, np.ndarray], target: np.ndarray, moving: np.ndarray,
                      slow: np.ndarray, units: dict, prior: bool, bristles: str) -> tuple[dict | None, dict | None]:
@@ -277,7 +271,7 @@ def held_out_choices(model: DissipativeFriction, fitted: list[DissipativeFrictio
     gets it where ``bristles`` is "on" or the check finds it helps ("off": not checked). ``slow``:
     the log's rows of slow motion. Returns the summaries ("prior", "bristles"), None where not made."""
     block = training_data.time_block(moving.size)
-    splits = held_out_splits(moving, held)
+    splits = [(np.flatnonzero(moving & ~np.isin(block, h)), np.flatnonzero(moving & np.isin(block, h))) for h in held]
     prior_summary = check = None
     if prior:
         prior_summary = blend_prior(model, fitted, [np.setdiff1d(rows, val) for _, val in splits],

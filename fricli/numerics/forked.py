@@ -114,11 +114,6 @@ class Orphaned:
         return os.getppid() != self.parent
 
 
-def shared_float64(n: int) -> np.ndarray:
-    """n zeros (float64) in memory that a child forked afterwards shares with this process."""
-    return np.frombuffer(mmap.mmap(-1, 8 * max(n, 1)), dtype=np.float64)[:n]
-
-
-def shared_int64(n: int) -> np.ndarray:
-    """n zeros (int64) in memory that a child forked afterwards shares with this process."""
-    return np.frombuffer(mmap.mmap(-1, 8 * n), dtype=np.int64)
+def shared_zeros(n: int, dtype=np.int64) -> np.ndarray:
+    """n zeros of ``dtype`` (8 bytes each) in memory that a child forked afterwards shares with this process."""
+    return np.frombuffer(mmap.mmap(-1, 8 * max(n, 1)), dtype=dtype)[:n]
