@@ -243,7 +243,8 @@ class Network:
 
 def _product(w: np.ndarray, a: np.ndarray, out: np.ndarray, pieces: list[slice] | None) -> None:
     """out = w @ a, over the column ``pieces`` when the whole product is too large for the small-matrix
-    kernels (each column of out is the same dot products, so the same bits either way)."""
+    kernels (each column of out is the same dot products: the same values to float32 rounding,
+    the same bits where the BLAS orders a column's sum alike in both kernels)."""
     if pieces is None or w.shape[0] * w.shape[1] * a.shape[1] <= SMALL_PRODUCT:
         np.matmul(w, a, out=out)
     else:
