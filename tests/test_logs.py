@@ -248,7 +248,13 @@ def test_constant_acceleration_column_is_not_a_measurement():
     notes = []
     log = logs.from_table(make_table(n=n, qdd=np.zeros(n), units={"qdd": "rad/s^2"}), name="x", warn=notes.append)
     assert log.derived["columns"] == ["qdd"]
-    assert any("qdd is constant" in m for m in notes)
+    assert any("qdd is constant" in m and "derived from the velocity" in m for m in notes)
+    # for a reader that reads no acceleration it is dropped and not derived, and the note says so
+    notes.clear()
+    unread = logs.from_table(make_table(n=n, qdd=np.zeros(n), units={"qdd": "rad/s^2"}), name="x",
+                             warn=notes.append, qdd=False)
+    assert "qdd" not in unread.signals and unread.derived == {}
+    assert any("qdd is constant" in m and "left out (not read)" in m for m in notes)
     t = np.arange(n) / 100.0
     inner = slice(200, n - 200)
     np.testing.assert_allclose(log.signals["qdd"][inner], -0.125 * np.sin(0.5 * t[inner]), atol=2e-3)

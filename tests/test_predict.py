@@ -46,6 +46,29 @@ class CountingModel(FrictionModel):
         return cls(**params)
 
 
+@register
+class InertialModel(FrictionModel):
+    """A test kind that reads the acceleration: friction = c*qdd."""
+
+    kind = "test-inertial"
+
+    def __init__(self, c=0.5):
+        self.c = c
+
+    def predict(self, signals, state=None):
+        return self.c * signals["qdd"], None
+
+    def required_inputs(self):
+        return {"qdd"}
+
+    def get_params(self):
+        return {"c": self.c}
+
+    @classmethod
+    def from_parts(cls, params, arrays, children):
+        return cls(**params)
+
+
 def log_table(n=3000, seed=0, joint=None, with_ext=False):
     """A rotary log with friction from the LuGre model plus noise (and an external torque)."""
     rng = np.random.default_rng(seed)
@@ -234,6 +257,33 @@ def test_log_without_velocity_is_read_whole(tmp_path, model_file):
     sig = logs.from_table(table, name="x", cutoff_hz=20).signals
     np.testing.assert_allclose(read(str(tmp_path / "p.parquet")).column("tau_f_pred").to_numpy(),
                                LuGreModel(**PARAMS).predict(sig)[0])
+
+
+def test_log_without_acceleration_is_read_in_batches_by_a_model_that_reads_none(tmp_path, model_file):
+    """A measured velocity without an acceleration: a model that reads none (LuGre) predicts in
+    record batches, no acceleration derived; a model that reads it has it derived from the
+    velocity through the zero-phase filter, the log read whole."""
+    table = log_table().drop_columns(["qdd"])
+    src = write(table, tmp_path / "l.parquet")
+    res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", "--batch-rows", 1000, "--json")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["batches"] == 3 and data["read_whole"] is None
+    sig = logs.from_table(table, name="x", qdd=False).signals
+    assert "qdd" not in sig and "qdd" in logs.from_table(table, name="x").signals
+    np.testing.assert_allclose(read(str(tmp_path / "p.parquet")).column("tau_f_pred").to_numpy(),
+                               LuGreModel(**PARAMS).predict(sig)[0])
+    inertial = str(tmp_path / "inertial.npz")
+    models.save(inertial, InertialModel(), joint=None, axis="rotary", units={}, provenance={})
+    res = invoke("predict", inertial, src, "-o", tmp_path / "q.parquet", "--batch-rows", 1000, "--json")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["batches"] == 1 and data["read_whole"] == "qdd derived with a zero-phase filter"
+    np.testing.assert_allclose(read(str(tmp_path / "q.parquet")).column("tau_f_pred").to_numpy(),
+                               0.5 * logs.from_table(table, name="x").signals["qdd"])
+    # without qd both are derived, the acceleration from the derived velocity, whatever the model reads
+    assert predicting.whole_reason(table.drop_columns(["qd"]).schema, None, qdd=False) == \
+        "qd and qdd derived with a zero-phase filter"
 
 
 def test_drop_invalid_in_batches(tmp_path, model_file):

@@ -27,7 +27,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from fricli import models
-from fricli.core import files, joints, lazy, logs, timewindow
+from fricli.core import files, joints, lazy, logs, logs_motion, timewindow
 from fricli.core.atomic import atomic_open
 from fricli.core.errors import DataError, LogError, ModelFileError, NoValidRows
 from fricli.models import coupled
@@ -141,11 +141,14 @@ def file_joints(pf: pq.ParquetFile, name: str) -> list | None:
     return joints.named(list(found), name)
 
 
-def whole_reason(schema: pa.Schema, lowpass_hz: float | None) -> str | None:
+def whole_reason(schema: pa.Schema, lowpass_hz: float | None, qdd: bool = True) -> str | None:
+    """Why the log must be read whole (None: in record batches); ``qdd``: whether a model reads
+    the acceleration (``logs.from_table``'s)."""
     names = set(schema.names)
     if lowpass_hz:
         return "the low-pass filter is zero-phase"
-    missing = [c for c in ("qd", "qdd") if c not in names]
+    missing = [c for c in ("qd", "qdd") if c not in names
+               and (c == "qd" or logs_motion.derives_qdd("qd" in names, False, qdd))]
     if missing:
         return f"{' and '.join(missing)} derived with a zero-phase filter"
     return None
@@ -232,6 +235,11 @@ class _Stream:
     fric: ErrorSums = dataclasses.field(default_factory=ErrorSums)
     ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
 
+    @property
+    def reads_qdd(self) -> bool:
+        """Whether the model reads the acceleration (else a log without it is not given one)."""
+        return "qdd" in self.model.required_inputs()
+
 
 _ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart
 
@@ -293,7 +301,8 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
         streams[j] = _Stream(j, coupled.view(model, j), meta, path, env=models.envelope(meta, path))
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
-    reason = whole_reason(pf.schema_arrow, outputs.lowpass_hz if outputs.external else None)
+    reason = whole_reason(pf.schema_arrow, outputs.lowpass_hz if outputs.external else None,
+                          any(st.reads_qdd for st in streams.values()))
     if reason is None and any(coupled.partners_read(st.model) for st in streams.values()):
         reason = "the joints of a coupled group are predicted together"
     warnings: list[str] = []
@@ -414,7 +423,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
                               drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows,
-                              later_batch=st.t_last is not None)
+                              later_batch=st.t_last is not None, qdd=st.reads_qdd)
     except NoValidRows:        # the rows of the other batches may be valid: judged once all are read
         return None, table.num_rows
     except LogError as exc:

@@ -100,7 +100,8 @@ def predict_cmd(model, log, output, joint, kt, cutoff, drop_invalid, zero, windo
     joint): every joint of the log is predicted with its own model into one long-format log.
     One model file on a log of several joints is used for its own joint (or --joint); a model
     fitted on another joint is refused (docs/joints.md). Large logs are processed in record batches with the model
-    state carried across; a log without qd/qdd is read whole (docs/lugre.md). The share of rows
+    state carried across; a log without qd (or without qdd, for a model that reads it) is read
+    whole (docs/lugre.md). The share of rows
     outside the model's training envelope (where it extrapolates) goes to stderr and the JSON.
 
     \b

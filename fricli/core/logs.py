@@ -498,7 +498,7 @@ def select_joint_rows(table: pa.Table, joint, name: str) -> tuple[pa.Table, obje
 
 def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: float | None = None,
                cutoff_hz: float = DEFAULT_CUTOFF_HZ, drop_invalid: bool = False, warn=None, zero=(),
-               rows: np.ndarray | None = None, later_batch: bool = False) -> Log:
+               rows: np.ndarray | None = None, later_batch: bool = False, qdd: bool = True) -> Log:
     """Check ``table`` against the contract and build a ``Log`` for one joint. ``zero``: robot-model
     columns (tau_g, tau_dyn) declared zero when the log lacks them (``declared_zero``); they are
     filled with zeros in ``signals``, with a note through ``warn``. ``rows``: the file's row number
@@ -506,7 +506,8 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     ``later_batch``: ``table`` follows an earlier record batch of the same file and joint, whose
     reading checked the units of t, q and qd (the file-wide notes are not repeated per batch).
     ``Log.reading`` keeps these options (the names of the options of
-    ``fricli.fitting.optionspec.READING``)."""
+    ``fricli.fitting.optionspec.READING``). ``qdd`` False: a missing acceleration is not derived
+    where qd is measured (for a reader that reads none; ``logs_motion.derive_motion``)."""
     joint_given, declared = joint, tuple(zero)
     table, joint, selected = select_joint_rows(table, joint, name)
     rows = selected if selected is not None or rows is None else np.asarray(rows)
@@ -525,14 +526,14 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
              "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
     where = name if selected is None else f"{name}, joint {joint}"   # what one joint's rows show
-    for column, note in not_measured(sig):
+    for column, note in not_measured(sig, qdd):
         del sig[column]
         if warn:
             warn(f"note: {where}: {note}")
     mismatch = None if later_batch else rate_mismatch(sig)
     if mismatch and warn:
         warn(f"warning: {where}: {mismatch}")
-    derived = derive_motion(sig, cutoff_hz)
+    derived = derive_motion(sig, cutoff_hz, qdd)
     dead = dead_torque(sig, CANONICAL[axis]["tau"])
     if dead and warn:
         warn(f"warning: {where}: {dead}")

@@ -36,18 +36,19 @@ def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:
     return bool(np.max(np.abs(x - x[0] - rate[0] * (t - t[0]))) > 0.1 * np.ptp(x))
 
 
-def not_measured(sig: dict[str, np.ndarray]) -> list[tuple[str, str]]:
+def not_measured(sig: dict[str, np.ndarray], qdd: bool = True) -> list[tuple[str, str]]:
     """Motion columns that cannot be measurements, as (column, note): an acceleration ``qdd``
     constant over a log whose velocity varies otherwise (a column of zeros a recorder filled in),
     a velocity ``qd`` constant while the position moves otherwise. Such a column is unknown, not a
-    value: the caller drops it and it is derived like a missing one."""
+    value: the caller drops it and it is derived like a missing one (``qdd`` as ``derive_motion``'s)."""
     out, t = [], sig["t"]
     if "q" in sig and "qd" in sig and _contradicts(sig["q"], sig["qd"], t):
         out.append(("qd", f"the velocity column qd is constant ({sig['qd'][0]:g}) while the position moves "
                           "otherwise: not a measurement, derived from q instead"))
     if "qdd" in sig and "qd" in sig and not out and _contradicts(sig["qd"], sig["qdd"], t):
         out.append(("qdd", f"the acceleration column qdd is constant ({sig['qdd'][0]:g}) while the velocity "
-                           "varies otherwise: not a measurement, derived from the velocity instead"))
+                           "varies otherwise: not a measurement, "
+                           + ("derived from the velocity instead" if qdd else "left out (not read)")))
     elif "qdd" in sig and out and np.ptp(sig["qdd"]) == 0:
         out.append(("qdd", "the acceleration column qdd is constant too: derived with the velocity"))
     return out
@@ -88,19 +89,28 @@ def rate_mismatch(sig: dict[str, np.ndarray]) -> str | None:
             "as s; 57.3 or 0.0175: degrees read as radians); check each column's field metadata 'unit'")
 
 
-def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float) -> dict:
-    """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences."""
+def derives_qdd(has_qd: bool, has_qdd: bool, qdd: bool = True) -> bool:
+    """Whether ``derive_motion`` derives qdd: where the log lacks it and the reader reads it
+    (``qdd``), or where qd is derived too (from it, by differences: no further filter)."""
+    return not has_qdd and (qdd or not has_qd)
+
+
+def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float, qdd: bool = True) -> dict:
+    """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences.
+    ``qdd`` False: a missing qdd stays missing where qd is measured (a reader that reads no
+    acceleration spares the zero-phase filter of qd, which needs the whole log)."""
     derived = []
     t = sig["t"]
-    if len(t) < 3 and ("qd" not in sig or "qdd" not in sig):
+    acceleration = derives_qdd("qd" in sig, "qdd" in sig, qdd)
+    if len(t) < 3 and ("qd" not in sig or acceleration):
         raise DataError("too few samples to derive velocity and acceleration")
     if "qd" not in sig:
         sig["qd"] = np.gradient(lowpass(sig["q"], t, cutoff_hz), t)
         derived.append("qd")
-        if "qdd" not in sig:
+        if acceleration:
             sig["qdd"] = np.gradient(sig["qd"], t)
             derived.append("qdd")
-    elif "qdd" not in sig:
+    elif acceleration:
         sig["qdd"] = np.gradient(lowpass(sig["qd"], t, cutoff_hz), t)
         derived.append("qdd")
     return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
