@@ -1,5 +1,7 @@
 """The log contract: required columns, units, derived motion, friction target sign."""
 
+import types
+
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -281,3 +283,27 @@ def test_constant_velocity_sweep_keeps_its_velocity():
                                     "tau_m": np.full(n, 3.0), "tau_g": np.zeros(n)}, {})
     log = logs.from_table(table, name="x", zero=("tau_dyn",))
     assert log.derived == {}
+
+
+def test_a_job_derives_the_acceleration_only_where_it_reads_it(tmp_path):
+    """A log with a measured velocity and no acceleration: identify and train-base (kinds that read
+    none) and adapt over a base that reads none leave it out (no zero-phase filter over the whole
+    log, none recorded as derived); diagnose, adapt over a base that reads it, and a reader of
+    everything derive it."""
+    from fricli import models
+    from fricli.fitting import runs
+    from fricli.models.lugre import LuGreModel
+
+    table = make_table(n=2000)
+    base = str(tmp_path / "lugre.npz")
+    models.save(base, LuGreModel(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, sigma0=1e4, sigma1=5.0),
+                joint=None, axis="rotary", units={}, provenance={})
+    opts = runs.options("identify", {})
+    for pipeline, given, reads in (("identify", None, False), ("train-base", None, False), ("adapt", base, False),
+                                   ("diagnose", None, True), (None, None, True)):
+        data = runs.read(table, "", "x", opts, base=given, pipeline=pipeline)
+        assert ("qdd" in data.signals) == reads, pipeline
+        assert data.derived == ({"columns": ["qdd"], "cutoff_hz": opts["cutoff"]} if reads else {}), pipeline
+    assert runs.reads_acceleration("adapt", models.load(base)[0]) is False
+    inertial = types.SimpleNamespace(required_inputs=lambda: {"qd", "qdd"})
+    assert runs.reads_acceleration("adapt", inertial) is True

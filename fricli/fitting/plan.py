@@ -166,7 +166,7 @@ def fit_log(pipeline: str, log: str, output: str, opts: dict, *, inputs=None, re
         elif refit:
             made = _run_refit(unit, table, digest, name, opts, if_changed, recorded, warn)
         else:
-            data = runs.read(table, digest, name, opts, joint=unit.joint, warn=warn, base=unit.base)
+            data = runs.read(table, digest, name, opts, joint=unit.joint, warn=warn, base=unit.base, pipeline=pipeline)
             on_eval = progress(data) if progress else None
             try:
                 made = runs.run(pipeline, data, unit.output, opts, base=unit.base, if_changed=if_changed,

@@ -25,6 +25,7 @@ import numpy as np
 from fricli import models
 from fricli.core import jobs, logs, metrics
 from fricli.fitting import optionspec
+from fricli.models.base import FrictionModel
 
 PIPELINES = ("identify", "train-base", "adapt", "diagnose")
 INPUT_NAME = {"adapt": "base", "diagnose": "model"}   # how a job records its input model
@@ -112,19 +113,32 @@ def check_rows(table, name: str, limit: int) -> None:
                         f"{IDENTIFY_BYTES_PER_ROW} bytes a row): identify on part of the log (--from, --until)")
 
 
+def reads_acceleration(pipeline: str | None, base: FrictionModel | None = None) -> bool:
+    """Whether the job ``pipeline`` (None: any reader) reads the log's acceleration: diagnose (its
+    acceleration effect, the robot model's inertia), adapt over a ``base`` model that reads it;
+    identify and train-base fit kinds that read none. A log without one is given none where it is
+    not read: deriving it runs the zero-phase filter over the whole log (``logs.from_table``)."""
+    if pipeline in ("identify", "train-base"):
+        return False
+    if pipeline == "adapt":
+        return base is not None and "qdd" in base.required_inputs()
+    return True
+
+
 def read(table, digest: str, name: str, opts: dict, joint=None, warn=None, base: str | None = None,
-         refitted: bool = False) -> logs.Log:
-    """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options; with
+         refitted: bool = False, pipeline: str | None = None) -> logs.Log:
+    """The log of ``joint`` (default ``opts["joint"]``) read with the job's reading options, for
+    the job ``pipeline`` (``reads_acceleration``; None: with everything a job may read); with
     ``base`` (the input model file of adapt and diagnose) also the other joints' velocities it
     reads (a coupled group's, ``coupled.add_partners``), and a warning when it was fitted on another
     robot model than the log's, unless the job refits it on this log (``refitted``)."""
     from fricli.models import coupled
 
+    model, meta = models.load(base) if base is not None else (None, None)
     reading = dict(kt=opts.get("kt"), cutoff_hz=opts["cutoff"], drop_invalid=opts["drop_invalid"], zero=zero(opts))
     data = logs.from_table(table, name=name, sha256=digest, joint=opts.get("joint") if joint is None else joint,
-                           warn=warn, **reading)
+                           warn=warn, qdd=reads_acceleration(pipeline, model), **reading)
     if base is not None:
-        model, meta = models.load(base)
         coupled.add_partners(coupled.view(model, data.joint), data, table, **reading)
         note = None if refitted else models.robot_model_note(meta, data, base)
         if note and warn:
