@@ -496,3 +496,38 @@ def test_thresholds_choose_the_gain_by_the_sample_rate(tmp_path, rate, gain):
     assert f"observer gain {gain:g} 1/s" in done.output
     assert invoke("thresholds", tmp_path / "m.npz", log, "--gain", 70, "-o", tmp_path / "t.json", "-q").exit_code == 0
     assert observer.Thresholds.read(str(tmp_path / "t.json")).gain == 70.0
+
+
+def test_a_log_without_acceleration_is_given_one_only_for_a_model_that_reads_it(tmp_path):
+    """The observer reads no acceleration: a log without one is replayed without deriving it (no
+    zero-phase filter over the log) for a model that reads none, and with it for one that reads it."""
+    from conftest import make_table
+    from fricli.models import register
+    from fricli.models.base import FrictionModel
+
+    @register
+    class ReadsAcceleration(FrictionModel):
+        kind = "test-replay-inertial"
+
+        def predict(self, signals, state=None):
+            return 0.01 * signals["qdd"], None
+
+        def required_inputs(self):
+            return {"qd", "qdd"}
+
+        @classmethod
+        def from_parts(cls, params, arrays, children):
+            return cls()
+
+    log = tmp_path / "no_qdd.parquet"
+    pq.write_table(make_table(n=1500), log)
+    zero = ("tau_dyn",)
+    for model, reads in ((LuGreModel(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, sigma0=1e4, sigma1=5.0), False),
+                         (ReadsAcceleration(), True)):
+        path = str(tmp_path / f"{model.kind}.npz")
+        models.save(path, model, joint=None, axis="rotary", units={}, provenance={})
+        arm = replay.read_arm(path, str(log), zero=zero)
+        assert ("qdd" in arm.signals[0]) == reads, model.kind
+        if reads:
+            np.testing.assert_allclose(arm.f0[:, 0], 0.01 * logs.from_table(make_table(n=1500), name="x",
+                                                                            zero=zero).signals["qdd"])

@@ -70,7 +70,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     for j, path in pairs:
         model, meta = models.load(path)
         model = models.set_precision(coupled.view(model, j), "double")
-        log, idx = _joint_rows(table, j, name, zero), index
+        log, idx = _joint_rows(table, j, name, zero, "qdd" in model.required_inputs()), index
         if j is not None:
             jcol = table.column("joint")
             idx = index[pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)]
@@ -108,7 +108,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
             if mine:
                 positions[mine[0]] = tables[mine[0]]
                 continue
-            other = _joint_rows(table, j, name, zero).signals
+            other = _joint_rows(table, j, name, zero, qdd=False).signals
             if len(other["t"]) != len(t) or not np.array_equal(other["t"], t):
                 raise LogError(f"{name}: joint {j} has other time stamps than joint {jnames[0]}"
                                f"{_first_apart(other['t'], t)}: the robot model needs every joint's position at "
@@ -130,15 +130,17 @@ def _first_apart(a: np.ndarray, b: np.ndarray) -> str:
     return f" ({len(a)} samples against {len(b)}, alike up to t = {a[n - 1]:.15g} s)" if n else ""
 
 
-def _joint_rows(table, joint, name: str, zero) -> logs.Log:
-    """Joint ``joint``'s rows of the log's ``table`` (every row for None), rows named by their row in the file."""
+def _joint_rows(table, joint, name: str, zero, qdd: bool) -> logs.Log:
+    """Joint ``joint``'s rows of the log's ``table`` (every row for None), rows named by their row in
+    the file; a missing acceleration derived only when ``qdd`` (the joint's model reads it: the
+    observer reads none)."""
     rows = None
     if joint is not None:
         jcol = table.column("joint")
         mask = pc.equal(jcol, pa.scalar(joint, jcol.type)).to_numpy(zero_copy_only=False)
         table, rows = table.filter(pa.array(mask)), np.flatnonzero(mask)
     try:
-        return logs.from_table(table, name=name, zero=zero, rows=rows)
+        return logs.from_table(table, name=name, zero=zero, rows=rows, qdd=qdd)
     except InvalidRows as exc:
         raise LogError(f"{exc.what}: a replay runs every row as the controller would and drops none") from None
 
