@@ -122,3 +122,28 @@ def test_evaluate_reports_rms_beside_mae(fitted, tmp_path):
     err = pq.read_table(pred).column("tau_f_pred").to_numpy() - logs.friction_target(logs.load_log(ASYM).signals)
     assert r["friction"]["rmse"] == pytest.approx(np.sqrt(np.mean(err ** 2)), rel=1e-6)
     assert r["friction"]["rmse"] > r["friction"]["mae"]
+
+
+def test_a_log_without_acceleration_is_evaluated_without_deriving_one(tmp_path, monkeypatch):
+    """A model that reads no acceleration is scored on a log without one as it is: the zero-phase
+    filter over the velocity (which derives it) does not run, and the figures are those of the
+    model on the log's own signals."""
+    import pyarrow.parquet as pq
+
+    from conftest import make_table
+    from fricli import evaluate, models
+    from fricli.core import logs, logs_motion
+    from fricli.models.lugre import LuGreModel
+
+    path = tmp_path / "no_qdd.parquet"
+    pq.write_table(make_table(n=1500), path)
+    model = LuGreModel(fc=5.0, fs=6.0, vs=0.05, delta=1.0, fv=10.0, sigma0=1e4, sigma1=5.0)
+    models.save(str(tmp_path / "m.npz"), model, joint=None, axis="rotary", units={}, provenance={})
+    filtered = []
+    lowpass = logs_motion.lowpass
+    monkeypatch.setattr(logs_motion, "lowpass", lambda *a, **k: filtered.append(1) or lowpass(*a, **k))
+    (result,) = evaluate({"m": str(tmp_path / "m.npz")}, {"log": str(path)}).results
+    assert filtered == []
+    sig = logs.load_log(str(path)).signals
+    assert result.friction["rmse"] == pytest.approx(metrics.errors(logs.friction_target(sig),
+                                                                   model.predict(sig)[0])["rmse"], rel=1e-12)

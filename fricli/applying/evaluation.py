@@ -68,14 +68,15 @@ def evaluate(model_paths: dict[str, str], log_paths: dict[str, str], *, lowpass_
         for lname, (table, digest) in tables.items():
             lpath = log_paths[lname]
             for joint, path in joints.pair(source, logs.joints_of(table, lpath), requested, lpath):
-                key = (lname, str(joint))
-                if key not in cache:
-                    cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint,
-                                                 **read_kwargs)
                 if path not in cache:
                     cache[path] = models.load(path)
                 model, meta = cache[path]
                 model = coupled.view(model, joint)
+                reads = models.reads_acceleration(model)
+                key = (lname, str(joint), reads)
+                if key not in cache:
+                    cache[key] = logs.from_table(table, name=log_paths[lname], sha256=digest, joint=joint,
+                                                 qdd=reads, **read_kwargs)
                 log = dataclasses.replace(cache[key], signals=dict(cache[key].signals))
                 coupled.add_partners(model, log, table, **read_kwargs)
                 result = evaluate_one(model, meta, log, lowpass_hz=lowpass_hz, model_name=mname, log_name=lname)

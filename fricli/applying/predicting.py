@@ -238,7 +238,7 @@ class _Stream:
     @property
     def reads_qdd(self) -> bool:
         """Whether the model reads the acceleration (else a log without it is not given one)."""
-        return "qdd" in self.model.required_inputs()
+        return models.reads_acceleration(self.model)
 
 
 _ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart

@@ -121,7 +121,7 @@ def reads_acceleration(pipeline: str | None, base: FrictionModel | None = None) 
     if pipeline in ("identify", "train-base"):
         return False
     if pipeline == "adapt":
-        return base is not None and "qdd" in base.required_inputs()
+        return base is not None and models.reads_acceleration(base)
     return True
 
 

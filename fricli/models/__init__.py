@@ -116,6 +116,12 @@ def load(path: str) -> tuple[FrictionModel, dict]:
     return model, meta
 
 
+def reads_acceleration(model: FrictionModel) -> bool:
+    """Whether ``model`` reads the acceleration qdd (a term of it: ``diagnose --fix``'s): a log
+    without one is given a derived one only for such a model (``logs.from_table``'s ``qdd``)."""
+    return "qdd" in model.required_inputs()
+
+
 def check_log(meta: dict, log, model_name: str = "model") -> None:
     """Refuse a log whose axis kind (rotary/linear) differs from the model's."""
     if meta.get("axis") and meta["axis"] != log.axis:

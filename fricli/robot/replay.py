@@ -70,7 +70,7 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
     for j, path in pairs:
         model, meta = models.load(path)
         model = models.set_precision(coupled.view(model, j), "double")
-        log, idx = _joint_rows(table, j, name, zero, "qdd" in model.required_inputs()), index
+        log, idx = _joint_rows(table, j, name, zero, models.reads_acceleration(model)), index
         if j is not None:
             jcol = table.column("joint")
             idx = index[pc.equal(jcol, pa.scalar(j, jcol.type)).to_numpy(zero_copy_only=False)]
