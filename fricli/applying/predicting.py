@@ -235,11 +235,6 @@ class _Stream:
     fric: ErrorSums = dataclasses.field(default_factory=ErrorSums)
     ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
 
-    @property
-    def reads_qdd(self) -> bool:
-        """Whether the model reads the acceleration (else a log without it is not given one)."""
-        return models.reads_acceleration(self.model)
-
 
 _ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart
 
@@ -302,7 +297,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
     several = len(streams) > 1
     filtered = found is not None and len(found) > len(streams)
     reason = whole_reason(pf.schema_arrow, outputs.lowpass_hz if outputs.external else None,
-                          any(st.reads_qdd for st in streams.values()))
+                          any(models.reads_acceleration(st.model) for st in streams.values()))
     if reason is None and any(coupled.partners_read(st.model) for st in streams.values()):
         reason = "the joints of a coupled group are predicted together"
     warnings: list[str] = []
@@ -423,7 +418,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
                               drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows,
-                              later_batch=st.t_last is not None, qdd=st.reads_qdd)
+                              later_batch=st.t_last is not None, qdd=models.reads_acceleration(st.model))
     except NoValidRows:        # the rows of the other batches may be valid: judged once all are read
         return None, table.num_rows
     except LogError as exc:

@@ -80,7 +80,7 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     seed = int(rng.integers(2 ** 63))
     stop = threading.Event()
     apart = forked.AVAILABLE
-    progress = shared_progress(on_eval, steps if apart else (len(splits) + 1) * steps, 1 if apart else 2, stop)
+    progress = shared_progress(on_eval, steps if apart else (len(splits) + 1) * steps, 1 if apart else len(splits) + 1, stop)
     # the probes' held-out losses as they are recorded, in memory their processes share with this one
     k_probes, weights = len(splits), [val.size for _, val in splits]
     curves = forked.shared_zeros(k_probes * (steps + 1), np.float64).reshape(k_probes, steps + 1)
@@ -144,7 +144,7 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
         with single_threaded():
             probes = [_unpacked(type(model), parcel) for parcel in beside_the_rest(0)]
     else:
-        run_parallel([lambda: [fit_probe(k, progress[0], stop) for k in range(k_probes)], fit_model], stop)
+        run_parallel([lambda: [fit_probe(k, progress[k], stop) for k in range(k_probes)], fit_model], stop)
     curve = pooled(int(counts.min()))   # every probe has ended: the records all of them reached
     record = min(int(np.argmin(curve)), len(model.snapshots_) - 1)
     # every network at that record: the model, and the probes for the choices made on their rows
