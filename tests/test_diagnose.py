@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pyarrow as pa
 import pytest
 from click.testing import CliRunner
 
@@ -861,8 +862,13 @@ def test_a_joint_held_still_is_refused_not_diagnosed(lugre_base):
     n = table.num_rows
     held = table.set_column(table.schema.get_field_index("q"), table.schema.field("q"),
                             [np.full(n, 0.3) + 1e-4 * np.sin(np.arange(n))])
-    with pytest.raises(DataError, match="held still"):
+    with pytest.raises(DataError, match=r"spans 0.0002 rad, less than 0.01 rad, over the whole log: it is held still"):
         diagnose(lugre_base, logs.from_table(held, name="held"))
+    # in degrees: the span and the limit are said in rad, which the check compares (0.3 deg = 0.0052 rad)
+    deg = held.set_column(table.schema.get_field_index("q"), pa.field("q", pa.float64(), metadata={"unit": "deg"}),
+                          [np.full(n, 10.0) + 0.15 * np.sin(np.arange(n))])
+    with pytest.raises(DataError, match=r"spans 0.0052\d* rad, less than 0.01 rad"):
+        diagnose(lugre_base, logs.from_table(deg, name="held"))
     diagnose(lugre_base, logs.from_table(table, name="moving"))     # the same log in motion is diagnosed
 
 

@@ -283,6 +283,11 @@ def test_trend_cli_exit_codes_json_and_figures(tmp_path, rng):
     synthetic_history(short, rng, days=5)
     res = invoke("trend", "short", cwd=tmp_path)
     assert res.returncode == errors.OK and "too little data" in res.stdout
+    # a folder that is not a history (the manifest's folder, the models): not "0 joints flagged"
+    (tmp_path / "not-history").mkdir()
+    (tmp_path / "not-history" / "a.parquet").write_text("hi")
+    res = invoke("trend", "not-history", cwd=tmp_path)
+    assert res.returncode == errors.INPUT and res.stderr.count("\n") == 1 and "not a fleet history" in res.stderr
 
 
 def test_theil_sen_is_robust():

@@ -555,3 +555,14 @@ def test_the_python_call_is_the_command(tmp_path, monkeypatch):
             fricli.import_log(str(tmp_path / "rec.csv"), output=str(tmp_path / "refused.parquet"), **args)
         assert err.value.option == option
     assert not (tmp_path / "refused.parquet").exists()
+
+
+def test_a_folder_that_is_no_bag_is_named_before_the_mapping_is_read_as_a_bag_s(tmp_path):
+    """A folder is read as a ROS bag: with a text recording's mapping, the folder's being no bag
+    is the error, not the mapping's keys that a bag's mapping does not have."""
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "a.csv").write_text("t,q\n0,0\n")
+    (tmp_path / "map.toml").write_text('delimiter = ","\n[time]\ncolumn = 0\n')
+    res = run_in(tmp_path, "import", "run", "--mapping", "map.toml", "-o", "out.parquet")
+    assert res.returncode == errors.INPUT and "not a ROS bag" in res.stderr, res.stderr
+    assert len(res.stderr.splitlines()) == 1 and not (tmp_path / "out.parquet").exists()

@@ -307,3 +307,20 @@ def test_a_job_derives_the_acceleration_only_where_it_reads_it(tmp_path):
     assert runs.reads_acceleration("adapt", models.load(base)[0]) is False
     inertial = types.SimpleNamespace(required_inputs=lambda: {"qd", "qdd"})
     assert runs.reads_acceleration("adapt", inertial) is True
+
+
+@pytest.mark.parametrize("keep, needle", [(("t", "qd"), "missing required column 'tau_m'"),
+                                          (("qd", "tau_m"), "missing required column 't'"),
+                                          (("t", "tau_m"), "needs at least one of the columns 'q', 'qd'")])
+def test_a_log_without_a_required_column_is_input_not_a_missing_robot_model(tmp_path, keep, needle):
+    """Without tau_g and a required column, the error is the required column (3 (INPUT)), not
+    advice to add tau_g (6 (DATA)) that would not make the file a log."""
+    from conftest import invoke
+    from fricli.core import errors
+
+    table = make_table()
+    path = tmp_path / "l.parquet"
+    pq.write_table(table.select(list(keep)), path)
+    for args in (("identify", path, "-o", tmp_path / "m.npz"), ("train-base", path, "-o", tmp_path / "m.npz")):
+        res = invoke(*args)
+        assert res.exit_code == errors.INPUT and needle in res.stderr, (args, res.stderr)

@@ -213,7 +213,10 @@ def test_level_share_and_a_thresholds_file_of_before(tmp_path):
     path.write_text(json.dumps(data))
     old = observer.Thresholds.read(str(path))      # written before share and persistence: as before
     assert old.persistence == 1 and np.all(old.shares == 0.0)
-    data["persistence"] = 0
-    path.write_text(json.dumps(data))
-    with pytest.raises(LogError):
-        observer.Thresholds.read(str(path))
+    for key, value in (("persistence", 0), ("persistence", observer.MAX_PERSISTENCE + 1), ("form", "banana"),
+                       ("joints", [1]), ("joints", {})):
+        path.write_text(json.dumps({**data, key: value}))
+        with pytest.raises(LogError, match="not a thresholds file"):
+            observer.Thresholds.read(str(path))
+    path.write_text(json.dumps({**data, "persistence": observer.MAX_PERSISTENCE, "form": "urdf"}))
+    assert observer.Thresholds.read(str(path)).persistence == observer.MAX_PERSISTENCE

@@ -221,8 +221,36 @@ def test_time_must_increase_across_batches(tmp_path, model_file):
     assert res.exit_code == errors.INPUT
     assert "not increasing" in res.stderr and "row 50" in res.stderr
     assert out.read_bytes() == b"old"                # a failed run leaves the old output
-    res = invoke("predict", model_file, src, "-o", out, "--batch-rows", 40)
-    assert res.exit_code == errors.INPUT and "rows counted from row 40" in res.stderr
+    res = invoke("predict", model_file, src, "-o", out, "--batch-rows", 40)   # the second batch holds it
+    assert res.exit_code == errors.INPUT and "first at row 50," in res.stderr, res.stderr
+
+
+def test_a_row_is_named_by_its_row_in_the_file_in_every_batch_and_window(tmp_path, model_file):
+    table = log_table(n=300)
+    qd = table.column("qd").to_numpy().copy()
+    qd[250] = np.nan
+    table = table.set_column(table.schema.get_field_index("qd"), table.schema.field("qd"), pa.array(qd))
+    src = write(table, tmp_path / "l.parquet")
+    for extra in ([], ["--batch-rows", "64"], ["--batch-rows", "64", "--from", "30%"]):
+        res = invoke("predict", model_file, src, "-o", tmp_path / "p.parquet", *extra)
+        assert res.exit_code == errors.INPUT and "(first at row 250," in res.stderr, (extra, res.stderr)
+
+
+def test_a_failure_in_a_later_batch_leaves_stdout_without_a_footer(tmp_path, model_file):
+    """Streamed to stdout (a pipe), the batches before the failure are out already: the file must
+    read as damaged downstream, not as a complete log of fewer rows."""
+    table = log_table(n=300)
+    qd = table.column("qd").to_numpy().copy()
+    qd[250] = np.nan
+    table = table.set_column(table.schema.get_field_index("qd"), table.schema.field("qd"), pa.array(qd))
+    src = write(table, tmp_path / "l.parquet")
+    res = invoke("predict", model_file, src, "-o", "-", "--batch-rows", "64")
+    assert res.exit_code == errors.INPUT and len(res.stdout_bytes) > 0
+    with pytest.raises(pa.ArrowInvalid):
+        pq.read_table(pa.BufferReader(res.stdout_bytes))
+    whole = invoke("predict", model_file, write(log_table(n=300), tmp_path / "ok.parquet"), "-o", "-",
+                   "--batch-rows", "64")
+    assert whole.exit_code == 0 and pq.read_table(pa.BufferReader(whole.stdout_bytes)).num_rows == 300
 
 
 def test_several_joints(tmp_path, model_file):
@@ -351,11 +379,25 @@ def test_lowpass_above_nyquist_warns(tmp_path, model_file):
     assert res.exit_code == 0 and "not applied" in res.stderr
 
 
+def test_a_lowpass_slower_than_the_log_is_refused_in_one_line(tmp_path, model_file):
+    """A cut-off whose period is longer than the log filters nothing but its padding (and, far
+    below, makes scipy's filter start singular): one line and 6 (DATA), the output not written."""
+    src = write(log_table(n=200), tmp_path / "l.parquet")
+    t = read(str(src)).column("t").to_numpy()
+    for cutoff in (0.5 / (t[-1] - t[0]), 1e-9):
+        res = invoke("estimate-ext", model_file, src, "-o", tmp_path / "e.parquet", "--lowpass", str(cutoff))
+        assert res.exit_code == errors.DATA and res.stderr.count("\n") == 1, res.stderr
+        assert "is a period longer than the log" in res.stderr and not (tmp_path / "e.parquet").exists()
+    assert invoke("estimate-ext", model_file, src, "-o", tmp_path / "e.parquet", "--lowpass",
+                  str(2 / (t[-1] - t[0]))).exit_code == 0
+
+
 @pytest.mark.parametrize("case,code,needle", [
     ("no-model", errors.MODEL, "no such file"),
     ("no-log", errors.INPUT, "no such file"),
     ("not-parquet", errors.INPUT, "not a Parquet file"),
     ("empty-stdin", errors.INPUT, "empty input"),
+    ("empty-file", errors.INPUT, "empty input, not a Parquet log"),
 ])
 def test_bad_inputs(tmp_path, model_file, case, code, needle):
     src = write(log_table(n=50), tmp_path / "l.parquet")
@@ -367,6 +409,9 @@ def test_bad_inputs(tmp_path, model_file, case, code, needle):
         args[2] = tmp_path / "missing.parquet"
     elif case == "not-parquet":
         (tmp_path / "x.parquet").write_text("hello")
+        args[2] = tmp_path / "x.parquet"
+    elif case == "empty-file":
+        (tmp_path / "x.parquet").write_bytes(b"")
         args[2] = tmp_path / "x.parquet"
     else:
         args[2] = "-"

@@ -398,3 +398,13 @@ def test_the_sample_figures_in_the_docs_are_current():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.section() in (ROOT / "docs" / "simulator.md").read_text()
+
+
+@pytest.mark.parametrize("args", [["--effect", "drift=1e30"], ["--effect", "offset=1e12"], ["--contact", "5,1e30,1"]])
+def test_strengths_that_would_write_an_unreadable_log_are_refused(tmp_path, args):
+    """Values beyond the limit every command refuses as absurd (logs.MAGNITUDE_LIMIT): exit 2
+    naming the option, and no file written."""
+    out = tmp_path / "s.parquet"
+    res = CliRunner().invoke(cli, ["simulate", "--scenario", "adapt", *args, "-o", str(out), "-q"])
+    assert res.exit_code == 2 and f"Invalid value for {args[0]}" in res.output and "every command refuses" in res.output
+    assert not out.exists()

@@ -190,6 +190,8 @@ def test_a_decompression_bomb_is_refused_relative_to_the_file_size(model):
     (lambda m: m["model"]["params"].update(fv=-1.0), "fv = -1 is negative"),
     (lambda m: m.update(kind="linear"), "its kind 'linear' disagrees with its model spec's 'lugre'"),
     (lambda m: m.update(format_version="1"), 'model format version "1" is not supported (this fricli reads version 1)'),
+    (lambda m: m.update(format_version=True), "model format version true is not supported"),
+    (lambda m: m.update(format_version=1.0), "model format version 1.0 is not supported"),
 ])
 def test_model_parameters_are_checked_against_the_spec(tmp_path, model, change, text):
     rewrite(model, lambda meta, arrays: change(meta))
@@ -257,6 +259,22 @@ def test_a_manifest_is_confined_to_its_folder(tmp_path, fleet, logs_glob, what):
     assert "is outside the manifest's folder" in res.stderr and "--allow-outside" in res.stderr
     trusted = CliRunner().invoke(cli, ["fleet", str(path), "--list", "--allow-outside"])
     assert trusted.exit_code == 0, trusted.stderr
+
+
+@pytest.mark.parametrize("robot, joints, needle", [
+    ("..", "[2]", "name must be letters, digits"),
+    (".", "[2]", "name must be letters, digits"),
+    ("r1", '[".."]', "joint '..': a joint is a whole number or a name without"),
+    ("r1", '["a/../../b"]', "joint 'a/../../b'"),
+    ("r1", "[true]", "joint True"),
+])
+def test_a_robot_or_joint_name_cannot_lead_out_of_the_models_folder(tmp_path, robot, joints, needle):
+    folder = tmp_path / "m"
+    folder.mkdir()
+    path = manifest(folder)
+    path.write_text(path.read_text().replace('name = "r1"', f'name = "{robot}"') + f"joints = {joints}\n")
+    res = CliRunner().invoke(cli, ["fleet", str(path), "--list"])
+    one_error_line(res, errors.NOTHING_RAN, needle)
 
 
 def test_a_symbolic_link_out_of_the_folder_is_outside(tmp_path):

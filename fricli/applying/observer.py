@@ -72,6 +72,8 @@ DEFAULT_MARGIN = 1.5           # threshold = margin x that quantile
 DEFAULT_RELEASE = 0.5          # a flag is released below this share of the threshold
 DEFAULT_MOVING_SPEED = 0.02    # |qd| above which a joint moves [rad/s or m/s]
 DEFAULT_PERSISTENCE = 3        # samples beyond the threshold, of one sign, before a flag
+MAX_PERSISTENCE = 1_000_000    # at most (an int of the exported C code; 1,000 s at 1 kHz)
+FORMS = ("per-joint", "urdf")  # the observer forms thresholds are calibrated on
 FORGET_MIN = 1e-12             # least forgetting factor: a gap of over 27.6 T forgets as much (the
                                # covariance cap binds; exp underflows to 0 past 745 T)
 THRESHOLDS_FORMAT = "fricli.thresholds"
@@ -127,14 +129,18 @@ class Thresholds:
             if data.get("version", 1) != THRESHOLDS_VERSION:
                 raise LogError(f"{name}: a thresholds file of version {data.get('version')!r}; this fricli reads "
                                f"version {THRESHOLDS_VERSION} (calibrate again with fricli thresholds)")
+            if not isinstance(data["joints"], dict) or not data["joints"]:
+                raise TypeError("joints")
             joints = list(data["joints"])
             thr = np.array([float(data["joints"][j]["threshold"]) for j in joints])
             rest = np.array([float(data["joints"][j]["static_friction"]) for j in joints])
             scale = np.array([float(data["joints"][j]["friction_scale"]) for j in joints])
             share = np.array([float(data["joints"][j].get("share", 0.0)) for j in joints])
             persistence = data.get("persistence", 1)
-            if not is_count(persistence, 1):
+            if not is_count(persistence, 1) or persistence > MAX_PERSISTENCE:
                 raise ValueError("persistence")
+            if data["form"] not in FORMS:
+                raise ValueError("form")
             out = cls(joints, thr, rest, scale, share=share, persistence=persistence,
                       gain=float(data["gain"]), quantile=float(data["quantile"]),
                       margin=float(data["margin"]), release=float(data["release"]),
@@ -167,7 +173,7 @@ class Thresholds:
         names = [str(j) for j in self.joints]
         missing = [str(j) for j in joints if str(j) not in names]
         if missing:
-            raise DataError(f"{name}: no threshold for joint {missing[0]} (it has joints {', '.join(names)})")
+            raise LogError(f"{name}: no threshold for joint {missing[0]} (it has joints {', '.join(names)})")
         idx = [names.index(str(j)) for j in joints]
         return dataclasses.replace(self, joints=list(joints), threshold=self.threshold[idx], share=self.shares[idx],
                                    static_friction=self.static_friction[idx], friction_scale=self.friction_scale[idx])
@@ -408,9 +414,9 @@ def level_share(scales: list[np.ndarray], speeds: list[np.ndarray], thresholds: 
 def check_settings(quantile: float, margin: float, release: float, moving_speed: float,
                    persistence: int = DEFAULT_PERSISTENCE) -> None:
     if (not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0
-            or not persistence >= 1):
+            or not 1 <= persistence <= MAX_PERSISTENCE):
         raise DataError("quantile in (0, 1], margin above 0, release in (0, 1), a moving speed above 0 and a "
-                        "persistence of at least 1 sample are needed")
+                        f"persistence of 1 to {MAX_PERSISTENCE:,} samples are needed")
 
 
 @dataclasses.dataclass

@@ -28,7 +28,7 @@ import numpy as np
 
 from fricli import models
 from fricli.core import files, joints, lazy, logs, logs_motion, timewindow
-from fricli.core.atomic import atomic_open
+from fricli.core.atomic import Cuttable, atomic_open
 from fricli.core.errors import DataError, LogError, ModelFileError, NoValidRows
 from fricli.models import coupled
 from fricli.models.base import FrictionModel
@@ -236,7 +236,7 @@ class _Stream:
     ext: ErrorSums = dataclasses.field(default_factory=ErrorSums)
 
 
-_ROW = "__fricli_row"   # original row numbers while the rows of several joints are processed apart
+_ROW = "__fricli_row"   # the file's row numbers (messages; the order of several joints' rows)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -315,15 +315,15 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
         # the next batch is read and the last one written (pyarrow releases the GIL while it
         # decompresses and compresses) while this one is checked and predicted
         writer = pending = None
+        sink = Cuttable(fh)   # after a failure, stdout or a pipe gets no footer: never a shorter valid log
         batches_read = _Prefetch(_batches(pf, name, batch_rows, reason is not None))
         try:
             for offset, table in batches_read:
                 if on_rows is not None:
                     on_rows(table.num_rows, total)
+                table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
                 if limits is not None:
                     table = timewindow.slice_batch(table, *limits)
-                if several:
-                    table = table.append_column(_ROW, pa.array(np.arange(offset, offset + table.num_rows)))
                 outs, tallies = [], []
                 for j, st in streams.items():
                     part = table
@@ -345,9 +345,10 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                     continue
                 out = outs[0] if len(outs) == 1 else pa.concat_tables(outs)
                 if several:
-                    out = out.take(pc.sort_indices(out.column(_ROW))).drop_columns([_ROW])
+                    out = out.take(pc.sort_indices(out.column(_ROW)))
+                out = out.drop_columns([_ROW])
                 if writer is None:
-                    writer = pq.ParquetWriter(fh, out.schema, **logs.parquet_options(out.schema))
+                    writer = pq.ParquetWriter(sink, out.schema, **logs.parquet_options(out.schema))
                 if pending is not None:
                     pending.result()
                 pending = io.submit(_tally_and_write, tallies, writer, out)
@@ -360,6 +361,9 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
             if writer is None:
                 raise LogError(f"{name}: the log is empty")
             pending.result()
+        except BaseException:
+            sink.cut()
+            raise
         finally:
             batches_read.close()
             if pending is not None:
@@ -421,10 +425,6 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
                               later_batch=st.t_last is not None, qdd=models.reads_acceleration(st.model))
     except NoValidRows:        # the rows of the other batches may be valid: judged once all are read
         return None, table.num_rows
-    except LogError as exc:
-        if reason is None and rows is None and (offset or table.num_rows < total):
-            raise LogError(f"{exc} (rows counted from row {offset} of the log)") from None
-        raise
     log.joint = st.joint
     coupled.add_partners(st.model, log, whole, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
                          drop_invalid=reading.drop_invalid, zero=reading.zero)
@@ -491,4 +491,5 @@ def lowpass_external(est: np.ndarray, t: np.ndarray, cutoff_hz: float, warn=None
     if warn and (len(t) < 16 or cutoff_hz >= 0.5 * fs):
         warn(f"warning: --lowpass {cutoff_hz:g} Hz not applied (at or above the Nyquist frequency "
              f"{0.5 * fs:g} Hz, or too few rows)")
+    logs_motion.check_lowpass_period(t, cutoff_hz)
     return logs.lowpass(est, t, cutoff_hz)

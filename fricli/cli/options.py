@@ -104,14 +104,24 @@ def check_paths(params: dict) -> None:
 
 
 def common(f):
-    """--quiet and --debug; and the paths checked (``check_paths``)."""
+    """--quiet and --debug; the paths checked (``check_paths``); an ``OptionError`` of the Python
+    call that names an option of the command is click's usage error on it (2 (USAGE))."""
 
     command = f
 
     @functools.wraps(command)
     def checked(**params):
+        from fricli.fitting.optionspec import OptionError
+
         check_paths(params)
-        return command(**params)
+        try:
+            return command(**params)
+        except OptionError as exc:
+            ctx = click.get_current_context()
+            named = {p.name: p for p in ctx.command.params if isinstance(p, click.Option)}
+            if exc.option not in named:
+                raise
+            raise click.BadParameter(str(exc), ctx=ctx, param=named[exc.option]) from None
 
     f = checked
     f = click.option("--debug", is_flag=True, expose_value=False, is_eager=True, callback=_set_debug,
@@ -250,7 +260,7 @@ def progress_enabled(quiet: bool) -> bool:
 
 
 LOWPASS_HELP = ("Zero-phase Butterworth low-pass (4th order) of the external-torque estimate tau_ext_pred at this "
-                "cut-off [Hz]; default: none (5 smooths it).")
+                "cut-off [Hz], one period of it within the log at least; default: none (5 smooths it).")
 
 
 def read_log(log: str, window: timewindow.Window | None = None):

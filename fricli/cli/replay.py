@@ -104,7 +104,7 @@ def replay_cmd(model, log, output, urdf, adapt, adapt_offset, thresholds_path, t
 @click.option("--moving-speed", type=Number(min=0, min_open=True), default=observer.DEFAULT_MOVING_SPEED, show_default=True,
               help="|qd| above which a joint moves [rad/s or m/s]: its threshold in motion applies, and the "
                    "adaptation may update.")
-@click.option("--persistence", type=click.IntRange(min=1), default=observer.DEFAULT_PERSISTENCE, show_default=True,
+@click.option("--persistence", type=click.IntRange(min=1, max=observer.MAX_PERSISTENCE), default=observer.DEFAULT_PERSISTENCE, show_default=True,
               help="Samples in a row beyond the threshold, with one sign, before a contact is flagged (1: at once).")
 @click.option("--no-level-share", "no_level", is_flag=True,
               help="A constant threshold in motion: leave out the share of the friction (the drift of its level).")

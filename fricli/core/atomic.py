@@ -161,6 +161,38 @@ def _write_through(path: str) -> Iterator[BinaryIO]:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
 
 
+class Cuttable:
+    """A binary file (``atomic_open``'s) that passes writes on until ``cut()``. A streaming writer
+    closed after a failure (pyarrow's ParquetWriter writes the footer as it closes) then leaves
+    stdout, a pipe or a device without the end of its format, so that the reader downstream finds
+    the output damaged, not a complete file of fewer rows. (A regular file is never renamed into
+    place after a failure.)"""
+
+    closed = False
+
+    def __init__(self, fh: BinaryIO):
+        self._fh, self._cut, self._pos = fh, False, 0
+
+    def cut(self) -> None:
+        self._cut = True
+
+    def write(self, data) -> int:
+        if not self._cut:
+            self._fh.write(data)
+        self._pos += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self) -> None:
+        if not self._cut:
+            self._fh.flush()
+
+    def close(self) -> None:
+        """Left to ``atomic_open``."""
+
+
 def atomic_write_bytes(path: str, data: bytes, *, binary: bool = False) -> None:
     with atomic_open(path, binary=binary) as fh:
         fh.write(data)

@@ -52,7 +52,9 @@ TABLE: tuple[ExitCode, ...] = (
              "does not hold, or on a log without a `joint` column; several joints where one is needed "
              "([joints](joints.md)); for `fricli import`: a recording with fewer than 3 usable rows or with time "
              "going back, or a [mapping](robot-import.md) file that is missing or wrong (no `--mapping` at all: 2 (USAGE)); "
-             "a thresholds file (`--thresholds`) that is missing, not one of `fricli thresholds` or of another version"),
+             "a thresholds file (`--thresholds`) that is missing, not one of `fricli thresholds` or of another version, "
+             "without a threshold for a joint of the log, or calibrated on the other observer form (`--urdf`); "
+             "`fricli trend` on a folder that is not a fleet history"),
     ExitCode(MODEL, "MODEL", "a model file that cannot be loaded or does not fit the log",
              "a model file cannot be loaded (missing, truncated, not a fricli model, unknown version, "
              "pickled content) or does not fit the log: other units, or fitted on another joint than the "

@@ -162,7 +162,7 @@ def axis_of(schema: pa.Schema, name: str) -> str:
     kinds = set()
     for field in schema:
         unit = field_unit(field)
-        if unit is None or field.name not in _EXPECTED:
+        if unit is None or field.name not in _EXPECTED or len(set(_EXPECTED[field.name].values())) == 1:
             continue
         dim = _UNITS[_field_spelling(field, name)][0]
         if dim in ("angle", "angle/s", "angle/s2", "torque"):
@@ -250,7 +250,7 @@ def table_signals(table: pa.Table, axis: str, name: str, kt: float | None = None
         if unit is not None and column in _EXPECTED:
             dim, factor = _UNITS[_field_spelling(field, name)]
             if dim != _EXPECTED[column][axis]:
-                raise LogError(f"{name}: column {column!r} has unit {unit!r}, which does not fit a {axis} axis")
+                raise LogError(f"{name}: column {column!r} has unit {unit!r}, not a unit of {_EXPECTED[column][axis]}")
             if factor != 1.0:
                 values = values * factor
         out[column] = values
@@ -276,7 +276,9 @@ def missing_robot_model(column: str) -> str:
 def require_robot_model(schema: pa.Schema, name: str, zero=()) -> None:
     """DataError (one line, with the fix) when the log lacks tau_g or tau_dyn and neither the
     options (``zero``) nor the log's metadata declare it zero: checked once before any joint is
-    fitted or predicted."""
+    fitted or predicted; not for a log without a required column (``check_signals`` says that)."""
+    if not {"t"} <= set(schema.names) or not {"tau_m", "i_m"} & set(schema.names) or not {"q", "qd"} & set(schema.names):
+        return
     declared = declared_zero(schema, name, zero)
     for column in ROBOT_MODEL:
         if column not in schema.names and column not in declared:

@@ -53,6 +53,8 @@ def unique_columns(pf: pq.ParquetFile, name: str) -> pq.ParquetFile:
 
 def not_parquet(name: str, head: bytes) -> str:
     """The message for input that is not Parquet; ``head``: its first bytes."""
+    if not head:
+        return f"{name}: empty input, not a Parquet log"
     if head == b"PAR1":   # a damaged Parquet file, not another format
         return f"{name}: not a Parquet file: damaged (truncated, or written only in part)"
     return f"{name}: not a Parquet file (convert a CSV or other text recording with fricli import, docs/robot-import.md)"

@@ -15,7 +15,8 @@ def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
 
 
 def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> np.ndarray:
-    """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate)."""
+    """Zero-phase Butterworth low-pass of ``x`` sampled at times ``t`` (median rate). DataError
+    when the cut-off is so far below the sample rate that the filter is singular."""
     if not lowpass_applies(t, cutoff_hz):
         return x.copy()
     fs = 1.0 / float(np.median(np.diff(t)))
@@ -24,7 +25,20 @@ def lowpass(x: np.ndarray, t: np.ndarray, cutoff_hz: float, order: int = 4) -> n
     sos = signal.butter(order, cutoff_hz, fs=fs, output="sos")
     # padded by the ends' odd reflection over three periods of the cut-off (scipy's default pads a
     # few samples, so a low cut-off left a transient in the first and last tenth of a second)
-    return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
+    try:
+        return signal.sosfiltfilt(sos, x, padlen=min(len(x) - 1, max(3 * (2 * len(sos) + 1), int(3 * fs / cutoff_hz))))
+    except np.linalg.LinAlgError:
+        raise DataError(f"a low-pass cut-off of {cutoff_hz:g} Hz is too far below the sample rate ({fs:g} Hz) "
+                        "to filter at") from None
+
+
+def check_lowpass_period(t: np.ndarray, cutoff_hz: float) -> None:
+    """DataError when a period of ``cutoff_hz`` is longer than the log of times ``t``: a zero-phase
+    filter of it outputs little but its padding (``--lowpass`` of an output)."""
+    duration = float(t[-1] - t[0]) if len(t) else 0.0
+    if lowpass_applies(t, cutoff_hz) and cutoff_hz * duration < 1:
+        raise DataError(f"--lowpass {cutoff_hz:g} Hz is a period longer than the log ({duration:g} s): "
+                        f"give at least {1 / duration:.3g} Hz")
 
 
 def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:

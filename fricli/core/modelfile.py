@@ -129,7 +129,7 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise ModelFileError(f"{name}: not a fricli model file")
     version = meta.get("format_version")
-    if version != FORMAT_VERSION:
+    if type(version) is not int or version != FORMAT_VERSION:   # true and 1.0 are no version
         shown = version if isinstance(version, int) and not isinstance(version, bool) else json.dumps(version)
         raise ModelFileError(f"{name}: model format version {shown} is not supported "
                              f"(this fricli reads version {FORMAT_VERSION})")

@@ -20,7 +20,7 @@ def export_header(model: str, output: str | None = None, *, prefix: str = "frict
     try:
         c.check_prefix(prefix)
     except ValueError as exc:
-        raise OptionError(f"--prefix: {exc}", "prefix") from None
+        raise OptionError(str(exc), "prefix") from None
     if observer:
         from fricli.robot.replay import settings
 

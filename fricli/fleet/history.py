@@ -94,8 +94,10 @@ def append(history: str, rows: list[dict], run: str) -> list[str]:
     return written
 
 
-def read(history: str) -> pa.Table:
-    """The whole history as one table (robot as a string column); LogError when it cannot be read.
+def read(history: str, *, partitioned: bool = False) -> pa.Table:
+    """The whole history as one table (robot as a string column); LogError when it cannot be read,
+    and with ``partitioned`` when the folder holds no ``robot=NAME`` folder (not a history: fleet
+    writes one as it records the first row).
 
     Reads file by file with ``pq.ParquetFile`` (not pyarrow's threaded dataset reader)."""
     import glob
@@ -105,7 +107,11 @@ def read(history: str) -> pa.Table:
     if not os.path.isdir(history):
         raise LogError(f"{history}: no such history folder")
     tables = []
-    for folder in sorted(glob.glob(os.path.join(glob.escape(history), "robot=*"))):
+    folders = sorted(glob.glob(os.path.join(glob.escape(history), "robot=*")))
+    if partitioned and not folders:
+        raise LogError(f"{history}: not a fleet history (no robot=NAME folder in it: the history is the folder "
+                       "of the manifest's [fleet] history, once fricli fleet has recorded a job)")
+    for folder in folders:
         robot = os.path.basename(folder).removeprefix("robot=")
         for path in sorted(glob.glob(os.path.join(glob.escape(folder), "*.parquet"))):
             try:

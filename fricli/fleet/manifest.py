@@ -153,8 +153,8 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
         where = f"{path}: robot {name or index + 1}"
         if unknown:
             raise ManifestError(f"{where}: unknown key {sorted(unknown)[0]!r} (use {', '.join(sorted(_ROBOT_KEYS))})")
-        if not isinstance(name, str) or not _NAME.match(name):
-            raise ManifestError(f"{where}: name must be letters, digits, '.', '_' or '-'")
+        if not _plain_name(name):
+            raise ManifestError(f"{where}: name must be letters, digits, '.', '_' or '-', not dots alone")
         if name in seen:
             raise ManifestError(f"{where}: the name is used twice")
         seen.add(name)
@@ -163,9 +163,15 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
             raise ManifestError(f"{where}: unknown pipeline {pipeline!r} (choose from {', '.join(PIPELINES)})")
         if pipeline == "adapt" and not isinstance(robot.get("base"), str):
             raise ManifestError(f"{where}: the adapt pipeline needs base = \"MODEL.npz\"")
-        joint_list = robot.get("joints", [None])
+        joint_list = robot.get("joints", [None])   # no joints: the log's single joint
         if not isinstance(joint_list, list) or not joint_list:
             raise ManifestError(f"{where}: joints must be a non-empty list")
+        odd = [j for j in joint_list if "joints" in robot and not (
+            isinstance(j, int) and not isinstance(j, bool)
+            or isinstance(j, str) and j.strip(".") and not set(j) & {"/", "\\", "\0"})]
+        if odd:
+            raise ManifestError(f"{where}: joint {odd[0]!r}: a joint is a whole number or a name without '/' or "
+                                "'\\', not dots alone")
         listed = [str(j) for j in joint_list]
         twice = sorted({j for j in listed if listed.count(j) > 1})
         if twice:
@@ -211,6 +217,12 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
                                 diagnose=diagnose))
             jobs[first:] = _clashes(jobs[first:])
     return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs), unmatched=tuple(unmatched))
+
+
+def _plain_name(name) -> bool:
+    """Whether ``name`` may name a folder or file of the fleet's output: text of letters, digits,
+    '.', '_' and '-' that is not '.' or '..' (which would lead out of the folder)."""
+    return isinstance(name, str) and bool(_NAME.match(name)) and bool(name.strip("."))
 
 
 def _clashes(jobs: list[Job]) -> list[Job]:

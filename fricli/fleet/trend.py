@@ -248,7 +248,7 @@ def fleet_trend(history: str, *, params=DEFAULT_PARAMS, baseline_days: int = 7, 
     checked = check_values({"baseline_days": baseline_days, "window_days": window_days, "max_level": max_level,
                             "max_growth": max_growth}, _spec(), "trend")
     rule = WearRule(params=params, **checked)
-    result = Trend(rule, trends(hist.read(history), rule))
+    result = Trend(rule, trends(hist.read(history, partitioned=True), rule))
     if figures:
         result.figures = _write_figures(result.joints, rule, figures)
     return result

@@ -75,6 +75,10 @@ def import_log(recordings: str | list[str], mapping: str | Mapping | None = None
         raise OptionError("no recording given", "recordings")
     recording = recordings[0]
     bag = is_bag(recording)
+    if bag:   # a folder that is no bag says so before its mapping is read as a bag's
+        from fricli.robot import rosbag
+
+        rosbag.bag_paths(recording)
     if len(recordings) > 1 and (bag or mapping is None):
         raise OptionError("several recordings are the files of one text recording: give a mapping (--mapping "
                           "MAP.toml) with their 'files' (docs/robot-import.md)", "mapping")

@@ -222,7 +222,7 @@ def run(arm: Arm, gain: float, thresholds: observer.Thresholds | None,
         adaptation: observer.Adaptation | None) -> observer.Replayed:
     if thresholds is not None:
         if thresholds.form != arm.form:
-            raise DataError(f"the thresholds were calibrated on the {thresholds.form} observer, this replay runs the "
+            raise LogError(f"the thresholds were calibrated on the {thresholds.form} observer, this replay runs the "
                             f"{arm.form} one ({'give --urdf' if thresholds.form == 'urdf' else 'leave out --urdf'})")
         thresholds = thresholds.for_joints(arm.joints, arm.name)
     return _replay(arm, gain, thresholds, adaptation)

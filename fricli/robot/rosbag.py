@@ -68,7 +68,7 @@ def _rosbags():
     return AnyReader, AnyReaderError, get_typestore(Stores.ROS2_HUMBLE)
 
 
-def _bag_paths(path: str) -> list[Path]:
+def bag_paths(path: str) -> list[Path]:
     """What rosbags opens: a ROS 1 file, a rosbag2 folder (a storage file's folder) with its
     metadata.yaml, or without one (a recording that did not end cleanly) its storage files."""
     p = Path(path)
@@ -115,7 +115,7 @@ def _messages(path: str, topic: str | None):
     """(topic, [(receive time [ns], stamp [ns], names, position, velocity, effort)]) of the
     JointState topic ``topic`` (or the bag's only one)."""
     AnyReader, AnyReaderError, default = _rosbags()
-    p = _bag_paths(path)
+    p = bag_paths(path)
     try:
         with AnyReader(p, default_typestore=default) as reader:
             states = sorted({c.topic for c in reader.connections if c.msgtype == JOINT_STATE})

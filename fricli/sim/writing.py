@@ -69,8 +69,24 @@ def simulate_log(output: str, *, scenario: str = "base", joint: int = 2, load: s
         if not contacts or "contact" not in str(exc):
             raise
         raise OptionError(str(exc), "contacts") from None
+    _check_magnitudes(table, "contacts" if contacts else "effects")
     write(table, output)
     return table
+
+
+def _check_magnitudes(table, option: str) -> None:
+    """OptionError when strengths so large (an --effect or --contact of 1e30) gave values that every
+    command refuses as absurd (``logs.MAGNITUDE_LIMIT``): a log no command would read."""
+    import pyarrow as pa
+
+    from fricli.core.logs import MAGNITUDE_LIMIT
+
+    for name, col in zip(table.column_names, table.columns):
+        if pa.types.is_floating(col.type):
+            top = float(np.max(np.abs(col.to_numpy()), initial=0.0))
+            if not top <= MAGNITUDE_LIMIT:
+                raise OptionError(f"the simulated {name!r} reaches {top:.3g}, beyond {MAGNITUDE_LIMIT:g}, which "
+                                  "every command refuses: give smaller strengths", option)
 
 
 def _simulate_fleet(output: str, size: tuple, wearing: int, seed: int, rate: float | None, map_fn):

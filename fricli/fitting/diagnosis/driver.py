@@ -130,8 +130,10 @@ def diagnose(model, log: logs.Log, *, folds: int = DEFAULT_FOLDS, min_gain: floa
                         f"for {folds} folds)")
     sig = log.signals
     if "q" in sig and metrics.held_still(sig["q"][:, None])[0]:
-        raise DataError(f"the joint's position spans less than {metrics.HELD_SPAN:g} "
-                        f"{column_units(log.table).get('q', '')} over the whole log: it is held still, and the torque "
+        span = float(np.ptp(sig["q"]))
+        unit = "m" if log.axis == "linear" else "rad"
+        raise DataError(f"the joint's position spans {span:.3g} {unit}, less than {metrics.HELD_SPAN:g} {unit}, "
+                        "over the whole log: it is held still, and the torque "
                         "that holds it (stiction, a push on the arm) is no friction to diagnose; diagnose a log in "
                         "which it moves")
     p, r = residual(model, log)
