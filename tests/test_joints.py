@@ -151,6 +151,14 @@ def test_several_joints_into_one_file_is_refused(files, tmp_path):
     assert "the log holds joints 2, 4: choose one with --joint, or give a model folder" in line
 
 
+def test_an_output_ending_with_a_slash_is_a_folder_for_one_joint_too(files, tmp_path):
+    res = run("identify", files["j4"], "-o", f"{tmp_path / 'one'}/", "-q")
+    assert res.exit_code == 0, res.stderr
+    assert [p.name for p in (tmp_path / "one").iterdir()] == ["joint_4.npz"]
+    line = one_error_line(run("identify", files["plain"], "-o", f"{tmp_path / 'two'}/"), errors.OUTPUT)
+    assert "names a folder, but" in line and "no 'joint' column" in line and not (tmp_path / "two").exists()
+
+
 def test_identify_every_joint_into_a_folder(files, tmp_path):
     out = tmp_path / "arm"
     res = run("identify", files["arm"], "-o", out, "--json", "-q")

@@ -74,19 +74,20 @@ def paired(source: Source, table, log_name: str, requested=None) -> dict:
 def output_folder(output: str, covered: list, log_joints: list | None, log_name: str) -> str | None:
     """The folder to write one model per joint into, or None for one model file at ``output``.
 
-    A folder when the run covers several joints or ``output`` is an existing folder. The folder
-    is made when missing (its parent must exist)."""
+    A folder when the run covers several joints, or ``output`` is an existing folder or ends
+    with "/". The folder is made when missing (its parent must exist)."""
     names = [file_name(j) for j in covered]
     if len(set(names)) < len(names):
         raise LogError(f"{log_name}: joints {listed(covered)} do not give distinct file names")
-    if os.path.isdir(output):
+    if os.path.isdir(output) or output.endswith(os.sep):
         if covered == [None]:
-            raise OutputError(f"{output} is a folder, but {log_name} has no 'joint' column to name a model "
+            raise OutputError(f"{output} names a folder, but {log_name} has no 'joint' column to name a model "
                               "file by: give -o FILE.npz")
-        return output
-    if len(covered) <= 1:
+        if os.path.isdir(output):
+            return output
+    elif len(covered) <= 1:
         return None
-    if output == "-" or output.endswith(".npz") or os.path.exists(output):
+    elif output == "-" or output.endswith(".npz") or os.path.exists(output):
         raise several(log_joints, log_name, "choose one with --joint, or give -o a folder for one model per joint")
     parent = os.path.dirname(os.path.abspath(output))
     if not os.path.isdir(parent):
