@@ -78,6 +78,13 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
     ``say(line)``: progress. OptionError naming the option for ``holdout`` out of (0, 1) or given
     with ``validate``; LogError naming an input file that is not there (nothing is written then);
     LockedError when another run holds ``out``."""
+    from fricli.core.files import path_arg
+
+    def paths(given, what: str) -> list[str]:   # one file given alone, not in a list: that file
+        return [path_arg(p, what, "fit_arm") for p in ([given] if isinstance(given, (str, os.PathLike)) else given)]
+
+    recordings, validate = paths(recordings, "recordings"), paths(validate, "validate")
+    mapping, urdf, out = (path_arg(v, w, "fit_arm") for v, w in ((mapping, "mapping"), (urdf, "urdf"), (out, "out")))
     if holdout is not None and validate:
         raise OptionError("holdout applies without validate (the validation recordings are held out)", "holdout")
     share = (0.0 if validate else HOLDOUT) if holdout is None else float(holdout)

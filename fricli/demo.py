@@ -181,6 +181,6 @@ def run_demo(output: str = "demo-out", *, data: str = "sample_data", joint: int 
     if str(joint) not in ("2", "4") or isinstance(joint, bool):
         raise OptionError(f"demo option joint: expected 2 or 4, got {joint!r}", "joint")
     check_values({"steps": steps, "seed": seed},
-                 {"steps": Option("steps", "int", low=1), "seed": Option("seed", "int", default=0)}, "demo")
+                 {"steps": Option("steps", "int", low=1), "seed": Option("seed", "int", default=0, low=0)}, "demo")
     return DemoRun(run(os.fspath(output), data=os.fspath(data), joint=int(joint), steps=steps, seed=seed,
                        say=say or (lambda s: None)))

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 
 from conftest import run_in
@@ -458,6 +459,17 @@ def test_refusals(arm, tmp_path):
     log = write_log(tmp_path / "brief.parquet", t, q, qd, qdd, simulate(model, t, q, qd, qdd))
     res = fricli("calibrate", log, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.DATA and "joint 3 is in motion in 10 rows" in res.stderr, res.stderr
+    # a log of velocities without positions: the rigid-body terms need q (it was an internal error)
+    pq.write_table(pq.read_table(log).drop_columns(["q"]), tmp_path / "no_q.parquet")
+    res = fricli("calibrate", "no_q.parquet", "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
+    assert res.returncode == errors.INPUT and "joint 1: the robot model needs positions q" in res.stderr, res.stderr
+    # a report into a missing folder: the existing URDF stays as it was
+    (tmp_path / "cal.urdf").write_text("mine")
+    t, q, qd, qdd = fit
+    good = write_log(tmp_path / "good.parquet", t, q, qd, qdd, simulate(model, t, q, qd, qdd))
+    res = fricli("calibrate", good, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", "--report",
+                 "missing/r.json", cwd=tmp_path)
+    assert res.returncode == errors.OUTPUT and (tmp_path / "cal.urdf").read_text() == "mine", res.stderr
 
 
 def test_stribeck_friction_is_found_with_the_rigid_body(arm):

@@ -111,6 +111,29 @@ def test_every_wrong_value_is_refused_naming_its_option(case):
         assert err.value.option == name and name in str(err.value), name
 
 
+def test_every_number_refuses_infinity_and_a_seed_a_negative_value(case):
+    """inf is no option value (the command line says "not a finite number"); a negative seed
+    would fail inside numpy once the fit had started."""
+    est = case["unfitted"]
+    for name, option in est._spec.items():
+        if option.type == "float":
+            with pytest.raises(OptionError) as err:
+                type(est)(**{**est.get_params(), name: float("inf")})
+            assert err.value.option == name
+    if "seed" in est._spec:
+        with pytest.raises(OptionError, match="seed = -1: expected an integer >= 0"):
+            type(est)(**{**est.get_params(), "seed": -1})
+        assert type(est)(**{**est.get_params(), "seed": np.int64(2)}).get_params()["seed"] == 2
+
+
+def test_a_model_of_one_joint_refuses_the_log_of_another(case):
+    """As the commands refuse it (exit 4): a model fitted on joint 2 predicts no rows of joint 4."""
+    from fricli.core.errors import ModelFileError
+
+    with pytest.raises(ModelFileError, match="fitted on joint 2, not on joint 4"):
+        case["fitted"].predict(SAMPLE / "joint4_adapt.parquet")
+
+
 def test_options_that_do_not_go_together_are_refused():
     with pytest.raises(OptionError, match="velocity_input") as err:
         Network(velocity_input="linear")

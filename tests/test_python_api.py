@@ -172,3 +172,55 @@ def test_predict_file_is_the_command(folder):
             fricli.predict_file(model, str(log), str(folder / "refused.parquet"), **kwargs)
         assert err.value.option == option
     assert not (folder / "refused.parquet").exists()
+
+
+def test_paths_may_be_path_objects_and_anything_else_is_an_option_error_naming_the_argument(folder):
+    """A pathlib.Path reads as its text (a Path log was once refused as a damaged Parquet file);
+    None, a number or a list where a file goes is OptionError naming the argument, never a
+    TypeError from deep inside."""
+    import pathlib
+
+    from fricli.fitting.optionspec import OptionError
+
+    log = pathlib.Path(folder / "sample_data" / "joint2_extended_asym.parquet")
+    fricli.Linear().fit(folder / "sample_data" / "joint2_base.parquet").save(folder / "linear-paths.npz")
+    model = pathlib.Path(folder / "linear-paths.npz")
+    assert fricli.predict_file(model, log, folder / "path.parquet").rows == fricli.read_log(log).table.num_rows
+    assert fricli.external_torque(model, log).shape == fricli.external_torque(fricli.load_model(model), log).shape
+    for call, argument in ((lambda: fricli.read_log(None), "path"), (lambda: fricli.load_model(5), "path"),
+                           (lambda: fricli.predict_file(None, log, folder / "x.parquet"), "model"),
+                           (lambda: fricli.predict_file(model, [log], folder / "x.parquet"), "log"),
+                           (lambda: fricli.external_torque(None, log), "model"),
+                           (lambda: fricli.load_model(model).predict(3), "log"),
+                           (lambda: fricli.replay_log(model, None), "log"),
+                           (lambda: fricli.export_header(None), "model"),
+                           (lambda: fricli.write_report(model, log, None), "output"),
+                           (lambda: fricli.evaluate([model], [log]), "models"),
+                           (lambda: fricli.calibrate_thresholds(model, []), "log_files")):
+        with pytest.raises(OptionError) as err:
+            call()
+        assert err.value.option == argument, (argument, str(err.value))
+
+
+@pytest.mark.parametrize("call, option", [
+    (lambda m, log: fricli.replay_log(m, log, gain=float("nan")), "gain"),
+    (lambda m, log: fricli.replay_log(m, log, gain=-1.0), "gain"),
+    (lambda m, log: fricli.replay_log(m, log, gain="5"), "gain"),
+    (lambda m, log: fricli.replay_log(m, log, time_constant=0), "time_constant"),
+    (lambda m, log: fricli.calibrate_thresholds(m, log, margin=float("inf")), "margin"),
+    (lambda m, log: fricli.calibrate_thresholds(m, log, release=1.0), "release"),
+    (lambda m, log: fricli.calibrate_thresholds(m, log, persistence=1.5), "persistence"),
+    (lambda m, log: fricli.calibrate_thresholds(m, log, level_share="no"), "level_share"),
+    (lambda m, log: fricli.export_header(m, observer="yes"), "observer"),
+    (lambda m, log: fricli.external_torque(m, log, lowpass_hz=0), "lowpass_hz"),
+    (lambda m, log: fricli.read_log(log, cutoff=float("inf")), "cutoff"),
+])
+def test_the_controllers_calls_check_their_options_as_the_commands(folder, call, option):
+    from fricli.fitting.optionspec import OptionError
+
+    log = folder / "sample_data" / "joint2_adapt.parquet"
+    if not (folder / "linear-options.npz").exists():
+        fricli.Linear().fit(log).save(folder / "linear-options.npz")
+    with pytest.raises(OptionError) as err:
+        call(str(folder / "linear-options.npz"), str(log))
+    assert err.value.option == option, str(err.value)

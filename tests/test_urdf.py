@@ -172,6 +172,22 @@ def test_not_a_urdf_is_a_model_error():
         RobotModel("<robot name='x'><link", "bad.urdf")
 
 
+@pytest.mark.parametrize("xyz, why", [("0 0 0", "joint 'elbow' has the axis '0 0 0'"),
+                                      ("0.0 -0 0", "joint 'elbow' has the axis '0.0 -0 0'"),
+                                      ("0 nan 1", "Malformed axis element for joint"), ("0 0", "Malformed axis")])
+def test_a_joint_axis_that_is_no_direction_is_a_model_error(xyz, why):
+    """Pinocchio builds a joint of axis 0 0 0 without complaint, and its torques come out zero."""
+    pytest.importorskip("pinocchio")
+    from fricli.robot.dynamics import RobotModel
+
+    with pytest.raises(errors.ModelFileError, match=why):
+        RobotModel(URDF.replace('<axis xyz="0 0 1"/>\n    <limit lower="-10" upper="10" effort="100" velocity="10"/>\n'
+                                '  </joint>\n  <link name="link2">',
+                                f'<axis xyz="{xyz}"/>\n    <limit lower="-10" upper="10" effort="100" velocity="10"/>\n'
+                                '  </joint>\n  <link name="link2">'), "arm.urdf")
+    RobotModel(URDF.replace('<axis xyz="0 0 1"/>', '<axis xyz="0 0 2"/>'), "arm.urdf")   # any length
+
+
 def test_a_xacro_file_is_named_as_one():
     """ROS descriptions ship as .urdf.xacro macros; the URDF parser would only say it found no links."""
     pytest.importorskip("pinocchio")

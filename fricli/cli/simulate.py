@@ -21,15 +21,13 @@ def _effects(ctx, param, values):
 
 
 def _contacts(ctx, param, values):
-    out = []
-    for value in values:
-        try:
-            start, torque, length = (float(x) for x in value.split(","))
-        except ValueError:
-            raise click.BadParameter(f"expected START,TORQUE,DURATION like 30,5,2, got {value!r}", ctx=ctx,
-                                     param=param) from None
-        out.append((start, torque, length))
-    return tuple(out)
+    from fricli.core.errors import OptionError
+    from fricli.sim.writing import contact_of
+
+    try:
+        return tuple(contact_of(value) for value in values)
+    except OptionError as exc:
+        raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
 
 
 def _fleet_size(ctx, param, value):

@@ -170,3 +170,14 @@ class LockedError(FricliError):
 
 class MissingDependencyError(FricliError):
     exit_code = DEPENDENCY
+
+
+class OptionError(FricliError):
+    """An option value of the wrong type or out of range, an unknown option, or options that do
+    not go together; ``option`` names the option."""
+
+    exit_code = USAGE
+
+    def __init__(self, message: str, option: str = ""):
+        super().__init__(message)
+        self.option = option

@@ -17,6 +17,16 @@ STDIN_LIMIT = 1 << 30      # bytes of stdin held in memory at most (more: give a
 SPOOL_LIMIT = 64 << 30     # bytes of stdin spooled to a temporary file at most (a log read in batches)
 
 
+def path_arg(value, what: str, who: str) -> str:
+    """A file argument of a Python call as text (str, bytes or os.PathLike; "-" where the call
+    takes stdin or stdout); OptionError naming ``what`` for anything else."""
+    from fricli.core.errors import OptionError
+
+    if isinstance(value, (str, bytes, os.PathLike)):
+        return os.fsdecode(value)
+    raise OptionError(f"{who}: {what} must be a file's path, not {type(value).__name__}", what)
+
+
 def _kind(mode: int) -> str | None:
     """What a file that is not regular is, or None for a regular file."""
     if stat.S_ISREG(mode):

@@ -11,6 +11,7 @@ import numpy as np
 
 from fricli import models
 from fricli.core import logs, modelfile, timewindow
+from fricli.core.files import path_arg
 from fricli.core.errors import USAGE, DataError, FricliError
 from fricli.fitting import optionspec, runs
 from fricli.fitting.optionspec import Option, OptionError
@@ -46,8 +47,9 @@ def read_log(path, *, joint=None, kt=None, cutoff=logs.DEFAULT_CUTOFF_HZ, drop_i
     given = dict(joint=joint, kt=kt, cutoff=cutoff, drop_invalid=drop_invalid, no_gravity=no_gravity,
                  no_dynamics=no_dynamics)
     opts, _, window = reading_of("read_log", given, time_from, time_until)
-    name = "stdin" if path == "-" else os.fspath(path)
-    table, digest = logs.read_table("-" if path == "-" else name)
+    path = path_arg(path, "path", "read_log")
+    name = "stdin" if path == "-" else path
+    table, digest = logs.read_table(path)
     table = timewindow.slice_table(table, window, name, warn=warn)
     data = runs.read(table, digest, name, opts, warn=warn)
     data.window = window.to_json() if window else None
@@ -103,12 +105,20 @@ def _as_log(log, reading: dict | None = None) -> logs.Log:
     """``log`` itself, or the log at the path ``log`` read with ``reading`` (``read_log``'s options)."""
     if isinstance(log, logs.Log):
         return log
-    if isinstance(log, (str, os.PathLike)):
+    if isinstance(log, (str, bytes, os.PathLike)):
         return read_log(log, **(reading or {}))
-    raise TypeError(f"log: expected a fricli.read_log result or a path, not {type(log).__name__}")
+    raise OptionError(f"log: expected a fricli.read_log result or a path, not {type(log).__name__}", "log")
 
 
-def _friction(model, data: logs.Log) -> np.ndarray:
+def _friction(model, data: logs.Log, meta: dict, name: str) -> np.ndarray:
+    """``model``'s friction on ``data`` once the model file's ``meta`` is checked against it as the
+    commands check it: the units' axis kind, and the joint (``joints.check``)."""
+    from fricli.core import joints
+
+    models.check_log(meta, data, name)
+    covered = joints.covers(meta)
+    if data.joint is not None and None not in covered and not any(joints.same(j, data.joint) for j in covered):
+        raise joints.mismatch(name, joints.listed(covered), data.name, data.joint)
     return np.asarray(with_partners(model, data).predict(data.signals)[0], dtype=np.float64)
 
 
@@ -125,11 +135,11 @@ class Model:
 
     def predict(self, log) -> np.ndarray:
         """The friction [Nm or N] (n,) on ``log`` (a ``read_log`` result or a path)."""
-        return _friction(self.model, _as_log(log))
+        return _friction(self.model, _as_log(log), self.meta, self.path or "the model")
 
     def save(self, path) -> None:
         """Write the model file again (the same bytes as the file it was read from)."""
-        modelfile.write(os.fspath(path), self.meta, models.to_parts(self.model)[1])
+        modelfile.write(path_arg(path, "path", "Model.save"), self.meta, models.to_parts(self.model)[1])
 
     def __repr__(self) -> str:
         return f"Model({self.kind!r}, path={self.path!r})"
@@ -137,16 +147,25 @@ class Model:
 
 def load_model(path) -> Model:
     """The model in the model file ``path`` (.npz); ModelFileError when it is not one."""
-    model, meta = models.load(os.fspath(path))
-    return Model(model, meta, os.fspath(path))
+    path = path_arg(path, "path", "load_model")
+    model, meta = models.load(path)
+    return Model(model, meta, path)
+
+
+LOWPASS = Option("lowpass_hz", "float", None, "Zero-phase low-pass of the external-torque estimate [Hz].", unit="Hz",
+                 low=0, low_open=True)
 
 
 def external_torque(model, log, lowpass_hz: float | None = None) -> np.ndarray:
     """tau_ext = tau_g + tau_dyn + friction - tau_m [Nm or N] (n,) on ``log`` as ``fricli estimate-ext``
-    gives it, with ``model`` a ``load_model`` result or a fitted estimator; optionally
-    low-passed at ``lowpass_hz`` [Hz] (zero-phase, as --lowpass)."""
+    gives it, with ``model`` a ``load_model`` result, a model file's path or a fitted estimator;
+    optionally low-passed at ``lowpass_hz`` [Hz] (zero-phase, as --lowpass)."""
     from fricli.applying.predicting import external_estimate
 
+    lowpass_hz = optionspec.check_values({"lowpass_hz": lowpass_hz}, {"lowpass_hz": LOWPASS},
+                                         "external_torque")["lowpass_hz"]
+    if not hasattr(model, "predict"):
+        model = load_model(path_arg(model, "model", "external_torque"))
     data = _as_log(log, getattr(model, "reading_", None))
     return external_estimate(data.signals, model.predict(data), lowpass_hz)
 
@@ -227,12 +246,13 @@ class _Estimator(_Params):
     def predict(self, log) -> np.ndarray:
         """The friction [Nm or N] (n,) on ``log``; a path is read as the fitted log was read."""
         self._check_fitted()
-        return _friction(self.model_, _as_log(log, self.reading_))
+        return _friction(self.model_, _as_log(log, self.reading_), self.meta_, f"this {type(self).__name__}")
 
     def save(self, path) -> None:
         """Write the model file (.npz) the command writes with the same options on the same log."""
         self._check_fitted()
-        modelfile.write(os.fspath(path), self.meta_, models.to_parts(self.model_)[1])
+        modelfile.write(path_arg(path, "path", f"{type(self).__name__}.save"), self.meta_,
+                        models.to_parts(self.model_)[1])
 
     def _model_bytes(self) -> bytes:
         return modelfile.dumps(self.meta_, models.to_parts(self.model_)[1])

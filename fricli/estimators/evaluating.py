@@ -4,14 +4,9 @@ external-torque errors)."""
 from __future__ import annotations
 
 import dataclasses
-import os
 
-from fricli.estimators.base import reading_of
+from fricli.estimators.base import LOWPASS, path_arg, reading_of
 from fricli.fitting import optionspec, runs
-
-
-LOWPASS = optionspec.Option("lowpass_hz", "float", None, "Zero-phase low-pass of the external-torque estimate [Hz].",
-                            unit="Hz", low=0, low_open=True)
 
 
 @dataclasses.dataclass
@@ -52,8 +47,12 @@ def evaluate(models: dict, logs: dict, *, lowpass_hz: float | None = None, time_
     lowpass_hz = extra["lowpass_hz"]
     read_kwargs = {"joint": r["joint"], "kt": r["kt"], "cutoff_hz": r["cutoff"], "drop_invalid": r["drop_invalid"],
                    "warn": warn, "zero": runs.zero(r)}
-    model_paths = {str(k): os.fspath(v) for k, v in models.items()}
-    log_paths = {str(k): os.fspath(v) for k, v in logs.items()}
+    for what, given in (("models", models), ("logs", logs)):
+        if not isinstance(given, dict):
+            raise optionspec.OptionError(f"evaluate: {what} must be a dict {{name: file path}}, not "
+                                         f"{type(given).__name__}", what)
+    model_paths = {str(k): path_arg(v, "models", "evaluate") for k, v in models.items()}
+    log_paths = {str(k): path_arg(v, "logs", "evaluate") for k, v in logs.items()}
     results = evaluation.evaluate(model_paths, log_paths, lowpass_hz=lowpass_hz, read_kwargs=read_kwargs,
                                   read=lambda path: plan.read_log(path, window, warn))
     return Evaluation(results, model_paths, log_paths, lowpass_hz)

@@ -4,8 +4,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from fricli.estimators.base import reading_of
-from fricli.estimators.evaluating import LOWPASS
+from fricli.estimators.base import LOWPASS, path_arg, reading_of
 from fricli.fitting import optionspec, runs
 
 BATCH_ROWS = optionspec.Option("batch_rows", "int", None, "Rows per record batch.", low=1)
@@ -45,5 +44,7 @@ def predict_file(model: str, log: str, output: str, *, external: bool = False, l
                               zero=runs.zero(r))
     outputs = predicting.Outputs(external=external, lowpass_hz=extra["lowpass_hz"],
                                  flag_extrapolation=flag_extrapolation)
+    model, log, output = (path_arg(value, what, "predict_file") for value, what in
+                          ((model, "model"), (log, "log"), (output, "output")))
     return predicting.run_models(modelset.source(model), log, output, reading=read, outputs=outputs, warn=warn,
                                  on_rows=on_rows, load=load)

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import os
 from typing import Callable
 
-from fricli.estimators.base import reading_of
-from fricli.estimators.evaluating import LOWPASS
+from fricli.estimators.base import LOWPASS, path_arg, reading_of
 
 
 def write_report(model: str, log: str, output: str, *, lowpass_hz: float | None = None, time_from=None,
@@ -27,8 +25,9 @@ def write_report(model: str, log: str, output: str, *, lowpass_hz: float | None 
     r, extra, window = reading_of("report", reading, time_from, time_until, {"lowpass_hz": (LOWPASS, lowpass_hz)})
     kwargs = {"kt": r["kt"], "cutoff_hz": r["cutoff"], "drop_invalid": r["drop_invalid"], "warn": warn,
               "zero": runs.zero(r)}
-    source = modelset.source(os.fspath(model))
-    log = os.fspath(log)
+    model, log, output = (path_arg(value, what, "write_report") for value, what in
+                          ((model, "model"), (log, "log"), (output, "output")))
+    source = modelset.source(model)
     table, digest = plan.read_log(log, window, warn)
     name = "stdin" if log == "-" else log
     pairs = []
@@ -36,7 +35,7 @@ def write_report(model: str, log: str, output: str, *, lowpass_hz: float | None 
         data = logs.from_table(table, name=name, sha256=digest, joint=j, **kwargs)
         coupled.add_partners(coupled.view(models.load(path)[0], j), data, table, **kwargs)
         pairs.append((path, data))
-    return report.write_reports(pairs, os.fspath(output), lowpass_hz=extra["lowpass_hz"])
+    return report.write_reports(pairs, output, lowpass_hz=extra["lowpass_hz"])
 
 
 def inspect_models(model: str) -> dict:
@@ -46,6 +45,6 @@ def inspect_models(model: str) -> dict:
     from fricli import models
     from fricli.core import modelset
 
-    source = modelset.source(os.fspath(model))
+    source = modelset.source(path_arg(model, "model", "inspect_models"))
     metas = {str(joint): models.load(path)[1] for joint, path in source.paths.items()}
     return {"joints": metas} if source.folder else next(iter(metas.values()))

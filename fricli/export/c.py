@@ -99,7 +99,7 @@ def identifier(text: str) -> str:
 
 
 def check_prefix(prefix: str) -> str:
-    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix or "") or prefix in _C_KEYWORDS:
+    if not isinstance(prefix, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", prefix) or prefix in _C_KEYWORDS:
         raise ValueError(f"the prefix {prefix!r} is not a C identifier (or is a keyword)")
     return prefix
 

@@ -17,13 +17,18 @@ def export_header(model: str, output: str | None = None, *, prefix: str = "frict
     ``adapt``, ``adapt_offset``, ``time_constant``, ``gain`` as ``fricli replay``'s), written to
     ``output`` when given (- for stdout); returns its text. Options that do not go together, or a
     prefix that is no C name, raise ``OptionError`` naming the option."""
+    from fricli.core.files import path_arg
+    from fricli.robot.replay import checked, settings
+
+    model = path_arg(model, "model", "export_header")
+    output = None if output is None else path_arg(output, "output", "export_header")
+    checked("export", observer=observer, adapt=adapt, adapt_offset=adapt_offset, time_constant=time_constant,
+            gain=gain)
     try:
         c.check_prefix(prefix)
     except ValueError as exc:
         raise OptionError(str(exc), "prefix") from None
     if observer:
-        from fricli.robot.replay import settings
-
         k, thr, adaptation = settings(thresholds, adapt, adapt_offset, time_constant, gain)
         text = arm.export(model, prefix, k, thr, adaptation)
     elif thresholds or adapt or adapt_offset or time_constant is not None or gain is not None:

@@ -8,21 +8,14 @@ command and a fleet job given the same options record the same job (``fricli.fit
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
+
+import numpy as np
 
 from fricli.fitting import learning
-from fricli.core.errors import USAGE, FricliError
+from fricli.core.errors import OptionError  # noqa: F401 - where the commands and the fleet take it from
 from fricli.core.logs import DEFAULT_CUTOFF_HZ
-
-
-class OptionError(FricliError):
-    """An option value of the wrong type or out of range, an unknown option, or options that do
-    not go together; ``option`` names the option."""
-
-    exit_code = USAGE
-
-    def __init__(self, message: str, option: str = ""):
-        super().__init__(message)
-        self.option = option
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +34,7 @@ class Option:
     low_open: bool = False
     choices: tuple = ()
     metavar: str | None = None
+    high_open: bool = False
 
     @property
     def flag(self) -> str:
@@ -61,7 +55,7 @@ class Option:
         if self.low is not None:
             bounds.append(f"{'>' if self.low_open else '>='} {self.low:g}")
         if self.high is not None:
-            bounds.append(f"<= {self.high:g}")
+            bounds.append(f"{'<' if self.high_open else '<='} {self.high:g}")
         return " ".join([what, " and ".join(bounds)]).strip()
 
     def check(self, value):
@@ -81,12 +75,12 @@ class Option:
             value = parse_sizes(value)
             ok = value is not None
         elif self.type in ("float", "int"):
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) \
-                and (self.type == "float" or isinstance(value, int))
+            ok = isinstance(value, (numbers.Integral, float, np.floating)) and not isinstance(value, (bool, np.bool_)) \
+                and (self.type == "float" or isinstance(value, numbers.Integral))
             if ok:
-                value = float(value) if self.type == "float" else value
-                ok = value == value and (self.low is None or (value > self.low if self.low_open else value >= self.low)) \
-                    and (self.high is None or value <= self.high)
+                value = float(value) if self.type == "float" else int(value)
+                ok = math.isfinite(value) and (self.low is None or (value > self.low if self.low_open else value >= self.low)) \
+                    and (self.high is None or (value < self.high if self.high_open else value <= self.high))
         if not ok:
             raise ValueError(f"{self.name} = {value!r}: expected {self.expects()}")
         return value
@@ -172,7 +166,7 @@ TRAIN_BASE = (
            "each held-out probe's, by default after a quarter of --steps].", low=1, metavar="STEPS"),
     Option("lr", "float", 0.01, "Adam learning rate.", low=0, low_open=True),
     Option("batch_size", "int", 0, "Samples per step; 0 = full batch.", low=0),
-    Option("seed", "int", 0, "Seed for the row selection, the initial weights and the batches."),
+    Option("seed", "int", 0, "Seed for the row selection, the initial weights and the batches.", low=0),
     Option("val_fraction", "float", 0.2,
            "Share of every constant-velocity stretch held out for validation, in whole pieces (a log without "
            "velocity levels: whole blocks of time, a fold of --ensemble; the default network's choices are made on "
@@ -219,7 +213,7 @@ ADAPT = (
     Option("epochs", "int", 200, "Passes over the training rows, in random mini-batches.", low=1),
     Option("batch_size", "int", 64, "Rows per mini-batch (an epoch is floor(rows / batch size) steps).", low=1),
     Option("lr", "float", 0.01, "Adam learning rate.", low=0, low_open=True),
-    Option("seed", "int", 0, "Seed for the split, weights and batches."),
+    Option("seed", "int", 0, "Seed for the split, weights and batches.", low=0),
     Option("val_fraction", "float", 0.2,
            "Share of every stretch of motion (a log without velocity levels: of the log's time) held out for "
            "validation, in whole pieces; 0 also skips the held-out decision (NN_add kept unchecked).",

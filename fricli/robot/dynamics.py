@@ -37,7 +37,7 @@ import tempfile
 
 import numpy as np
 
-from fricli.core.errors import MissingDependencyError, ModelFileError
+from fricli.core.errors import LogError, MissingDependencyError, ModelFileError
 from fricli.core.logs import DEFAULT_GRAVITY
 from fricli.robot.mapping import Payload
 
@@ -96,6 +96,7 @@ class RobotModel:
         if model.nv == 0:
             raise ModelFileError(f"{name}: the URDF has no moving joints")
         self.links = link_inertials(urdf_text, name)   # each link's own (10,), before Pinocchio merges fixed links
+        check_axes(urdf_text, name)
         self.joints = list(model.names)[1:]
         self.kinds = []
         self.continuous = []  # continuous joints: pinocchio's configuration is (cos q, sin q)
@@ -254,6 +255,26 @@ def link_inertials(urdf_text: str, name: str) -> dict[str, np.ndarray]:
         out[link.get("name")] = np.array([mass, *(mass * c), i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2],
                                           i_o[2, 2]])
     return out
+
+
+def check_axes(urdf_text: str, name: str) -> None:
+    """ModelFileError for a moving joint whose <axis xyz> is zero (once Pinocchio has read the URDF:
+    three numbers): Pinocchio builds the joint all the same, and its torques come out zero."""
+    import xml.etree.ElementTree as ET
+
+    for joint in ET.fromstring(urdf_text).iter("joint"):
+        axis = joint.find("axis")
+        if joint.get("type") != "fixed" and axis is not None and \
+                not np.linalg.norm([float(v) for v in axis.get("xyz", "1 0 0").split()]) > 1e-9:
+            raise ModelFileError(f"{name}: joint {joint.get('name')!r} has the axis {axis.get('xyz')!r}: a joint's "
+                                 "axis is a direction, not zero")
+
+
+def require_positions(signals: dict, where: str) -> None:
+    """LogError when a joint's signals hold no positions q: the rigid-body terms are of q (a log
+    may hold qd alone, which friction needs)."""
+    if "q" not in signals:
+        raise LogError(f"{where}: the robot model needs positions q, and there are none")
 
 
 def check_inertia(tensor: np.ndarray, who: str) -> None:

@@ -248,6 +248,8 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
     (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it. ``cutoff_hz``: of
     the low-pass for derived qd/qdd [Hz]; ``logs.AUTO_CUTOFF``: chosen (``choose_cutoff``); None: chosen
     when every joint has tau_m, else the log contract's ``logs.DEFAULT_CUTOFF_HZ``."""
+    from fricli.robot.dynamics import require_positions
+
     if mapping.match is None:
         raise LogError("choose how the log's joints match the URDF's: match = \"name\" or \"order\" under "
                        "[robot] in the mapping, or --match name|order")
@@ -258,8 +260,7 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
                                  f"{jm.name} is {axis}; a joint the robot model need not move (a gripper's) can be "
                                  f"held at zero with --hold {model.joints[k]} and left out of the mapping (a ROS bag "
                                  "without a mapping leaves held joints out itself)")
-        if "q" not in sig:
-            raise LogError(f"joint {jm.name}: the robot model needs positions q, and there are none")
+        require_positions(sig, f"joint {jm.name}")
     # a continuous joint recorded wrapped to one turn jumps by 2 pi: velocity and acceleration are
     # derived from its unwrapped position (the log keeps q as recorded; the terms read cos q, sin q)
     unwrapped = [str(jm.name) for jm, sig, k in zip(mapping.joints, per_joint, order)

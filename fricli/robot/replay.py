@@ -24,6 +24,7 @@ from fricli.applying import observer
 from fricli.core import joints as joint_rule
 from fricli.core import lazy, logs, metrics, modelset
 from fricli.core.atomic import atomic_open, atomic_write_bytes
+from fricli.core.files import path_arg
 from fricli.core.errors import DataError, InvalidRows, LogError, ModelFileError
 from fricli.fitting import runs
 from fricli.models import coupled
@@ -78,6 +79,10 @@ def read_arm(model_path: str, log_path: str, urdf: str | None = None, zero=()) -
         coupled.add_partners(model, log, table, zero=zero)
         models.check_log(meta, log, path)
         sig = log.signals
+        if urdf is not None:
+            from fricli.robot.dynamics import require_positions
+
+            require_positions(sig, f"{name}: joint {j}")
         if t is None:
             t = sig["t"]
         elif len(sig["t"]) != len(t) or not np.array_equal(sig["t"], t):
@@ -340,13 +345,29 @@ def check_model_path(path: str) -> None:
         raise ModelFileError(f"{path}: no such model file or folder")
 
 
+def checked(who: str, **given) -> dict:
+    """The options of replay, thresholds and export --observer ``given`` as Python keywords,
+    checked as the command line checks them (``OptionError`` naming the option)."""
+    from fricli.fitting.optionspec import Option, check_values
+
+    positive = {name: Option(name, "float", low=0, low_open=True) for name in ("gain", "time_constant", "margin",
+                                                                               "moving_speed")}
+    spec = {**positive, "quantile": Option("quantile", "float", low=0, low_open=True, high=1),
+            "release": Option("release", "float", low=0, low_open=True, high=1, high_open=True),
+            "persistence": Option("persistence", "int", low=1, high=observer.MAX_PERSISTENCE),
+            **{name: Option(name, "flag") for name in ("adapt", "adapt_offset", "level_share", "no_gravity",
+                                                       "no_dynamics", "observer")}}
+    return check_values(given, spec, who)
+
+
 def settings(thresholds: str | None, adapt: bool = False, adapt_offset: bool = False,
              time_constant: float | None = None, gain: float | None = None):
     """(gain, thresholds or None, adaptation or None) of replay's and export --observer's options:
-    the gain given, else the thresholds file's, else ``observer.DEFAULT_GAIN``. Options that do not
-    go together raise ``OptionError``."""
+    the gain given, else the thresholds file's, else ``observer.DEFAULT_GAIN``. Options of the
+    wrong value, or that do not go together, raise ``OptionError``."""
     from fricli.fitting.optionspec import OptionError
 
+    checked("replay", adapt=adapt, adapt_offset=adapt_offset, time_constant=time_constant, gain=gain)
     if adapt and thresholds is None:
         raise OptionError("--adapt needs --thresholds: the adaptation stops while a contact is suspected", "thresholds")
     if adapt_offset and not adapt:
@@ -380,6 +401,9 @@ def replay_log(model: str, log: str, output: str | None = None, *, urdf: str | N
     ``adapt_offset``, ``time_constant`` [s], ``gain`` [1/s], ``no_gravity``, ``no_dynamics`` as the
     command's options), written to ``output`` when given (the log with tau_f_pred, tau_ext_pred
     and contact added)."""
+    checked("replay", no_gravity=no_gravity, no_dynamics=no_dynamics)
+    model, log = path_arg(model, "model", "replay_log"), path_arg(log, "log", "replay_log")
+    output = None if output is None else path_arg(output, "output", "replay_log")
     k, thr, adaptation = settings(thresholds, adapt, adapt_offset, time_constant, gain)
     arm = read_arm(model, log, urdf, runs.zero({"no_gravity": no_gravity, "no_dynamics": no_dynamics}))
     out = run(arm, k, thr, adaptation)
@@ -398,7 +422,15 @@ def calibrate_thresholds(model: str, log_files: str | list[str], output: str | N
     ``log_files`` replayed with ``model`` (``calibrate``), written to ``output`` when given (JSON);
     the keywords are the command's options (``level_share`` False: ``--no-level-share``; ``gain``
     None: ``observer.default_gain`` of the logs' sample interval)."""
-    paths = [log_files] if isinstance(log_files, str) else list(log_files)
+    from fricli.fitting.optionspec import OptionError
+
+    checked("thresholds", gain=gain, quantile=quantile, margin=margin, release=release, moving_speed=moving_speed,
+            persistence=persistence, level_share=level_share, no_gravity=no_gravity, no_dynamics=no_dynamics)
+    model = path_arg(model, "model", "calibrate_thresholds")
+    listed = [log_files] if isinstance(log_files, (str, bytes, os.PathLike)) or log_files is None else log_files
+    paths = [path_arg(p, "log_files", "calibrate_thresholds") for p in listed]
+    if not paths:
+        raise OptionError("no collision-free log given to calibrate on", "log_files")
     zero = runs.zero({"no_gravity": no_gravity, "no_dynamics": no_dynamics})
     thr = calibrate(model, paths, urdf, gain, quantile, margin, release, moving_speed, zero=zero,
                     persistence=persistence, level=level_share)

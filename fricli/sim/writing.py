@@ -39,6 +39,8 @@ def simulate_log(output: str, *, scenario: str = "base", joint: int = 2, load: s
                   "wearing": wearing, "rate": rate, "duration": duration}, _SPEC, "simulate")
     if str(joint) not in ("2", "4") or isinstance(joint, bool):
         raise OptionError(f"simulate option joint: expected 2 or 4, got {joint!r}", "joint")
+    effects = (effects,) if isinstance(effects, str) else effects
+    contacts = tuple(contact_of(c) for c in ((contacts,) if isinstance(contacts, str) else contacts))
     try:
         effects = resolve_effects(effects)
     except ValueError as exc:
@@ -72,6 +74,16 @@ def simulate_log(output: str, *, scenario: str = "base", joint: int = 2, load: s
     _check_magnitudes(table, "contacts" if contacts else "effects")
     write(table, output)
     return table
+
+
+def contact_of(value) -> tuple[float, float, float]:
+    """A contact as (start [s], torque [Nm], duration [s]), from that or from "START,TORQUE,DURATION"
+    (--contact); OptionError otherwise."""
+    try:
+        start, torque, length = (float(x) for x in (value.split(",") if isinstance(value, str) else value))
+    except (TypeError, ValueError):
+        raise OptionError(f"expected START,TORQUE,DURATION like 30,5,2, got {value!r}", "contacts") from None
+    return start, torque, length
 
 
 def _check_magnitudes(table, option: str) -> None:

@@ -9,7 +9,8 @@ import os
 import numpy as np
 
 from fricli.core import logs, transmission
-from fricli.core.errors import LogError
+from fricli.core.errors import InvalidRows, LogError
+from fricli.robot.dynamics import require_positions
 from fricli.numerics.threads import pinned
 
 
@@ -45,7 +46,12 @@ def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[
             raise LogError(f"{name}: the log does not record how its joints match the URDF's: give --match name|order")
         match = "name"
         urdf_names = {**record["joints"], **urdf_names}
-    per_joint = [logs.from_table(table, name=name, joint=j, cutoff_hz=cutoff_hz) for j in names]
+    try:
+        per_joint = [logs.from_table(table, name=name, joint=j, cutoff_hz=cutoff_hz) for j in names]
+    except InvalidRows as exc:   # no --drop-invalid here: a whole-arm fit takes every row of every joint
+        raise LogError(f"{exc.what}; remove those rows from the log (fricli import drops malformed rows)") from None
+    for j, log in zip(names, per_joint):
+        require_positions(log.signals, f"{name}: joint {j}")
     t = per_joint[0].signals["t"]
     for log in per_joint[1:]:
         if len(log) != len(t) or not np.array_equal(log.signals["t"], t):

@@ -91,7 +91,15 @@ def write(text: str, report: dict, output: str, report_file: str | None = None) 
     from fricli.core import jsontext
     from fricli.core.atomic import atomic_write_bytes
 
+    import os
+
+    from fricli.core.errors import OutputError
+
     where = report_file or (None if output == "-" else report_path(output))
+    for path in (output, where):   # both folders first: a failed report must not leave a new URDF
+        folder = os.path.dirname(os.path.abspath(path)) if path not in (None, "-") else None
+        if folder is not None and not os.path.isdir(folder):
+            raise OutputError(f"cannot write {path}: folder {folder} does not exist")
     report["report"] = where
     atomic_write_bytes(output, text.encode())
     if where:
