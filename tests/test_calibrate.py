@@ -463,6 +463,11 @@ def test_refusals(arm, tmp_path):
     pq.write_table(pq.read_table(log).drop_columns(["q"]), tmp_path / "no_q.parquet")
     res = fricli("calibrate", "no_q.parquet", "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.INPUT and "joint 1: the robot model needs positions q" in res.stderr, res.stderr
+    # a prismatic joint for a rotary log's joint: refused as fricli import refuses it
+    (tmp_path / "prismatic.urdf").write_text(URDF.replace('<joint name="j3" type="revolute">',
+                                                          '<joint name="j3" type="prismatic">'))
+    res = fricli("calibrate", log, "--urdf", "prismatic.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
+    assert res.returncode == errors.MODEL and "joint j3 is linear, but log joint 3 is rotary" in res.stderr, res.stderr
     # a report into a missing folder: the existing URDF stays as it was
     (tmp_path / "cal.urdf").write_text("mine")
     t, q, qd, qdd = fit

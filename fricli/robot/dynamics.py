@@ -270,6 +270,14 @@ def check_axes(urdf_text: str, name: str) -> None:
                                  "axis is a direction, not zero")
 
 
+def check_kind(robot: "RobotModel", k: int, log_joint, axis: str, hint: str = "") -> None:
+    """ModelFileError when URDF joint ``k`` (revolute or prismatic) is not of the kind of the log's
+    joint ``log_joint`` (``axis``: its units', rotary or linear)."""
+    if robot.kinds[k] != axis:
+        raise ModelFileError(f"{robot.name}: joint {robot.joints[k]} is {robot.kinds[k]}, but log joint {log_joint} "
+                             f"is {axis}{hint}")
+
+
 def require_positions(signals: dict, where: str) -> None:
     """LogError when a joint's signals hold no positions q: the rigid-body terms are of q (a log
     may hold qd alone, which friction needs)."""

@@ -16,7 +16,7 @@ import os
 import numpy as np
 
 from fricli.core import logs
-from fricli.core.errors import LogError, ModelFileError
+from fricli.core.errors import LogError
 from fricli.core import transmission
 from fricli.robot.mapping import Mapping
 from fricli.robot.recording import KINDS, Recording, read_recording
@@ -248,18 +248,16 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
     (n,) per joint of ``mapping``, all at times ``t``) in place; the record of it. ``cutoff_hz``: of
     the low-pass for derived qd/qdd [Hz]; ``logs.AUTO_CUTOFF``: chosen (``choose_cutoff``); None: chosen
     when every joint has tau_m, else the log contract's ``logs.DEFAULT_CUTOFF_HZ``."""
-    from fricli.robot.dynamics import require_positions
+    from fricli.robot.dynamics import check_kind, require_positions
 
     if mapping.match is None:
         raise LogError("choose how the log's joints match the URDF's: match = \"name\" or \"order\" under "
                        "[robot] in the mapping, or --match name|order")
     order = model.match([jm.urdf or str(jm.name) for jm in mapping.joints], mapping.match)
     for jm, sig, k in zip(mapping.joints, per_joint, order):
-        if model.kinds[k] != axis:
-            raise ModelFileError(f"{model.name}: joint {model.joints[k]} is {model.kinds[k]}, but log joint "
-                                 f"{jm.name} is {axis}; a joint the robot model need not move (a gripper's) can be "
-                                 f"held at zero with --hold {model.joints[k]} and left out of the mapping (a ROS bag "
-                                 "without a mapping leaves held joints out itself)")
+        check_kind(model, k, jm.name, axis, f"; a joint the robot model need not move (a gripper's) can be held at "
+                   f"zero with --hold {model.joints[k]} and left out of the mapping (a ROS bag without a mapping "
+                   "leaves held joints out itself)")
         require_positions(sig, f"joint {jm.name}")
     # a continuous joint recorded wrapped to one turn jumps by 2 pi: velocity and acceleration are
     # derived from its unwrapped position (the log keeps q as recorded; the terms read cos q, sin q)

@@ -174,6 +174,9 @@ def momentum_terms(urdf: str, schema, jnames: list, sig: dict, name: str,
         idx = robot.match([named[str(j)] for j in jnames], "name")
     else:
         idx = robot.match([None] * len(jnames), "order")
+    axis = logs.axis_of(schema, name)
+    for k, j in zip(idx, jnames):
+        dynamics.check_kind(robot, k, j, axis)
     nv = len(robot.joints)
     n = len(next(iter(sig.values()))["t"])
     q, qd = np.zeros((n, nv)), np.zeros((n, nv))

@@ -10,7 +10,7 @@ import numpy as np
 
 from fricli.core import logs, transmission
 from fricli.core.errors import InvalidRows, LogError
-from fricli.robot.dynamics import require_positions
+from fricli.robot.dynamics import check_kind, require_positions
 from fricli.numerics.threads import pinned
 
 
@@ -56,9 +56,9 @@ def read_motion(table, name: str, robot, *, match: str | None, urdf_names: dict[
     for log in per_joint[1:]:
         if len(log) != len(t) or not np.array_equal(log.signals["t"], t):
             raise LogError(f"{name}: joints {names[0]} and {log.joint} are not sampled at the same times")
-    if per_joint[0].axis != "rotary" and any(k == "rotary" for k in robot.kinds):
-        raise LogError(f"{name}: the log's units are linear, the URDF's joints rotary")
     order = robot.match([urdf_names.get(str(j), str(j)) for j in names], match)
+    for j, log, k in zip(names, per_joint, order):
+        check_kind(robot, k, j, log.axis)
     by_urdf = [order.index(k) for k in range(len(order))]
     stack = lambda c: np.column_stack([per_joint[i].signals[c] for i in by_urdf])  # noqa: E731
     recorded = record.get("rotor_inertia") or {}
