@@ -35,7 +35,7 @@ import numpy as np
 
 from fricli.core import jobs, logs, metrics, modelset, timewindow
 from fricli.core.atomic import atomic_write_bytes
-from fricli.core.errors import LogError
+from fricli.core.errors import FricliError, LogError
 from fricli.fitting.optionspec import OptionError
 
 STEPS_FILE = "fit-arm.json"
@@ -93,34 +93,41 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
     check_inputs(list(recordings), mapping, urdf, list(validate))
     os.makedirs(out, exist_ok=True)
     run = _Steps(out, if_changed, say)
+    earlier = bool(run.record)   # the folder holds a run before this one
     with jobs.output_lock(os.path.join(out, STEPS_FILE)):
-        window = timewindow.Window(None, timewindow.Bound.parse(f"{100 * (1 - share):g}%")) if share else None
-        fit_cad = run.imported("fit-cad.parquet", recordings, mapping, urdf, cutoff_hz)
-        lugre = run.models("lugre", "identify", fit_cad, window)
-        cal_urdf = run.calibrated("robot.urdf", fit_cad, urdf, window, cutoff_hz)
-        fit = run.imported("fit.parquet", recordings, mapping, cal_urdf, cutoff_hz)
-        fixed = run.models("fixed", "diagnose", fit, window, inputs=lugre, urdf=cal_urdf)
-        if validate:
-            pairs = [(run.imported(f"validate/{name}-cad.parquet", [v], mapping, urdf, cutoff_hz),
-                      run.imported(f"validate/{name}.parquet", [v], mapping, cal_urdf, cutoff_hz))
-                     for v, name in zip(validate, _names(validate))]
-            held = f"{len(validate)} validation recording{'s' if len(validate) > 1 else ''}"
-        else:
-            pairs = [(fit_cad, fit)]
-            held = f"the last {share:.0%} of the recording's time"
-        header = run.exported("friction.h", fixed, prefix)
-        scores = run.last_scores() if not run.redone else None
-        if scores is None:
-            say("scoring on held-out data ...")
-            scores = score(fit_cad, window, lugre, fixed, pairs, None if validate else share)
-        ratios = [s["ratio"] for s in scores.values() if np.isfinite(s["ratio"])]
-        report = ArmReport({"import": fit_cad, "identify": lugre, "calibrate": cal_urdf, "import_calibrated": fit,
-                            "diagnose": fixed, "export": header}, scores,
-                           float(np.mean(ratios)) if ratios else float("nan"), held, list(dict.fromkeys(run.notices)),
-                           run.redone)
-        if run.redone or not os.path.exists(os.path.join(out, "report.json")):
-            _write_report(out, report, recordings, urdf)
-        run.save()
+        try:
+            window = timewindow.Window(None, timewindow.Bound.parse(f"{100 * (1 - share):g}%")) if share else None
+            fit_cad = run.imported("fit-cad.parquet", recordings, mapping, urdf, cutoff_hz)
+            lugre = run.models("lugre", "identify", fit_cad, window)
+            cal_urdf = run.calibrated("robot.urdf", fit_cad, urdf, window, cutoff_hz)
+            fit = run.imported("fit.parquet", recordings, mapping, cal_urdf, cutoff_hz)
+            fixed = run.models("fixed", "diagnose", fit, window, inputs=lugre, urdf=cal_urdf)
+            if validate:
+                pairs = [(run.imported(f"validate/{name}-cad.parquet", [v], mapping, urdf, cutoff_hz),
+                          run.imported(f"validate/{name}.parquet", [v], mapping, cal_urdf, cutoff_hz))
+                         for v, name in zip(validate, _names(validate))]
+                held = f"{len(validate)} validation recording{'s' if len(validate) > 1 else ''}"
+            else:
+                pairs = [(fit_cad, fit)]
+                held = f"the last {share:.0%} of the recording's time"
+            header = run.exported("friction.h", fixed, prefix)
+            scores = run.last_scores() if not run.redone else None
+            if scores is None:
+                say("scoring on held-out data ...")
+                scores = score(fit_cad, window, lugre, fixed, pairs, None if validate else share)
+            ratios = [s["ratio"] for s in scores.values() if np.isfinite(s["ratio"])]
+            report = ArmReport({"import": fit_cad, "identify": lugre, "calibrate": cal_urdf, "import_calibrated": fit,
+                                "diagnose": fixed, "export": header}, scores,
+                               float(np.mean(ratios)) if ratios else float("nan"), held,
+                               list(dict.fromkeys(run.notices)), run.redone)
+            if run.redone or not os.path.exists(os.path.join(out, "report.json")):
+                _write_report(out, report, recordings, urdf)
+            run.save()
+        except FricliError as exc:   # say which files are this run's: the others are of the run before
+            if earlier and run.redone:
+                exc.args = (f"{exc} (in {out}, this run redid {', '.join(run.redone)}; its other files are of the "
+                            "run before)",)
+            raise
     return report
 
 

@@ -93,3 +93,28 @@ def test_the_python_call_refuses_what_the_command_refuses(tmp_path):
         fricli.fit_arm([tmp_path / "nothing.csv"], MAPPING, MAPPING, tmp_path / "o")
     assert missing.value.exit_code == errors.INPUT and "nothing.csv" in str(missing.value)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_a_failed_run_over_an_earlier_one_says_which_files_are_its_own(arm, tmp_path, monkeypatch):
+    """A step failing after others were redone leaves a folder of two runs: the error says which."""
+    import shutil
+
+    import fricli
+    from fricli import arm as arm_module
+
+    out, args, _ = arm
+    copy = tmp_path / "arm"
+    shutil.copytree(out, copy)
+    recording = tmp_path / FIT_RUN
+    recording.write_bytes(args[0].read_bytes() + b"\n")          # another file: the import is redone
+
+    def failing(self, *a, **k):
+        raise errors.DataError("joint 3: the joint does not move")
+
+    monkeypatch.setattr(arm_module._Steps, "models", failing)
+    with pytest.raises(errors.DataError) as info:
+        fricli.fit_arm([str(recording)], str(MAPPING), str(args[4]), str(copy), if_changed=True)
+    assert str(info.value) == (f"joint 3: the joint does not move (in {copy}, this run redid fit-cad.parquet; "
+                               "its other files are of the run before)")
+    assert (copy / "report.md").read_bytes() == (out / "report.md").read_bytes()

@@ -77,6 +77,10 @@ def test_a_joint_the_log_lacks_is_refused_with_the_way_to_hold_it(gripper_arm):
     done = fricli("dynamics", raw, "--urdf", "gripper.urdf", "--match", "name", "--hold", "nosuch", "-o", "x.parquet",
                   cwd=root)
     assert done.returncode == errors.MODEL and "no moving joint 'nosuch' to hold" in done.stderr, done.stderr
+    done = fricli("dynamics", raw, "--urdf", "gripper.urdf", "--match", "name", "--hold", "finger_l", "--hold", "finger_r", "--hold", "j2",
+                  "-o", "x.parquet", cwd=root)
+    assert done.returncode == errors.MODEL, done.stderr
+    assert "joint 'j2' is held at zero" in done.stderr and "but the log records it" in done.stderr, done.stderr
 
 
 def test_held_joints_give_the_terms_of_the_urdf_with_them_fixed(gripper_arm):

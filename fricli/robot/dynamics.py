@@ -145,6 +145,9 @@ class RobotModel:
                                      "matching by order needs the same count")
             return list(range(n_urdf))
         missing = [u for u in urdf_names if u not in self.joints]
+        if missing and missing[0] in self.held:
+            raise ModelFileError(f"{self.name}: joint {missing[0]!r} is held at zero (--hold, or hold = [...] in the "
+                                 "mapping), but the log records it: hold only joints the log does not record")
         if missing:
             raise ModelFileError(f"{self.name}: no joint {missing[0]!r} (it has {', '.join(self.joints)})")
         dup = next((u for u in urdf_names if urdf_names.count(u) > 1), None)
