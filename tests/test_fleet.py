@@ -542,3 +542,27 @@ def test_on_a_terminal_the_progress_bar_is_drawn_and_cleared_before_the_table(fl
     pieces = bar.split("\r")
     assert pieces[-1] == "" and pieces[-2].strip() == "" and len(pieces[-2]) >= 50, repr(bar[-200:])   # wiped
     assert "4 jobs: 4 ok" in table and "fleet:" not in table
+
+
+def test_the_scratch_folder_of_a_killed_run_is_removed_by_the_next(tmp_path):
+    """A run killed with SIGKILL cannot remove its cluster's scratch folder; the next run removes
+    it: old enough, and locked by no process (a live run holds its folder's lock)."""
+    import fcntl
+    import os
+    import time
+
+    from fricli.fleet import run
+
+    dead, live, young = (tmp_path / f"{run.SCRATCH_PREFIX}{name}" for name in ("dead", "live", "young"))
+    for folder in (dead, live, young):
+        (folder / "dask-scratch-space").mkdir(parents=True)
+    old = time.time() - 2 * run.SCRATCH_AGE
+    for folder in (dead, live):
+        os.utime(folder, (old, old))
+    held = os.open(live, os.O_RDONLY)
+    fcntl.flock(held, fcntl.LOCK_EX)
+    try:
+        assert run.remove_stale_scratch(str(tmp_path)) == [str(dead)]
+    finally:
+        os.close(held)
+    assert not dead.exists() and live.exists() and young.exists()

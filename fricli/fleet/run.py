@@ -7,11 +7,13 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
+import fcntl
 import os
 import secrets
 import shutil
 import sys
 import tempfile
+import time
 from typing import Callable, Iterator
 
 from fricli.core import errors
@@ -89,7 +91,10 @@ def client(scheduler: str | None = None, workers: int | None = None, timeout: fl
         sys.warnoptions.append(quiet_tracker)
     # the workers' scratch space (and its lock files) in a folder of this run, removed at its end:
     # Dask's default, dask-scratch-space in $TMPDIR, keeps lock files after the cluster closes
-    scratch = tempfile.mkdtemp(prefix="fricli-dask-")
+    remove_stale_scratch()
+    scratch = tempfile.mkdtemp(prefix=SCRATCH_PREFIX)
+    held = os.open(scratch, os.O_RDONLY)
+    fcntl.flock(held, fcntl.LOCK_EX)   # this run's, until its end (``remove_stale_scratch``)
     import dask
 
     try:
@@ -103,6 +108,36 @@ def client(scheduler: str | None = None, workers: int | None = None, timeout: fl
             yield c
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        os.close(held)
+
+
+SCRATCH_PREFIX = "fricli-dask-"
+SCRATCH_AGE = 60.0   # s: a scratch folder is locked by its run this long after its creation at the latest
+
+
+def remove_stale_scratch(folder: str | None = None) -> list[str]:
+    """Remove the scratch folders in ``folder`` (default $TMPDIR) of local clusters whose run was
+    killed with SIGKILL: older than SCRATCH_AGE and locked by no process (a run holds an exclusive
+    ``flock`` on its folder until it ends; the kernel drops a dead process's). Returns those removed."""
+    import glob
+
+    removed = []
+    for path in glob.glob(os.path.join(folder or tempfile.gettempdir(), SCRATCH_PREFIX + "*")):
+        try:
+            if time.time() - os.stat(path).st_mtime < SCRATCH_AGE:
+                continue
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # fails while its run holds it
+            shutil.rmtree(path, ignore_errors=True)
+            removed.append(path)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+    return removed
 
 
 def run_id(now: dt.datetime) -> str:
