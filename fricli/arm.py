@@ -112,7 +112,10 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
                 held = f"the last {share:.0%} of the recording's time"
             header = run.exported("friction.h", fixed, prefix)
             scores = run.last_scores() if not run.redone else None
-            if scores is None:
+            if scores is None or not all(os.path.isfile(os.path.join(out, f)) for f in ("report.md", "report.json")):
+                if not run.redone:   # nothing else redone: the report was missing or damaged; its notes kept
+                    run.redone.append("report")
+                    run.notices = run.notices or run.last_notices
                 say("scoring on held-out data ...")
                 scores = score(fit_cad, window, lugre, fixed, pairs, None if validate else share)
             ratios = [s["ratio"] for s in scores.values() if np.isfinite(s["ratio"])]
@@ -120,7 +123,7 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
                                 "diagnose": fixed, "export": header}, scores,
                                float(np.mean(ratios)) if ratios else float("nan"), held,
                                list(dict.fromkeys(run.notices)), run.redone)
-            if run.redone or not os.path.exists(os.path.join(out, "report.json")):
+            if run.redone:
                 _write_report(out, report, recordings, urdf)
             run.save()
         except FricliError as exc:   # say which files are this run's: the others are of the run before
@@ -152,10 +155,14 @@ class _Steps:
         self.out, self.if_changed, self.say = out, if_changed, say
         self.path = os.path.join(out, STEPS_FILE)
         self.notices, self.redone = [], []
+        self.last_notices: list = []   # the notices of the last run's report (``last_scores``)
         try:
             with open(self.path, encoding="utf-8") as fh:
                 self.record = json.load(fh).get("steps", {})
         except (OSError, ValueError, AttributeError):
+            self.record = {}
+        if not isinstance(self.record, dict) or not all(   # a record of another shape: every step is redone
+                isinstance(r, dict) and isinstance(r.get("outputs"), dict) for r in self.record.values()):
             self.record = {}
 
     def _fresh(self, name: str, key: dict, outputs: list[str]) -> bool:
@@ -239,8 +246,10 @@ class _Steps:
         """The scores of the last run's report when ``if_changed`` and it is there (nothing was redone)."""
         try:
             with open(os.path.join(self.out, "report.json"), encoding="utf-8") as fh:
-                scores = json.load(fh)["scores"]
-        except (OSError, ValueError, KeyError, TypeError):
+                last = json.load(fh)
+            scores = last["scores"]
+            self.last_notices = [("note", str(line)) for line in last.get("notices", [])]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
             return None
         if not self.if_changed or not isinstance(scores, dict):
             return None

@@ -118,3 +118,21 @@ def test_a_failed_run_over_an_earlier_one_says_which_files_are_its_own(arm, tmp_
     assert str(info.value) == (f"joint 3: the joint does not move (in {copy}, this run redid fit-cad.parquet; "
                                "its other files are of the run before)")
     assert (copy / "report.md").read_bytes() == (out / "report.md").read_bytes()
+
+
+@pytest.mark.slow
+def test_a_missing_report_is_made_again_and_a_step_record_of_another_shape_redoes_the_steps(arm, tmp_path):
+    import shutil
+
+    out, args, _ = arm
+    copy = tmp_path / "arm"
+    shutil.copytree(out, copy)
+    args = [copy if a == out else a for a in args]
+    (copy / "report.md").unlink()
+    done = invoke("fit-arm", *args, "--if-changed")
+    assert done.exit_code == 0, done.output
+    assert (copy / "report.md").read_bytes() == (out / "report.md").read_bytes()
+    (copy / "fit-arm.json").write_text('{"steps": 5}')
+    done = invoke("fit-arm", *args, "--if-changed", "--json")
+    assert done.exit_code == 0, done.output
+    assert "fit-cad.parquet" in json.loads(done.stdout)["redone"]   # redone, the record being of no use

@@ -210,6 +210,34 @@ def test_unreachable_scheduler(fleet_dir, tmp_path):
     assert "cannot reach the Dask scheduler" in res.stderr and len(res.stderr.splitlines()) == 1
 
 
+@pytest.mark.parametrize("address", ["garbage", "tcp://127.0.0.1", "foo://1.2.3.4:1"])
+def test_a_scheduler_address_that_is_none_is_nothing_ran(fleet_dir, tmp_path, address):
+    folder = copy_of(fleet_dir, tmp_path)
+    res = invoke("fleet", "fleet.toml", "--scheduler", address, cwd=folder)
+    assert res.returncode == errors.NOTHING_RAN, res.stderr
+    assert "cannot reach the Dask scheduler" in res.stderr and len(res.stderr.splitlines()) == 1
+
+
+def test_a_history_that_is_a_file_runs_nothing(fleet_dir, tmp_path):
+    """No job runs (their models would be rewritten and the history never written): 12, one line."""
+    folder = copy_of(fleet_dir, tmp_path)
+    shutil.rmtree(folder / "history", ignore_errors=True)
+    (folder / "history").write_text("x")
+    res = invoke("fleet", "fleet.toml", cwd=folder)
+    assert res.returncode == errors.NOTHING_RAN and "is a file, not a folder: no job ran" in res.stderr, res.stderr
+    assert not (folder / "models").exists() or not any((folder / "models").rglob("*.npz"))
+
+
+def test_a_base_the_manifest_writes_is_refused(tmp_path):
+    """Adapted from a model it overwrites, a job's models would drift from night to night."""
+    (tmp_path / "logs").mkdir()
+    (tmp_path / "logs" / "2026-01-02.parquet").write_bytes(b"")
+    (tmp_path / "m.toml").write_text('[fleet]\npipeline = "adapt"\n[[robot]]\nname = "r1"\njoints = [2]\n'
+                                     'logs = "logs/*.parquet"\nbase = "models/r1/joint2/2026-01-02.npz"\n')
+    with pytest.raises(manifest.ManifestError, match="is a model a job of this manifest writes"):
+        manifest.load(str(tmp_path / "m.toml"))
+
+
 # ------------------------------------------------------------------ trends on made-up histories
 
 
@@ -566,3 +594,39 @@ def test_the_scratch_folder_of_a_killed_run_is_removed_by_the_next(tmp_path):
     finally:
         os.close(held)
     assert not dead.exists() and live.exists() and young.exists()
+
+
+def test_a_baseline_too_short_to_flag_anything_is_refused(tmp_path, rng):
+    """A baseline is the median of at least 3 days' values: --baseline-days 1 or 2 would leave every
+    joint "too little data" and switch the alarm off without a word."""
+    from fricli.cli import cli as group
+
+    synthetic_history(tmp_path / "h", rng)
+    option = next(p for p in group.get_command(None, "trend").params if p.name == "baseline_days")
+    assert option.type.min == trend.MIN_BASELINE_DAYS
+    res = invoke("trend", "h", "--baseline-days", "2", cwd=tmp_path)
+    assert res.returncode == errors.USAGE and "--baseline-days" in res.stderr
+    from fricli import fleet_trend
+
+    with pytest.raises(errors.OptionError):
+        fleet_trend(str(tmp_path / "h"), baseline_days=2)
+
+
+def test_a_damaged_history_part_is_named_in_one_line(tmp_path, rng):
+    """Columns of another type, missing dates, dates out of range: 3 (INPUT) naming the file."""
+    import glob
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    for change in (lambda t: t.set_column(t.schema.get_field_index("fc"), "fc", pa.array(["x"] * t.num_rows)),
+                   lambda t: t.set_column(t.schema.get_field_index("date"), "date", pa.nulls(t.num_rows, pa.date32())),
+                   lambda t: t.set_column(t.schema.get_field_index("date"), "date",
+                                          pa.array([-800000] * t.num_rows, pa.date32()))):
+        folder = tmp_path / f"h{len(list(tmp_path.iterdir()))}"
+        synthetic_history(folder, rng)
+        part = sorted(glob.glob(str(folder / "robot=*" / "*.parquet")))[0]
+        pq.write_table(change(pq.read_table(part)), part)
+        res = invoke("trend", folder.name, cwd=tmp_path)
+        assert res.returncode == errors.INPUT and res.stderr.count("\n") == 1, res.stderr
+        assert f"{part}: not a fricli history file" in res.stderr or "not a fricli history file" in res.stderr

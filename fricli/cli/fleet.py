@@ -79,8 +79,8 @@ def fleet_cmd(manifest, scheduler, connect_timeout, workers, force, list_only, a
 @click.argument("history", type=click.Path(file_okay=False))
 @click.option("--param", "params", multiple=True, default=("fc", "fv"), show_default=True,
               help="Parameter to watch (repeatable): fc, fs, fv, ...")
-@click.option("--baseline-days", type=click.IntRange(min=1), default=7, show_default=True,
-              help="The first days of a joint's data that set its baseline.")
+@click.option("--baseline-days", type=click.IntRange(min=3), default=7, show_default=True,   # trend.MIN_BASELINE_DAYS
+              help="The first days of a joint's data that set its baseline (a median of one value a day: 3 at least).")
 @click.option("--window-days", type=click.IntRange(min=2), default=14, show_default=True,
               help="Days over which the growth is measured (the latest ones).")
 @click.option("--max-level", type=Number(min=0, min_open=True), default=0.15, show_default=True,

@@ -121,7 +121,15 @@ def read(history: str, *, partitioned: bool = False) -> pa.Table:
             missing = [f.name for f in SCHEMA if f.name not in table.column_names]
             if missing:
                 raise LogError(f"{path}: not a fricli history file (no column {missing[0]})")
-            table = table.select([f.name for f in SCHEMA]).cast(SCHEMA)
+            try:   # columns of other types, and dates Python cannot hold, are no history of fricli's
+                table = table.select([f.name for f in SCHEMA]).cast(SCHEMA)
+                table.column("date").to_pylist()
+                table.column("run_time").to_pylist()
+            except (pa.ArrowException, OverflowError, ValueError, TypeError) as exc:
+                raise LogError(f"{path}: not a fricli history file ({str(exc).splitlines()[0]})") from None
+            empty = [c for c in ("joint", "date", "run_time", "status") if table.column(c).null_count]
+            if empty:
+                raise LogError(f"{path}: not a fricli history file (missing values in column {empty[0]})")
             tables.append(table.append_column(pa.field("robot", pa.string()), pa.array([robot] * table.num_rows,
                                                                                       pa.string())))
     if not tables:

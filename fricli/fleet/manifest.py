@@ -216,6 +216,11 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
                                 base=os.path.join(root, _fill(base, name, jname)) if base else None,
                                 diagnose=diagnose))
             jobs[first:] = _clashes(jobs[first:])
+    written = {os.path.realpath(job.model) for job in jobs}
+    drifting = next((job for job in jobs if job.base and os.path.realpath(job.base) in written), None)
+    if drifting is not None:   # a base a job writes: each night's models adapted from the last night's
+        raise ManifestError(f"{path}: robot {drifting.robot}: the base {drifting.base} is a model a job of this "
+                            "manifest writes: give adapt a base outside the models folder")
     return Manifest(path=os.path.abspath(path), history=history, jobs=tuple(jobs), unmatched=tuple(unmatched))
 
 

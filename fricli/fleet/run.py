@@ -72,7 +72,7 @@ def client(scheduler: str | None = None, workers: int | None = None, timeout: fl
     if scheduler:
         try:
             c = distributed.Client(scheduler, timeout=f"{timeout:g}s")
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, ValueError) as exc:   # ValueError: an address that is none
             raise ClusterError(f"cannot reach the Dask scheduler {scheduler}: {errors.one_line(str(exc))}") from None
         with c:
             yield c
@@ -174,6 +174,11 @@ def run(manifest: Manifest, *, scheduler: str | None = None, workers: int | None
 
 
 def _run(manifest: Manifest, *, scheduler, workers, if_changed: bool, on_done, timeout: float) -> Outcome:
+    from fricli.fleet.manifest import ManifestError
+
+    if os.path.exists(manifest.history) and not os.path.isdir(manifest.history):
+        raise ManifestError(f"the history {manifest.history} is a file, not a folder: no job ran (move the file "
+                            "away, or give [fleet] history another name)")
     now = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
     run = run_id(now)
     jobs = list(manifest.jobs)

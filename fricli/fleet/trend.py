@@ -19,6 +19,8 @@ import datetime as dt
 
 import numpy as np
 
+MIN_BASELINE_DAYS = 3   # days of data (one value a day) a baseline is the median of, at least
+
 DEFAULT_PARAMS = ("fc", "fv")
 
 
@@ -80,9 +82,9 @@ def joint_trend(robot: str, joint: str, rows: list[dict], rule: WearRule) -> Joi
         return out
     day = np.array([(d - dates[0]).days for d in dates], dtype=float)
     base_rows = day < rule.baseline_days
-    if day[-1] < rule.baseline_days or base_rows.sum() < 3:
+    if day[-1] < rule.baseline_days or base_rows.sum() < MIN_BASELINE_DAYS:
         out.note = f"too little data: {len(dates)} days over {int(day[-1]) + 1}, needs {rule.baseline_days} " \
-                   "days of baseline (3 logs at least) and later data"
+                   f"days of baseline ({MIN_BASELINE_DAYS} logs at least) and later data"
         return out
     recent_window = day > day[-1] - rule.window_days
     for p in rule.params:
@@ -225,7 +227,7 @@ class Trend:
 def _spec() -> dict:
     from fricli.fitting.optionspec import Option
 
-    return {o.name: o for o in (Option("baseline_days", "int", 7, low=1), Option("window_days", "int", 14, low=2),
+    return {o.name: o for o in (Option("baseline_days", "int", 7, low=MIN_BASELINE_DAYS), Option("window_days", "int", 14, low=2),
                                 Option("max_level", "float", 0.15, low=0.0, low_open=True),
                                 Option("max_growth", "float", 0.01, low=0.0, low_open=True))}
 
