@@ -56,6 +56,7 @@ _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cach
 MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
 VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the top speed: exp(-3) < MINOR at half of it
+VS_WIDE_SHARE = 1.0 / 3.0  # the bound tried when the fit runs vs to the first: exp(-3) < MINOR at the top speed
 FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
 
 
@@ -245,7 +246,8 @@ class LuGreIdentifier:
         # vanishing Coulomb level, a viscous slope traded against it): no breakaway the log shows. Bounds:
         # at half the top speed 95 % of the drop Fs - Fc is done (delta = 1; more with a larger delta),
         # and vs not far below the slowest row
-        layout = _Layout(stribeck=stribeck, load=load is not None, vs_max=VS_MAX_SHARE * float(np.abs(v).max()),
+        top = float(np.abs(v).max())
+        layout = _Layout(stribeck=stribeck, load=load is not None, vs_max=VS_MAX_SHARE * top,
                          vs_min=MINOR * float(np.abs(v).min()))
         if stribeck:
             start["vs"] = min(max(start["vs"], 2 * layout.vs_min), 0.5 * layout.vs_max)
@@ -271,6 +273,21 @@ class LuGreIdentifier:
             if layout.stribeck and math.exp(-(layout.vs_min / MINOR / params["vs"]) ** params["delta"]) < MINOR:
                 bound["vs"] = "lower"   # the rise Fs - Fc is gone by the slowest row: no row shows Fs
 
+            if bound.get("vs") == "upper" and layout.stribeck and layout.vs_max < VS_WIDE_SHARE * top:
+                # slow sweeps (a top speed of 3 to 6 Stribeck velocities): the drop is done by the top
+                # speed, not by half of it. The wider bound is kept when no parameter reaches a bound
+                # there; else (a decay across all the speeds, traded against Fc and Fv) as before
+                wide = dataclasses.replace(layout, vs_max=VS_WIDE_SHARE * top)
+                layout, narrow = wide, layout
+                res_w = _least_squares(residual, wide.encode(params), wide.bounds(), self.max_nfev, "static parameters")
+                nfev += int(res_w.nfev)
+                params_w = wide.decode(res_w.x, fixed)
+                bound_w = _at_bounds(wide.names, res_w, *wide.bounds())
+                bound_w.update(_coulomb_in_load(wide, params_w, _typical({"l": load}, "l", slice(None))))
+                if bound_w or math.exp(-(wide.vs_min / MINOR / params_w["vs"]) ** params_w["delta"]) < MINOR:
+                    layout = narrow
+                else:
+                    res, params, bound = res_w, params_w, {}
             hit.update(bound)
             if not bound:
                 break
