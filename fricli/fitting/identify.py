@@ -247,6 +247,7 @@ class LuGreIdentifier:
         # at half the top speed 95 % of the drop Fs - Fc is done (delta = 1; more with a larger delta),
         # and vs not far below the slowest row
         top = float(np.abs(v).max())
+        vs_wide = VS_WIDE_SHARE * top
         layout = _Layout(stribeck=stribeck, load=load is not None, vs_max=VS_MAX_SHARE * top,
                          vs_min=MINOR * float(np.abs(v).min()))
         if stribeck:
@@ -273,11 +274,11 @@ class LuGreIdentifier:
             if layout.stribeck and math.exp(-(layout.vs_min / MINOR / params["vs"]) ** params["delta"]) < MINOR:
                 bound["vs"] = "lower"   # the rise Fs - Fc is gone by the slowest row: no row shows Fs
 
-            if bound.get("vs") == "upper" and layout.stribeck and layout.vs_max < VS_WIDE_SHARE * top:
+            if bound.get("vs") == "upper" and layout.stribeck and vs_wide > layout.vs_max:
                 # slow sweeps (a top speed of 3 to 6 Stribeck velocities): the drop is done by the top
                 # speed, not by half of it. The wider bound is kept when no parameter reaches a bound
                 # there; else (a decay across all the speeds, traded against Fc and Fv) as before
-                wide = dataclasses.replace(layout, vs_max=VS_WIDE_SHARE * top)
+                wide = dataclasses.replace(layout, vs_max=vs_wide)
                 layout, narrow = wide, layout
                 res_w = _least_squares(residual, wide.encode(params), wide.bounds(), self.max_nfev, "static parameters")
                 nfev += int(res_w.nfev)

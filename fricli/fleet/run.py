@@ -9,6 +9,7 @@ import dataclasses
 import datetime as dt
 import fcntl
 import os
+import re
 import secrets
 import shutil
 import sys
@@ -61,6 +62,7 @@ def _distributed():
 
 
 CONNECT_TIMEOUT = 10.0   # s: how long a run waits for a scheduler it is given
+SCHEDULER_ADDRESS = re.compile(r"((tcp|tls|ucx|ws|wss)://)?(\[[0-9A-Fa-f:.]+\]|[^\s:/\[\]]+):\d{1,5}")
 
 
 @contextlib.contextmanager
@@ -70,6 +72,9 @@ def client(scheduler: str | None = None, workers: int | None = None, timeout: fl
     per core)."""
     distributed = _distributed()
     if scheduler:
+        if not SCHEDULER_ADDRESS.fullmatch(scheduler):   # distributed's own errors for these vary
+            raise ClusterError(f"cannot reach the Dask scheduler {scheduler}: not an address of the form "
+                               "[tcp://]HOST:PORT (tls://, ucx://, ws://, wss:// too)")
         try:
             c = distributed.Client(scheduler, timeout=f"{timeout:g}s")
         except (OSError, TimeoutError, ValueError) as exc:   # ValueError: an address that is none
