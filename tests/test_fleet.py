@@ -409,6 +409,10 @@ def test_a_robot_joint_without_logs_is_named(tmp_path):
                            "robot r2 joint 2: no log matches r2/*-j2.parquet")
     res = invoke("fleet", "m.toml", "--list", cwd=tmp_path)
     assert res.returncode == 0 and "warning: robot r2 joint 1: no log matches r2/*-j1.parquet" in res.stderr
+    listed = invoke("fleet", "m.toml", "--list", "--json", cwd=tmp_path)     # the listing as JSON, not TSV
+    assert listed.returncode == 0, listed.stderr
+    jobs = json.loads(listed.stdout)["jobs"]
+    assert [(j["robot"], j["joint"], j["date"], j["pipeline"]) for j in jobs] == [("r1", "1", "2026-05-04", "identify")]
 
 
 def test_two_logs_of_one_name_for_one_joint_fail_naming_each_other(tmp_path):

@@ -61,7 +61,9 @@ def fleet_cmd(manifest, scheduler, connect_timeout, workers, force, list_only, a
         if bar is not None:
             bar.close()
     if list_only:
-        if result.jobs:
+        if as_json:
+            emit_json(result.as_json())
+        elif result.jobs:
             click.echo(result.listing())
         return
     if as_json:

@@ -284,8 +284,11 @@ class FleetRun:
         return table(self.outcome)
 
     def as_json(self) -> dict:
-        """What ``fricli fleet --json`` prints."""
+        """What ``fricli fleet --json`` prints (with ``--list``: the jobs, as ``listing``)."""
         o = self.outcome
+        if o is None:
+            return {"jobs": [{"robot": j.robot, "joint": j.joint, "date": j.date, "pipeline": j.pipeline, "log": j.log,
+                              "model": j.model} for j in self.jobs]}
         return {"run": o.run, "history": o.written, "exit_code": o.exit_code,
                 "jobs": [{"robot": j.robot, "joint": j.joint, "date": j.date, "log": j.log, "model": j.model,
                           "status": r["status"], "reason": r.get("reason", ""), "seconds": r.get("seconds"),
