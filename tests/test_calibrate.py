@@ -468,6 +468,13 @@ def test_refusals(arm, tmp_path):
                                                           '<joint name="j3" type="prismatic">'))
     res = fricli("calibrate", log, "--urdf", "prismatic.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
     assert res.returncode == errors.MODEL and "joint j3 is linear, but log joint 3 is rotary" in res.stderr, res.stderr
+    # NaN rows: no --drop-invalid to advise (a whole-arm fit takes every row of every joint)
+    nan_q = q.copy()
+    nan_q[100:105, 1] = np.nan
+    bad = write_log(tmp_path / "nan.parquet", t, nan_q, qd, qdd, simulate(model, t, q, qd, qdd))
+    res = fricli("calibrate", bad, "--urdf", "cad.urdf", "--match", "order", "-o", "cal.urdf", cwd=tmp_path)
+    assert res.returncode == errors.INPUT and "remove those rows from the log" in res.stderr, res.stderr
+    assert "--drop-invalid" not in res.stderr
     # a report into a missing folder: the existing URDF stays as it was
     (tmp_path / "cal.urdf").write_text("mine")
     t, q, qd, qdd = fit

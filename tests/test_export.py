@@ -482,3 +482,18 @@ def test_the_python_call_is_the_command(tmp_path):
     assert not (tmp_path / "refused.h").exists()
     refused = invoke("export", model, "--prefix", "2arm", "-o", tmp_path / "refused.h")
     assert refused.exit_code == 2 and "--prefix" in refused.output
+
+
+@pytest.mark.parametrize("prefix", ["1abc", "a-b", "int"])
+def test_a_prefix_that_is_no_c_name_is_clicks_usage_error(tmp_path, prefix):
+    """An option error of the Python call shows as click's on the option, as docs/exit-codes.md says
+    of code 2: Usage, Try and Error lines, and no file."""
+    from fricli import LuGre
+
+    model = tmp_path / "m.npz"
+    LuGre().fit(str(SAMPLE / "joint2_base.parquet")).save(model)
+    res = invoke("export", model, "--prefix", prefix, "-o", tmp_path / "h.h")
+    lines = res.stderr.splitlines()
+    assert res.exit_code == 2 and lines[0].startswith("Usage: ") and " export " in lines[0] and lines[1].startswith("Try ")
+    assert f"Error: Invalid value for '--prefix': the prefix '{prefix}' is not a C identifier" in res.stderr
+    assert not (tmp_path / "h.h").exists()

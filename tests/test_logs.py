@@ -50,6 +50,13 @@ def test_unit_of_wrong_dimension_refused():
     table = make_table(units={"tau_g": "rad"})
     with pytest.raises(LogError, match="tau_g"):
         logs.from_table(table, name="x")
+    # a time of another kind's unit says so (it was "does not fit a rotary axis", or "mixes rotary
+    # and linear units" for metres)
+    for unit in ("deg", "m", "Nm"):
+        with pytest.raises(LogError, match=f"column 't' has unit '{unit}', not a unit of time"):
+            logs.from_table(make_table(units={"t": unit}), name="x")
+    with pytest.raises(LogError, match="column 'q' has unit 's', not a unit of angle"):
+        logs.from_table(make_table(units={"q": "s"}), name="x")
 
 
 @pytest.mark.parametrize("drop,needle", [("t", "'t'"), ("tau_m", "tau_m")])
