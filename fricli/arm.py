@@ -112,10 +112,11 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
                 held = f"the last {share:.0%} of the recording's time"
             header = run.exported("friction.h", fixed, prefix)
             scores = run.last_scores() if not run.redone else None
-            if scores is None or not all(os.path.isfile(os.path.join(out, f)) for f in ("report.md", "report.json")):
-                if not run.redone:   # nothing else redone: the report was missing or damaged; its notes kept
-                    run.redone.append("report")
-                    run.notices = run.notices or run.last_notices
+            if not run.redone and (scores is None or not all(os.path.isfile(os.path.join(out, f))
+                                                             for f in ("report.md", "report.json"))):
+                run.redone.append("report")   # the report missing or damaged: made again, with its notes
+                run.notices = run.notices or run.last_notices
+            if scores is None:
                 say("scoring on held-out data ...")
                 scores = score(fit_cad, window, lugre, fixed, pairs, None if validate else share)
             ratios = [s["ratio"] for s in scores.values() if np.isfinite(s["ratio"])]

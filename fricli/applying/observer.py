@@ -411,12 +411,9 @@ def level_share(scales: list[np.ndarray], speeds: list[np.ndarray], thresholds: 
     return dataclasses.replace(thresholds, share=share)
 
 
-def check_settings(quantile: float, margin: float, release: float, moving_speed: float,
-                   persistence: int = DEFAULT_PERSISTENCE) -> None:
-    if (not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0
-            or not 1 <= persistence <= MAX_PERSISTENCE):
-        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1), a moving speed above 0 and a "
-                        f"persistence of 1 to {MAX_PERSISTENCE:,} samples are needed")
+def check_settings(quantile: float, margin: float, release: float, moving_speed: float) -> None:
+    if not (0 < quantile <= 1) or not margin > 0 or not (0 < release < 1) or not moving_speed > 0:
+        raise DataError("quantile in (0, 1], margin above 0, release in (0, 1) and a moving speed above 0 are needed")
 
 
 @dataclasses.dataclass

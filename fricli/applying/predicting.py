@@ -332,8 +332,7 @@ def run_models(source: joints.Source, log_path: str, out_path: str, *, reading: 
                         part = table.filter(pc.equal(jcol, pa.scalar(j, jcol.type)))
                     if part.num_rows == 0:
                         continue
-                    out, n_in = _predict_part(st, part, offset, name, total, reason, reading, outputs, warn,
-                                              warnings, table, tallies)
+                    out, n_in = _predict_part(st, part, name, reading, outputs, warn, warnings, table, tallies)
                     st.read += n_in
                     if out is None:            # every row of the piece dropped (--drop-invalid)
                         dropped += n_in
@@ -403,9 +402,8 @@ def _tally_and_write(tallies: list[Callable[[], None]], writer, out: pa.Table) -
     writer.write_table(out)
 
 
-def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: int, reason, reading: Reading,
-                  outputs: Outputs, warn, warnings: list, whole: pa.Table,
-                  tallies: list) -> tuple[pa.Table | None, int]:
+def _predict_part(st: _Stream, table: pa.Table, name: str, reading: Reading, outputs: Outputs, warn,
+                  warnings: list, whole: pa.Table, tallies: list) -> tuple[pa.Table | None, int]:
     """One joint's rows of one batch with tau_f_pred (and ``outputs``) added (None when
     ``--drop-invalid`` left none of them); the rows it had. What only adds to the figures (the
     stream's error sums and rows outside its envelope) is appended to ``tallies``, to run before
@@ -418,7 +416,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     if jfield is not None:
         jcol = table.column(jpos)
         table = table.remove_column(jpos)
-    rows = table.column(_ROW).to_numpy() if _ROW in table.column_names else None   # the file's, of a joint's rows
+    rows = table.column(_ROW).to_numpy()   # the file's row numbers of these rows
     try:
         log = logs.from_table(table, name=name, kt=reading.kt, cutoff_hz=reading.cutoff_hz,
                               drop_invalid=reading.drop_invalid, warn=warnings.append, zero=reading.zero, rows=rows,
@@ -438,7 +436,7 @@ def _predict_part(st: _Stream, table: pa.Table, offset: int, name: str, total: i
     if st.t_last is not None and not t[0] > st.t_last:
         what = "duplicate timestamps" if t[0] == st.t_last else "'t' is not increasing"
         where = f" of joint {st.joint}" if st.joint is not None else ""
-        raise LogError(f"{name}: {what}{where} (at row {offset} between two batches, t = {t[0]:g} s)")
+        raise LogError(f"{name}: {what}{where} (at row {int(rows[0])} between two batches, t = {t[0]:g} s)")
     st.t_last = float(t[-1])
     with prediction_threads(1):   # the reader and writer threads keep the other core busy
         try:

@@ -112,7 +112,7 @@ def _as_log(log, reading: dict | None = None) -> logs.Log:
 
 def _friction(model, data: logs.Log, meta: dict, name: str) -> np.ndarray:
     """``model``'s friction on ``data`` once the model file's ``meta`` is checked against it as the
-    commands check it: the units' axis kind, and the joint (``joints.check``)."""
+    commands check it: the units' axis kind, and the joint (one of the joints the model covers)."""
     from fricli.core import joints
 
     models.check_log(meta, data, name)

@@ -166,7 +166,7 @@ def load(path: str, *, allow_outside: bool = False) -> Manifest:
         joint_list = robot.get("joints", [None])   # no joints: the log's single joint
         if not isinstance(joint_list, list) or not joint_list:
             raise ManifestError(f"{where}: joints must be a non-empty list")
-        odd = [j for j in joint_list if "joints" in robot and not (
+        odd = [j for j in (joint_list if "joints" in robot else []) if not (
             isinstance(j, int) and not isinstance(j, bool)
             or isinstance(j, str) and j.strip(".") and not set(j) & {"/", "\\", "\0"})]
         if odd:

@@ -77,7 +77,7 @@ def client(scheduler: str | None = None, workers: int | None = None, timeout: fl
                                "[tcp://]HOST:PORT (tls://, ucx://, ws://, wss:// too)")
         try:
             c = distributed.Client(scheduler, timeout=f"{timeout:g}s")
-        except (OSError, TimeoutError, ValueError) as exc:   # ValueError: an address that is none
+        except (OSError, TimeoutError, ValueError) as exc:   # ValueError: e.g. a port beyond 65535
             raise ClusterError(f"cannot reach the Dask scheduler {scheduler}: {errors.one_line(str(exc))}") from None
         with c:
             yield c

@@ -290,7 +290,6 @@ def calibrate(model_path: str, log_paths: list[str], urdf: str | None = None, ga
             raise DataError(f"{arm.name}: joints {', '.join(map(str, arm.joints))}, but {arms[0].name} has "
                             f"{', '.join(names)}: calibrate on logs of the same joints")
         arms[k] = _in_order(arm, names)
-    observer.check_settings(quantile, margin, release, moving_speed, persistence)
     if gain is None:
         gain = observer.default_gain(max(float(np.median(np.diff(a.t))) if len(a.t) > 1 else np.inf for a in arms))
     joints = list(arms[0].joints)
