@@ -768,6 +768,46 @@ def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best
         assert loss == pytest.approx(probe.history_val_[best], rel=1e-4)
 
 
+def test_the_model_waits_one_record_past_the_probes_best_while_they_train(monkeypatch):
+    """On a target that no function of the velocity gives (a level drifting in time) the probes'
+    held-out best comes early: the model stops training one record past it and waits there,
+    while the probes train on for their patience."""
+    rng, sig = harmonic_motion(7, 100.0, 40.0)
+    target = 3.0 * np.sin(2 * np.pi * sig["t"] / 7.0)
+    seen = {"model": []}
+    chosen = learning.chosen_on_held_out
+
+    def spy(new_model, steps, *args, **kwargs):
+        made = []
+
+        def watched(n_steps):
+            net = new_model(n_steps)
+            if not made:   # the first network made is the model: its reports are its steps
+                fit = net.fit
+
+                def fit_seen(*a, on_eval=None, **kw):
+                    def report(step, *rest):
+                        seen["model"].append(step)
+                        return on_eval(step, *rest)
+                    return fit(*a, on_eval=report, **kw)
+                net.fit = fit_seen
+            made.append(net)
+            return net
+
+        model, probes, summary = chosen(watched, steps, *args, **kwargs)
+        seen.update(probes=probes, summary=summary)
+        return model, probes, summary
+
+    monkeypatch.setattr(learning, "chosen_on_held_out", spy)
+    model, summary = learning.train(sig, target, name="x", units={"tau": "Nm", "qd": "rad/s"},
+                                    rng=np.random.default_rng(0), steps=2000, patience=400)
+    every, best = model.eval_every_, summary["held_out_choice"]["step"]
+    probe_steps = max(p.history_val_.size for p in seen["probes"]) * every
+    # the model: one record past the best at most, while the probes trained on
+    assert max(seen["model"]) <= best + 2 * every < probe_steps
+    assert summary["best_step"] == best
+
+
 @pytest.mark.parametrize("moving_until", [4.0, 12.0])
 def test_a_half_of_the_time_blocks_without_motion_scores_no_choice(moving_until, monkeypatch):
     """A log that moves in its first seconds only: a probe whose half of the time blocks leaves

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 from typing import Callable
@@ -36,6 +37,10 @@ SIGNIFICANCE = 2.0
 FOLDS = 2
 # chosen_on_held_out's probe stops after this share of its steps without a better held-out loss
 PATIENCE_SHARE = 0.25
+# while the model waits for the probes it looks at their records every WAIT_POLL seconds; when
+# none has recorded for PROBE_SILENCE seconds (a probe's process was killed) it trains on
+WAIT_POLL = 0.001
+PROBE_SILENCE = 60.0
 _SNAPSHOTS = "__snapshots__"
 WORKERS = 2   # trainings run side by side (numpy releases the GIL; each trains on one BLAS thread)
 
@@ -61,7 +66,9 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
     the held-out rows, over the records every probe reached). A probe stops once its held-out
     loss has not improved by 0.1 % for its patience (the model's, else PATIENCE_SHARE of
     ``steps``); the model records its weights at every loss record, trains on until it has
-    passed the pooled curve's best record and keeps the weights of that record. Which weights
+    passed the pooled curve's best record and keeps the weights of that record. While the probes
+    train it runs at most one record past the best they have shown so far and waits there for
+    them (the cores go to the probes where their best comes early). Which weights
     are kept depends on the probes' losses alone, not on which training runs ahead; so do the
     model's recorded steps and training losses (up to the record kept).
     ``meanwhile`` (e.g. loading what the steps after training need) runs in this process after the
@@ -101,24 +108,43 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
             return bool(ended and counts[k] >= min(ended))
 
         train, val = splits[k]
-        probes[k].fit(subset(sig, train), target[train], subset(sig, val), target[val],
-                      rng=np.random.default_rng(seed), scales_from=model, on_eval=noted, stop=halt,
-                      snapshots=True)
-        done[k] = 1
+        try:
+            probes[k].fit(subset(sig, train), target[train], subset(sig, val), target[val],
+                          rng=np.random.default_rng(seed), scales_from=model, on_eval=noted, stop=halt,
+                          snapshots=True)
+        finally:   # a probe that failed no longer holds the model up (its error is raised after)
+            done[k] = 1
         return probes[k]
 
-    def model_report(*args) -> bool:
-        progress[-1](*args)
+    def verdict() -> str:
+        """"stop", "go" or "wait": what the model does after its latest record."""
         # the pooled curve ends with the shortest probe: once one has finished and the others
         # have recorded as many losses, its best record is known (the others train on for the
         # choices made on their own best weights)
         finished = done.astype(bool)
-        if not finished.any():
-            return False
-        length = int(counts[finished].min())
-        if (counts[~finished] < length).any():
-            return False
-        return len(model.snapshots_) > int(np.argmin(pooled(length)))
+        if finished.any():
+            length = int(counts[finished].min())
+            if not (counts[~finished] < length).any():
+                return "stop" if len(model.snapshots_) > int(np.argmin(pooled(length))) else "go"
+        # until then the model trains while it may be needed: up to one record past the best the
+        # probes have shown so far; beyond, it waits for them to show a later best or to end
+        # (on threads the probes train one after the other: before the last starts, the model goes on)
+        reached = int(counts.min())
+        if stop.is_set() or (reached == 0 and not apart):
+            return "go"
+        best = int(np.argmin(pooled(reached))) if reached else -1
+        return "go" if len(model.snapshots_) <= best + 1 else "wait"
+
+    def model_report(*args) -> bool:
+        progress[-1](*args)
+        seen, since = -1, time.monotonic()
+        while (now := verdict()) == "wait":
+            if int(counts.sum()) != seen:
+                seen, since = int(counts.sum()), time.monotonic()
+            elif time.monotonic() - since > PROBE_SILENCE:   # a probe's process is gone: train on
+                return False
+            time.sleep(WAIT_POLL)
+        return now == "stop"
 
     fit_rows = partial(model.fit, subset(sig, rows), target[rows], rng=np.random.default_rng(seed),
                        scales_from=model, on_eval=model_report, snapshots=True, stop=stop)
