@@ -4,6 +4,7 @@ NN_add helps on held-out halves of the log (``cross_validate``)."""
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
@@ -116,24 +117,35 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
             done[k] = 1
         return probes[k]
 
+    pooled_best = {"upto": 0, "record": -1, "loss": math.inf}
+
+    def best_record(length: int) -> int:
+        """The record of least pooled loss over the first ``length`` records (-1 for none): the
+        records not looked at before are pooled and compared (the first least one, as argmin)."""
+        upto = pooled_best["upto"]
+        if length > upto:
+            part = np.average(curves[:, upto:length], axis=0, weights=weights)
+            k = int(np.argmin(part))
+            if part[k] < pooled_best["loss"]:
+                pooled_best.update(record=upto + k, loss=float(part[k]))
+            pooled_best["upto"] = length
+        return pooled_best["record"]
+
     def verdict() -> str:
         """"stop", "go" or "wait": what the model does after its latest record."""
         # the pooled curve ends with the shortest probe: once one has finished and the others
         # have recorded as many losses, its best record is known (the others train on for the
         # choices made on their own best weights)
+        reached = int(counts.min())
         finished = done.astype(bool)
-        if finished.any():
-            length = int(counts[finished].min())
-            if not (counts[~finished] < length).any():
-                return "stop" if len(model.snapshots_) > int(np.argmin(pooled(length))) else "go"
+        if finished.any() and int(counts[finished].min()) == reached:
+            return "stop" if len(model.snapshots_) > best_record(reached) else "go"
         # until then the model trains while it may be needed: up to one record past the best the
         # probes have shown so far; beyond, it waits for them to show a later best or to end
         # (on threads the probes train one after the other: before the last starts, the model goes on)
-        reached = int(counts.min())
         if stop.is_set() or (reached == 0 and not apart):
             return "go"
-        best = int(np.argmin(pooled(reached))) if reached else -1
-        return "go" if len(model.snapshots_) <= best + 1 else "wait"
+        return "go" if len(model.snapshots_) <= best_record(reached) + 1 else "wait"
 
     def model_report(*args) -> bool:
         progress[-1](*args)
