@@ -209,7 +209,7 @@ def test_identify_on_an_arm_without_tau_g_refuses_with_the_fix(arm, tmp_path):
     assert res.exit_code == errors.DATA
     line, = res.stderr.strip().splitlines()
     assert "no 'tau_g' column" in line and "unknown, not zero" in line
-    assert "fricli import ... --urdf" in line and "--no-gravity" in line
+    assert "fricli dynamics LOG --urdf URDF" in line and "fricli import ... --urdf" in line and "--no-gravity" in line
     assert not out.exists() or not list(out.iterdir())
 
 

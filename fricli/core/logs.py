@@ -270,7 +270,7 @@ def missing_robot_model(column: str) -> str:
     """The one-line refusal for a robot-model column the log lacks and nobody declared zero."""
     option, meaning, when = ROBOT_MODEL[column]
     return (f"the log has no '{column}' column ({meaning}): unknown, not zero; add it with "
-            f"'fricli import ... --urdf', or give {option} {when}")
+            f"'fricli dynamics LOG --urdf URDF' (or 'fricli import ... --urdf'), or give {option} {when}")
 
 
 def require_robot_model(schema: pa.Schema, name: str, zero=()) -> None:
