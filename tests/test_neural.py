@@ -876,3 +876,34 @@ def test_a_long_stepped_log_trains_on_its_plateaus(tmp_path):
     assert mae["nn"] <= 1.1 * mae["lugre"], mae
     res = runner.invoke(cli, ["adapt", str(tmp_path / "lugre.npz"), log, "-o", str(tmp_path / "a.npz"), "--epochs", "1"])
     assert res.exit_code == 0 and "--max-seconds 60 adapts on the first minute of the 600 s" in res.stderr, res.output
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the probes train in child processes on Linux")
+def test_a_probe_process_killed_while_the_model_waits_ends_the_training_with_an_error(monkeypatch):
+    """The model waits at the probes' best; a probe's process killed outright records nothing
+    more: after PROBE_SILENCE without a record the model trains on, once, and the training ends
+    with the child's failure instead of waiting for good."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from fricli.fitting import heldout
+
+    monkeypatch.setattr(heldout, "PROBE_SILENCE", 1.0)
+    rng, sig = harmonic_motion(7, 100.0, 40.0)
+    target = 3.0 * np.sin(2 * np.pi * sig["t"] / 7.0)   # the probes' best comes early (test above)
+    me = os.getpid()
+
+    def kill_the_probes():
+        time.sleep(1.5)
+        with open(f"/proc/{me}/task/{me}/children") as f:
+            for pid in f.read().split():
+                os.kill(int(pid), signal.SIGKILL)
+
+    threading.Thread(target=kill_the_probes, daemon=True).start()
+    start = time.monotonic()
+    with pytest.raises(RuntimeError, match="ended without a result"):
+        learning.train(sig, target, name="x", units={"tau": "Nm", "qd": "rad/s"},
+                       rng=np.random.default_rng(0), steps=4000, patience=3000)
+    assert time.monotonic() - start < 60

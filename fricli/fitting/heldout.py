@@ -147,14 +147,15 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
             return "go"
         return "go" if len(model.snapshots_) <= best_record(reached) + 1 else "wait"
 
+    heard = {"records": -1, "at": time.monotonic(), "silent": False}
+
     def model_report(*args) -> bool:
         progress[-1](*args)
-        seen, since = -1, time.monotonic()
-        while (now := verdict()) == "wait":
-            if int(counts.sum()) != seen:
-                seen, since = int(counts.sum()), time.monotonic()
-            elif time.monotonic() - since > PROBE_SILENCE:   # a probe's process is gone: train on
-                return False
+        while (now := verdict()) == "wait" and not heard["silent"]:
+            if int(counts.sum()) != heard["records"]:
+                heard.update(records=int(counts.sum()), at=time.monotonic())
+            elif time.monotonic() - heard["at"] > PROBE_SILENCE:   # a probe's process is gone: train on
+                heard["silent"] = True
             time.sleep(WAIT_POLL)
         return now == "stop"
 
