@@ -799,12 +799,18 @@ def test_the_model_waits_one_record_past_the_probes_best_while_they_train(monkey
         return model, probes, summary
 
     monkeypatch.setattr(learning, "chosen_on_held_out", spy)
+    shown = []
     model, summary = learning.train(sig, target, name="x", units={"tau": "Nm", "qd": "rad/s"},
-                                    rng=np.random.default_rng(0), steps=2000, patience=400)
+                                    rng=np.random.default_rng(0), steps=2000, patience=400,
+                                    on_eval=lambda step, *_: shown.append(step))
     every, best = model.eval_every_, summary["held_out_choice"]["step"]
     probe_steps = max(p.history_val_.size for p in seen["probes"]) * every
     # the model: one record past the best at most, while the probes trained on
     assert max(seen["model"]) <= best + 2 * every < probe_steps
+    from fricli.numerics import forked
+
+    if forked.AVAILABLE:   # the one progress report follows the probes while the model waits, never back
+        assert shown == sorted(shown) and max(shown) > best + 2 * every
     assert summary["best_step"] == best
 
 

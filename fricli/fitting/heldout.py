@@ -147,13 +147,24 @@ def chosen_on_held_out(new_model: Callable[[int], FrictionModel], steps: int, si
             return "go"
         return "go" if len(model.snapshots_) <= best_record(reached) + 1 else "wait"
 
-    heard = {"records": -1, "at": time.monotonic(), "silent": False}
+    heard = {"records": -1, "at": time.monotonic(), "silent": False, "shown": 0}
 
-    def model_report(*args) -> bool:
-        progress[-1](*args)
+    def show(step: int, *rest) -> None:
+        """Report progress: in processes the model's bar is the only one, and while the model waits
+        it follows the probes (never back: the model's later steps may lie behind them)."""
+        if apart:
+            if step <= heard["shown"]:
+                return
+            heard["shown"] = step
+        progress[-1](step, *rest)
+
+    def model_report(step, total, *losses) -> bool:
+        show(step, total, *losses)
+        every = step // max(len(model.snapshots_), 1)   # steps per loss record
         while (now := verdict()) == "wait" and not heard["silent"]:
             if int(counts.sum()) != heard["records"]:
                 heard.update(records=int(counts.sum()), at=time.monotonic())
+                show(min(int(counts.min()) * every, total), total, *losses)
             elif time.monotonic() - heard["at"] > PROBE_SILENCE:   # a probe's process is gone: train on
                 heard["silent"] = True
             time.sleep(WAIT_POLL)
