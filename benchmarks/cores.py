@@ -54,16 +54,22 @@ def timed(exe: str, mode: str, copies: int) -> float:
     return max(ends)
 
 
-def main() -> None:
+def measure() -> dict[str, tuple[float, float]]:
+    """{"vector": (alone, two), "scalar": (alone, two)}: wall seconds of each loop alone and the
+    slower of two copies at once (gcc compiles the loops)."""
     with tempfile.TemporaryDirectory() as tmp:
         src, exe = os.path.join(tmp, "loop.c"), os.path.join(tmp, "loop")
         with open(src, "w") as fh:
             fh.write(SOURCE)
         subprocess.run(["gcc", "-O2", "-mavx2", "-mfma", "-o", exe, src], check=True)
-        print(f"{os.cpu_count()} CPUs; seconds alone / two copies at once (the slower)")
-        for mode, what in (("v", "AVX2 multiply-adds (throughput)"), ("s", "scalar chain (latency)")):
-            alone, two = timed(exe, mode, 1), timed(exe, mode, 2)
-            print(f"{what}: {alone:.2f} / {two:.2f} s ({two / alone:.2f}x)")
+        return {what: (timed(exe, mode, 1), timed(exe, mode, 2)) for what, mode in (("vector", "v"), ("scalar", "s"))}
+
+
+def main() -> None:
+    print(f"{os.cpu_count()} CPUs; seconds alone / two copies at once (the slower)")
+    for what, (alone, two) in measure().items():
+        label = "AVX2 multiply-adds (throughput)" if what == "vector" else "scalar chain (latency)"
+        print(f"{label}: {alone:.2f} / {two:.2f} s ({two / alone:.2f}x)")
 
 
 if __name__ == "__main__":

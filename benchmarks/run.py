@@ -40,6 +40,7 @@ for _path in (ROOT, HERE):
 
 import numpy as np  # noqa: E402
 
+import cores  # noqa: E402
 import plain_pyarrow  # noqa: E402
 
 from fricli.core import logs  # noqa: E402
@@ -452,6 +453,18 @@ def distinct_velocities_log(tmp: str, seed: int = 0) -> str:
     return path
 
 
+def host_cores(add) -> None:
+    """``benchmarks/cores.py``'s AVX2 loop alone and as two copies at once, before the figures: on a
+    host whose two vCPUs are at times one core's two hardware threads, every figure that runs two
+    trainings or threads at once moves with it (docs/performance.md)."""
+    try:
+        alone, two = cores.measure()["vector"]
+    except (OSError, subprocess.CalledProcessError) as exc:
+        add("host", "two copies of an AVX2 loop / one", None, "", f"skipped: {exc}")
+        return
+    add("host", "two copies of an AVX2 loop / one (1: two cores)", two / alone, "x")
+
+
 def bench_train_base(add, tmp: str, size: dict, reps: int, torch, threads: int) -> None:
     """The default ``fricli train-base`` (training time as the command reports it, and the wall
     time of the whole command), against the same training in PyTorch: the same training and
@@ -651,6 +664,10 @@ def main(argv=None) -> dict:
     def add(group, name, value, unit, note=""):
         rows.append({"group": group, "name": name, "value": value, "unit": unit, "note": note})
         say(f"  {group:<9} {name:<52} {fmt(value):>12} {unit} {note}")
+
+    if not args.quick:   # whether the two vCPUs shared a core's vector units while this ran
+        say("host")
+        host_cores(add)
 
     if args.only is not None:
         with tempfile.TemporaryDirectory() as tmp:
