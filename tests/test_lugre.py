@@ -14,7 +14,7 @@ from fricli.core import errors, logs, metrics
 from fricli.numerics import physics
 from fricli.cli import cli
 from fricli.core.errors import DataError, FitError, ModelFileError
-from fricli.fitting.identify import LuGreIdentifier, speed_levels, steady_state_mask
+from fricli.fitting.identify import LuGreIdentifier, _along_the_motion, speed_levels, steady_state_mask
 from fricli.models import lugre
 from fricli.models.lugre import LuGreModel
 
@@ -801,3 +801,39 @@ def test_a_bristle_deflection_held_at_its_smallest_is_named_the_lower_bound():
     assert p["fs"] / p["sigma0"] == pytest.approx(1e-8, rel=1e-3)
     notes = [n for n in fitted.notes_ if n.startswith("bristle deflection")]
     assert notes and notes[0].startswith("bristle deflection g/sigma0 at its lower bound"), fitted.notes_
+
+
+def with_offset(sig, offset):
+    """``sig`` with ``offset`` [Nm] added to tau_m: a torque sensor's bias, or a robot model's
+    error, that is no friction."""
+    return dict(sig, tau_m=sig["tau_m"] + offset)
+
+
+def test_warning_friction_along_the_motion_names_the_offset():
+    """An offset larger than the friction of one direction (the Franka joint's middle file: +0.07 Nm
+    averaged moving backward, an offset of about 0.31 Nm) leaves a target that pushes along the motion
+    there on average: no friction does that. The warning names the offset and the fix; a vanishing
+    Coulomb level beside it (that file's continuous-motion fit: Fc at its bound) is put down to the
+    offset, not to the sign of tau_m."""
+    sig = sweep_signals(seed=3, amp=0.0, p=dict(TRUE, kc=0.0, ks=0.0))
+    shifted = with_offset(sig, 15.0)
+    ident = LuGreIdentifier().fit(shifted)
+    assert len(ident.warnings_) == 1 and ident.warnings_[0].startswith("moving backward the friction target averages +")
+    assert "an offset of about +1" in ident.warnings_[0] and "fricli diagnose MODEL LOG --fix" in ident.warnings_[0]
+    units = {"tau": "Nm", "qd": "rad/s"}
+    vanishing = LuGreModel(**dict(ident.model_.parameters(), fc=1e-3))
+    flagged = ident._plausibility(shifted, ident.steady_, vanishing, ident.fit_, units)
+    assert flagged[1].startswith("the Coulomb level vanishes") and "the offset above hides it" in flagged[1]
+    assert "--kt" not in flagged[1]
+    unshifted = LuGreIdentifier().fit(sig)
+    assert "--kt" in unshifted._plausibility(sig, unshifted.steady_, vanishing, unshifted.fit_, units)[0]
+    assert warnings_of(with_offset(sig, -15.0))[0].startswith("moving forward the friction target averages -")
+    assert warnings_of(with_offset(sig, 3.0)) == [] and unshifted.warnings_ == []   # an offset within the friction
+
+
+def test_warning_friction_along_the_motion_both_ways_is_a_sign_error():
+    v = np.array([0.1, 0.2, -0.1, -0.2])
+    text, offset = _along_the_motion(v, np.array([-1.0, -2.0, 1.0, 2.0]))
+    assert text.startswith("in both directions of motion the friction target averages along the motion")
+    assert "--kt" in text and not offset
+    assert _along_the_motion(v, np.array([1.0, 2.0, -1.0, -2.0])) == (None, False)

@@ -423,6 +423,9 @@ class LuGreIdentifier:
                        f"static-curve rows, {curve['max'] / curve['rmse']:.0f} times their RMS error: the static curve cannot follow some "
                        "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
                        "settled, --drop-invalid for bad rows, or a model kind with the missing effect")
+        along, offset = _along_the_motion(signals["qd"][steady], logs.friction_target(signals)[steady], tau)
+        if along is not None:
+            out.append(along)
         speed = np.abs(signals["qd"][steady])
         load = _typical(signals, "tau_g", steady)                     # typical |tau_g| [Nm]
         fc, fs = p["fc"] + p["kc"] * load, p["fs"] + p["ks"] * load   # the levels at that load
@@ -451,6 +454,9 @@ class LuGreIdentifier:
             if spans:   # the friction is there; the curve has not decayed to Fc within the log's speeds
                 out.append(f"{what}: with vs spanning the log's speeds, Fc is the friction beyond its fastest rows, "
                            "which the log does not determine; do not use the model beyond them")
+            elif offset:
+                out.append(f"{what}: the offset above hides it (in the direction it cancels, little friction is left "
+                           "to fit; fricli diagnose --fix)")
             else:
                 out.append(f"{what}. Check the sign and scale of tau_m (--kt) and that tau_g and tau_dyn are not "
                            "counted twice; log slow constant-velocity motion in both directions")
@@ -515,6 +521,29 @@ class LuGreIdentifier:
         fit["warnings"] = list(self.warnings_)
         self.fit_ = fit
         return self
+
+
+def _along_the_motion(v: np.ndarray, y: np.ndarray, tau: str = "Nm") -> tuple[str | None, bool]:
+    """(warning, offset): the warning when the friction target ``y`` (n,) of the static-curve rows,
+    averaged over the rows of one direction of motion (velocities ``v`` (n,)), pushes along the
+    motion (None when both means oppose it). No friction does that on average: in one direction
+    the target carries an offset (half the sum of the two directions' means; ``offset`` True) that a
+    model odd in the velocity cannot hold; in both, tau_m's sign is wrong."""
+    up, down = float(np.mean(y[v > 0])), float(np.mean(y[v < 0]))
+    if up >= 0 >= down:
+        return None, False
+    if up < 0 < down:
+        return (f"in both directions of motion the friction target averages along the motion ({up:+.3g} {tau} moving "
+                f"forward, {down:+.3g} {tau} backward): no friction does that. Check the sign of tau_m (--kt, the "
+                "mapping) and that tau_g and tau_dyn are not counted twice"), False
+    which, mean = ("forward", up) if up < 0 else ("backward", down)
+    return (f"moving {which} the friction target averages {mean:+.3g} {tau} on the static-curve rows, along the "
+            f"motion in one direction: no friction does that. The target carries an offset of about "
+            f"{0.5 * (up + down):+.3g} {tau} (half the sum of the two directions' means: a bias of the torque "
+            "measurement or of the robot model's tau_g), which this model, odd in the velocity, cannot hold: it "
+            "stays in the error, and where the two directions move at different speeds the fit trades friction "
+            "terms against it. fricli diagnose MODEL LOG --fix adds it as a robot-model error; "
+            "--kind gms fits one beside the friction"), True
 
 
 def identify(log: logs.Log, **kwargs) -> LuGreIdentifier:
