@@ -14,7 +14,7 @@ from fricli.core import errors, logs, metrics
 from fricli.numerics import physics
 from fricli.cli import cli
 from fricli.core.errors import DataError, FitError, ModelFileError
-from fricli.fitting.identify import LuGreIdentifier, _along_the_motion, speed_levels, steady_state_mask
+from fricli.fitting.identify import TAU1_MAX, LuGreIdentifier, _along_the_motion, speed_levels, steady_state_mask
 from fricli.models import lugre
 from fricli.models.lugre import LuGreModel
 
@@ -837,3 +837,25 @@ def test_warning_friction_along_the_motion_both_ways_is_a_sign_error():
     assert text.startswith("in both directions of motion the friction target averages along the motion")
     assert "--kt" in text and not offset
     assert _along_the_motion(v, np.array([1.0, 2.0, -1.0, -2.0])) == (None, False)
+
+
+def test_notes_describe_the_model_after_the_joint_refinement():
+    """A Stribeck curve that spans the speeds of continuous motion: the static stage runs vs to its bound
+    and holds it (Fs = Fc there), then the joint refinement fits the rise Fs - Fc beside it on the whole
+    log, and moves the bristle parameters off the bounds the dynamic stage had reached. The notes say
+    what the model holds (they said Fs = Fc, and sigma1/sigma0 at its lower bound, of a model with
+    Fs = 2.9 Fc and sigma1/sigma0 = 3e-4 s)."""
+    sig, _ = continuous_signals(p=dict(fc=0.3, fs=0.6, vs=0.1, delta=1.0, fv=0.0, kc=0.0, ks=0.0,
+                                       sigma0=3e3, sigma1=1.0))
+    fitted = LuGreIdentifier().fit(sig)
+    p = fitted.model_.parameters()
+    assert "joint" in fitted.fit_["stages"] and p["fs"] > 2 * p["fc"]
+    vs_notes = [n for n in fitted.notes_ if n.startswith("Stribeck velocity vs")]
+    assert len(vs_notes) == 1 and f"held at the bound it reached, vs = {p['vs']:.3g} rad/s" in vs_notes[0]
+    assert "Fs = Fc" not in vs_notes[0]
+    tau1 = p["sigma1"] / p["sigma0"]
+    for note in fitted.notes_:
+        if note.startswith("micro-damping time constant sigma1/sigma0 at its lower bound"):
+            assert tau1 == pytest.approx(1e-7, rel=1e-3)
+        if note.startswith("micro-damping time constant sigma1/sigma0 at its upper bound"):
+            assert tau1 == pytest.approx(TAU1_MAX, rel=1e-3)

@@ -57,6 +57,7 @@ MINOR = 0.05              # plausibility: a friction term under this share of it
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
 VS_MAX_SHARE = 0.5 / 3.0  # upper bound of the Stribeck velocity, share of the top speed: exp(-3) < MINOR at half of it
 VS_WIDE_SHARE = 1.0 / 3.0  # the bound tried when the fit runs vs to the first: exp(-3) < MINOR at the top speed
+_BRISTLE_NOTES = ("bristle deflection g/sigma0", "micro-damping time constant sigma1/sigma0")
 FC_MIN_SHARE = 1e-3       # lower bound of Fc, share of the median |friction| on the static-curve rows
 
 
@@ -304,22 +305,33 @@ class LuGreIdentifier:
                 and params["ks"] == params["kc"])
         if idle:   # no Stribeck rise at any load: the exponent has no effect, shown at its neutral 1
             params["delta"] = 1.0
-        self._note_held(layout.held, delta_idle=idle)
+        self._note_held(layout.held, delta_idle=idle, params=params)
         return params, {"nfev": nfev, "cost": float(res.cost), "stribeck": stribeck,
                         "load": layout.load, "held": list(layout.held), "vs_max": layout.vs_max, "vs_min": layout.vs_min,
                         "fc_min": layout.fc_min, "at_bounds": hit,
                         "converged": bool(res.status != 0)}
 
-    def _note_held(self, held, delta_idle: bool = False) -> None:
+    def _note_held(self, held, delta_idle: bool = False, params: dict | None = None, vu: str = "") -> None:
+        """A note per parameter ``held``, saying the value it is held at in ``params`` (the model of
+        the latest stage); a later stage's note replaces an earlier one of the same parameter (the
+        joint refinement fits the rise Fs - Fc again beside a Stribeck velocity held at its bound)."""
         for k in held:
-            if f"{HELD_TEXT[k]}:" not in " ".join(self.notes_):
-                value = ("Fs = Fc" if k in ("fs", "vs") else "its lower bound, 0.1 % of the median friction"
-                         if k == "fc" else "delta = 1 (with Fs = Fc it has no effect)" if k == "delta" and delta_idle
-                         else "the bound it reached (the steepest or flattest drop the model has)"
-                         if k == "delta" else f"{k} = {HELD[k]:g}")
-                self.notes_.append(f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, "
-                                   f"or traded it against another term), "
-                                   f"held at {'' if k == 'fc' else 'its default '}{value}")
+            if k in ("fs", "vs"):
+                value = ("its default Fs = Fc" if params is None or k == "fs" or params["fs"] == params["fc"]
+                         else f"the bound it reached, vs = {params['vs']:.3g} {vu}, with the rise Fs - Fc fitted "
+                              "beside it on the whole log".replace(" , ", ", "))
+            else:
+                value = ("its lower bound, 0.1 % of the median friction" if k == "fc"
+                         else "its default delta = 1 (with Fs = Fc it has no effect)" if k == "delta" and delta_idle
+                         else "its default the bound it reached (the steepest or flattest drop the model has)"
+                         if k == "delta" else f"its default {k} = {HELD[k]:g}")
+            note = (f"{HELD_TEXT[k]}: the log does not determine it (the fit ran it to a bound, or traded it against "
+                    f"another term), held at {value}")
+            same = [i for i, n in enumerate(self.notes_) if n.startswith(f"{HELD_TEXT[k]}:")]
+            if same:
+                self.notes_[same[0]] = note
+            else:
+                self.notes_.append(note)
 
     # ----------------------------------------------------------------- stage 2
 
@@ -345,19 +357,25 @@ class LuGreIdentifier:
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
         sigma0, sigma1 = _bristles(res.x)
-        # x[0] is log(sigma0): its upper bound is the deflection g/sigma0's lower one
-        names = (("bristle deflection g/sigma0", ("upper", "lower")),
-                 ("micro-damping time constant sigma1/sigma0", ("lower", "upper")))
-        for i, (what, sides) in enumerate(names):
-            for bound, side in zip((lb[i], ub[i]), sides):
-                if abs(res.x[i] - bound) < 1e-3:
-                    self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
-                                       "(its default)")
+        self._note_bristles(sigma0, sigma1, g_typ)
         return dict(static, sigma0=sigma0, sigma1=sigma1), {"nfev": int(res.nfev) + len(grid),
                                                                 "cost": float(res.cost),
                                                                 "converged": bool(res.status != 0)}
 
-    def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout) -> tuple[dict, dict]:
+    def _note_bristles(self, sigma0: float, sigma1: float, g_typ: float) -> None:
+        """Notes on the bristle parameters at a bound of the dynamic stage (deflection g/sigma0 within
+        [1e-8, 1] of the breakaway level ``g_typ``, sigma1/sigma0 within [1e-7 s, TAU1_MAX]), replacing
+        those of an earlier stage: the joint refinement moves them."""
+        self.notes_ = [n for n in self.notes_ if not n.startswith(_BRISTLE_NOTES)]
+        for (what, sides), x, (lo, hi) in zip(
+                ((_BRISTLE_NOTES[0], ("lower", "upper")), (_BRISTLE_NOTES[1], ("lower", "upper"))),
+                (g_typ / sigma0, sigma1 / sigma0), ((1e-8, 1.0), (1e-7, TAU1_MAX))):
+            for bound, side in zip((lo, hi), sides):
+                if abs(math.log(x) - math.log(bound)) < 1e-3:
+                    self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
+                                       "(its default)")
+
+    def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout, vu: str = "") -> tuple[dict, dict]:
         nfev, start_cost, p, res, hit = 0, None, dict(params), None, {}
         for _ in range(len(HELD) + 1):
             fixed = dict(p)
@@ -399,7 +417,8 @@ class LuGreIdentifier:
         if not res.cost < start_cost:
             self.notes_.append("joint refinement did not lower the error: kept the two-stage estimate")
             return params, {"nfev": nfev, "cost": start_cost, "kept": "two-stage"}
-        self._note_held(layout.held)
+        self._note_held(layout.held, params=p, vu=vu)
+        self._note_bristles(p["sigma0"], p["sigma1"], p["fs"] + p["ks"] * float(np.median(np.abs(logs.column(sig, "tau_g")))))
         return p, {"nfev": nfev, "cost": float(res.cost), "held": list(layout.held), "at_bounds": hit}
 
     # ----------------------------------------------------------- plausibility
@@ -496,7 +515,7 @@ class LuGreIdentifier:
         if self.refine or self.continuous_:
             layout = _Layout(stribeck=info1["stribeck"], load=info1["load"], held=tuple(info1["held"]),
                              vs_max=info1["vs_max"], vs_min=info1["vs_min"], fc_min=info1["fc_min"])
-            params, stages["joint"] = self._fit_joint(sig, y, params, layout)
+            params, stages["joint"] = self._fit_joint(sig, y, params, layout, units["qd"])
         try:
             model = LuGreModel(**params, axis=axis)
         except ValueError as exc:

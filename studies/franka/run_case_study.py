@@ -62,16 +62,18 @@ def rms(e: np.ndarray) -> float:
         return float(np.sqrt(np.mean(e * e))) if np.isfinite(e).all() else float("inf")
 
 
-def fit_kinds(train: dict) -> dict:
-    """Each fricli kind fitted on ``train`` (the library calls `fricli identify` makes)."""
+def fit_kinds(train: dict) -> tuple[dict, list[str]]:
+    """Each fricli kind fitted on ``train`` (the library calls `fricli identify` makes), and the
+    warnings of the lugre fit (what `fricli identify` prints)."""
     out = {}
     t0 = time.perf_counter()
-    out["lugre"] = (LuGreIdentifier().fit(train).model_, time.perf_counter() - t0)
+    ident = LuGreIdentifier().fit(train)
+    out["lugre"] = (ident.model_, time.perf_counter() - t0)
     t0 = time.perf_counter()
     out["linear"] = (linear.fit(train)[0], time.perf_counter() - t0)
     t0 = time.perf_counter()
     out["gms"] = (hysteresis.fit(train)[0], time.perf_counter() - t0)
-    return out
+    return out, list(ident.warnings_)
 
 
 def score(model, before: dict, after: dict) -> float:
@@ -131,7 +133,7 @@ def main(argv=None) -> int:
         t = sig["t"]
         fit_rows = t < t[0] + FIT_SHARE * (t[-1] - t[0])
         train, test = rows(sig, fit_rows), rows(sig, ~fit_rows)
-        kinds = fit_kinds(train)
+        kinds, warned = fit_kinds(train)
         models[speed] = kinds
         y = test["tau_m"]
         published = {c: rms(pub[c][~fit_rows] - y) for c in pub}
@@ -140,14 +142,15 @@ def main(argv=None) -> int:
                          "seconds": {k: s for k, (_, s) in kinds.items()},
                          "classical": min(published[c] for c in CLASSICAL),
                          "learned": min(published[c] for c in LEARNED), "nnfm": published["NNFM"],
-                         "published": published})
+                         "published": published, "lugre_warnings": warned})
         print(speed, {k: round(v, 3) for k, v in per_file[-1]["fricli"].items()}, file=sys.stderr)
     # across speeds: fit on slow + middle (one log, the middle recording 10 s after the end of the slow one)
     both = [read(args.data, s)[0] for s in ("slow", "middle")]
     train = {k: np.concatenate([b[k] for b in both]) for k in both[0]}
     train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + GAP_S])
     high, pub_high = read(args.data, "high")
-    kinds = fit_kinds(train)
+    kinds, kinds_warned = fit_kinds(train)
+    kinds["lugre_warnings"] = kinds_warned
     kinds["vmax_high"] = float(np.abs(high["qd"]).max())
     kinds["vmax_train"] = float(np.abs(train["qd"]).max())
     record = hysteresis.fit(train)[1]
@@ -229,6 +232,11 @@ def render(per_file, across, across_pub, models, across_models) -> str:
     lines += ["slow + middle, gms:", "", "```", across_models["gms"][0].describe(), "```", "",
               "slow + middle, lugre (the default kind, fitted on continuous motion):", "", "```",
               across_models["lugre"][0].describe(), "```", "",
+              "What `fricli identify` (the default kind, lugre) warns of on each fit:", ""]
+    for name, warned in [*((r["file"], r["lugre_warnings"]) for r in per_file),
+                         ("slow + middle", across_models["lugre_warnings"])]:
+        lines += [f"- {name}: " + ("none" if not warned else " / ".join(warned))]
+    lines += ["",
               "## What limits the figure", "",
               "- The friction of this joint has memory: near each reversal it builds up over a travel of",
               "  milliradians, and how it builds depends on the path since earlier reversals. The LuGre model",
