@@ -561,8 +561,8 @@ def _along_the_motion(v: np.ndarray, y: np.ndarray, tau: str = "Nm") -> tuple[st
             f"{0.5 * (up + down):+.3g} {tau} (half the sum of the two directions' means: a bias of the torque "
             "measurement or of the robot model's tau_g), which this model, odd in the velocity, cannot hold: it "
             "stays in the error, and where the two directions move at different speeds the fit trades friction "
-            "terms against it. fricli diagnose MODEL LOG --fix adds it as a robot-model error; "
-            "--kind gms fits one beside the friction"), True
+            "terms against it. 'fricli diagnose MODEL LOG --fix' adds it as a robot-model error; "
+            "'fricli identify --kind gms' fits one beside the friction"), True
 
 
 def identify(log: logs.Log, **kwargs) -> LuGreIdentifier:
