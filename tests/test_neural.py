@@ -2,6 +2,7 @@
 
 import json
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -771,7 +772,9 @@ def test_the_probes_stop_after_their_patience_and_the_model_at_their_pooled_best
 def test_the_model_waits_one_record_past_the_probes_best_while_they_train(monkeypatch):
     """On a target that no function of the velocity gives (a level drifting in time) the probes'
     held-out best comes early: the model stops training one record past it and waits there,
-    while the probes train on for their patience."""
+    while the probes train on for their patience. The probes are slowed (2 ms a record), so that
+    the model waits for them however the host shares its cores (on a loaded host they ran ahead
+    of it, and it had nothing to wait for)."""
     rng, sig = harmonic_motion(7, 100.0, 40.0)
     target = 3.0 * np.sin(2 * np.pi * sig["t"] / 7.0)
     seen = {"model": []}
@@ -791,6 +794,15 @@ def test_the_model_waits_one_record_past_the_probes_best_while_they_train(monkey
                         return on_eval(step, *rest)
                     return fit(*a, on_eval=report, **kw)
                 net.fit = fit_seen
+            else:          # the probes slowed down, so that the model reaches their best first on any load
+                fit_probe = net.fit
+
+                def fit_slowed(*a, on_eval=None, fit_probe=fit_probe, **kw):
+                    def report(*args):
+                        time.sleep(0.002)
+                        return on_eval(*args)
+                    return fit_probe(*a, on_eval=report, **kw)
+                net.fit = fit_slowed
             made.append(net)
             return net
 

@@ -52,6 +52,7 @@ optimize = lazy.module("scipy.optimize")
 MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
 TAU1_MAX = 0.01           # upper bound on sigma1/sigma0 [s]
+TAU1_MIN = 1e-7           # lower bound on sigma1/sigma0 [s], the micro-damping's default
 _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cache for no better start)
 MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
@@ -353,7 +354,7 @@ class LuGreIdentifier:
         costs = [_sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
         # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
-        lb = np.array([math.log(g_typ), math.log(1e-7)])
+        lb = np.array([math.log(g_typ), math.log(TAU1_MIN)])
         ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
         sigma0, sigma1 = _bristles(res.x)
@@ -364,16 +365,35 @@ class LuGreIdentifier:
 
     def _note_bristles(self, sigma0: float, sigma1: float, g_typ: float) -> None:
         """Notes on the bristle parameters at a bound of the dynamic stage (deflection g/sigma0 within
-        [1e-8, 1] of the breakaway level ``g_typ``, sigma1/sigma0 within [1e-7 s, TAU1_MAX]), replacing
+        [1e-8, 1] of the breakaway level ``g_typ``, sigma1/sigma0 within [TAU1_MIN, TAU1_MAX]), replacing
         those of an earlier stage: the joint refinement moves them."""
         self.notes_ = [n for n in self.notes_ if not n.startswith(_BRISTLE_NOTES)]
         for (what, sides), x, (lo, hi) in zip(
                 ((_BRISTLE_NOTES[0], ("lower", "upper")), (_BRISTLE_NOTES[1], ("lower", "upper"))),
-                (g_typ / sigma0, sigma1 / sigma0), ((1e-8, 1.0), (1e-7, TAU1_MAX))):
+                (g_typ / sigma0, sigma1 / sigma0), ((1e-8, 1.0), (TAU1_MIN, TAU1_MAX))):
             for bound, side in zip((lo, hi), sides):
                 if abs(math.log(x) - math.log(bound)) < 1e-3:
                     self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
                                        "(its default)")
+
+    def _damping_determined(self, sig: dict, y: np.ndarray, params: dict) -> dict:
+        """``params``, or with sigma1/sigma0 at its default TAU1_MIN when the log does not tell the
+        fitted micro-damping from it: held there, the squared error over the log grows by less than
+        one row's noise variance (its mean over the log after the fit), a change of chi-square
+        under 1. A fitted value that no row distinguishes from its default is not reported as one."""
+        tau1 = params["sigma1"] / params["sigma0"]
+        if tau1 <= TAU1_MIN * (1.0 + 1e-3):
+            return params
+        held = dict(params, sigma1=TAU1_MIN * params["sigma0"])
+        sse = _sumsq(LuGreModel(**params).predict(sig)[0] - y)
+        sse_held = _sumsq(LuGreModel(**held).predict(sig)[0] - y)
+        if not sse_held - sse < sse / max(len(y) - 9, 1):
+            return params
+        self.notes_ = [n for n in self.notes_ if not n.startswith(_BRISTLE_NOTES[1])]
+        self.notes_.append(f"{_BRISTLE_NOTES[1]}: the log does not determine it (the fitted {tau1:.3g} s and the "
+                           f"default {TAU1_MIN:g} s differ in squared error by less than one row's noise variance), "
+                           "held at its default")
+        return held
 
     def _fit_joint(self, sig: dict, y: np.ndarray, params: dict, layout: _Layout, vu: str = "") -> tuple[dict, dict]:
         nfev, start_cost, p, res, hit = 0, None, dict(params), None, {}
@@ -391,9 +411,9 @@ class LuGreIdentifier:
 
             lb, ub = layout.bounds()
             s0 = math.log(p["sigma0"])
-            tau1 = math.log(max(p["sigma1"] / p["sigma0"], 1e-7))
+            tau1 = math.log(max(p["sigma1"] / p["sigma0"], TAU1_MIN))
             x0 = np.concatenate([layout.encode(p), [s0, tau1]])
-            lb = np.concatenate([lb, [s0 - 5, math.log(1e-7)]])
+            lb = np.concatenate([lb, [s0 - 5, math.log(TAU1_MIN)]])
             ub = np.concatenate([ub, [s0 + 5, math.log(TAU1_MAX)]])
             if start_cost is None:
                 start_cost = 0.5 * _sumsq(residual(_inside(x0, lb, ub)))
@@ -516,6 +536,7 @@ class LuGreIdentifier:
             layout = _Layout(stribeck=info1["stribeck"], load=info1["load"], held=tuple(info1["held"]),
                              vs_max=info1["vs_max"], vs_min=info1["vs_min"], fc_min=info1["fc_min"])
             params, stages["joint"] = self._fit_joint(sig, y, params, layout, units["qd"])
+        params = self._damping_determined(sig, y, params)
         try:
             model = LuGreModel(**params, axis=axis)
         except ValueError as exc:

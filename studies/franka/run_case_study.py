@@ -62,9 +62,9 @@ def rms(e: np.ndarray) -> float:
         return float(np.sqrt(np.mean(e * e))) if np.isfinite(e).all() else float("inf")
 
 
-def fit_kinds(train: dict) -> tuple[dict, list[str]]:
+def fit_kinds(train: dict) -> tuple[dict, dict]:
     """Each fricli kind fitted on ``train`` (the library calls `fricli identify` makes), and the
-    warnings of the lugre fit (what `fricli identify` prints)."""
+    warnings and notes of the lugre fit (what `fricli identify` prints)."""
     out = {}
     t0 = time.perf_counter()
     ident = LuGreIdentifier().fit(train)
@@ -73,7 +73,7 @@ def fit_kinds(train: dict) -> tuple[dict, list[str]]:
     out["linear"] = (linear.fit(train)[0], time.perf_counter() - t0)
     t0 = time.perf_counter()
     out["gms"] = (hysteresis.fit(train)[0], time.perf_counter() - t0)
-    return out, list(ident.warnings_)
+    return out, {"warnings": list(ident.warnings_), "notes": list(ident.notes_)}
 
 
 def score(model, before: dict, after: dict) -> float:
@@ -142,7 +142,7 @@ def main(argv=None) -> int:
                          "seconds": {k: s for k, (_, s) in kinds.items()},
                          "classical": min(published[c] for c in CLASSICAL),
                          "learned": min(published[c] for c in LEARNED), "nnfm": published["NNFM"],
-                         "published": published, "lugre_warnings": warned})
+                         "published": published, "lugre_warnings": warned["warnings"]})
         print(speed, {k: round(v, 3) for k, v in per_file[-1]["fricli"].items()}, file=sys.stderr)
     # across speeds: fit on slow + middle (one log, the middle recording 10 s after the end of the slow one)
     both = [read(args.data, s)[0] for s in ("slow", "middle")]
@@ -150,7 +150,7 @@ def main(argv=None) -> int:
     train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + GAP_S])
     high, pub_high = read(args.data, "high")
     kinds, kinds_warned = fit_kinds(train)
-    kinds["lugre_warnings"] = kinds_warned
+    kinds["lugre_warnings"], kinds["lugre_notes"] = kinds_warned["warnings"], kinds_warned["notes"]
     kinds["vmax_high"] = float(np.abs(high["qd"]).max())
     kinds["vmax_train"] = float(np.abs(train["qd"]).max())
     record = hysteresis.fit(train)[1]
@@ -232,6 +232,8 @@ def render(per_file, across, across_pub, models, across_models) -> str:
     lines += ["slow + middle, gms:", "", "```", across_models["gms"][0].describe(), "```", "",
               "slow + middle, lugre (the default kind, fitted on continuous motion):", "", "```",
               across_models["lugre"][0].describe(), "```", "",
+              "Its notes (what `fricli identify` prints of the fit):", "",
+              *(f"- {n}" for n in across_models["lugre_notes"]), "",
               "What `fricli identify` (the default kind, lugre) warns of on each fit:", ""]
     for name, warned in [*((r["file"], r["lugre_warnings"]) for r in per_file),
                          ("slow + middle", across_models["lugre_warnings"])]:
