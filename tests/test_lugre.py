@@ -277,7 +277,7 @@ def warnings_of(sig):
 def test_warning_parameters_at_bounds_with_a_large_max_error():
     # a Stribeck drop steeper than delta = 5 puts delta at its bound; spikes make the max error large
     flagged = warnings_of(with_spikes(sweep_signals(seed=3, p=dict(TRUE, delta=10.0))))
-    assert len(flagged) == 1 and flagged[0].startswith("delta = 5 (at the bound of the fit, held at its default)")
+    assert len(flagged) == 1 and flagged[0].startswith("delta = 5 (at the bound of the fit, held there)")
     assert "fricli diagnose" in flagged[0]
     # the same spikes with every parameter inside its bounds: no warning
     assert warnings_of(with_spikes(sweep_signals(seed=3))) == []

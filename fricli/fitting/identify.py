@@ -458,7 +458,7 @@ class LuGreIdentifier:
         if bounds and curve["max"] > tail:
             shown = {k: v for k, v in bounds.items() if not (k == "delta" and "fs" in bounds)}  # no effect then
             which = " and ".join(_BOUND_TEXT[name][side] for name, side in shown.items())
-            out.append(f"{which} (at the bound of the fit, held at its default) with a max error of {curve['max']:.3g} {tau} on the "
+            out.append(f"{which} (at the bound of the fit, held there) with a max error of {curve['max']:.3g} {tau} on the "
                        f"static-curve rows, {curve['max'] / curve['rmse']:.0f} times their RMS error: the static curve cannot follow some "
                        "rows. Look at where the error is largest (fricli diagnose); try --samples steady or "
                        "settled, --drop-invalid for bad rows, or a model kind with the missing effect")
