@@ -170,6 +170,9 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
     fit_cad = import_run(data, work, FIT_RUN, cad, "cad", keep=keep)
     lugre_cad, fixed_cad, fixed = (os.path.join(work, d) for d in ("lugre-cad", "fixed-cad", "fixed"))
     fricli("identify", fit_cad, "-o", lugre_cad, "-q")
+    # the memory kind beside it (docs/gms.md): the same fitting run, the same CAD URDF
+    gms_cad = os.path.join(work, "gms-cad")
+    fricli("identify", fit_cad, "--kind", "gms", "-o", gms_cad, "-q")
     law = ["--calibrate-friction", calibrate_friction] if calibrate_friction else []
     calibrated = fricli("diagnose", lugre_cad, fit_cad, "--fix", "--calibrate", cal, *law, "-o", fixed, "--json",
                         json_out=True)
@@ -222,6 +225,7 @@ def study(data: str, work: str, joints, runs: int | None, keep: bool = False, ad
             "linear": torque_errors(lambda p, s: linear_columns(s) @ coef, val_cad, j),
             "published": torque_errors(lambda p, s: linear_columns(s) @ published, val_cad, j),
             "lugre": torque_errors(model(lugre_cad), val_cad, j),
+            "gms": torque_errors(model(gms_cad), val_cad, j),
             "fixed_cad": torque_errors(model(fixed_cad), val_cad, j),
             "idim": torque_errors(lambda p, s: linear_columns(s) @ idim, val_idim, j),
             "lugre_cal": torque_errors(model(lugre_cal), val_cal, j),
@@ -352,6 +356,7 @@ def _fmt_effect(e: dict) -> str:
 
 
 MODEL_COLUMNS = (("published", "published Fv, Fc, offset", "CAD"), ("lugre", "LuGre (identify)", "CAD"),
+                 ("gms", "GMS (identify --kind gms)", "CAD"),
                  ("fixed_cad", "identify + diagnose --fix", "CAD"), ("idim", "IDIM-LS (fricli calibrate)", "calibrated"),
                  ("lugre_cal", "LuGre (identify)", "calibrated"),
                  ("fixed", "**fricli: diagnose --fix --calibrate**", "calibrated"))
