@@ -517,3 +517,36 @@ def test_a_continuous_joint_recorded_wrapped_is_derived_unwrapped(rng):
         np.testing.assert_allclose(sigs[k]["qd"][inner], truth[k]["qd"][inner], atol=1e-9)
         np.testing.assert_allclose(sigs[k]["tau_dyn"][inner], truth[k]["tau_dyn"][inner], atol=1e-9)
     assert np.abs(sigs[3]["qd"]).max() < 2.5
+
+
+def test_import_derives_an_acceleration_column_of_zeros_for_the_robot_terms(tmp_path, rng):
+    """A recorder that fills the acceleration column with zeros (the Franka friction files: ddq2 is 0 on
+    every row): with --urdf, import reports it and derives qdd for tau_dyn, as when no qdd is mapped;
+    without, it reports it and keeps the column as recorded, which every command reads as missing."""
+    pytest.importorskip("pinocchio")
+    t, q, qd, qdd = write_case(tmp_path, rng)
+    data = np.loadtxt(tmp_path / "rec.csv", delimiter=",")
+    data[:, 5:7] = 0.0
+    np.savetxt(tmp_path / "rec.csv", data, delimiter=",", fmt="%.17g")
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "two_link.urdf", "--cutoff", "20",
+              "-o", "zeros.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    notes = [line for line in res.stderr.splitlines() if "qdd is constant (0)" in line]
+    assert [n.split(":")[1] for n in notes] == [" rec.csv, joint a", " rec.csv, joint b"]
+    assert all(n.endswith("not a measurement, derived from the velocity instead") for n in notes)
+    (tmp_path / "map.toml").write_text(mapping_text("order", qdd=False))
+    res = run("import", "rec.csv", "--mapping", "map.toml", "--urdf", "two_link.urdf", "--cutoff", "20",
+              "-o", "none.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    zeros, none = pq.read_table(tmp_path / "zeros.parquet"), pq.read_table(tmp_path / "none.parquet")
+    for column in ("qdd", "tau_dyn", "tau_g"):
+        np.testing.assert_array_equal(zeros.column(column).to_numpy(), none.column(column).to_numpy())
+    assert np.abs(zeros.column("qdd").to_numpy()).max() > 0.1
+    (tmp_path / "map.toml").write_text(mapping_text("order", qdd=True))
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "kept.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    assert "joint a: the acceleration column qdd is constant (0) while the velocity varies otherwise: not a " \
+           "measurement; the log keeps it as recorded and every command reads it as missing" in res.stderr
+    kept = pq.read_table(tmp_path / "kept.parquet")
+    assert not kept.column("qdd").to_numpy().any()
+    assert set(json.loads(kept.schema.metadata[b"fricli.import"])["not_measured"]) == {"a", "b"}

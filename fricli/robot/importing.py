@@ -194,6 +194,12 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
         k = meta["blank_lines"]
         out.append(("note", f"note: {name}: {k:,} blank line{'s' if k > 1 else ''} between the rows "
                     f"{'take' if k > 1 else 'takes'} no sample (rows are counted by data line, without them)"))
+    for joint, found in meta.get("not_measured", {}).items():
+        for column, note in found.items():
+            if meta["robot"] is None:   # kept as recorded: every reader takes it as missing
+                note = (note.split(": ", 1)[0] + ": not a measurement; the log keeps it as recorded and every "
+                        "command reads it as missing (derived where needed)")
+            out.append(("note", f"note: {name}, joint {joint}: {note}"))
     if meta["unterminated_last_line"]:
         out.append(("note", f"note: {name}: the last line (line {meta['unterminated_last_line']}) has no line end; "
                     "it is complete and kept"))
@@ -395,6 +401,13 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
     """The long-format table of ``rec`` (read with ``mapping``), its metadata recording the source
     (``extra`` added), the dropped rows (numbered by ``unit``) and, with ``model``, the robot terms."""
     t, per_joint, axis = _signals(mapping, rec, name)
+    # a qd or qdd column that cannot be a measurement (zeros a recorder filled in): unknown, not a value
+    unmeasured = {str(jm.name): dict(logs.not_measured({"t": t, **sig})) for jm, sig in zip(mapping.joints, per_joint)}
+    unmeasured = {j: found for j, found in unmeasured.items() if found}
+    if model is not None:   # the robot terms derive it, and the log holds the derived column
+        for jm, sig in zip(mapping.joints, per_joint):
+            for column in unmeasured.get(str(jm.name), {}):
+                del sig[column]
     tr = mapping.transmission
     if model is not None and tr is not None and tr.rotor_inertia.any():   # motor-side inertias, reflected
         for jm, armature in zip(mapping.joints, tr.armature()):
@@ -444,6 +457,7 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
         "i_m_left_out": currents if "i_m" not in present else [],
         "robot": robot, "time_step_s": float(np.median(np.diff(t))) if n > 1 else None,
+        "not_measured": unmeasured,
     }
     if rec.blank_lines and (mapping.time.ref is None or (mapping.files and mapping.join == "rows")):
         meta["blank_lines"] = rec.blank_lines   # rows counted by data line: these took no row
