@@ -90,7 +90,11 @@ def render(r: dict, names: list[str], joints, s: dict) -> str:
             f"Mean ratio {mean_a:.3f} (target at most 0.60: **{'met' if mean_a <= 0.60 else 'not met'}**); "
             f"joint 1 {ra[0]:.3f} (target 0.54: **{'met' if ra[0] <= 0.54 else 'not met'}**), joint 6 {ra[5]:.3f} "
             f"(target 0.90: **{'met' if ra[5] <= 0.90 else 'not met'}**). The hindsight level of each run averages "
-            f"{float(np.mean(own)):.3f}: a mean of 0.60 asks for more than each run's friction level.",
+            f"{float(np.mean(own)):.3f}: a mean of 0.60 asks for more than each run's friction level. Refitting each "
+            "run's static friction in hindsight as a·tau_f_pred + b·qd + c·sign(qd) + d on its rows in motion (a "
+            "scale, the viscous and Coulomb levels and an offset, four parameters per run known in advance) gives "
+            f"{float(np.mean(r['hindsight_four'])):.3f} on average (per joint "
+            + ", ".join(f"{v:.3f}" for v in r["hindsight_four"]) + ").",
             ""]
     out += ["## False alarms on collision-free runs",
             "",

@@ -108,6 +108,23 @@ def errors(paths: list[str]) -> list[float]:
     return [rms(np.concatenate(p)) for p in pooled]
 
 
+def hindsight(paths: list[str]) -> list[float]:
+    """Per joint: RMS in motion, pooled over the runs, of the friction target minus the static replay's
+    tau_f_pred refitted on each run by least squares as a tau_f_pred + b qd + c sign(qd) + d: the scale,
+    the viscous and Coulomb levels and an offset of each run, known in hindsight."""
+    pooled = [[] for _ in JOINTS]
+    for path in paths:
+        c = columns(path)
+        for k in range(len(JOINTS)):
+            qd = c["qd"][:, k]
+            mv = metrics.in_motion(qd)
+            y = c["tau_m"][:, k] - c["tau_g"][:, k] - c["tau_dyn"][:, k]
+            x = np.column_stack([c["tau_f_pred"][:, k], qd, np.sign(qd), np.ones_like(qd)])[mv]
+            coef = np.linalg.lstsq(x, y[mv], rcond=None)[0]
+            pooled[k].append(y[mv] - x @ coef)
+    return [rms(np.concatenate(p)) for p in pooled]
+
+
 def pushes(c: dict) -> list[dict]:
     """The pushes of a collision run, from the measured torque alone (no friction model): per joint,
     d = tau_m - tau_g - tau_dyn low-passed at PUSH_LOWPASS_HZ (zero phase); its baseline the median
@@ -340,6 +357,7 @@ def main(argv=None) -> None:
            for j in JOINTS]
     static_err = errors([replays[n]["static"][0] for n in names])
     adapt_err = errors([replays[n]["adapt"][0] for n in names])
+    four = hindsight([replays[n]["static"][0] for n in names])
     # collision runs: pushes from the measured torque, flags of the adapted replay
     push_runs, push_rows = {}, []
     for path in collision:
@@ -375,6 +393,7 @@ def main(argv=None) -> None:
 
     result = {"thresholds": thr.as_json(), "constant": observer.Thresholds.read(constant).as_json(),
               "load_run": os.path.basename(load).removesuffix(".parquet"), "baseline": base, "static": static_err, "adapt": adapt_err, "own": own,
+              "hindsight_four": [f / b for f, b in zip(four, base)],
               "fixed_case_study": [study["joints"][str(j)]["fixed"]["moving"] for j in JOINTS],
               "false_alarms": {n: {m: {"rows": {j: v["contact_rows"] for j, v in r[1]["joints"].items()},
                                        "events": len(r[1]["events"])} for m, r in modes.items()}
