@@ -50,21 +50,23 @@ def _contradicts(x: np.ndarray, rate: np.ndarray, t: np.ndarray) -> bool:
     return bool(np.max(np.abs(x - x[0] - rate[0] * (t - t[0]))) > 0.1 * np.ptp(x))
 
 
-def not_measured(sig: dict[str, np.ndarray], qdd: bool = True) -> list[tuple[str, str]]:
+def not_measured(sig: dict[str, np.ndarray], qdd: bool = True, kept: bool = False) -> list[tuple[str, str]]:
     """Motion columns that cannot be measurements, as (column, note): an acceleration ``qdd``
     constant over a log whose velocity varies otherwise (a column of zeros a recorder filled in),
     a velocity ``qd`` constant while the position moves otherwise. Such a column is unknown, not a
-    value: the caller drops it and it is derived like a missing one (``qdd`` as ``derive_motion``'s)."""
+    value: the caller drops it and it is derived like a missing one (``qdd`` as ``derive_motion``'s);
+    ``kept``: the caller writes it as recorded (an import without the robot terms), and the note says so."""
     out, t = [], sig["t"]
+    left = "not a measurement; the log keeps it as recorded and every command reads it as missing (derived where needed)"
     if "q" in sig and "qd" in sig and _contradicts(sig["q"], sig["qd"], t):
         out.append(("qd", f"the velocity column qd is constant ({sig['qd'][0]:g}) while the position moves "
-                          "otherwise: not a measurement, derived from q instead"))
+                          "otherwise: " + (left if kept else "not a measurement, derived from q instead")))
     if "qdd" in sig and "qd" in sig and not out and _contradicts(sig["qd"], sig["qdd"], t):
         out.append(("qdd", f"the acceleration column qdd is constant ({sig['qdd'][0]:g}) while the velocity "
-                           "varies otherwise: not a measurement, "
-                           + ("derived from the velocity instead" if qdd else "left out (not read)")))
+                           "varies otherwise: " + (left if kept else "not a measurement, "
+                                                   + ("derived from the velocity instead" if qdd else "left out (not read)"))))
     elif "qdd" in sig and out and np.ptp(sig["qdd"]) == 0:
-        out.append(("qdd", "the acceleration column qdd is constant too: derived with the velocity"))
+        out.append(("qdd", "the acceleration column qdd is constant too: " + (left if kept else "derived with the velocity")))
     return out
 
 

@@ -53,6 +53,7 @@ MIN_STEADY_PER_DIRECTION = 20
 MIN_STRIBECK_LEVELS = 6
 TAU1_MAX = 0.01           # upper bound on sigma1/sigma0 [s]
 TAU1_MIN = 1e-7           # lower bound on sigma1/sigma0 [s], the micro-damping's default
+DEFLECTION = (1e-8, 1.0)  # bounds of the bristle deflection g/sigma0 at the breakaway level g [rad or m]
 _GRID_ROWS = 10_000       # rows that rank the start grid (more fall out of cache for no better start)
 MINOR = 0.05              # plausibility: a friction term under this share of its reference counts as absent
 TAIL = 2.0                # plausibility: a max error over TAIL * sqrt(2 ln n) * RMS is a local misfit
@@ -319,8 +320,8 @@ class LuGreIdentifier:
         for k in held:
             if k in ("fs", "vs"):
                 value = ("its default Fs = Fc" if params is None or k == "fs" or params["fs"] == params["fc"]
-                         else f"the bound it reached, vs = {params['vs']:.3g} {vu}, with the rise Fs - Fc fitted "
-                              "beside it on the whole log".replace(" , ", ", "))
+                         else f"the bound it reached, vs = {params['vs']:.3g}{' ' + vu if vu else ''}, with the rise "
+                              "Fs - Fc fitted beside it on the whole log")
             else:
                 value = ("its lower bound, 0.1 % of the median friction" if k == "fc"
                          else "its default delta = 1 (with Fs = Fc it has no effect)" if k == "delta" and delta_idle
@@ -340,7 +341,7 @@ class LuGreIdentifier:
         """sigma0, sigma1 on the whole log, as x = (log sigma0, log tau1), tau1 = sigma1/sigma0 [s]."""
         # the bristles deflect most at breakaway, where the static curve is at Fs (Fc when the log shows
         # no Stribeck effect): that level scales the stiffness, so a vanishing Fc cannot shrink it
-        g_typ = static["fs"] + static["ks"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
+        g_typ = _breakaway(static, sig)
         if not g_typ > 0:
             raise FitError(f"the static fit gave no breakaway friction (Fs {g_typ:.3g}): the bristle stiffness "
                            "cannot be scaled; check the sign of tau_m (--kt, the mapping)")
@@ -353,9 +354,9 @@ class LuGreIdentifier:
                 for tau1 in (1e-6, 1e-4, TAU1_MAX)]
         costs = [_sumsq(residual(x)) for x in grid]
         x0 = np.array(grid[int(np.nanargmin(costs))])
-        # bristle deflection g/sigma0 within [1e-8, 1], time constant sigma1/sigma0 within [1e-7 s, TAU1_MAX]
-        lb = np.array([math.log(g_typ), math.log(TAU1_MIN)])
-        ub = np.array([math.log(g_typ / 1e-8), math.log(TAU1_MAX)])
+        # bristle deflection g/sigma0 within DEFLECTION, time constant sigma1/sigma0 within [TAU1_MIN, TAU1_MAX]
+        lb = np.array([math.log(g_typ / DEFLECTION[1]), math.log(TAU1_MIN)])
+        ub = np.array([math.log(g_typ / DEFLECTION[0]), math.log(TAU1_MAX)])
         res = _least_squares(residual, x0, (lb, ub), self.max_nfev, "bristle parameters")
         sigma0, sigma1 = _bristles(res.x)
         self._note_bristles(sigma0, sigma1, g_typ)
@@ -365,13 +366,11 @@ class LuGreIdentifier:
 
     def _note_bristles(self, sigma0: float, sigma1: float, g_typ: float) -> None:
         """Notes on the bristle parameters at a bound of the dynamic stage (deflection g/sigma0 within
-        [1e-8, 1] of the breakaway level ``g_typ``, sigma1/sigma0 within [TAU1_MIN, TAU1_MAX]), replacing
+        DEFLECTION of the breakaway level ``g_typ``, sigma1/sigma0 within [TAU1_MIN, TAU1_MAX]), replacing
         those of an earlier stage: the joint refinement moves them."""
         self.notes_ = [n for n in self.notes_ if not n.startswith(_BRISTLE_NOTES)]
-        for (what, sides), x, (lo, hi) in zip(
-                ((_BRISTLE_NOTES[0], ("lower", "upper")), (_BRISTLE_NOTES[1], ("lower", "upper"))),
-                (g_typ / sigma0, sigma1 / sigma0), ((1e-8, 1.0), (TAU1_MIN, TAU1_MAX))):
-            for bound, side in zip((lo, hi), sides):
+        for what, x, bounds in zip(_BRISTLE_NOTES, (g_typ / sigma0, sigma1 / sigma0), (DEFLECTION, (TAU1_MIN, TAU1_MAX))):
+            for bound, side in zip(bounds, ("lower", "upper")):
                 if abs(math.log(x) - math.log(bound)) < 1e-3:
                     self.notes_.append(f"{what} at its {side} bound: the log does not determine it, held there "
                                        "(its default)")
@@ -438,7 +437,7 @@ class LuGreIdentifier:
             self.notes_.append("joint refinement did not lower the error: kept the two-stage estimate")
             return params, {"nfev": nfev, "cost": start_cost, "kept": "two-stage"}
         self._note_held(layout.held, params=p, vu=vu)
-        self._note_bristles(p["sigma0"], p["sigma1"], p["fs"] + p["ks"] * float(np.median(np.abs(logs.column(sig, "tau_g")))))
+        self._note_bristles(p["sigma0"], p["sigma1"], _breakaway(p, sig))
         return p, {"nfev": nfev, "cost": float(res.cost), "held": list(layout.held), "at_bounds": hit}
 
     # ----------------------------------------------------------- plausibility
@@ -561,6 +560,12 @@ class LuGreIdentifier:
         fit["warnings"] = list(self.warnings_)
         self.fit_ = fit
         return self
+
+
+def _breakaway(params: dict, sig: dict) -> float:
+    """The breakaway friction Fs + ks |tau_g| at the log's median |tau_g| [Nm]: the level the bristle
+    deflection is measured against."""
+    return params["fs"] + params["ks"] * float(np.median(np.abs(logs.column(sig, "tau_g"))))
 
 
 def _along_the_motion(v: np.ndarray, y: np.ndarray, tau: str = "Nm") -> tuple[str | None, bool]:

@@ -195,11 +195,7 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
         out.append(("note", f"note: {name}: {k:,} blank line{'s' if k > 1 else ''} between the rows "
                     f"{'take' if k > 1 else 'takes'} no sample (rows are counted by data line, without them)"))
     for joint, found in meta.get("not_measured", {}).items():
-        for column, note in found.items():
-            if meta["robot"] is None:   # kept as recorded: every reader takes it as missing
-                note = (note.split(": ", 1)[0] + ": not a measurement; the log keeps it as recorded and every "
-                        "command reads it as missing (derived where needed)")
-            out.append(("note", f"note: {name}, joint {joint}: {note}"))
+        out += [("note", f"note: {name}, joint {joint}: {note}") for note in found.values()]
     if meta["unterminated_last_line"]:
         out.append(("note", f"note: {name}: the last line (line {meta['unterminated_last_line']}) has no line end; "
                     "it is complete and kept"))
@@ -402,9 +398,11 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
     (``extra`` added), the dropped rows (numbered by ``unit``) and, with ``model``, the robot terms."""
     t, per_joint, axis = _signals(mapping, rec, name)
     # a qd or qdd column that cannot be a measurement (zeros a recorder filled in): unknown, not a value
-    unmeasured = {str(jm.name): dict(logs.not_measured({"t": t, **sig})) for jm, sig in zip(mapping.joints, per_joint)}
+    # (with the robot terms it is derived, and the log holds the derived column; else kept as recorded)
+    unmeasured = {str(jm.name): dict(logs.not_measured({"t": t, **sig}, kept=model is None))
+                  for jm, sig in zip(mapping.joints, per_joint)}
     unmeasured = {j: found for j, found in unmeasured.items() if found}
-    if model is not None:   # the robot terms derive it, and the log holds the derived column
+    if model is not None:
         for jm, sig in zip(mapping.joints, per_joint):
             for column in unmeasured.get(str(jm.name), {}):
                 del sig[column]
