@@ -6,7 +6,7 @@ import pytest
 from fricli.fitting import hysteresis
 from fricli.models.gms import GMSModel
 from fricli.sim import simulate
-from fricli.core import logs
+from fricli.core import logs, metrics
 
 
 def _motion(seed):
@@ -108,6 +108,55 @@ def test_fit_on_slow_recordings_predicts_the_friction_of_faster_motion():
     err = np.sqrt(np.mean((friction - fast["tau_f_true"]) ** 2))
     assert err <= 0.05 * np.sqrt(np.mean(fast["tau_f_true"] ** 2)), (err, model.describe())
     assert record["recordings"] == 2
+
+
+def _smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x ** 3 * (10 - 15 * x + 6 * x * x)
+
+
+def _with_holds(rng, true, holds, sd=0.05, seconds=40.0, rate=500.0):
+    """A joint swinging, brought to rest for 3 s at each of ``holds`` [s] (a smooth stop and
+    start); at rest the controller lets the torque relax to a quarter of the friction the joint
+    stopped with."""
+    t = np.arange(int(seconds * rate)) / rate
+    envelope = np.ones(len(t))
+    for a in holds:
+        envelope = np.minimum(envelope, 1.0 - _smoothstep(t - a + 1.0) * _smoothstep(a + 4.0 - t))
+    q = (0.3 * np.sin(0.9 * t) + 0.1 * np.sin(2.3 * t + 1.0)) * envelope
+    sig = {"t": t, "q": q, "qd": np.gradient(q, t), "tau_g": np.zeros(len(t)), "tau_dyn": np.zeros(len(t))}
+    friction = true.predict(sig)[0]
+    sig["tau_f_true"] = np.where(sig["qd"] == 0.0, 0.25 * friction, friction)
+    sig["tau_m"] = sig["tau_f_true"] + rng.normal(0.0, sd, len(t))
+    return sig
+
+
+def test_the_fit_leaves_out_holds_where_the_torque_is_the_controllers():
+    """At a hold the friction is statically indeterminate: the torque is what the controller left
+    there, not the law the motion follows (here it relaxes to a quarter). The fit leaves the holds
+    out and says so: its Coulomb level is the true one within 5 %, and its error in motion on
+    another trajectory is that of the same fit on a log whose holds carry the model's own friction.
+    Fitted on every row, the holds pull the Coulomb level off (the test can fail)."""
+    true = GMSModel([0.002, 0.01], [1.0, 0.6], fc=3.0, fst=0.5, vs=0.03, fv=4.0)
+    rng = np.random.default_rng(7)
+    train, test = _with_holds(rng, true, (8.0, 22.0)), _with_holds(rng, true, (15.0,))
+    fit_on = {k: v for k, v in train.items() if k != "tau_f_true"}
+    held = metrics.at_hold(train["t"], train["qd"])
+    assert held.sum() > 0.1 * len(held)
+    model, record = hysteresis.fit(fit_on)
+    assert abs(model.fc - true.fc) <= 0.05 * true.fc, model.describe()
+    assert record["held_rows"] == int(held.sum())
+    assert any("holds" in note for note in record["notes"])
+    lawful = dict(fit_on, tau_m=true.predict(train)[0] + (train["tau_m"] - train["tau_f_true"]))
+    moving = metrics.in_motion(test["qd"])
+
+    def rms(m):
+        return np.sqrt(np.mean((m.predict(test)[0] - test["tau_m"])[moving] ** 2))
+
+    assert rms(model) <= 1.02 * rms(hysteresis.fit(lawful)[0]), model.describe()
+    every_row, _ = hysteresis.fit({k: v for k, v in fit_on.items() if k != "t"})   # no time: no holds
+    assert abs(every_row.fc - true.fc) > 0.5 * true.fc, every_row.describe()
+    assert rms(every_row) > 2 * rms(model)
 
 
 def test_franka_joint_fitted_on_slow_and_middle_beats_the_classical_models_on_the_high_file():

@@ -86,3 +86,15 @@ def test_in_motion_is_a_share_of_the_top_speed():
     assert metrics.in_motion(qd).tolist() == [False, False, True, True, True, False]
     assert metrics.in_motion(1000 * qd).tolist() == metrics.in_motion(qd).tolist()    # no unit in the rule
     assert not metrics.in_motion(np.zeros(5)).any() and metrics.in_motion(np.zeros(0)).shape == (0,)
+
+
+def test_a_hold_is_a_stretch_at_rest_longer_than_a_pass_through_a_reversal():
+    """A sine motion of 2.5 min period passes each reversal within HOLD_S below the in-motion
+    speed: no hold; a stop of 2 s in it is one, and only its rows are."""
+    t = np.arange(0.0, 300.0, 0.01)
+    qd = np.cos(2 * np.pi * t / 150.0)
+    assert not metrics.at_hold(t, qd).any()
+    stop = (t > 40.0) & (t < 42.0)
+    held = metrics.at_hold(t, np.where(stop, 0.0, qd))
+    assert held[stop].all() and not held[~stop].any()
+    assert not metrics.at_hold(t, np.zeros_like(t), longer=400.0).any()

@@ -28,6 +28,11 @@ REST_SHARE = 0.02
 HELD_SPAN = 0.01
 
 
+#: a stretch of rows not in motion lasting longer than this [s] is a hold, not a pass through a
+#: reversal: a joint in sine motion of period P spends 0.64 % of P below REST_SHARE of its top
+#: speed at each reversal, under 1 s for any period up to 2.5 min
+HOLD_S = 1.0
+
 #: a load slope needs |tau_g| to vary by at least this share of the friction level (docs/lugre.md)
 LOAD_SHARE = 0.05
 
@@ -74,6 +79,20 @@ def slow_motion(qd: np.ndarray) -> np.ndarray:
     passes there through each reversal (where a pre-sliding state shows); standstill, qd = 0,
     holds what the controller set."""
     return (np.asarray(qd) != 0) & ~in_motion(qd)
+
+
+def at_hold(t: np.ndarray, qd: np.ndarray, longer: float = HOLD_S) -> np.ndarray:
+    """Rows of the stretches not ``in_motion`` that last longer than ``longer`` [s] (time of a
+    stretch's last row minus its first), (n,) bool: the joint held still, where the torque is what
+    the controller left, not a law of friction. The slow rows of a pass through a reversal, where
+    a pre-sliding state shows, are not among them."""
+    t, still = np.asarray(t, dtype=np.float64), ~in_motion(qd)
+    out = np.zeros(len(t), dtype=bool)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
+    for a, b in zip(edges[::2], edges[1::2]):
+        if t[b - 1] - t[a] > longer:
+            out[a:b] = True
+    return out
 
 
 def moving_both_ways(qd: np.ndarray, what: str) -> np.ndarray:

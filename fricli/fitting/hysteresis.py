@@ -18,7 +18,9 @@ error wins; a candidate with fewer coefficients within ``TOLERANCE`` of it is pr
 element states run over the whole log (they are causal and read only the position), so a block
 is scored with the memory its past gives it, as in use. The Stribeck velocity is
 chosen first the same way, among the ``VS_QUANTILES`` percentiles of the speeds in motion, on the
-largest candidate with one Coulomb level.
+largest candidate with one Coulomb level. Holds (``metrics.at_hold``: over a second not in motion,
+where the torque is what the controller left) are left out of the fit and of the held-out scores;
+the element states run through them.
 
 A log may join several recordings (``recordings``: a pause of more than ``GAP`` sample periods
 starts one). Each recording's elements start afresh at its first row (the joint moved unseen during
@@ -160,10 +162,19 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
     starts = recordings(signals["t"]) if "t" in signals else np.zeros(1, dtype=int)
     ke_max = max(error_k)
 
+    held = metrics.at_hold(signals["t"], qd) if "t" in signals else np.zeros(n, dtype=bool)
+    if held.any():
+        notes.append(f"{int(held.sum())} rows of holds (over {metrics.HOLD_S:g} s not in motion) left out of the fit: "
+                     "the torque there is what the controller left; the elements run through them")
+    fitted = np.flatnonzero(~held)
+    cuts = np.searchsorted(fitted, edges)
+    rows = fitted if held.any() else slice(None)
+
     def normal(n_el, vs_):
         d = grid(n_el, q, qd)
-        x = _regressor(signals, d, vs_, load, q_range, ks, ke_max, starts)
-        parts = [(x[a:b].T @ x[a:b], x[a:b].T @ y[a:b], float(y[a:b] @ y[a:b])) for a, b in zip(edges[:-1], edges[1:])]
+        x = _regressor(signals, d, vs_, load, q_range, ks, ke_max, starts)[rows]
+        yf = y[rows]
+        parts = [(x[a:b].T @ x[a:b], x[a:b].T @ yf[a:b], float(yf[a:b] @ yf[a:b])) for a, b in zip(cuts[:-1], cuts[1:])]
         return d, parts, sum(p[0] for p in parts), sum(p[1] for p in parts)
 
     def heldout(parts, gram, xy, idx, lower):
@@ -171,7 +182,7 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
         for gb, xb, yb in parts:
             coef = _solve((gram - gb)[np.ix_(idx, idx)], (xy - xb)[idx], lower)
             sse += max(float(coef @ gb[np.ix_(idx, idx)] @ coef - 2 * coef @ xb[idx] + yb), 0.0)
-        return math.sqrt(sse / n)
+        return math.sqrt(sse / len(fitted))
 
     # the Stribeck velocity first, on the largest candidate with one Coulomb level
     speeds = np.abs(qd[moving])
@@ -219,7 +230,7 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
                      "offsets " + ", ".join(f"{c:.4g}" for c in coef[at:at + len(starts)])
                      + " (robot-model error, one per recording); the model keeps their mean")
     record = metrics.errors(y, pred)
-    record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
+    record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()), held_rows=int(held.sum()),
                   elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, recordings=len(starts),
                   recording_offsets=[float(c) for c in coef[at:at + len(starts)]] if ke >= 0 else [], heldout_best=best,
                   vs_candidates=[{"vs": v, "heldout_rmse": e} for e, v in vs_scores], notes=notes,
