@@ -146,8 +146,32 @@ def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
     res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--mapping", str(tmp_path / "map.toml"), "-o",
                                    str(tmp_path / "log.parquet")])
     assert res.exit_code == 0, res.stderr
+    assert "dropped" not in res.stderr         # the header is read as one: header = true
     res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "-o", str(tmp_path / "m2.toml")])
     assert res.exit_code == 2 and "--template needs --urdf" in res.stderr
+
+
+def test_a_template_asks_for_the_drive_gain_of_a_current_and_reads_v_as_a_velocity(tmp_path):
+    (tmp_path / "arm6.urdf").write_text(urdf_text())
+    names = ["t"] + [f"{s}_{k}" for s in ("q", "v", "cur") for k in range(1, 7)]
+    (tmp_path / "rec.csv").write_text(",".join(names) + "\n" + ",".join(["0.5"] * len(names)) + "\n")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf", str(tmp_path / "arm6.urdf"),
+                                   "-o", "-"])
+    assert res.exit_code == 0, res.stderr
+    assert 'qd = {column = 8, unit = "rad/s"}' in res.stdout and 'i_m = {column = 14, unit = "A"}' in res.stdout
+    assert res.stdout.count("# kt = VALUE") == 6
+
+
+def test_a_header_read_as_a_row_is_named_with_the_fix(tmp_path):
+    t = np.arange(300) / 100.0
+    np.savetxt(tmp_path / "rec.csv", np.column_stack([t, np.sin(t), np.cos(t)]), delimiter=",", header="time,pos,torque",
+               comments="", fmt="%.9g")
+    (tmp_path / "map.toml").write_text('time = {column = 1, unit = "s"}\n[[joints]]\nname = 1\n'
+                                       'q = {column = 2, unit = "rad"}\ntau_m = {column = 3, unit = "Nm"}\n')
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--mapping", str(tmp_path / "map.toml"), "-o",
+                                   str(tmp_path / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    assert "line 1: 'time' in column 1: the first line names the columns (set header = true in the mapping)" in res.stderr
 
 
 

@@ -327,6 +327,12 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
     return cols, numbers[ok]
 
 
+def _names(text: bytes, delimiter: str) -> bool:
+    """Whether every field of a line is a name (text with a letter, no number): a header line."""
+    fields = [f.strip().strip(b'"').decode("ascii", "replace") for f in _fields(text, delimiter)]
+    return all(f and re.search("[A-Za-z]", f) and not re.match(NUMBER, f) for f in fields)
+
+
 def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[str | None, list[float]]:
     """One line (the unterminated last one) checked like ``_careful`` checks the others."""
     if len(fields) != n_fields:
@@ -454,6 +460,9 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     else:  # slow path: find every bad row
         cols, numbers = _careful(data, starts, ends, start, n_body, n_fields, wanted, mapping.delimiter, defect,
                                  label=lambda i: repr(header[i]) if header else str(i + 1))
+        names = defects.get("non_numeric")
+        if names is not None and names.first_line == first + 1 and not mapping.header and _names(line(first), mapping.delimiter):
+            names.example += ": the first line names the columns (set header = true in the mapping)"
     unterminated = None
     if n_body < n_lines and line(n_lines - 1).strip():
         kind, row = _parse_row(_fields(line(n_lines - 1), mapping.delimiter), n_fields, wanted)

@@ -2,7 +2,7 @@
 
 The URDF gives the joints that move (their names and order); the recording's first line gives
 the columns: a header names them, and a column whose name holds a signal's word (position, q,
-velocity, qd, current, i, torque, effort, tau) and a joint's number or URDF name is taken for that
+velocity, qd, v, current, i, torque, effort, tau) and a joint's number or URDF name is taken for that
 signal of that joint; a line of numbers only gives their count. Every guess is marked; what
 cannot be guessed is left as a comment to fill in. The skeleton is a start to be checked, not a
 mapping to trust: ``fricli import --urdf`` then checks the result against the robot model.
@@ -18,7 +18,7 @@ from fricli.robot.recording import NUMBER
 
 _WORDS = {  # signal: words in a column name, most specific first
     "q": ("position", "pos", "angle", "q"),
-    "qd": ("velocity", "vel", "speed", "qd", "dq"),
+    "qd": ("velocity", "vel", "speed", "qd", "dq", "v"),
     "i_m": ("current", "cur", "i", "iq"),
     "tau_m": ("torque", "effort", "tau", "trq"),
 }
@@ -85,6 +85,8 @@ def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
              f"# The recording has {count} columns"
              + (f": {', '.join(f'{c}={one_line(f)}' for c, f in enumerate(fields, 1))}" if fields else
                 " and no header"), ""]
+    if fields:
+        lines.append("header = true                               # the first line names the columns")
     if delimiter != ",":
         lines.append(f"delimiter = {delimiter!r}".replace("'", '"'))
     time = None
@@ -104,6 +106,9 @@ def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
                 found = found or signal in ("tau_m", "i_m")
                 lines.append(f'{signal} = {{column = {column}, unit = "{_UNITS[signal]}"}}'
                              f"        # guessed from {one_line(fields[column - 1])!r}; check the unit")
+                if signal == "i_m":
+                    lines.append("# kt = VALUE                                 # FILL IN: the drive gain [Nm/A] (torque "
+                                 "constant x gear ratio), or --kt")
             elif signal == "q":
                 lines.append(f'# q = {{column = N, unit = "rad"}}          # FILL IN: joint {k}\'s position')
         if not found:
