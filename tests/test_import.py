@@ -352,6 +352,19 @@ def test_garbage_rows_inside_and_after_a_recording_are_dropped_and_reported():
     np.testing.assert_array_equal(t, [float(lines[k - 1].split(",")[0]) for k in kept])
 
 
+def test_a_dump_interrupted_by_garbage_keeps_the_rows_on_both_sides():
+    """The dump wrote zeros over 150 samples and then 30 lines of text: the time steps over the
+    lines they took, so the recording goes on across them (the rows before are not a shorter
+    recording of their own)."""
+    lines = rows(400)
+    lines[100:250] = ["0,0,0,0,0,0,0,ok"] * 150
+    lines[250:280] = ["ERROR: buffer overrun"] * 30
+    result = parse(lines)
+    assert result.meta["dropped"]["field_count"]["count"] == 30
+    assert {k: d["lines"] for k, d in result.meta["dropped"].items() if k != "field_count"} == {"zero_row": [[101, 250]]}
+    assert list(result.recording.lines) == list(range(1, 101)) + list(range(281, 401))
+
+
 def test_the_longest_consistent_stretch_wins_over_a_shorter_one():
     lines = rows(30) + [ln.replace("100.", "500.", 1) for ln in rows(50)]     # a jump of 400 s at line 31
     result = parse(lines)

@@ -94,10 +94,13 @@ def ranges(numbers: np.ndarray) -> list[list[int]]:
     return [[int(a), int(b)] for a, b in zip(firsts, lasts)]
 
 
-def _chain(t: np.ndarray, limit: float) -> np.ndarray:
+def _chain(t: np.ndarray, limit: float, at: np.ndarray | None = None) -> np.ndarray:
     """Mask of the longest chain of stretches of ``t`` (shape (m,)) in which time increases by at
     most ``limit`` a step: a stretch follows another when its first time after the other's end is
-    at most ``limit`` per row skipped (+1) later; its rows at or before that end are left out."""
+    at most ``limit`` per row skipped (+1) later; its rows at or before that end are left out.
+    ``at`` (m,): each row's place in the file (its line number), so that rows dropped before
+    (garbage, malformed lines) count as skipped; default: its index."""
+    at = np.arange(len(t)) if at is None else np.asarray(at)
     ok = (np.diff(t) > 0) & (np.diff(t) <= limit)
     cut = np.flatnonzero(~ok) + 1
     starts, ends = np.r_[0, cut], np.r_[cut, len(t)] - 1
@@ -107,7 +110,7 @@ def _chain(t: np.ndarray, limit: float) -> np.ndarray:
         part = t[starts[j]:ends[j] + 1]
         for i in range(max(0, j - LINK_WINDOW), j):
             r = starts[j] + int(np.searchsorted(part, t[ends[i]], side="right"))
-            if r > ends[j] or t[r] - t[ends[i]] > limit * (r - ends[i]):
+            if r > ends[j] or t[r] - t[ends[i]] > limit * (at[r] - at[ends[i]]):
                 continue
             if best[i] + ends[j] - r + 1 > best[j]:
                 best[j], head[j], prev[j] = best[i] + ends[j] - r + 1, r, i
@@ -120,12 +123,14 @@ def _chain(t: np.ndarray, limit: float) -> np.ndarray:
 
 
 def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarray, *, name: str,
-                    drop_backward: bool = False, unit: str = "line",
-                    shown_from: float = 0.0) -> tuple[np.ndarray, dict[str, Defect]]:
+                    drop_backward: bool = False, unit: str = "line", shown_from: float = 0.0,
+                    places: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Defect]]:
     """Which rows to keep: not of implausible magnitude, not all zero, and in the longest chain of
     consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR median steps).
     ``t`` [s] and each of ``signals`` (canonical units) have shape (n,); ``numbers`` are the rows'
-    line (or message) numbers. Returns the mask of shape (n,) and the defects found; LogError when
+    line (or message) numbers; ``places`` (n,) the rows' places among the file's rows (default:
+    ``numbers``), so that the rows dropped before (malformed lines) count as skipped in the chain of
+    stretches. Returns the mask of shape (n,) and the defects found; LogError when
     time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``
     (its message gives times from ``shown_from``)."""
     n = len(t)
@@ -148,7 +153,7 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
         raise LogError(f"{name}: time never increases from one {unit} to the next")
     if len(rest) > 1:
         limit = STEP_FACTOR * float(np.median(steps[steps > 0]))
-        chained = _chain(t[rest], limit)
+        chained = _chain(t[rest], limit, (numbers if places is None else places)[rest])
         kept, dropped = rest[chained], rest[~chained]
         at = np.searchsorted(kept, dropped) - 1            # the kept row before each dropped one
         before = np.where(at >= 0, t[kept[np.maximum(at, 0)]], np.nan)
@@ -482,7 +487,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
         index[None] = -1
         cols[-1] = rows / mapping.time.rate
     keep, found = consistent_rows(mapping.time.values(cols[index[mapping.time.ref]]) * mapping.time.factor, signals,
-                                  numbers, name=name, drop_backward=drop_backward)
+                                  numbers, name=name, drop_backward=drop_backward, places=rows)
     for kind, d in found.items():
         defects[kind] = d
     if keep.sum() < MIN_ROWS:
