@@ -546,6 +546,24 @@ def test_a_time_step_no_controller_samples_at_is_flagged(tmp_path):
     assert res.returncode == 0 and "median time step" not in res.stderr
 
 
+def test_a_velocity_that_is_not_the_rate_of_the_position_is_flagged(tmp_path):
+    """Time in ms mapped as s: a step of 10 "s" is one a controller could take, but each joint's
+    velocity is then 100 times the rate of change of its position; import says so, per joint, and
+    where to fix it."""
+    (tmp_path / "map.toml").write_text(MAPPING.replace('unit = "s"', 'unit = "s", scale = 1000'))
+    (tmp_path / "rec.csv").write_text("\n".join(rows(400)) + "\n")
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0, res.stderr
+    for joint in (1, 2):
+        assert f"warning: rec.csv, joint {joint}: qd is 1e+03 times the rate of change of q over t" in res.stderr
+    assert res.stderr.count("check the units of the time, q and qd in the mapping") == 2
+    meta = json.loads(pq.read_table(tmp_path / "out.parquet").schema.metadata[b"fricli.import"])
+    assert sorted(meta["rate_mismatch"]) == ["1", "2"]
+    (tmp_path / "map.toml").write_text(MAPPING)
+    res = run("import", "rec.csv", "--mapping", "map.toml", "-o", "out.parquet", cwd=tmp_path)
+    assert res.returncode == 0 and "rate of change" not in res.stderr, res.stderr
+
+
 def test_the_python_call_is_the_command(tmp_path, monkeypatch):
     """``fricli.import_log`` writes the command's bytes, says what it says on stderr, and refuses
     what it refuses (OptionError naming the option, before anything is written)."""

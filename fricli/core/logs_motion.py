@@ -82,12 +82,12 @@ def dead_torque(sig: dict[str, np.ndarray], unit: str = "Nm") -> str | None:
             "built from it are meaningless")
 
 
-def rate_mismatch(sig: dict[str, np.ndarray]) -> str | None:
+def rate_mismatch(sig: dict[str, np.ndarray], check: str = "check each column's field metadata 'unit'") -> str | None:
     """A note when a measured ``qd`` is not the rate of change of ``q`` over ``t`` but a multiple
     of it (units of t, q and qd that disagree: t in ms read as s, degrees read as radians); else
     None. The increments of q over 200 windows of the first 100,000 rows are compared with the
     integral of qd over them (a least-squares factor), where the two agree in shape (correlation
-    above 0.95)."""
+    above 0.95). ``check``: where the note sends the user."""
     q, qd, t = sig.get("q"), sig.get("qd"), sig["t"]
     if q is None or qd is None or len(t) < 10:
         return None
@@ -102,7 +102,7 @@ def rate_mismatch(sig: dict[str, np.ndarray]) -> str | None:
     if 0.2 < factor < 5:
         return None
     return (f"qd is {factor:.3g} times the rate of change of q over t: their units disagree (1e+03: t in ms read "
-            "as s; 57.3 or 0.0175: degrees read as radians); check each column's field metadata 'unit'")
+            f"as s; 57.3 or 0.0175: degrees read as radians); {check}")
 
 
 def derives_qdd(has_qd: bool, has_qdd: bool, qdd: bool = True) -> bool:

@@ -194,6 +194,8 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
         k = meta["blank_lines"]
         out.append(("note", f"note: {name}: {k:,} blank line{'s' if k > 1 else ''} between the rows "
                     f"{'take' if k > 1 else 'takes'} no sample (rows are counted by data line, without them)"))
+    for joint, text in meta.get("rate_mismatch", {}).items():
+        out.append(("warning", f"warning: {name}, joint {joint}: {text}"))
     for joint, found in meta.get("not_measured", {}).items():
         out += [("note", f"note: {name}, joint {joint}: {note}") for note in found.values()]
     if meta["unterminated_last_line"]:
@@ -402,6 +404,8 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
     unmeasured = {str(jm.name): dict(logs.not_measured({"t": t, **sig}, kept=model is None))
                   for jm, sig in zip(mapping.joints, per_joint)}
     unmeasured = {j: found for j, found in unmeasured.items() if found}
+    mismatch = {str(jm.name): text for jm, sig in zip(mapping.joints, per_joint)
+                if (text := logs.rate_mismatch({"t": t, **sig}, "check the units of the time, q and qd in the mapping"))}
     if model is not None:
         for jm, sig in zip(mapping.joints, per_joint):
             for column in unmeasured.get(str(jm.name), {}):
@@ -455,7 +459,7 @@ def build_log(rec: Recording, mapping: Mapping, name: str, source_sha256: str, *
         "kt": {str(jm.name): jm.kt for jm in mapping.joints if jm.kt is not None},
         "i_m_left_out": currents if "i_m" not in present else [],
         "robot": robot, "time_step_s": float(np.median(np.diff(t))) if n > 1 else None,
-        "not_measured": unmeasured,
+        "not_measured": unmeasured, "rate_mismatch": mismatch,
     }
     if rec.blank_lines and (mapping.time.ref is None or (mapping.files and mapping.join == "rows")):
         meta["blank_lines"] = rec.blank_lines   # rows counted by data line: these took no row
