@@ -546,6 +546,15 @@ def test_a_time_step_no_controller_samples_at_is_flagged(tmp_path):
     assert res.returncode == 0 and "median time step" not in res.stderr
 
 
+def test_numbers_in_double_quotes_are_read_without_them():
+    """A writer that quotes every field ("0.01","0.5",...): the same log as the plain file, the
+    unterminated last line too."""
+    quoted = ['"' + ln.replace(",", '","') + '"' for ln in rows(60)]
+    result = parse(quoted, end="")
+    assert result.meta["dropped"] == {} and result.meta["rows"] == 60
+    assert result.table.replace_schema_metadata(None).equals(parse(rows(60)).table.replace_schema_metadata(None))
+
+
 def test_a_velocity_that_is_not_the_rate_of_the_position_is_flagged(tmp_path):
     """Time in ms mapped as s: a step of 10 "s" is one a controller could take, but each joint's
     velocity is then 100 times the rate of change of its position; import says so, per joint, and

@@ -275,6 +275,8 @@ def _fast(body: bytes, n_fields: int, index: dict, delimiter: str):
 
 # a field that reads as a number (also import --template's rule)
 NUMBER = r"^[-+]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][-+]?[0-9]+)?$"
+# a field in double quotes (as writers that quote every field write numbers): read without them
+QUOTED = r'^"(.*)"$'
 
 
 def _not_a_number(text: str, column: str) -> str:
@@ -319,7 +321,8 @@ def _careful(data, starts, ends, start, stop, n_fields, wanted, delimiter, defec
                                             include_columns=[names[i] for i in wanted]))
     if table.num_rows != len(numbers):  # not expected: every line is one row here
         raise LogError("the recording's lines could not be told apart")
-    texts = {i: pc.utf8_trim_whitespace(table.column(names[i])) for i in wanted}
+    texts = {i: pc.replace_substring_regex(pc.utf8_trim_whitespace(table.column(names[i])), QUOTED, r"\1")
+             for i in wanted}
     ok = np.ones(len(numbers), dtype=bool)
     for text in texts.values():
         ok &= np.asarray(pc.match_substring_regex(text, NUMBER).to_numpy(zero_copy_only=False), dtype=bool)
@@ -342,7 +345,7 @@ def _parse_row(fields: list[bytes], n_fields: int, wanted: list[int]) -> tuple[s
     """One line (the unterminated last one) checked like ``_careful`` checks the others."""
     if len(fields) != n_fields:
         return "field_count", []
-    texts = [fields[i].strip().decode("ascii", "replace") for i in wanted]
+    texts = [re.sub(QUOTED, r"\1", fields[i].strip().decode("ascii", "replace")) for i in wanted]
     if not all(re.match(NUMBER, text) for text in texts):
         return "non_numeric", []
     return None, [float(text) for text in texts]
