@@ -555,6 +555,18 @@ def test_numbers_in_double_quotes_are_read_without_them():
     assert result.table.replace_schema_metadata(None).equals(parse(rows(60)).table.replace_schema_metadata(None))
 
 
+def test_columns_aligned_with_spaces_read_as_the_csv():
+    """delimiter = " " takes a run of spaces and tabs as one delimiter and none at a line's start
+    or end: columns aligned as MATLAB's save -ascii writes them ("   1.0000000e-02  -5.0e-01"),
+    with CRLF line ends, give the CSV's log."""
+    aligned = ["".join(f"{float(f):16.7e}" if k < 7 else "  ok\t" for k, f in enumerate(ln.split(","))) for ln in rows(60)]
+    result = parse(aligned, MAPPING.replace("time =", 'delimiter = " "\ntime ='), end="\r\n")
+    assert result.meta["dropped"] == {}
+    plain = parse(rows(60)).table
+    for name in ("t", "q", "qd", "i_m"):
+        np.testing.assert_allclose(result.table.column(name).to_numpy(), plain.column(name).to_numpy(), rtol=1e-6, atol=1e-7)
+
+
 def test_a_velocity_that_is_not_the_rate_of_the_position_is_flagged(tmp_path):
     """Time in ms mapped as s: a step of 10 "s" is one a controller could take, but each joint's
     velocity is then 100 times the rate of change of its position; import says so, per joint, and

@@ -162,6 +162,17 @@ def test_a_template_asks_for_the_drive_gain_of_a_current_and_reads_v_as_a_veloci
     assert res.stdout.count("# kt = VALUE") == 6
 
 
+def test_a_template_reads_names_aligned_with_spaces(tmp_path):
+    (tmp_path / "arm6.urdf").write_text(urdf_text())
+    names = ["t"] + [f"pos_{k}" for k in range(1, 7)] + [f"effort_{k}" for k in range(1, 7)]
+    (tmp_path / "rec.txt").write_text("".join(f"{n:>12}" for n in names) + "\n" + "".join(f"{0.5:12.4f}" for _ in names) + "\n")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.txt"), "--template", "--urdf", str(tmp_path / "arm6.urdf"),
+                                   "-o", "-"])
+    assert res.exit_code == 0, res.stderr
+    assert 'delimiter = " "' in res.stdout and 'tau_m = {column = 13, unit = "Nm"}' in res.stdout
+    assert "FILL IN" not in res.stdout
+
+
 def test_a_header_read_as_a_row_is_named_with_the_fix(tmp_path):
     t = np.arange(300) / 100.0
     np.savetxt(tmp_path / "rec.csv", np.column_stack([t, np.sin(t), np.cos(t)]), delimiter=",", header="time,pos,torque",

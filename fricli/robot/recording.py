@@ -396,6 +396,12 @@ def _trailing_delimiter(header: list[str], sample: list[bytes], delimiter: str) 
     return header
 
 
+def one_space(data: bytes) -> bytes:
+    """``data`` with each run of spaces and tabs as one space and none at a line's start or end:
+    columns aligned with spaces (as MATLAB's ``save -ascii`` writes them) split at a space."""
+    return re.sub(rb"(?m)^ | (?=\r?$)", b"", re.sub(rb"[ \t]+", b" ", data))
+
+
 def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: bool = False) -> Recording:
     """Parse ``data`` (the file's bytes) with ``mapping``. LogError (exit 3) when nothing is
     usable, a named column is missing, or time goes back without ``drop_backward``."""
@@ -417,6 +423,8 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     if data.count(b"\r") != data.count(b"\r\n"):
         raise LogError(f"{name}: holds carriage returns that are not part of a CRLF line end (old Mac line "
                        "ends?): convert the file to LF or CRLF line ends")
+    if mapping.delimiter == " ":
+        data = one_space(data)
     starts, ends, terminated = _line_bounds(data)
     line = lambda i: data[starts[i]:ends[i]]  # noqa: E731
     n_lines = len(starts)

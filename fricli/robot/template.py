@@ -52,10 +52,11 @@ def header_fields(data: bytes, name: str) -> tuple[list[str] | None, int, str]:
     if not first:
         raise LogError(f"{name}: empty input, no first line to read the columns from")
     delimiter = max((",", ";", "\t", " "), key=first.count)
-    fields = [f.strip().strip('"') for f in first.split(delimiter)]
+    split = (lambda text: text.split()) if delimiter == " " else (lambda text: text.split(delimiter))  # noqa: E731
+    fields = [f.strip().strip('"') for f in split(first)]
     number = re.compile(NUMBER)   # a field of numbers, as the import reads it
     if all(number.fullmatch(f) for f in fields if f):
-        named = [f.strip().strip('"') for f in (comment or "").split(delimiter)]
+        named = [f.strip().strip('"') for f in split(comment or "")]
         if len(named) == len(fields) > 1 and not any(number.fullmatch(f) for f in named):
             return named, len(fields), delimiter
         return None, len(fields), delimiter
