@@ -365,6 +365,27 @@ def test_a_dump_interrupted_by_garbage_keeps_the_rows_on_both_sides():
     assert list(result.recording.lines) == list(range(1, 101)) + list(range(281, 401))
 
 
+def test_a_spike_of_one_or_two_samples_is_dropped_and_a_burst_is_kept():
+    """A velocity glitch of 500 rad/s in a joint moving at 1 (one sample at line 100, two at lines
+    200-201) would become the log's top speed, and every row would count as at rest; they are
+    dropped and reported. Five samples of the same size are a burst: kept."""
+    def with_qd1(lines, at, value):
+        f = lines[at].split(",")
+        f[3] = value
+        lines[at] = ",".join(f)
+
+    lines = rows(400)
+    for at in (99, 199, 200):
+        with_qd1(lines, at, "500.0")
+    result = parse(lines)
+    assert dropped(result) == {"spike": [[100, 100], [200, 201]]}
+    assert float(np.abs(result.table.column("qd").to_numpy()).max()) < 1.01
+    burst = rows(400)
+    for at in range(99, 104):
+        with_qd1(burst, at, "500.0")
+    assert parse(burst).meta["dropped"] == {}
+
+
 def test_the_longest_consistent_stretch_wins_over_a_shorter_one():
     lines = rows(30) + [ln.replace("100.", "500.", 1) for ln in rows(50)]     # a jump of 400 s at line 31
     result = parse(lines)

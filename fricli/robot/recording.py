@@ -32,6 +32,7 @@ KINDS = {
     "truncated": "truncated last line",
     "implausible": "a value of implausible magnitude",
     "zero_row": "all values zero",
+    "spike": "a value far from its neighbours' (a spike of one or two samples)",
     "time_outside": "time not continuing the recording (before or after its longest consistent stretch)",
     "time_jump": "time far from its neighbours'",
     "duplicate_time": "same time as the previous row",
@@ -43,6 +44,8 @@ STEP_FACTOR = 100.0        # a time step beyond this many median steps breaks th
 MAGNITUDE_FACTOR = 1e4     # |value| beyond this many times its column's median |value| (at least 1) is garbage
 MAGNITUDE_LIMIT = logs.MAGNITUDE_LIMIT   # ... and so is any |value| beyond the log contract's
 LINK_WINDOW = 64           # stretches of consistent time looked back over when chaining them
+SPIKE_FACTOR = 10.0        # a value this many times its column's 99th percentile |value| (at least 1) ...
+SPIKE_SPAN = 2             # ... from the median of the rows this many before and after it is a spike
 
 
 @dataclasses.dataclass
@@ -122,10 +125,35 @@ def _chain(t: np.ndarray, limit: float, at: np.ndarray | None = None) -> np.ndar
     return keep
 
 
+def spikes(values: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Rows (n,) bool of the ``usable`` rows of ``values`` (n, columns) where a value departs from
+    the median of the SPIKE_SPAN usable rows before and after it by more than SPIKE_FACTOR times
+    its column's 99th percentile magnitude (at least 1 in the canonical unit): a spike of one
+    or two samples, which no joint's position, velocity, current or torque makes (it cannot leave
+    and come back by ten times its largest values within two samples). A glitch of a velocity
+    (500 rad/s in a joint moving at 1) would otherwise become the log's top speed, and every row
+    would be at rest."""
+    out = np.zeros(len(values), dtype=bool)
+    rows = np.flatnonzero(usable)
+    if len(rows) <= 2 * SPIKE_SPAN:
+        return out
+    x = values[rows]
+    scale = np.maximum(np.percentile(np.abs(x[::max(1, len(x) // 20_000)]), 99.0, axis=0), 1.0)   # on 20,000 rows at most
+    # a departure beyond SPIKE_FACTOR * scale needs a value beyond half of it in the window:
+    # the medians are taken only there (none on a clean log)
+    big = np.flatnonzero((np.abs(x) > 0.5 * SPIKE_FACTOR * scale).any(axis=1))
+    near = np.unique(np.clip(big[:, None] + np.arange(-SPIKE_SPAN, SPIKE_SPAN + 1), 0, len(x) - 1))
+    if len(near):
+        window = np.clip(near[:, None] + np.arange(-SPIKE_SPAN, SPIKE_SPAN + 1), 0, len(x) - 1)
+        local = np.median(x[window], axis=1)
+        out[rows[near]] = (np.abs(x[near] - local) > SPIKE_FACTOR * scale).any(axis=1)
+    return out
+
+
 def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarray, *, name: str,
                     drop_backward: bool = False, unit: str = "line", shown_from: float = 0.0,
                     places: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Defect]]:
-    """Which rows to keep: not of implausible magnitude, not all zero, and in the longest chain of
+    """Which rows to keep: not of implausible magnitude, not all zero, no spike (``spikes``), and in the longest chain of
     consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR median steps).
     ``t`` [s] and each of ``signals`` (canonical units) have shape (n,); ``numbers`` are the rows'
     line (or message) numbers; ``places`` (n,) the rows' places among the file's rows (default:
@@ -134,13 +162,14 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``
     (its message gives times from ``shown_from``)."""
     n = len(t)
-    garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool)}
+    garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool), "spike": np.zeros(n, dtype=bool)}
     if signals:
         values = np.abs(np.column_stack(signals))
         bound = np.minimum(MAGNITUDE_FACTOR * np.maximum(1.0, np.median(values, axis=0)), MAGNITUDE_LIMIT)
         garbage["implausible"] = (values > bound).any(axis=1)
         garbage["zero_row"] = (values == 0).all(axis=1) & ~garbage["implausible"]
-    rest = np.flatnonzero(~(garbage["implausible"] | garbage["zero_row"]))
+        garbage["spike"] = spikes(np.column_stack(signals), ~(garbage["implausible"] | garbage["zero_row"]))
+    rest = np.flatnonzero(~np.logical_or.reduce(list(garbage.values())))
     kinds = np.full(n, "", dtype=object)
     for kind, mask in garbage.items():
         kinds[mask] = kind
