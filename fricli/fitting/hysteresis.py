@@ -230,8 +230,8 @@ def fit(signals: dict[str, np.ndarray], *, axis: str = "rotary", elements=ELEMEN
                      "offsets " + ", ".join(f"{c:.4g}" for c in coef[at:at + len(starts)])
                      + " (robot-model error, one per recording); the model keeps their mean")
     record = metrics.errors(y, pred)
-    record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()), held_rows=int(held.sum()),
-                  elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, recordings=len(starts),
+    record.update(moving=metrics.errors(y[moving], pred[moving]), moving_rows=int(moving.sum()),
+                  held_rows=int(held.sum()), elements=n_el, coulomb_k=kc_, error_k=ke, blocks=blocks, recordings=len(starts),
                   recording_offsets=[float(c) for c in coef[at:at + len(starts)]] if ke >= 0 else [], heldout_best=best,
                   vs_candidates=[{"vs": v, "heldout_rmse": e} for e, v in vs_scores], notes=notes,
                   candidates=[{k: v for k, v in c.items() if not k.startswith("_")} for c in candidates])

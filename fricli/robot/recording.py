@@ -138,7 +138,8 @@ def spikes(values: np.ndarray, usable: np.ndarray) -> np.ndarray:
     if len(rows) <= 2 * SPIKE_SPAN:
         return out
     x = values[rows]
-    scale = np.maximum(np.percentile(np.abs(x[::max(1, len(x) // 20_000)]), 99.0, axis=0), 1.0)   # on 20,000 rows at most
+    sample = x[::max(1, len(x) // 20_000)]          # the percentile of 20,000 rows at most
+    scale = np.maximum(np.percentile(np.abs(sample), 99.0, axis=0), 1.0)
     # a departure beyond SPIKE_FACTOR * scale needs a value beyond half of it in the window:
     # the medians are taken only there (none on a clean log)
     big = np.flatnonzero((np.abs(x) > 0.5 * SPIKE_FACTOR * scale).any(axis=1))
@@ -153,8 +154,9 @@ def spikes(values: np.ndarray, usable: np.ndarray) -> np.ndarray:
 def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarray, *, name: str,
                     drop_backward: bool = False, unit: str = "line", shown_from: float = 0.0,
                     places: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Defect]]:
-    """Which rows to keep: not of implausible magnitude, not all zero, no spike (``spikes``), and in the longest chain of
-    consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR median steps).
+    """Which rows to keep: not of implausible magnitude, not all zero, no spike (``spikes``), and in
+    the longest chain of consistent time (``_chain``: strictly increasing, steps within STEP_FACTOR
+    median steps).
     ``t`` [s] and each of ``signals`` (canonical units) have shape (n,); ``numbers`` are the rows'
     line (or message) numbers; ``places`` (n,) the rows' places among the file's rows (default:
     ``numbers``), so that the rows dropped before (malformed lines) count as skipped in the chain of
@@ -162,13 +164,14 @@ def consistent_rows(t: np.ndarray, signals: list[np.ndarray], numbers: np.ndarra
     time goes back within STEP_FACTOR median steps inside the recording and not ``drop_backward``
     (its message gives times from ``shown_from``)."""
     n = len(t)
-    garbage = {"implausible": np.zeros(n, dtype=bool), "zero_row": np.zeros(n, dtype=bool), "spike": np.zeros(n, dtype=bool)}
+    garbage = {kind: np.zeros(n, dtype=bool) for kind in ("implausible", "zero_row", "spike")}
     if signals:
-        values = np.abs(np.column_stack(signals))
+        stacked = np.column_stack(signals)
+        values = np.abs(stacked)
         bound = np.minimum(MAGNITUDE_FACTOR * np.maximum(1.0, np.median(values, axis=0)), MAGNITUDE_LIMIT)
         garbage["implausible"] = (values > bound).any(axis=1)
         garbage["zero_row"] = (values == 0).all(axis=1) & ~garbage["implausible"]
-        garbage["spike"] = spikes(np.column_stack(signals), ~(garbage["implausible"] | garbage["zero_row"]))
+        garbage["spike"] = spikes(stacked, ~(garbage["implausible"] | garbage["zero_row"]))
     rest = np.flatnonzero(~np.logical_or.reduce(list(garbage.values())))
     kinds = np.full(n, "", dtype=object)
     for kind, mask in garbage.items():
