@@ -132,9 +132,9 @@ def import_cmd(recordings, mapping_path, topic, kt_pairs, urdf, match, inertia_p
     For a text file the mapping says which column is the time and, per joint, which are q, qd,
     i_m or tau_m, with units and drive gains; a bag's sensor_msgs/JointState messages name their
     joints and give position, velocity and effort. Malformed rows, garbage rows (implausible
-    magnitudes, rows of zeros, time outside the longest consistent stretch), a truncated last line
-    and repeated time steps are dropped and reported on stderr; time going back a little inside
-    the recording is refused unless --drop-backward.
+    magnitudes, rows of zeros, spikes of one or two samples, time outside the longest consistent
+    stretch), a truncated last line and repeated time steps are dropped and reported on stderr;
+    time going back a little inside the recording is refused unless --drop-backward.
 
     \b
     Example:
