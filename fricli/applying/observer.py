@@ -61,6 +61,7 @@ import math
 
 import numpy as np
 
+from fricli.core import metrics
 from fricli.core.errors import DataError, LogError
 from fricli.core.jsontext import is_count
 
@@ -432,9 +433,7 @@ def events(t: np.ndarray, contact: np.ndarray, tau_ext: np.ndarray, joints: list
     """The contacts of a replay: one per run of flagged rows of a joint, in time order."""
     out = []
     for j, name in enumerate(joints):
-        flag = contact[:, j].astype(np.int8)
-        edges = np.diff(np.concatenate([[0], flag, [0]]))
-        for s, e in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        for s, e in metrics.true_runs(contact[:, j] != 0):
             seg = tau_ext[s:e, j]
             i = int(np.argmax(np.abs(seg)))
             out.append(Event(name, float(t[s]), float(t[e]) if e < len(t) else None, float(seg[i]),

@@ -86,13 +86,18 @@ def at_hold(t: np.ndarray, qd: np.ndarray, longer: float = HOLD_S) -> np.ndarray
     stretch's last row minus its first), (n,) bool: the joint held still, where the torque is what
     the controller left, not a law of friction. The slow rows of a pass through a reversal, where
     a pre-sliding state shows, are not among them."""
-    t, still = np.asarray(t, dtype=np.float64), ~in_motion(qd)
+    t = np.asarray(t, dtype=np.float64)
     out = np.zeros(len(t), dtype=bool)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(np.int8), [0]])))
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in true_runs(~in_motion(qd)):
         if t[b - 1] - t[a] > longer:
             out[a:b] = True
     return out
+
+
+def true_runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every maximal run of True in ``mask`` (n,) bool, rows start:stop."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 def moving_both_ways(qd: np.ndarray, what: str) -> np.ndarray:

@@ -97,13 +97,13 @@ def ranges(numbers: np.ndarray) -> list[list[int]]:
     return [[int(a), int(b)] for a, b in zip(firsts, lasts)]
 
 
-def _chain(t: np.ndarray, limit: float, at: np.ndarray | None = None) -> np.ndarray:
+def _chain(t: np.ndarray, limit: float, places: np.ndarray | None = None) -> np.ndarray:
     """Mask of the longest chain of stretches of ``t`` (shape (m,)) in which time increases by at
     most ``limit`` a step: a stretch follows another when its first time after the other's end is
     at most ``limit`` per row skipped (+1) later; its rows at or before that end are left out.
-    ``at`` (m,): each row's place in the file (its line number), so that rows dropped before
+    ``places`` (m,): each row's place in the file (its line number), so that rows dropped before
     (garbage, malformed lines) count as skipped; default: its index."""
-    at = np.arange(len(t)) if at is None else np.asarray(at)
+    places = np.arange(len(t)) if places is None else np.asarray(places)
     ok = (np.diff(t) > 0) & (np.diff(t) <= limit)
     cut = np.flatnonzero(~ok) + 1
     starts, ends = np.r_[0, cut], np.r_[cut, len(t)] - 1
@@ -113,7 +113,7 @@ def _chain(t: np.ndarray, limit: float, at: np.ndarray | None = None) -> np.ndar
         part = t[starts[j]:ends[j] + 1]
         for i in range(max(0, j - LINK_WINDOW), j):
             r = starts[j] + int(np.searchsorted(part, t[ends[i]], side="right"))
-            if r > ends[j] or t[r] - t[ends[i]] > limit * (at[r] - at[ends[i]]):
+            if r > ends[j] or t[r] - t[ends[i]] > limit * (places[r] - places[ends[i]]):
                 continue
             if best[i] + ends[j] - r + 1 > best[j]:
                 best[j], head[j], prev[j] = best[i] + ends[j] - r + 1, r, i
@@ -472,7 +472,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     if mapping.header:
         top, start = _header_line(line, comments, first, mapping.delimiter)
         header = [f.strip().decode("utf-8", "replace") for f in _fields(top, mapping.delimiter)]
-        header = [h[1:-1] if len(h) > 1 and h[0] == h[-1] == '"' else h for h in header]   # "name", as R writes it
+        header = [re.sub(QUOTED, r"\1", h) for h in header]   # "name", as R writes it
         header = _trailing_delimiter(header, [line(i) for i in range(start, min(start + 200, n_lines))],
                                      mapping.delimiter)
         n_fields = len(header)
