@@ -234,7 +234,7 @@ def test_header_compiles_as_cpp_without_warnings(kind, sim_models, tmp_path):
 
 
 @pytest.mark.parametrize("cxx", [False, True], ids=["c", "c++"])
-@pytest.mark.parametrize("kind", ["dissipative", "residual", "augmented-nn"])
+@pytest.mark.parametrize("kind", ["mlp", "residual", "augmented-nn"])
 def test_the_fma_copy_of_a_network_agrees_with_the_portable_copy(kind, cxx, sim_models, tmp_path):
     """With GCC or Clang on x86-64 a CPU with AVX2 and FMA runs the networks' fused copy: what
     the portable copy (FRICLI_PORTABLE) gives, to rounding, also as C++."""

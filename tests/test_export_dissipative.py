@@ -2,7 +2,9 @@
 left out: C equals `fricli predict --precision double` to 1e-9 on every row for each variant (no
 load term, no prior, no bristles, blend 0 and 1, a prior without its Stribeck shape, an ensemble,
 extrapolation below v_min and above v_max with a slope, the settled Stribeck shape and bristle decay
-that the step skips), and predict leaves out only terms that add 0.
+that the step skips), and predict leaves out only terms that add 0. The networks' magnitude is
+written as polynomial pieces of the speed input (``fricli.export.piecewise``) where the speed has a
+top, as the layers otherwise ("no extrapolation"); the pieces agree with the networks.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import pytest
 from conftest import SAMPLE
 from fricli import models
 from fricli.core import logs
-from fricli.export import c, neural
+from fricli.export import c, neural, piecewise
 from fricli.models import dissipative as D
 from fricli.models.dissipative import DissipativeFriction
 from test_export import _compare, needs_cc
@@ -93,11 +95,11 @@ def _header(model, tmp_path) -> str:
 
 def test_terms_of_weight_zero_are_not_written(tmp_path):
     text = _header(_variant(_fit(), prior=PRIOR, blend=1.0, sigma0=2e4), tmp_path)
-    assert "fr_m_net(x)" in text and "exp(-exp(" not in text        # blend 1: no prior
+    assert "fr_m_mag(" in text and "exp(-exp(" not in text           # blend 1: no prior
     text = _header(_variant(_fit(), prior=PRIOR, blend=0.0, sigma0=2e4), tmp_path)
-    assert "fr_m_net" not in text and "exp(-exp(" in text            # blend 0: no network
+    assert "fr_m_mag" not in text and "exp(-exp(" in text            # blend 0: no network
     text = _header(_variant(_fit(), prior=FLAT, blend=0.5), tmp_path)
-    assert "fr_m_net(x)" in text and "exp(-exp(" not in text         # fs = fc, ks = kc: no Stribeck shape
+    assert "fr_m_mag(" in text and "exp(-exp(" not in text           # fs = fc, ks = kc: no Stribeck shape
     model = _variant(_fit(), load=False)
     model.slope_ = (0.0, 0.0)
     text = _header(model, tmp_path)
@@ -139,3 +141,42 @@ def test_the_bristle_blocks_carry_the_state(monkeypatch):
     assert len(sig["t"]) > 10 * 1000
     np.testing.assert_allclose(blocks, whole, rtol=1e-12, atol=1e-12)
     assert state2[1] == state[1] and abs(state2[0] - state[0]) <= 1e-12 * (1.0 + abs(state[0]))
+
+
+@pytest.mark.parametrize("members", [1, 3])
+def test_the_magnitude_pieces_agree_with_the_networks_between_their_check_points(members):
+    """At 20,000 random speeds of each direction (not the points the pieces were checked at),
+    and at qd = 0, the pieces give the networks' magnitude to piecewise.TOL."""
+    model = _variant(_fit(members=members), prior=PRIOR, blend=0.5, sigma0=2e4)
+    pos, neg, at_rest = neural.magnitude_pieces(model)
+    rng = np.random.default_rng(0)
+    for k, (pieces, sign) in enumerate(((pos, 1.0), (neg, -1.0))):
+        speed = rng.uniform(model.v_min_[k], model.v_max_[k], 20_000)
+        qd = sign * speed
+        model.blend_, model.precision = 1.0, "double"    # the networks alone, m = softplus(r0), as the C step
+        want = model.magnitude({"qd": qd, "tau_g": np.zeros_like(qd)}) / model.y_scale_
+        got = pieces(neural._speed_input(speed, model))
+        assert np.max(np.abs(got - want) / np.maximum(1.0, want)) <= 2 * piecewise.TOL
+        assert len(pieces.table) < piecewise.MAX_PIECES and pieces.error <= piecewise.TOL
+    model.load_ = False
+    assert at_rest == pytest.approx(model.magnitude({"qd": np.zeros(1)})[0] / model.y_scale_, rel=1e-15)
+
+
+def test_without_a_top_speed_the_layers_are_written():
+    model = _variant(_fit(), extrapolation=False)
+    assert neural.magnitude_pieces(model) is None
+
+
+def test_crossings_are_found_to_the_last_bit_and_pieces_meet_the_tolerance():
+    roots = np.array([-0.7, 0.123456789, 0.5])
+    pre = lambda u: [np.vstack([u - r for r in roots])]                       # noqa: E731
+    found = piecewise.crossings(pre, -1.0, 1.0)
+    np.testing.assert_allclose(found, roots, rtol=0, atol=4e-16)
+    kinked = lambda u: np.where(u > roots[1], np.expm1(-(u - roots[1])), -(u - roots[1])) + np.sin(3 * u)  # noqa: E731
+    with_breaks = piecewise.fit(kinked, -1.0, 1.0, found)
+    u = np.random.default_rng(1).uniform(-1.0, 1.0, 50_000)
+    assert np.max(np.abs(with_breaks(u) - kinked(u))) <= 2 * piecewise.TOL
+    halved = piecewise.fit(kinked, -1.0, 1.0)                                 # the kink not given: found by halving
+    assert np.max(np.abs(halved(u) - kinked(u))) <= 2 * piecewise.TOL and len(halved.table) > len(with_breaks.table)
+    noise = np.random.default_rng(2).normal(size=1000)
+    assert piecewise.fit(lambda v: noise[np.minimum((v + 1) * 500, 999).astype(int)], -1.0, 1.0) is None

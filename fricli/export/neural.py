@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from fricli.core.errors import ModelFileError
-from fricli.export import network
+from fricli.export import network, piecewise
 from fricli.export.c import Context, Part, emitter, num
 from fricli.models.dissipative import G_MIN
 from fricli.numerics.nn import activations as acts
@@ -62,18 +62,23 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     names = [f"{name}_net" if k == 0 else f"{name}_net{k}" for k in range(len(nets))]
     qd = ctx.signal("qd")
     ctx.signal("tau_g")   # a step of (t,) qd, tau_g for every dissipative model, whether it reads tau_g or not
-    lines = [*(network.dense(net, net_name, output=0) for net, net_name in zip(nets, names) if uses_net),
+    pieces = magnitude_pieces(model) if uses_net else None
+    if pieces is not None:
+        code = [_pieces_code(model, pieces, name)]
+    else:
+        code = [network.dense(net, net_name, output=0) for net, net_name in zip(nets, names) if uses_net]
+    lines = [*code,
              f"static inline double {name}_step(const {ctx.in_type} *in) {{",
              f"    const double qd = {qd};",
              "    const int pos_ = qd > 0.0; (void)pos_;",
              "    double m;",
-             *(_net_magnitude(model, names, ctx) if uses_net else ["    m = 0.0;"]),
+             *(_net_magnitude(model, name, names, ctx, pieces) if uses_net else ["    m = 0.0;"]),
              *(_prior(model, ctx) if uses_prior else []),
              *([f"    return m * tanh(qd * {num(1.0 / model.v_ps_)}) * {num(model.y_scale_)};", "}", ""]
                if model.sigma0_ is None else _bristles(model, ctx))]
     if model.sigma0_ is None:
         return Part(name, "\n".join(lines), stateful=False)
-    k = len(nets) if uses_net else 0
+    k = len(code)
     lines[k:k] = [
         "typedef struct {", "    double z;       /* bristle deflection [rad] */",
         "    double t_prev;  /* time of the previous sample [s] */",
@@ -96,8 +101,53 @@ def _uses(model) -> tuple[bool, bool]:
     return model.blend_ != 0.0, model.blend_ != 1.0
 
 
-def _net_magnitude(model, names: list[str], ctx: Context) -> list[str]:
-    """m = the networks' magnitude softplus(r0) + k |tau_g| (+ the slope beyond v_max), / y_scale."""
+def _speed_input(speed, model) -> np.ndarray:
+    """The network input u of the clamped speed ``speed`` [rad/s] (as ``DissipativeFriction._rows``)."""
+    return (np.arcsinh(np.asarray(speed, dtype=np.float64) / model.v0_) - model.u_mean_) / model.u_scale_
+
+
+def magnitude_pieces(model) -> tuple[piecewise.Pieces, piecewise.Pieces, float] | None:
+    """The networks' magnitude mean_k softplus(r0_k(u, sign(qd))) over the speed input u as
+    polynomial pieces (``fricli.export.piecewise``) for qd > 0 and for qd < 0, and its value at
+    qd = 0; None where the speed has no top (u unbounded) or the pieces do not agree with the
+    networks to ``piecewise.TOL``."""
+    if model.v_max_ is None or any(net.n_skip for net in model.nets_):
+        return None
+
+    def pre(u: np.ndarray, sign: float) -> list[np.ndarray]:
+        return [h for net in model.nets_ for h in network.preactivations(net, np.vstack([u, np.full_like(u, sign)]))[0]]
+
+    def magnitude(u: np.ndarray, sign: float) -> np.ndarray:
+        x = np.vstack([u, np.full_like(u, sign)])
+        return np.mean([acts.softplus(network.preactivations(net, x)[1][0]) for net in model.nets_], axis=0)
+
+    out = []
+    for i, sign in enumerate((1.0, -1.0)):
+        low = 0.0 if model.v_min_ is None else model.v_min_[i]
+        lo, hi = _speed_input([low, max(low, model.v_max_[i])], model)
+        part = piecewise.fit(lambda u: magnitude(u, sign), lo, hi, piecewise.crossings(lambda u: pre(u, sign), lo, hi))
+        if part is None:
+            return None
+        out.append(part)
+    at_rest = _speed_input([0.0 if model.v_min_ is None else model.v_min_[1]], model)
+    return out[0], out[1], float(magnitude(at_rest, 0.0)[0])
+
+
+def _pieces_code(model, pieces, name: str) -> str:
+    """The tables and the evaluation function of ``magnitude_pieces``, with a comment saying what they are."""
+    pos, neg, _ = pieces
+    note = (f"/* The networks' magnitude{' (the mean of the members)' if len(model.nets_) > 1 else ''} "
+            f"softplus(r0) of the speed input x[0], as polynomials of degree {piecewise.DEGREE} "
+            f"in {len(pos.table)} pieces for qd > 0 and {len(neg.table)} for qd < 0, each between the inputs where "
+            f"a hidden unit's input crosses 0 (halved where needed); largest difference from the networks at "
+            f"{piecewise.CHECKS} points a piece: {max(pos.error, neg.error):.1e} (relative to max(1, m)). */")
+    return "\n".join([note, piecewise.c_tables(f"{name}_mag_pos", pos), piecewise.c_tables(f"{name}_mag_neg", neg),
+                      piecewise.c_function(f"{name}_mag"), ""])
+
+
+def _net_magnitude(model, name: str, names: list[str], ctx: Context, pieces=None) -> list[str]:
+    """m = the networks' magnitude softplus(r0) + k |tau_g| (+ the slope beyond v_max), / y_scale;
+    with ``pieces`` (``magnitude_pieces``), softplus(r0) from its polynomials."""
     nets = model.nets_
     b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
     inv_v0 = 1.0 / model.v0_
@@ -111,13 +161,18 @@ def _net_magnitude(model, names: list[str], ctx: Context) -> list[str]:
     lines.append(f"    s_ = s_ * {num(inv_v0)};")
     lines += ["    /* asinh(s_) for s_ >= 0, to a few 1e-16 (as a library asinh, faster) */",
               "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
-              f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};",
-              "    x[1] = pos_ ? 1.0 : (qd < 0.0 ? -1.0 : 0.0);",
-              "    m = 0.0;"]
-    softplus = "log(1.0 + exp(-fabs(r_))) + (r_ > 0.0 ? r_ : 0.0)"   # softplus(r_), to 1e-16 absolute
-    lines += [f"    r_ = {net_name}(x); m += {softplus};" for net_name in names]
-    if len(nets) > 1:
-        lines.append(f"    m = m * {num(1.0 / len(nets))};")
+              f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};"]
+    if pieces is not None:
+        pos, neg, at_rest = pieces
+        lines[0] = "    double x[1], s_ = fabs(qd);"
+        lines.append(f"    m = pos_ ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_pos', pos, 'x[0]')}"
+                     f" : (qd < 0.0 ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_neg', neg, 'x[0]')} : {num(at_rest)});")
+    else:
+        lines += ["    x[1] = pos_ ? 1.0 : (qd < 0.0 ? -1.0 : 0.0);", "    m = 0.0;"]
+        softplus = "log(1.0 + exp(-fabs(r_))) + (r_ > 0.0 ? r_ : 0.0)"   # softplus(r_), to 1e-16 absolute
+        lines += [f"    r_ = {net_name}(x); m += {softplus};" for net_name in names]
+        if len(nets) > 1:
+            lines.append(f"    m = m * {num(1.0 / len(nets))};")
     if model.load_ and b1 != 0.0:
         lines.append(f"    m = m + {num(b1 / model.g_scale_)} * fabs({ctx.signal('tau_g')});")
     if model.v_max_ is not None and max(model.slope_) > 0.0:   # linear beyond the top training speeds
