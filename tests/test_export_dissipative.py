@@ -15,7 +15,8 @@ import pytest
 from conftest import SAMPLE
 from fricli import models
 from fricli.core import logs
-from fricli.export import c, neural, piecewise
+from fricli.export import c, neural
+from fricli.numerics import piecewise
 from fricli.models import dissipative as D
 from fricli.models.dissipative import DissipativeFriction
 from test_export import _compare, needs_cc
@@ -148,23 +149,51 @@ def test_the_magnitude_pieces_agree_with_the_networks_between_their_check_points
     """At 20,000 random speeds of each direction (not the points the pieces were checked at),
     and at qd = 0, the pieces give the networks' magnitude to piecewise.TOL."""
     model = _variant(_fit(members=members), prior=PRIOR, blend=0.5, sigma0=2e4)
-    pos, neg, at_rest = neural.magnitude_pieces(model)
+    pieces = model.magnitude_pieces()
     rng = np.random.default_rng(0)
-    for k, (pieces, sign) in enumerate(((pos, 1.0), (neg, -1.0))):
+    model.blend_, model.precision = 1.0, "double"    # the networks alone, m = softplus(r0), as the C step
+    for k, (side, sign) in enumerate(((pieces.pos, 1.0), (pieces.neg, -1.0))):
         speed = rng.uniform(model.v_min_[k], model.v_max_[k], 20_000)
         qd = sign * speed
-        model.blend_, model.precision = 1.0, "double"    # the networks alone, m = softplus(r0), as the C step
         want = model.magnitude({"qd": qd, "tau_g": np.zeros_like(qd)}) / model.y_scale_
-        got = pieces(neural._speed_input(speed, model))
+        got = side(model.speed_input(speed))
         assert np.max(np.abs(got - want) / np.maximum(1.0, want)) <= 2 * piecewise.TOL
-        assert len(pieces.table) < piecewise.MAX_PIECES and pieces.error <= piecewise.TOL
+        np.testing.assert_allclose(pieces(model.speed_input(speed), qd), got, rtol=1e-14, atol=1e-14)
+        assert len(side.table) < piecewise.MAX_PIECES and side.error <= piecewise.TOL
     model.load_ = False
-    assert at_rest == pytest.approx(model.magnitude({"qd": np.zeros(1)})[0] / model.y_scale_, rel=1e-15)
+    assert pieces.at_rest == pytest.approx(model.magnitude({"qd": np.zeros(1)})[0] / model.y_scale_, rel=1e-15)
 
 
-def test_without_a_top_speed_the_layers_are_written():
+def test_without_a_top_speed_there_are_no_pieces():
     model = _variant(_fit(), extrapolation=False)
-    assert neural.magnitude_pieces(model) is None
+    assert model.magnitude_pieces() is None
+
+
+@pytest.mark.parametrize("members", [1, 2])
+def test_a_large_batch_predicts_through_the_pieces_as_the_networks_do(members):
+    """From PIECES_ROWS rows on, predict takes the magnitude from the pieces: the networks' numbers in
+    double precision to 1e-11 (the float32 networks' to their rounding); new weights, new pieces."""
+    model = _variant(_fit(members=members), prior=PRIOR, blend=0.4, sigma0=2e4)
+    sig = logs.load_log(LOG).signals
+    reps = -(-D.PIECES_ROWS // len(sig["t"]))
+    big = {k: np.tile(v, reps) for k, v in sig.items()}
+    big["t"] = np.arange(len(big["qd"])) * 1e-3
+    big["qd"][::7] = 0.0                                            # rows at rest too
+    assert len(big["t"]) >= D.PIECES_ROWS
+    model.precision = "double"
+    fast = model.predict(big)[0]
+    built = model._pieces[1]
+    assert built is not None
+    parts, state = [], None
+    for i in range(0, len(big["t"]), 5000):                        # batches below PIECES_ROWS: the networks
+        y, state = model.predict({k: v[i:i + 5000] for k, v in big.items()}, state)
+        parts.append(y)
+    slow = np.concatenate(parts)
+    np.testing.assert_allclose(fast, slow, rtol=1e-11, atol=1e-11 * np.max(np.abs(slow)))
+    model.precision = "single"
+    np.testing.assert_allclose(model.predict(big)[0], slow, rtol=1e-5, atol=1e-5 * np.max(np.abs(slow)))
+    model.net_.set_weights([w * 1.01 for w in model.net_.weights])
+    assert model.magnitude_pieces() is not built and not np.allclose(model.predict(big)[0], fast)
 
 
 def test_crossings_are_found_to_the_last_bit_and_pieces_meet_the_tolerance():
@@ -180,3 +209,13 @@ def test_crossings_are_found_to_the_last_bit_and_pieces_meet_the_tolerance():
     assert np.max(np.abs(halved(u) - kinked(u))) <= 2 * piecewise.TOL and len(halved.table) > len(with_breaks.table)
     noise = np.random.default_rng(2).normal(size=1000)
     assert piecewise.fit(lambda v: noise[np.minimum((v + 1) * 500, 999).astype(int)], -1.0, 1.0) is None
+
+
+def test_the_docs_and_the_help_give_the_batch_size_of_the_pieces():
+    from click.testing import CliRunner
+    from conftest import ROOT
+    from fricli.cli import cli
+    rows = f"{D.PIECES_ROWS:,}"
+    assert f"batch of {rows} rows or more (`PIECES_ROWS`" in (ROOT / "docs" / "deploy.md").read_text()
+    assert f"batches of {rows} rows or more" in (ROOT / "docs" / "neural-models.md").read_text()
+    assert f"batches of {rows} rows" in " ".join(CliRunner().invoke(cli, ["predict", "--help"]).output.split())

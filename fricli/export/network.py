@@ -208,20 +208,6 @@ def _body(net, weights: list[np.ndarray], name: str, output: int, fused: bool) -
     return lines + ["    (void)i; (void)j;", "    return y;", "}"]
 
 
-def preactivations(net, x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-    """The hidden layers' inputs [(units, m)] and the outputs (n_out, m) of ``net`` for the
-    standardised inputs x (n_in, m), in double precision (as ``predict --precision double``)."""
-    a, pre = np.asarray(x, dtype=np.float64), []
-    for (_, act), w in zip(net.hidden, net.weights):
-        w = np.asarray(w, dtype=np.float64)
-        h = w[:, :-1] @ a + w[:, -1:]
-        pre.append(h)
-        a = np.empty_like(h)
-        act.value(h, a, np.empty_like(h))
-    w = np.asarray(net.weights[-1], dtype=np.float64)
-    return pre, w[:, :a.shape[0]] @ a + w[:, a.shape[0]:a.shape[0] + 1]
-
-
 def dense(net, name: str, output: int | None = None) -> str:
     """C definition of ``static inline double <name>(const double *x)`` for ``net``: its single
     output, or output number ``output`` of several. The header puts ``c.PRELUDE`` before it.

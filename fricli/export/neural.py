@@ -18,6 +18,7 @@ import numpy as np
 
 from fricli.core.errors import ModelFileError
 from fricli.export import network, piecewise
+from fricli.numerics.piecewise import CHECKS, DEGREE
 from fricli.export.c import Context, Part, emitter, num
 from fricli.models.dissipative import G_MIN
 from fricli.numerics.nn import activations as acts
@@ -62,7 +63,7 @@ def dissipative(model, name: str, ctx: Context) -> Part:
     names = [f"{name}_net" if k == 0 else f"{name}_net{k}" for k in range(len(nets))]
     qd = ctx.signal("qd")
     ctx.signal("tau_g")   # a step of (t,) qd, tau_g for every dissipative model, whether it reads tau_g or not
-    pieces = magnitude_pieces(model) if uses_net else None
+    pieces = model.magnitude_pieces() if uses_net else None
     if pieces is not None:
         code = [_pieces_code(model, pieces, name)]
     else:
@@ -101,53 +102,21 @@ def _uses(model) -> tuple[bool, bool]:
     return model.blend_ != 0.0, model.blend_ != 1.0
 
 
-def _speed_input(speed, model) -> np.ndarray:
-    """The network input u of the clamped speed ``speed`` [rad/s] (as ``DissipativeFriction._rows``)."""
-    return (np.arcsinh(np.asarray(speed, dtype=np.float64) / model.v0_) - model.u_mean_) / model.u_scale_
-
-
-def magnitude_pieces(model) -> tuple[piecewise.Pieces, piecewise.Pieces, float] | None:
-    """The networks' magnitude mean_k softplus(r0_k(u, sign(qd))) over the speed input u as
-    polynomial pieces (``fricli.export.piecewise``) for qd > 0 and for qd < 0, and its value at
-    qd = 0; None where the speed has no top (u unbounded) or the pieces do not agree with the
-    networks to ``piecewise.TOL``."""
-    if model.v_max_ is None or any(net.n_skip for net in model.nets_):
-        return None
-
-    def pre(u: np.ndarray, sign: float) -> list[np.ndarray]:
-        return [h for net in model.nets_ for h in network.preactivations(net, np.vstack([u, np.full_like(u, sign)]))[0]]
-
-    def magnitude(u: np.ndarray, sign: float) -> np.ndarray:
-        x = np.vstack([u, np.full_like(u, sign)])
-        return np.mean([acts.softplus(network.preactivations(net, x)[1][0]) for net in model.nets_], axis=0)
-
-    out = []
-    for i, sign in enumerate((1.0, -1.0)):
-        low = 0.0 if model.v_min_ is None else model.v_min_[i]
-        lo, hi = _speed_input([low, max(low, model.v_max_[i])], model)
-        part = piecewise.fit(lambda u: magnitude(u, sign), lo, hi, piecewise.crossings(lambda u: pre(u, sign), lo, hi))
-        if part is None:
-            return None
-        out.append(part)
-    at_rest = _speed_input([0.0 if model.v_min_ is None else model.v_min_[1]], model)
-    return out[0], out[1], float(magnitude(at_rest, 0.0)[0])
-
-
 def _pieces_code(model, pieces, name: str) -> str:
-    """The tables and the evaluation function of ``magnitude_pieces``, with a comment saying what they are."""
-    pos, neg, _ = pieces
+    """The tables and the evaluation function of ``model.magnitude_pieces()``, with a comment saying what they are."""
+    pos, neg = pieces.pos, pieces.neg
     note = (f"/* The networks' magnitude{' (the mean of the members)' if len(model.nets_) > 1 else ''} "
-            f"softplus(r0) of the speed input x[0], as polynomials of degree {piecewise.DEGREE} "
+            f"softplus(r0) of the speed input x[0], as polynomials of degree {DEGREE} "
             f"in {len(pos.table)} pieces for qd > 0 and {len(neg.table)} for qd < 0, each between the inputs where "
             f"a hidden unit's input crosses 0 (halved where needed); largest difference from the networks at "
-            f"{piecewise.CHECKS} points a piece: {max(pos.error, neg.error):.1e} (relative to max(1, m)). */")
+            f"{CHECKS} points a piece: {pieces.error:.1e} (relative to max(1, m)). */")
     return "\n".join([note, piecewise.c_tables(f"{name}_mag_pos", pos), piecewise.c_tables(f"{name}_mag_neg", neg),
                       piecewise.c_function(f"{name}_mag"), ""])
 
 
 def _net_magnitude(model, name: str, names: list[str], ctx: Context, pieces=None) -> list[str]:
     """m = the networks' magnitude softplus(r0) + k |tau_g| (+ the slope beyond v_max), / y_scale;
-    with ``pieces`` (``magnitude_pieces``), softplus(r0) from its polynomials."""
+    with ``pieces`` (``model.magnitude_pieces()``), softplus(r0) from its polynomials."""
     nets = model.nets_
     b1 = float(np.mean(acts.softplus(np.array([float(net.weights[-1][1, -1]) for net in nets]))))
     inv_v0 = 1.0 / model.v0_
@@ -163,7 +132,7 @@ def _net_magnitude(model, name: str, names: list[str], ctx: Context, pieces=None
               "    s_ = s_ < 1e8 ? log(s_ + sqrt(s_ * s_ + 1.0)) : log(s_) + 0.69314718055994531;",
               f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};"]
     if pieces is not None:
-        pos, neg, at_rest = pieces
+        pos, neg, at_rest = pieces.pos, pieces.neg, pieces.at_rest
         lines[0] = "    double x[1], s_ = fabs(qd);"
         lines.append(f"    m = pos_ ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_pos', pos, 'x[0]')}"
                      f" : (qd < 0.0 ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_neg', neg, 'x[0]')} : {num(at_rest)});")

@@ -83,7 +83,7 @@ from fricli.models import register
 from fricli.models.base import FrictionModel
 from fricli.models.neural import (VELOCITY_QUANTILE, _describe_activation, load_training, record_training,
                                   training_arrays, training_options, training_params)
-from fricli.numerics import physics
+from fricli.numerics import physics, piecewise
 from fricli.numerics.nn import activations as acts
 from fricli.numerics.nn.heads import DissipativeHead, HeadedNetwork
 from fricli.numerics.nn.network import predict_in_chunks
@@ -95,6 +95,7 @@ G_MIN = 1e-12            # floor on the bristle curve g [Nm], so the bristle rat
 # fit_bristles: the bristle deflection g_typ / sigma0 [rad] searched (as identify's bounds)
 DEFLECTION_RANGE = (1e-8, 1.0)
 BRISTLE_BLOCK = 1 << 16  # rows per block of the bristle recurrence in predict (as LuGreModel's)
+PIECES_ROWS = 1 << 16    # a batch of this many rows or more takes the networks' magnitude from its pieces
 
 
 @register
@@ -126,6 +127,7 @@ class DissipativeFriction(FrictionModel):
         self.prior_: dict | None = None                   # static LuGre curve (PRIOR_KEYS, LuGreModel's units)
         self.blend_: float | None = None                  # lambda in [0, 1]: the network's share over the prior
         self.load_ = True                                 # whether |tau_g| enters (metrics.load_can_show)
+        self._pieces: tuple | None = None                 # (what they were built from, magnitude_pieces)
 
     @property
     def net_(self) -> HeadedNetwork | None:
@@ -155,9 +157,7 @@ class DissipativeFriction(FrictionModel):
         speed = np.abs(qd) if self.v_max_ is None else np.minimum(np.abs(qd), self._by_direction(qd, self.v_max_))
         if self.v_min_ is not None:
             np.maximum(speed, self._by_direction(qd, self.v_min_), out=speed)
-        np.arcsinh(speed / self.v0_, out=out[0])
-        out[0] -= self.u_mean_
-        out[0] /= self.u_scale_
+        out[0] = self.speed_input(speed)
         np.sign(qd, out=out[1])
         if sliding:
             out[2] = 1.0
@@ -265,6 +265,23 @@ class DissipativeFriction(FrictionModel):
 
     def required_inputs(self) -> set[str]:
         return {"qd", "tau_g"} if self.sigma0_ is None else {"t", "qd", "tau_g"}
+
+    def magnitude_pieces(self) -> piecewise.SignedPieces | None:
+        """mean_k softplus(r0_k) as pieces of u (``piecewise.network_pieces``), built once for the current
+        networks and scales; None without a top speed (u unbounded) or where they miss ``piecewise.TOL``."""
+        if self.nets_ is None or self.v_max_ is None:
+            return None
+        key = (self.v0_, self.u_mean_, self.u_scale_, self.v_min_, self.v_max_,
+               b"".join(np.asarray(net.theta, dtype=np.float64).tobytes() for net in self.nets_))
+        if self._pieces is None or self._pieces[0] != key:
+            low = (0.0, 0.0) if self.v_min_ is None else self.v_min_
+            ranges = [self.speed_input(np.array([v, max(v, top)])) for v, top in zip(low, self.v_max_)]
+            self._pieces = (key, piecewise.network_pieces(self.nets_, ranges, float(self.speed_input(low[1]))))
+        return self._pieces[1]
+
+    def speed_input(self, speed: np.ndarray) -> np.ndarray:
+        """The network input u (n,) of the clamped speed |qd| (n,) [rad/s]."""
+        return (np.arcsinh(np.asarray(speed, dtype=np.float64) / self.v0_) - self.u_mean_) / self.u_scale_
 
     def load_slope(self) -> float:
         """k [Nm/Nm]: the growth of the friction magnitude per |tau_g| (0 without a load term)."""
@@ -381,27 +398,33 @@ class DissipativeFriction(FrictionModel):
 
     def _run(self, signals: dict[str, np.ndarray], sliding: bool) -> np.ndarray:
         """y_scale * head output (n,), in chunks (``predict_in_chunks``); ``sliding``: c = 1. The network
-        runs in float32 (``precision="single"``) or float64 (``"double"``, as exported C code)."""
+        runs in float32 (``precision="single"``) or float64 (``"double"``, as exported C code); from
+        PIECES_ROWS rows on, the magnitude comes from ``magnitude_pieces`` (double to 1e-12)."""
         n = len(signals["qd"]) if "qd" in signals else 0
         if self.precision not in ("single", "double"):
             raise ValueError(f"precision must be 'single' or 'double', not {self.precision!r}")
-        nets = [net.astype(np.float64) if self.precision == "double" else net for net in self.nets_]
         out = np.empty(n, dtype=np.float64)
         # terms of weight 0 are left out (they would add 0): the networks at blend 0, the prior at
         # blend 1, the extrapolation when both slopes are 0
         uses_net = self.prior_ is None or self.blend_ != 0.0
         uses_prior = self.prior_ is not None and self.blend_ != 1.0
         slopes = uses_net and self.v_max_ is not None and max(self.slope_) > 0.0
+        pieces = self.magnitude_pieces() if uses_net and n >= PIECES_ROWS else None
+        nets = [net.astype(np.float64) if self.precision == "double" else net for net in self.nets_ if not pieces]
+        dtype = np.float64 if pieces is not None else nets[0].dtype
 
         def run(part: list[tuple[int, int]]) -> None:
             ws = [None] * len(nets)
             for start, stop in part:
                 rows = {k: v[start:stop] for k, v in signals.items() if k in ("qd", "tau_g")}
                 if uses_net or not sliding:
-                    x = self._rows(rows, nets[0].dtype, sliding)
+                    x = self._rows(rows, dtype, sliding)
                 c = 1.0 if sliding else x[2]
                 if not uses_net:
                     out[start:stop] = 0.0
+                if pieces is not None:   # y_scale c (m + mean softplus(b1) |tau_g| / g_scale)
+                    m = pieces(x[0], rows["qd"]) * self.y_scale_ + self.load_slope() * self.g_scale_ * x[3]
+                    out[start:stop] = m * c
                 for k, net in enumerate(nets if uses_net else ()):
                     if ws[k] is None or ws[k].n != stop - start:
                         ws[k] = net.workspace(stop - start, backward=False)
@@ -410,7 +433,7 @@ class DissipativeFriction(FrictionModel):
                         np.multiply(net.forward(ws[k])[0], self.y_scale_, out=out[start:stop])
                     else:
                         out[start:stop] += net.forward(ws[k])[0] * self.y_scale_
-                if len(nets) > 1 and uses_net:
+                if len(nets) > 1:
                     out[start:stop] /= len(nets)
                 if slopes:
                     qd = signals["qd"][start:stop]
@@ -574,3 +597,4 @@ def _member(k: int) -> str:
 def _pair(value) -> bool:
     """Two finite numbers."""
     return isinstance(value, list) and len(value) == 2 and all(is_finite_number(x) for x in value)
+

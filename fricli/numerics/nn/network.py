@@ -222,6 +222,19 @@ class Network:
                 np.multiply(g, ws.d[i - 1], out=g)
             upstream = g
 
+    def layer_inputs(self, x: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
+        """The hidden layers' inputs [(units, m)] and the outputs (n_out, m) for the inputs x
+        (n_in, m), in double precision whatever the network's (no skip inputs)."""
+        a, pre = np.asarray(x, dtype=np.float64), []
+        for (_, act), w in zip(self.hidden, self.weights):
+            w = np.asarray(w, dtype=np.float64)
+            h = w[:, :-1] @ a + w[:, -1:]
+            pre.append(h)
+            a = np.empty_like(h)
+            act.value(h, a, np.empty_like(h))
+        w = np.asarray(self.weights[-1], dtype=np.float64)
+        return pre, w[:, :a.shape[0]] @ a + w[:, a.shape[0]:a.shape[0] + 1]
+
     def predict(self, x: np.ndarray, chunk: int = PREDICT_CHUNK) -> np.ndarray:
         """Outputs (n_out, n) for inputs ``x`` (n_in + n_skip, n), in chunks of ``chunk`` columns."""
         n = x.shape[1]
