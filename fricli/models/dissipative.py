@@ -423,7 +423,7 @@ class DissipativeFriction(FrictionModel):
                 if not uses_net:
                     out[start:stop] = 0.0
                 if pieces is not None:   # y_scale c (m + mean softplus(b1) |tau_g| / g_scale)
-                    m = pieces(x[0], rows["qd"]) * self.y_scale_ + self.load_slope() * self.g_scale_ * x[3]
+                    m = pieces(x[0], x[1]) * self.y_scale_ + self.load_slope() * self.g_scale_ * x[3]
                     out[start:stop] = m * c
                 for k, net in enumerate(nets if uses_net else ()):
                     if ws[k] is None or ws[k].n != stop - start:

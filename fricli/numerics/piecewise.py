@@ -118,8 +118,8 @@ def fit(fn: Callable[[np.ndarray], np.ndarray], lo: float, hi: float, breaks=())
 
 @dataclasses.dataclass
 class SignedPieces:
-    """A function of (u, sign(qd)) as pieces of u: ``pos`` for qd > 0, ``neg`` for qd < 0, and
-    its value ``at_rest`` at qd = 0."""
+    """A function of (u, sign(qd)) as pieces of u: ``pos`` for sign 1, ``neg`` for sign -1, and
+    its value ``at_rest`` at sign 0."""
 
     pos: Pieces
     neg: Pieces
@@ -136,11 +136,11 @@ class SignedPieces:
     def error(self) -> float:
         return max(self.pos.error, self.neg.error)
 
-    def __call__(self, u: np.ndarray, qd: np.ndarray) -> np.ndarray:
-        """The function (n,) at the inputs u (n,) of the velocities qd (n,)."""
-        w = u + np.where(qd < 0, self._shift, 0.0)
+    def __call__(self, u: np.ndarray, sign: np.ndarray) -> np.ndarray:
+        """The function (n,) at the inputs u (n,) and sign(qd) (n,) (1, -1 or 0)."""
+        w = u + np.where(sign < 0, self._shift, 0.0)
         y = horner(self._table, np.searchsorted(self._inner, w, side="right"), w)
-        y[qd == 0] = self.at_rest
+        y[sign == 0] = self.at_rest
         return y
 
 
