@@ -18,10 +18,10 @@ import numpy as np
 
 from fricli.core.errors import ModelFileError
 from fricli.export import network, piecewise
-from fricli.numerics.piecewise import CHECKS, DEGREE
 from fricli.export.c import Context, Part, emitter, num
 from fricli.models.dissipative import G_MIN
 from fricli.numerics.nn import activations as acts
+from fricli.numerics.piecewise import CHECKS, DEGREE
 
 
 def feature(model, name: str, ctx: Context) -> str:
@@ -122,7 +122,7 @@ def _net_magnitude(model, name: str, names: list[str], ctx: Context, pieces=None
     inv_v0 = 1.0 / model.v0_
     by_dir = lambda pair: f"(pos_ ? {num(pair[0])} : {num(pair[1])})"  # noqa: E731
     # limits as comparisons, not fmin and fmax (library calls at -O2); the same for every input
-    lines = ["    double x[2], r_, s_ = fabs(qd);"]
+    lines = [f"    double {'x[2], r_' if pieces is None else 'x[1]'}, s_ = fabs(qd);"]
     if model.v_max_ is not None:
         lines.append(f"    {{ const double top_ = {by_dir(model.v_max_)}; s_ = s_ < top_ ? s_ : top_; }}")
     if model.v_min_ is not None:   # held at the slowest training speeds below them
@@ -133,7 +133,6 @@ def _net_magnitude(model, name: str, names: list[str], ctx: Context, pieces=None
               f"    x[0] = (s_ - {num(model.u_mean_)}) * {num(1.0 / model.u_scale_)};"]
     if pieces is not None:
         pos, neg, at_rest = pieces.pos, pieces.neg, pieces.at_rest
-        lines[0] = "    double x[1], s_ = fabs(qd);"
         lines.append(f"    m = pos_ ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_pos', pos, 'x[0]')}"
                      f" : (qd < 0.0 ? {piecewise.c_call(f'{name}_mag', f'{name}_mag_neg', neg, 'x[0]')} : {num(at_rest)});")
     else:

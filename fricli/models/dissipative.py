@@ -272,7 +272,7 @@ class DissipativeFriction(FrictionModel):
         if self.nets_ is None or self.v_max_ is None:
             return None
         key = (self.v0_, self.u_mean_, self.u_scale_, self.v_min_, self.v_max_,
-               b"".join(np.asarray(net.theta, dtype=np.float64).tobytes() for net in self.nets_))
+               b"".join(net.theta.tobytes() for net in self.nets_))
         if self._pieces is None or self._pieces[0] != key:
             low = (0.0, 0.0) if self.v_min_ is None else self.v_min_
             ranges = [self.speed_input(np.array([v, max(v, top)])) for v, top in zip(low, self.v_max_)]
@@ -410,8 +410,10 @@ class DissipativeFriction(FrictionModel):
         uses_prior = self.prior_ is not None and self.blend_ != 1.0
         slopes = uses_net and self.v_max_ is not None and max(self.slope_) > 0.0
         pieces = self.magnitude_pieces() if uses_net and n >= PIECES_ROWS else None
-        nets = [net.astype(np.float64) if self.precision == "double" else net for net in self.nets_ if not pieces]
+        nets = [] if pieces is not None else [
+            net.astype(np.float64) if self.precision == "double" else net for net in self.nets_]
         dtype = np.float64 if pieces is not None else nets[0].dtype
+        load = self.load_slope() * self.g_scale_ if pieces is not None else 0.0   # y_scale mean softplus(b1)
 
         def run(part: list[tuple[int, int]]) -> None:
             ws = [None] * len(nets)
@@ -423,8 +425,7 @@ class DissipativeFriction(FrictionModel):
                 if not uses_net:
                     out[start:stop] = 0.0
                 if pieces is not None:   # y_scale c (m + mean softplus(b1) |tau_g| / g_scale)
-                    m = pieces(x[0], x[1]) * self.y_scale_ + self.load_slope() * self.g_scale_ * x[3]
-                    out[start:stop] = m * c
+                    out[start:stop] = (pieces(x[0], x[1]) * self.y_scale_ + load * x[3]) * c
                 for k, net in enumerate(nets if uses_net else ()):
                     if ws[k] is None or ws[k].n != stop - start:
                         ws[k] = net.workspace(stop - start, backward=False)
@@ -433,7 +434,7 @@ class DissipativeFriction(FrictionModel):
                         np.multiply(net.forward(ws[k])[0], self.y_scale_, out=out[start:stop])
                     else:
                         out[start:stop] += net.forward(ws[k])[0] * self.y_scale_
-                if len(nets) > 1:
+                if len(nets) > 1 and uses_net:
                     out[start:stop] /= len(nets)
                 if slopes:
                     qd = signals["qd"][start:stop]
@@ -597,4 +598,3 @@ def _member(k: int) -> str:
 def _pair(value) -> bool:
     """Two finite numbers."""
     return isinstance(value, list) and len(value) == 2 and all(is_finite_number(x) for x in value)
-
