@@ -78,6 +78,26 @@ def test_model_meta_of_the_wrong_shape_refused(key, value):
         modelfile.loads(data, "m.npz")
 
 
+@pytest.mark.parametrize("value", [1e308, -1e39, float("inf"), float("nan")])
+@pytest.mark.parametrize("where", ["top", "child", "list"])
+def test_a_model_parameter_no_fit_writes_is_a_damaged_model(value, where):
+    """fv = 1e308 was accepted: predictions of 1e307 Nm, an RMS error of inf, and exit 0."""
+    params = {"fc": 1.0, "fv": value} if where == "top" else {"fc": 1.0, "pieces": [0.5, value]}
+    spec = {"kind": "lugre", "params": params}
+    if where == "child":
+        spec = {"kind": "residual", "params": {}, "children": {"base": spec}}
+    import io
+    import json
+
+    buf = io.BytesIO()   # as another tool writes it (fricli's writer refuses NaN and inf)
+    np.savez(buf, meta=np.array(json.dumps(META | {"model": spec})))
+    data = buf.getvalue()
+    with pytest.raises(ModelFileError, match=r"m\.npz: damaged model \(parameter '(fv|pieces)' is .*NaN, infinite or huge"):
+        modelfile.loads(data, "m.npz")
+    spec_ok = {"kind": "lugre", "params": {"fc": 1.0, "fv": 3.0e38, "t_ref": None, "flag": True}}
+    assert modelfile.loads(modelfile.dumps(META | {"model": spec_ok}, {}), "m.npz")[0]["model"] == spec_ok
+
+
 def test_model_meta_of_the_right_shape_loads():
     meta = META | {"joint": "j2", "provenance": {}, "units": {"tau": "Nm"}, "model": {}, "inputs": ["qd"]}
     assert modelfile.loads(modelfile.dumps(meta, {}), "m.npz")[0] == meta
@@ -123,6 +143,31 @@ def test_comment_lines_before_rows_without_a_header_are_skipped():
     rec = recording_of("# run 4\n# t q tau\n" + ROWS, HEADED.replace("header = true", "header = false")
                        .replace('"t"', "1").replace('"q"', "2").replace('"tau"', "3"))
     assert len(rec.lines) == 20 and not rec.defects
+
+
+NUMBERED = HEADED.replace("header = true", "header = false").replace('"t"', "1").replace('"q"', "2").replace('"tau"', "3")
+
+
+@pytest.mark.parametrize("mapping", [HEADED, NUMBERED])
+def test_a_byte_order_mark_is_not_part_of_the_first_line(mapping):
+    """Without a header the mark made the first row's time non-numeric: the row was dropped."""
+    text = ("t,q,tau\n" if mapping is HEADED else "") + ROWS
+    rec = recording_of("\ufeff" + text, mapping)
+    assert len(rec.lines) == 20 and not rec.defects
+    np.testing.assert_allclose(rec.values["tau"] if mapping is HEADED else rec.values[3], 1 + 0.1 * np.arange(20))
+
+
+def test_a_nul_byte_far_into_a_text_file_is_a_malformed_row():
+    """A file with NUL bytes in its first 64 KiB is binary; a NUL further on (a block a crash left
+    unwritten) is a damaged row: dropped and reported, the others kept."""
+    lines = ("t,q,tau\n" + "".join(f"{k * 0.01:.2f},{np.sin(k * 0.01):.6f},{1 + 0.1 * k:.1f}\n"
+                                    for k in range(5000))).splitlines(True)
+    assert sum(map(len, lines[:4001])) > 65536
+    lines[4000] = "\x00" + lines[4000]
+    rec = recording_of("".join(lines))
+    assert len(rec.lines) == 4999 and sum(d.count for d in rec.defects.values()) == 1
+    with pytest.raises(LogError, match="a binary file"):
+        recording_of("".join(lines[:10]) + "\x00" + "".join(lines[10:]))
 
 
 def two_joints(b):

@@ -309,6 +309,20 @@ def test_stdout_that_cannot_be_written_is_an_output_error(tmp_path, stdout):
         assert res.stderr.decode().startswith("fricli: error: cannot write"), res.stderr
 
 
+def test_a_reader_that_closes_stdout_early_is_an_output_error(tmp_path):
+    """``fricli predict ... -o - | head -c 10``: exit 7 with one line, where it was exit 7 without one."""
+    model = tmp_path / "m.npz"
+    models.save(str(model), LuGreModel(**PARAMS), joint=2, axis="rotary", units=logs.CANONICAL["rotary"], provenance={})
+    args = ["predict", model, SAMPLE / "joint2_adapt.parquet", "-o", "-", "-q", "--batch-rows", "1000"]
+    proc = subprocess.Popen([sys.executable, "-m", "fricli", *map(str, args)], cwd=tmp_path, env=base_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert len(proc.stdout.read(10)) == 10
+    proc.stdout.close()
+    stderr = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == errors.OUTPUT
+    assert stderr == "fricli: error: cannot write to stdout: the command reading it has closed it\n", stderr
+
+
 def test_binary_output_to_a_terminal_is_refused_and_text_is_written(tmp_path):
     import pty
 

@@ -408,6 +408,12 @@ def test_dynamics_adds_the_same_terms_to_an_existing_log(tmp_path, rng, monkeypa
               cwd=tmp_path)
     assert res.returncode == errors.INPUT and "not sampled at the same times" in res.stderr
     assert not (tmp_path / "x.parquet").exists()
+    # a log without rows (it was an internal error)
+    pq.write_table(table.slice(0, 0), tmp_path / "empty.parquet")
+    res = run("dynamics", "empty.parquet", "--urdf", "two_link.urdf", "--match", "order", "-o", "x.parquet",
+              cwd=tmp_path)
+    assert res.returncode == errors.INPUT and res.stderr == "fricli: error: empty.parquet: the log is empty\n", res.stderr
+    assert not (tmp_path / "x.parquet").exists()
 
 
 @pytest.mark.slow

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import errno
 import importlib
+import os
 import signal
 import sys
 
@@ -78,7 +79,10 @@ class FricliGroup(click.Group):
             click.echo("fricli: interrupted", err=True)
             ctx.exit(errors.INTERRUPTED)
         except BrokenPipeError:
-            sys.stderr.close()  # the reader went away: nothing more to say
+            # the reader went away (| head): stdout goes to /dev/null, so that the interpreter's
+            # last flush at exit raises nothing more
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            click.echo("fricli: error: cannot write to stdout: the command reading it has closed it", err=True)
             ctx.exit(errors.OUTPUT)
         except MemoryError:
             click.echo("fricli: error: out of memory", err=True)

@@ -71,7 +71,8 @@ TABLE: tuple[ExitCode, ...] = (
              "the memory available allows (calibrate on part of it with `--from`/`--until`); for `fricli identify`, a "
              "joint with more rows than it fits within its memory limit (identify on part of it with `--from`/`--until`)"),
     ExitCode(OUTPUT, "OUTPUT", "an output could not be written",
-             "an output could not be written (missing folder, disk full, permissions)"),
+             "an output could not be written (missing folder, disk full, permissions, stdout closed by the command "
+             "reading it)"),
     ExitCode(LOCKED, "LOCKED", "another job holds the lock on the output",
              "another job holds the lock on the same output; for `fleet`, another run of the same manifest"),
     ExitCode(UNCHANGED, "UNCHANGED", "--if-changed: the output is up to date, nothing was done",

@@ -134,6 +134,9 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
         raise ModelFileError(f"{name}: model format version {shown} is not supported "
                              f"(this fricli reads version {FORMAT_VERSION})")
     _check_shapes(meta, name)
+    bad = _beyond_float32(meta.get("model"))
+    if bad is not None:
+        raise ModelFileError(f"{name}: damaged model (parameter {bad[0]!r} is {bad[1]!r}: NaN, infinite or huge)")
     for key, arr in arrays.items():
         if arr.dtype.kind not in "biuf":  # model arrays are real numbers
             raise ModelFileError(f"{name}: damaged model (array {key!r} has type {arr.dtype})")
@@ -153,6 +156,23 @@ _SHAPES = {
     "envelope": (lambda v: v is None or isinstance(v, dict), "an object"),
     **{key: (lambda v: isinstance(v, dict), "an object") for key in ("model", "units", "provenance", "fit")},
 }
+
+
+def _beyond_float32(value, key: str = "") -> tuple[str, float] | None:
+    """(key, value) of the first number in the model spec ``value`` (nested dicts and lists) that is
+    not finite or beyond float32's range, as the arrays are checked: no fit writes one."""
+    if isinstance(value, dict):
+        found = (_beyond_float32(v, k) for k, v in value.items())
+    elif isinstance(value, list):
+        found = (_beyond_float32(v, key) for v in value)
+    elif isinstance(value, (int, float)) and not isinstance(value, bool) and not abs(value) <= _FLOAT32_MAX:
+        return key, value
+    else:
+        return None
+    return next((f for f in found if f is not None), None)
+
+
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _check_shapes(meta: dict, name: str) -> None:

@@ -26,6 +26,8 @@ def add_terms(table, model, name: str, *, match: str | None, urdf_names: dict[st
     import pyarrow.compute as pc
 
     urdf_names, rotor_inertia = urdf_names or {}, rotor_inertia or {}
+    if table.num_rows == 0:
+        raise LogError(f"{name}: the log is empty")
     names = logs.joints_of(table)
     if names == [None]:
         raise LogError(f"{name}: the log has no 'joint' column: a robot model needs every joint's position")

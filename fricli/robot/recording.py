@@ -405,11 +405,11 @@ def _header_line(line, comments: list[int], first: int, delimiter: str) -> tuple
         return bool(re.match(NUMBER, text.strip().decode("ascii", "replace")))
 
     if comments:
-        names, row = _fields(line(comments[-1]).removeprefix(_BOM).lstrip()[1:].strip(), delimiter), \
+        names, row = _fields(line(comments[-1]).lstrip()[1:].strip(), delimiter), \
             _fields(line(first), delimiter)
         if 1 < len(names) == len(row) and not number(names[0]) and number(row[0]):
-            return line(comments[-1]).removeprefix(_BOM).lstrip()[1:], first
-    return line(first).removeprefix(_BOM), first + 1
+            return line(comments[-1]).lstrip()[1:], first
+    return line(first), first + 1
 
 
 def _trailing_delimiter(header: list[str], sample: list[bytes], delimiter: str) -> list[str]:
@@ -450,6 +450,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
             data = data.decode("utf-16").encode("utf-8")
         except UnicodeDecodeError:
             raise LogError(f"{name}: starts like UTF-16 text but is not: save it as UTF-8") from None
+    data = data.removeprefix(_BOM)   # a UTF-8 byte order mark, as spreadsheets save CSV
     if b"\x00" in data[:65536]:
         raise LogError(f"{name}: a binary file (it holds NUL bytes), not a text recording")
     if data.count(b"\r") != data.count(b"\r\n"):
@@ -463,7 +464,7 @@ def read_recording(data: bytes, mapping: Mapping, name: str, *, drop_backward: b
     filled = _filled(data, starts, ends)   # blank lines hold nothing: no row, no sample time
     non_blank = (int(i) for i in np.flatnonzero(filled))
     comments = []   # leading lines starting with '#': a recorder's preamble, skipped like empty lines
-    while (first := next(non_blank, None)) is not None and line(first).removeprefix(_BOM).lstrip().startswith(b"#"):
+    while (first := next(non_blank, None)) is not None and line(first).lstrip().startswith(b"#"):
         comments.append(first)
     if first is None:
         raise LogError(f"{name}: the recording is empty" + (" (it holds comment lines only)" if comments else ""))
