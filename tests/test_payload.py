@@ -153,3 +153,21 @@ def test_joints_held_still_are_left_out():
     t, q, qd, qdd, tau = simulate(np.random.default_rng(8), TRUE, held=(0, 1, 2, 3))
     with pytest.raises(errors.DataError, match="every joint is held still"):
         payload.identify(RobotModel(URDF, "cad"), motion(t, q, qd, qdd, tau), "flange")
+
+
+def test_friction_with_a_stribeck_bump_needs_the_stribeck_columns():
+    """A joint whose friction rises towards rest (the LuGre static curve's bump) biased the payload
+    fitted beside linear friction; ``friction="stribeck"`` fits the bump beside it (vs on a grid)."""
+    t, q, qd, qdd, tau = simulate(np.random.default_rng(3), TRUE)
+    vs = np.array([0.2, 0.3, 0.25, 0.4])                          # rad/s
+    bump = np.array([2.0, 3.0, 1.5, 0.8]) * np.sign(qd) * np.exp(-np.square(qd / vs))   # (Fs - Fc) [Nm]
+    data = motion(t, q, qd, qdd, tau + bump)
+    errors_of = {}
+    for friction in ("linear", "stribeck"):
+        found = payload.identify(RobotModel(URDF, "cad"), data, "flange", friction=friction)
+        errors_of[friction] = (abs(found.mass / TRUE.mass - 1), float(np.abs(found.com - TRUE.com).max()))
+    assert errors_of["stribeck"][0] < 0.01 and errors_of["stribeck"][1] < 0.005, errors_of
+    assert errors_of["linear"][0] > 5 * errors_of["stribeck"][0], errors_of
+    assert set(found.report()["joints"]["1"]) >= {"Fs-Fc", "vs"} and found.vs.shape == (4,)
+    with pytest.raises(ValueError, match="unknown friction kind"):
+        payload.identify(RobotModel(URDF, "cad"), data, "flange", friction="tanh")

@@ -16,14 +16,17 @@ from fricli.cli.options import Number, common, emit_json, say, warn, window_opti
               help="Low-pass cut-off [Hz] when qd/qdd are derived from the log (default: the log contract's 50).")
 @click.option("--edge", type=Number(min=0), default=0.5, show_default=True,
               help="Seconds dropped at each end of the log (filter and difference transients in qdd).")
+@click.option("--friction", type=click.Choice(["linear", "stribeck"]), default="linear", show_default=True,
+              help="Each joint's friction fitted alongside: linear (Fv, Fc, offset) or stribeck (and the bump of "
+                   "the LuGre static curve, as fricli calibrate --friction stribeck).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
 @window_options
 @common
-def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
+def payload_cmd(log, frame, urdf, cutoff, edge, friction, as_json, quiet, window):
     """Identify the payload at FRAME from a whole-arm log imported with a URDF.
 
     A point mass and its centre of mass in FRAME's coordinates are fitted to what the robot model
-    leaves of tau_m, with each joint's linear friction alongside (rows in motion). A payload the
+    leaves of tau_m, with each joint's friction alongside (rows in motion). A payload the
     import declared is left out of the model, so the whole payload is identified. Prints the
     import options that declare it. See docs/payload.md.
 
@@ -34,8 +37,8 @@ def payload_cmd(log, frame, urdf, cutoff, edge, as_json, quiet, window):
     """
     from fricli.estimators import identify_payload
 
-    found = identify_payload(log, frame, urdf=urdf, cutoff=cutoff, edge=edge, time_from=window.start,
-                             time_until=window.stop, warn=warn)
+    found = identify_payload(log, frame, urdf=urdf, cutoff=cutoff, edge=edge, friction=friction,
+                             time_from=window.start, time_until=window.stop, warn=warn)
     name = "stdin" if log == "-" else log
     for line in summary(found):
         say(line, quiet)
@@ -66,7 +69,8 @@ def summary(found) -> list[str]:
     else:
         lines = [f"no payload at {found.frame} on {found.rows:,} rows: mass {m:.3g} kg, within "
                  f"{payload_significance()} standard errors ({sm:.2g}) of zero"]
-    lines.append("RMS of tau_m minus the robot model and linear friction [Nm], without -> with the payload:")
+    lines.append(f"RMS of tau_m minus the robot model and {'linear' if found.vs is None else 'Stribeck'} friction [Nm], "
+                 "without -> with the payload:")
     lines += [f"  joint {j}: held still, not used" if j in found.held else f"  joint {j}: {a:.4g} -> {b:.4g}"
               for j, a, b in zip(found.joints, found.rms_without, found.rms_with)]
     if verdict == "payload":

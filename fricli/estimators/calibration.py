@@ -182,11 +182,11 @@ def summary_lines(report: dict) -> list[str]:
     return lines
 
 
-def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0.5, time_from=None, time_until=None,
-                     warn=None):
+def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0.5, friction: str = "linear",
+                     time_from=None, time_until=None, warn=None):
     """``fricli payload LOG --frame FRAME``: the point mass [kg] and centre of mass [m, in FRAME's
-    coordinates] a whole-arm log's joints carry at ``frame``, with each joint's linear friction
-    alongside; ``urdf`` (default: the one the log's import recorded), ``cutoff`` [Hz], ``edge`` [s],
+    coordinates] a whole-arm log's joints carry at ``frame``, with each joint's friction alongside
+    (``friction``: "linear" or "stribeck"); ``urdf`` (default: the one the log's import recorded), ``cutoff`` [Hz], ``edge`` [s],
     ``time_from``/``time_until`` as the command's options. Returns the command's result
     (``fricli.robot.payload.IdentifiedPayload``: ``mass``, ``com``, ``stderr``, ``verdict``,
     ``report()`` as ``--json`` prints it without ``log``); ``warn(line)`` gets the command's notes."""
@@ -194,12 +194,13 @@ def identify_payload(log, frame: str, *, urdf=None, cutoff=None, edge: float = 0
     from fricli.robot import payload
 
     spec = _calibrate_spec()
-    opts = check_values({"cutoff": cutoff, "edge": edge, "time_from": time_from, "time_until": time_until},
-                        {name: spec[name] for name in ("cutoff", "edge", "time_from", "time_until")},
+    opts = check_values({"cutoff": cutoff, "edge": edge, "friction": friction, "time_from": time_from,
+                         "time_until": time_until},
+                        {name: spec[name] for name in ("cutoff", "edge", "friction", "time_from", "time_until")},
                         "identify_payload")
     bounds = [_bound(opts["time_from"]), _bound(opts["time_until"])]
     name = "stdin" if log == "-" else os.fspath(log)
     table, _ = logs.read_table("-" if log == "-" else name)
     table = timewindow.slice_table(table, timewindow.Window(*bounds), name, warn=warn)
     return payload.identify_log(table, name, frame, urdf=None if urdf is None else os.fspath(urdf),
-                                cutoff_hz=opts["cutoff"], edge_s=opts["edge"])
+                                cutoff_hz=opts["cutoff"], edge_s=opts["edge"], friction=opts["friction"])

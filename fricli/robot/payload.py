@@ -5,6 +5,10 @@ without any payload it declared) and each joint's linear friction fitted alongsi
 
     tau_m - tau_rb(q, qd, qdd) = Y_b(q, qd, qdd) pi(m, c) + Fv qd + Fc sign(qd) + offset + e
 
+(with ``friction="stribeck"`` also (Fs - Fc) sign(qd) exp(-(qd / vs)^2), the bump of the LuGre
+static curve, vs per joint alternated with the fit by a search on a grid, as ``fricli calibrate
+--friction stribeck`` does).
+
 ``Y_b`` (n, joints, 10): the columns of Pinocchio's joint-torque regressor for the body that holds
 the frame; ``pi(m, c)``: the dynamic parameters of a point mass m [kg] at c [m] in the frame's
 coordinates, placed by the frame's placement, which is how ``fricli import --payload-*`` adds a
@@ -41,9 +45,10 @@ class IdentifiedPayload:
     stderr: np.ndarray           # (4,) standard errors of mass, com (white residuals assumed)
     rows: int
     joints: list                 # the log's joint names, URDF order
-    rms_without: np.ndarray      # (joints,) [Nm] RMS of the residual with linear friction alone
+    rms_without: np.ndarray      # (joints,) [Nm] RMS of the residual with the friction alone
     rms_with: np.ndarray         # (joints,) [Nm] with the payload too
-    friction: np.ndarray         # (joints, 3) Fv, Fc, offset fitted with the payload
+    friction: np.ndarray         # (joints, 3) Fv, Fc, offset fitted with the payload; (joints, 4) with Fs - Fc
+    vs: np.ndarray | None = None  # (joints,) [rad/s] the Stribeck velocities (friction "stribeck")
     held: list = dataclasses.field(default_factory=list)   # joints held still: not used (no figures)
 
     @property
@@ -65,12 +70,14 @@ class IdentifiedPayload:
         return "negative" if self.mass < 0 else "payload"
 
     def report(self) -> dict:
+        bump = (lambda j, f: {}) if self.vs is None else (lambda j, f: {"Fs-Fc": float(f[3]), "vs": float(self.vs[j])})
         return {"frame": self.frame, "detected": self.detected, "verdict": self.verdict, "mass": self.mass, "com": [float(v) for v in self.com],
                 "stderr": {"mass": float(self.stderr[0]), "com": [float(v) for v in self.stderr[1:]]},
                 "rows": self.rows, "held": [str(j) for j in self.held],
                 "joints": {str(j): {"rms_without": float(a), "rms_with": float(b),
-                                    "Fv": float(f[0]), "Fc": float(f[1]), "offset": float(f[2])}
-                           for j, a, b, f in zip(self.joints, self.rms_without, self.rms_with, self.friction)
+                                    "Fv": float(f[0]), "Fc": float(f[1]), "offset": float(f[2]), **bump(k, f)}
+                           for k, (j, a, b, f) in enumerate(zip(self.joints, self.rms_without, self.rms_with,
+                                                                self.friction))
                            if j not in self.held}}
 
 
@@ -99,10 +106,15 @@ def point_parameters(mass: float, com: np.ndarray, placement) -> np.ndarray:
 
 
 @pinned
-def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_EDGE_S) -> IdentifiedPayload:
+def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_EDGE_S,
+             friction: str = "linear") -> IdentifiedPayload:
     """The point payload at ``frame`` of ``robot`` (a ``RobotModel`` without payload) that the
-    torques of ``motion`` (``calibration.Motion``) carry."""
+    torques of ``motion`` (``calibration.Motion``) carry, with each joint's ``friction``: "linear"
+    or "stribeck" (see the module docstring)."""
     from scipy.optimize import least_squares
+
+    if friction not in ("linear", "stribeck"):
+        raise ValueError(f"unknown friction kind {friction!r}")
 
     rows = calibration.edge_rows(motion.t, edge_s)
     q, qd, qdd, tau = (a[rows] for a in (motion.q, motion.qd, motion.qdd, motion.tau))
@@ -117,35 +129,51 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
         raise DataError(f"every joint is held still (position span under {metrics.HELD_SPAN:g} rad): no motion "
                         "to identify a payload from")
     moving = [metrics.in_motion(qd[:, j]) & ~held[j] for j in range(qd.shape[1])]
-    friction = [np.column_stack([qd[m, j], np.sign(qd[m, j]), np.ones(int(m.sum()))]) for j, m in enumerate(moving)]
-    proj = [np.linalg.pinv(a) for a in friction]
+    speeds = [qd[m, j] for j, m in enumerate(moving)]
 
-    def parts(theta):
-        load = y_b @ point_parameters(theta[0], theta[1:], placement)
-        out, coef = [], []
-        for j, m in enumerate(moving):
-            r = residual[m, j] - load[m, j]
-            c = proj[j] @ r
-            out.append(r - friction[j] @ c)
-            coef.append(c)
-        return out, coef
+    def fitted(vs):
+        """(fit, parts) with the friction columns of Stribeck velocities ``vs`` (None: linear)."""
+        cols = [np.column_stack([w, np.sign(w), np.ones_like(w)]
+                                + ([] if vs is None else [np.sign(w) * np.exp(-np.square(w / vs[j]))]))
+                for j, w in enumerate(speeds)]
+        proj = [np.linalg.pinv(a) for a in cols]
 
-    def fun(theta):
-        return np.concatenate(parts(theta)[0])
+        def parts(theta):
+            load = y_b @ point_parameters(theta[0], theta[1:], placement)
+            out, coef = [], []
+            for j, m in enumerate(moving):
+                r = residual[m, j] - load[m, j]
+                c = proj[j] @ r
+                out.append(r - cols[j] @ c)
+                coef.append(c)
+            return out, coef
 
+        # start: the linear estimate of (m, m c) from the first moments' columns, the inertia neglected
+        first = np.concatenate([y_b[m, j, :4] for j, m in enumerate(moving)])
+        target = np.concatenate(parts(np.zeros(4))[0])
+        h = np.linalg.lstsq(first, target, rcond=None)[0]
+        start = np.zeros(4)
+        if np.isfinite(h).all() and h[0] > 0:
+            start = np.concatenate([[h[0]], placement.actInv(pinocchio().SE3(np.eye(3), h[1:] / h[0])).translation])
+        fit = least_squares(lambda theta: np.concatenate(parts(theta)[0]), start, x_scale="jac")
+        if not fit.success:
+            raise FitError(f"no payload fits the torques at {frame} (least squares: {fit.message})")
+        return fit, parts
+
+    fit, parts = fitted(None)
+    vs = None
+    if friction == "stribeck":
+        grids = [calibration.STRIBECK_GRID * float(np.abs(w).max()) if w.size else np.ones(1) for w in speeds]
+        grids = [g[g >= np.abs(w).min()] if w.size and g[-1] >= np.abs(w).min() else g[-1:]
+                 for g, w in zip(grids, speeds)]
+        for _ in range(calibration.STRIBECK_ALTERNATIONS):
+            load = y_b @ point_parameters(fit.x[0], fit.x[1:], placement)
+            vs = np.array([min(g, key=lambda v: calibration._stribeck_rss(w, residual[m, j] - load[m, j], v))
+                           if w.size else g[-1] for j, (g, w, m) in enumerate(zip(grids, speeds, moving))])
+            fit, parts = fitted(vs)
     none, _ = parts(np.zeros(4))
-    # start: the linear estimate of (m, m c) from the first moments' columns, the inertia neglected
-    first = np.concatenate([y_b[m, j, :4] for j, m in enumerate(moving)])
-    target = np.concatenate([residual[m, j] - friction[j] @ (proj[j] @ residual[m, j]) for j, m in enumerate(moving)])
-    h = np.linalg.lstsq(first, target, rcond=None)[0]
-    start = np.zeros(4)
-    if np.isfinite(h).all() and h[0] > 0:
-        start = np.concatenate([[h[0]], placement.actInv(pinocchio().SE3(np.eye(3), h[1:] / h[0])).translation])
-    fit = least_squares(fun, start, x_scale="jac")
-    if not fit.success:
-        raise FitError(f"no payload fits the torques at {frame} (least squares: {fit.message})")
     out, coef = parts(fit.x)
-    dof = max(len(fit.fun) - 4 - 3 * int((~held).sum()), 1)
+    dof = max(len(fit.fun) - 4 - (3 if vs is None else 4) * int((~held).sum()), 1)
     try:
         cov = np.linalg.inv(fit.jac.T @ fit.jac) * float(fit.fun @ fit.fun) / dof
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -154,15 +182,15 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
     rms = lambda parts_: np.array([np.sqrt(np.mean(r ** 2)) if r.size else np.nan for r in parts_])  # noqa: E731
     return IdentifiedPayload(frame=frame, mass=float(fit.x[0]), com=fit.x[1:].copy(), stderr=stderr, rows=int(len(q)),
                              joints=list(motion.names), rms_without=rms(none), rms_with=rms(out), friction=np.array(coef),
-                             held=[motion.names[j] for j in np.flatnonzero(held)])
+                             vs=vs, held=[motion.names[j] for j in np.flatnonzero(held)])
 
 
 def identify_log(table, name: str, frame: str, *, urdf: str | None = None, cutoff_hz: float | None = None,
-                 edge_s: float = calibration.DEFAULT_EDGE_S) -> IdentifiedPayload:
+                 edge_s: float = calibration.DEFAULT_EDGE_S, friction: str = "linear") -> IdentifiedPayload:
     """``identify`` on a whole-arm log imported with a URDF: its robot model as recorded (or the
     URDF at ``urdf``), without the payload the import may have declared."""
     from fricli.core import logs
 
     _, robot, motion = calibration.recorded_motion(
         table, name, urdf, cutoff_hz=logs.DEFAULT_CUTOFF_HZ if cutoff_hz is None else cutoff_hz)
-    return identify(robot, motion, frame, edge_s=edge_s)
+    return identify(robot, motion, frame, edge_s=edge_s, friction=friction)
