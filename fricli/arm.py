@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 from typing import Callable
 
@@ -119,6 +120,7 @@ def fit_arm(recordings: list[str], mapping: str, urdf: str, out: str, *, validat
             if scores is None:
                 say("scoring on held-out data ...")
                 scores = score(fit_cad, window, lugre, fixed, pairs, None if validate else share)
+                run.notices += worse_after_calibration(scores)
             ratios = [s["ratio"] for s in scores.values() if np.isfinite(s["ratio"])]
             report = ArmReport({"import": fit_cad, "identify": lugre, "calibrate": cal_urdf, "import_calibrated": fit,
                                 "diagnose": fixed, "export": header}, scores,
@@ -311,6 +313,19 @@ def score(fit_cad: str, window, lugre: str, fixed: str, pairs: list, holdout: fl
         row["linear_coef"] = {"Fv": float(coef[0]), "Fc": float(coef[1]), "offset": float(coef[2])}
         scores[key] = row
     return scores
+
+
+def worse_after_calibration(scores: dict) -> list[tuple[str, str]]:
+    """A warning per joint whose fixed model, on the calibrated robot model, scores worse on the
+    held-out rows than its LuGre model on the CAD one by more than two standard errors of an RMS
+    over its rows (2 / sqrt(2 rows) relative, white residuals assumed) (``scores`` as ``score``
+    returns them)."""
+    return [("warning", f"joint {joint}: the fixed model on the calibrated robot model scores {s['fixed']:.4g} on the "
+                        f"held-out rows, worse than the LuGre model on the CAD one ({s['lugre']:.4g}): for this joint "
+                        "the LuGre (CAD) model is the better of the two. Look at what the calibration moved "
+                        "(robot.calibration.json: an offset traded against a constant gravity torque, a breakaway "
+                        "the refit lost)")
+            for joint, s in scores.items() if s["fixed"] > s["lugre"] * (1 + 2 / math.sqrt(2 * max(s["rows"], 1)))]
 
 
 def _write_report(out: str, report: ArmReport, recordings: list[str], urdf: str) -> None:

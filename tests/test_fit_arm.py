@@ -136,3 +136,24 @@ def test_a_missing_report_is_made_again_and_a_step_record_of_another_shape_redoe
     done = invoke("fit-arm", *args, "--if-changed", "--json")
     assert done.exit_code == 0, done.output
     assert "fit-cad.parquet" in json.loads(done.stdout)["redone"]   # redone, the record being of no use
+
+
+def test_a_joint_the_calibration_made_worse_is_warned_of():
+    from fricli.arm import worse_after_calibration
+
+    scores = {"1": {"lugre": 0.18, "fixed": 0.23, "rows": 900}, "2": {"lugre": 0.5, "fixed": 0.4, "rows": 900},
+              "z": {"lugre": 1.0, "fixed": 1.04, "rows": 900},        # within 2 / sqrt(1800) = 4.7 %
+              "y": {"lugre": 1.0, "fixed": 1.04, "rows": 90_000}}     # beyond 2 / sqrt(180000) = 0.47 %
+    found = worse_after_calibration(scores)
+    assert [line.split(":")[0] for _, line in found] == ["joint 1", "joint y"]
+    assert found[0][1].startswith("joint 1: the fixed model on the calibrated robot model scores 0.23 on the held-out "
+                                  "rows, worse than the LuGre model on the CAD one (0.18)")
+
+
+@pytest.mark.slow
+def test_the_report_warns_of_exactly_the_joints_the_calibration_made_worse(arm):
+    _, _, result = arm
+    worse = sorted(j for j, s in result["scores"].items() if s["fixed"] > s["lugre"] * (1 + 2 / np.sqrt(2 * s["rows"])))
+    warned = sorted(line.split(":")[0].removeprefix("joint ") for line in result["notices"]
+                    if "worse than the LuGre model on the CAD one" in line)
+    assert warned == worse
