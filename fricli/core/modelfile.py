@@ -141,7 +141,7 @@ def loads(data: bytes, name: str = "model") -> tuple[dict, dict[str, np.ndarray]
         if arr.dtype.kind not in "biuf":  # model arrays are real numbers
             raise ModelFileError(f"{name}: damaged model (array {key!r} has type {arr.dtype})")
         # finite, and within float32 (the precision networks predict in): no fit writes others
-        if arr.dtype.kind == "f" and not (np.abs(arr) <= np.finfo(np.float32).max).all():
+        if arr.dtype.kind == "f" and not (np.abs(arr) <= _FLOAT32_MAX).all():
             raise ModelFileError(f"{name}: damaged model (array {key!r} holds NaN, infinite or huge values)")
     return meta, arrays
 
@@ -158,6 +158,9 @@ _SHAPES = {
 }
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 def _beyond_float32(value, key: str = "") -> tuple[str, float] | None:
     """(key, value) of the first number in the model spec ``value`` (nested dicts and lists) that is
     not finite or beyond float32's range, as the arrays are checked: no fit writes one."""
@@ -170,9 +173,6 @@ def _beyond_float32(value, key: str = "") -> tuple[str, float] | None:
     else:
         return None
     return next((f for f in found if f is not None), None)
-
-
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _check_shapes(meta: dict, name: str) -> None:

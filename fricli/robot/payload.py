@@ -162,14 +162,11 @@ def identify(robot, motion, frame: str, *, edge_s: float = calibration.DEFAULT_E
 
     fit, parts = fitted(None)
     vs = None
-    if friction == "stribeck":
-        grids = [calibration.STRIBECK_GRID * float(np.abs(w).max()) if w.size else np.ones(1) for w in speeds]
-        grids = [g[g >= np.abs(w).min()] if w.size and g[-1] >= np.abs(w).min() else g[-1:]
-                 for g, w in zip(grids, speeds)]
+    if friction == "stribeck":   # a joint held still has no rows, and no Stribeck velocity (NaN)
         for _ in range(calibration.STRIBECK_ALTERNATIONS):
             load = y_b @ point_parameters(fit.x[0], fit.x[1:], placement)
-            vs = np.array([min(g, key=lambda v: calibration._stribeck_rss(w, residual[m, j] - load[m, j], v))
-                           if w.size else g[-1] for j, (g, w, m) in enumerate(zip(grids, speeds, moving))])
+            vs = np.array([calibration.stribeck_velocity(w, residual[m, j] - load[m, j], np.abs(w).max())
+                           if w.size else np.nan for j, (w, m) in enumerate(zip(speeds, moving))])
             fit, parts = fitted(vs)
     none, _ = parts(np.zeros(4))
     out, coef = parts(fit.x)

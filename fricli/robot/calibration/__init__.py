@@ -52,8 +52,9 @@ from fricli.robot.calibration.parameters import (FRICTION, MIN_LENGTH, PARAMS, a
                                                  parameter_names, _pin, prior_scales, pseudo_inertia,
                                                  _random_regressor, regressor, stribeck_columns)
 from fricli.robot.calibration.fit import (MAX_ITERATIONS, NUMERIC_ZERO, PRIOR_FOLDS, PRIOR_GRID,  # noqa: F401
-                                          PRIOR_START, UNDETERMINED, choose_prior, consistent_fit,
-                                          _excitation, _map_fit, _stribeck_rss, _with_prior)
+                                          PRIOR_START, STRIBECK_ALTERNATIONS, STRIBECK_GRID, UNDETERMINED,
+                                          choose_prior, consistent_fit, _excitation, _map_fit, stribeck_velocity,
+                                          _with_prior)
 from fricli.robot.calibration.report import (OTHER_CAUSES, SUSPICIOUS, TOLERANCE, body_inertias,  # noqa: F401
                                              consistency, _friction_report, link_table, _motor_report,
                                              _physical, refuse_inconsistent, _scale, suspicious, warnings,
@@ -70,8 +71,6 @@ DEFAULT_EDGE_S = 0.5       # rows dropped at each end [s]: the zero-phase filter
 POOR_EXCITATION = 1e3      # a scaled base regressor's condition number above this is flagged (varied runs: 10-300)
 MEMORY_COPIES = 6          # peak memory of a calibration / its regressor's size (5.4 measured on 4.5 M rows)
 MIN_ROWS = 20              # a joint in motion in fewer rows is refused
-STRIBECK_ALTERNATIONS = 4
-STRIBECK_GRID = np.geomspace(0.005, 0.5, 25)   # Stribeck velocities searched, x the joint's top speed
 
 
 @pinned
@@ -153,11 +152,6 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
     if stribeck:
         top = np.abs(w).max(axis=0)
         vs = 0.1 * top
-        grids = []      # a Stribeck velocity below the slowest row in motion has no rows to be fitted on
-        for m in range(nj):
-            grid = top[m] * STRIBECK_GRID
-            slowest = np.abs(w[sliding[:, m], m]).min()
-            grids.append(grid[grid >= slowest] if grid[-1] >= slowest else grid[-1:])
         x0 = np.concatenate([x0, np.zeros(nj)])
         s = np.concatenate([s, 10.0 * np.maximum(motor_rms, 1e-6)])
         for _ in range(STRIBECK_ALTERNATIONS):
@@ -167,7 +161,7 @@ def calibrate(robot, motion: Motion, *, prior: float | str = DEFAULT_PRIOR, edge
             target = to_motors(resid + own)
             for m in range(nj):
                 on = sliding[:, m]
-                vs[m] = min(grids[m], key=lambda v: _stribeck_rss(w[on, m], target[on, m], v))
+                vs[m] = stribeck_velocity(w[on, m], target[on, m], top[m])
         Phi = np.hstack([Phi, stribeck_columns(qd, vs, norm) * mask[:, None]])
     x, sigma, resid, iteration = _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts)
 

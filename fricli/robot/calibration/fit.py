@@ -19,6 +19,8 @@ PRIOR_START = 0.5          # the fixed strength whose fit gives the cross-valida
 UNDETERMINED = 1.0         # a direction whose data information is below the prior's stays at CAD
 NUMERIC_ZERO = 1e-10       # ... or below this share of the best-determined direction's
 MAX_ITERATIONS = 30
+STRIBECK_ALTERNATIONS = 4  # rounds of the fit and the Stribeck velocities' search
+STRIBECK_GRID = np.geomspace(0.005, 0.5, 25)   # Stribeck velocities searched, x the joint's top speed
 
 
 def _with_prior(s1: np.ndarray, nj: int, prior) -> np.ndarray:
@@ -114,6 +116,17 @@ def _map_fit(Phi, y, x0, s, sigma, rows_of, tau_rms, counts):
         if settled:
             break
     return x, sigma, resid, iteration
+
+
+def stribeck_velocity(qd: np.ndarray, target: np.ndarray, top: float) -> float:
+    """The Stribeck velocity vs on the grid ``top`` x STRIBECK_GRID whose bump sign(qd) exp(-(qd / vs)^2),
+    fitted with qd, sign(qd) and an offset to ``target`` (n,) at the velocities ``qd`` (n,) of the rows
+    in motion, leaves the least squared error. A vs below the slowest of them has no rows to be
+    fitted on: left out (the largest kept when every one is)."""
+    grid = top * STRIBECK_GRID
+    slowest = np.abs(qd).min()
+    return float(min(grid[grid >= slowest] if grid[-1] >= slowest else grid[-1:],
+                     key=lambda vs: _stribeck_rss(qd, target, vs)))
 
 
 def _stribeck_rss(qd: np.ndarray, target: np.ndarray, vs: float) -> float:
