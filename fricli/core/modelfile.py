@@ -158,7 +158,7 @@ _SHAPES = {
 }
 
 
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
+_FLOAT32_MAX = np.finfo(np.float32).max   # a float32: a float16 array is compared in float32, without overflow
 
 
 def _beyond_float32(value, key: str = "") -> tuple[str, float] | None:
@@ -168,7 +168,7 @@ def _beyond_float32(value, key: str = "") -> tuple[str, float] | None:
         found = (_beyond_float32(v, k) for k, v in value.items())
     elif isinstance(value, list):
         found = (_beyond_float32(v, key) for v in value)
-    elif isinstance(value, (int, float)) and not isinstance(value, bool) and not abs(value) <= _FLOAT32_MAX:
+    elif isinstance(value, (int, float)) and not isinstance(value, bool) and not abs(value) <= float(_FLOAT32_MAX):
         return key, value
     else:
         return None
