@@ -131,6 +131,48 @@ def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
     assert abs(fitted - 32.0) < 0.2, lines
 
 
+def joint_side_import(folder, degrees: list[int]) -> list[str]:
+    """A joint-side recording of the six-joint arm (q, qd, tau_m per joint; friction Fv 2 qd +
+    Fc 3 sign(qd)) with the joints ``degrees`` (0-based) written in degrees, imported with a mapping
+    that says rad for every joint: the import's lines on the mapping."""
+    from fricli.robot.dynamics import RobotModel
+
+    t = np.arange(int(20 * RATE)) / RATE
+    rng = np.random.default_rng(4)
+    q, qd, qdd = coupled.trajectories(t, 6, rng)
+    q = q + np.array([0.0, -0.6, 0.9, 0.2, 0.0, 0.3])
+    g, d = RobotModel(urdf_text(), "arm6.urdf").terms(q, qd, qdd)
+    tau = g + d + 2.0 * qd + 3.0 * np.tanh(qd / 0.01) + rng.normal(size=q.shape) * 0.05
+    scale = np.ones(6)
+    scale[degrees] = 180 / np.pi
+    cols = [t, *(q * scale).T, *(qd * scale).T, *tau.T]
+    names = ["t"] + [f"{s}{k}" for s in ("q", "qd", "tau") for k in range(1, 7)]
+    np.savetxt(folder / "rec.csv", np.column_stack(cols), delimiter=",", header=",".join(names), comments="",
+               fmt="%.12g")
+    (folder / "arm6.urdf").write_text(urdf_text())
+    joints = "".join(f'[[joints]]\nname = "j{k}"\nq = "q{k}"\nqd = "qd{k}"\ntau_m = "tau{k}"\n' for k in range(1, 7))
+    (folder / "map.toml").write_text('header = true\ntime = "t"\n[robot]\nmatch = "name"\n' + joints)
+    res = CliRunner().invoke(cli, ["import", str(folder / "rec.csv"), "--mapping", str(folder / "map.toml"), "--urdf",
+                                   str(folder / "arm6.urdf"), "-o", str(folder / "log.parquet")])
+    assert res.exit_code == 0, res.stderr
+    return [line for line in res.stderr.splitlines() if "the mapping disagrees" in line]
+
+
+@pytest.mark.parametrize("degrees,said", [
+    ([], None),
+    ([0, 1, 2, 3, 4, 5], "joints j1, j2, j3, j4, j5, j6: their position and velocity are in deg, read as rad"),
+    ([2], "joint j3: its position and velocity are in deg, read as rad")])
+def test_a_joint_side_motion_in_degrees_read_as_radians_is_flagged(tmp_path, degrees, said):
+    """A recorder that writes degrees, mapped with the default unit rad: the robot model's gravity then
+    turns with 57 times the angle, and the check names the unit (and only where it is wrong)."""
+    lines = joint_side_import(tmp_path, degrees)
+    if said is None:
+        assert lines == []
+    else:
+        assert len(lines) == 1 and said in lines[0], lines
+        assert ('q and qd: unit "deg" and "deg/s" in the mapping') in lines[0]
+
+
 def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):
     (tmp_path / "arm6.urdf").write_text(urdf_text())
     t = np.arange(600) / 100.0
@@ -160,6 +202,48 @@ def test_a_template_asks_for_the_drive_gain_of_a_current_and_reads_v_as_a_veloci
     assert res.exit_code == 0, res.stderr
     assert 'qd = {column = 8, unit = "rad/s"}' in res.stdout and 'i_m = {column = 14, unit = "A"}' in res.stdout
     assert res.stdout.count("# kt = VALUE") == 6
+
+
+_ARM3 = """<robot name="a"><link name="b"/><link name="l1"/><link name="l2"/><link name="l3"/>
+<joint name="j1" type="revolute"><parent link="b"/><child link="l1"/><axis xyz="0 0 1"/>
+<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><axis xyz="0 1 0"/>
+<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>
+<joint name="a3" type="continuous"><parent link="l2"/><child link="l3"/><axis xyz="0 1 0"/></joint></robot>"""
+
+
+def test_a_template_takes_the_unit_a_column_name_states(tmp_path):
+    (tmp_path / "arm3.urdf").write_text(_ARM3)
+    names = ["stamp_ms", "q1_deg", "q2 [rad]", "a3_pos", "qd1_deg_s", "i1_mA", "j2_amps", "tau_a3 (Nm)"]
+    (tmp_path / "rec.csv").write_text(",".join(names) + "\n" + ",".join(["0.5"] * len(names)) + "\n")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf", str(tmp_path / "arm3.urdf"),
+                                   "-o", "-"])
+    assert res.exit_code == 0, res.stderr
+    lines = res.stdout.splitlines()
+    stated = ['time = {column = 1, unit = "ms"}', 'q = {column = 2, unit = "deg"}', 'q = {column = 3, unit = "rad"}',
+              'qd = {column = 5, unit = "deg/s"}', 'i_m = {column = 6, unit = "mA"}', 'i_m = {column = 7, unit = "A"}',
+              'tau_m = {column = 8, unit = "Nm"}']
+    for text in stated:   # a unit the name states is no guess to check
+        line = next(ln for ln in lines if ln.startswith(text))
+        assert "check the unit" not in line, line
+    # no unit in the name ('a3_pos'; the joint's own name 'a3' is no ampere): the default, to check
+    assert any(ln.startswith('q = {column = 4, unit = "rad"}') and "check the unit" in ln for ln in lines)
+    (tmp_path / "ros.csv").write_text("%time,field.position0\n1,2\n")   # rostopic echo -p: %time in ns
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "ros.csv"), "--template", "--urdf", str(tmp_path / "arm3.urdf"),
+                                   "-o", "-"])
+    assert 'time = {column = 1, unit = "ns"}' in res.stdout
+
+
+def test_a_template_of_a_linear_axis_defaults_to_metres_and_newtons(tmp_path):
+    (tmp_path / "gantry.urdf").write_text(
+        '<robot name="g"><link name="b"/><link name="c"/><joint name="x" type="prismatic"><parent link="b"/>'
+        '<child link="c"/><axis xyz="1 0 0"/><limit lower="0" upper="1" effort="1" velocity="1"/></joint></robot>')
+    (tmp_path / "rec.csv").write_text("time,x_pos_mm,x_vel,x_force\n0,1,2,3\n")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf",
+                                   str(tmp_path / "gantry.urdf"), "-o", "-"])
+    assert res.exit_code == 0, res.stderr
+    assert 'q = {column = 2, unit = "mm"}' in res.stdout and 'qd = {column = 3, unit = "m/s"}' in res.stdout
+    assert 'tau_m = {column = 4, unit = "N"}' in res.stdout and 'unit = "rad' not in res.stdout
 
 
 def test_a_template_reads_names_aligned_with_spaces(tmp_path):

@@ -2,7 +2,8 @@
 
 A mapping written by hand goes wrong in a few ways that an import cannot see by itself: a joint's
 zero a quarter or half turn away from the URDF's (an encoder offset left out), a joint turning the
-other way than the URDF's axis (a sign), a gear ratio or drive gain off by a large factor, a
+other way than the URDF's axis (a sign), a joint's motion in degrees read as radians (or mm as m,
+and the reverse; joint-side mappings), a gear ratio or drive gain off by a large factor, a
 coupling term of a wrist guessed wrong. Each leaves ``tau_m`` far from what the robot model and
 friction explain. ``check`` scores the mapping as it is and under each such change:
 
@@ -38,6 +39,10 @@ MAX_FINDINGS = 3
 QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/2
 GROSS = (0.8, 1.25)                        # a diagonal ratio's or drive gain's factor inside this is no mistake
 FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then refined)
+# a joint's motion (q, qd, qdd) in another unit than the mapping says, by the joint's kind: (the factor
+# that makes it right, the unit it is in, the unit the mapping gave)
+UNIT_SLIPS = {"rotary": ((math.pi / 180, "deg", "rad"), (180 / math.pi, "rad", "deg")),
+              "linear": ((1e-3, "mm", "m"), (1e3, "m", "mm"))}
 
 
 class _Case:
@@ -104,6 +109,7 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         return g[:, order], d[:, order] + aa @ cross.T
 
     ratio = np.array(transmission.ratio, dtype=float) if transmission is not None else np.eye(k)
+    kinds = [model.kinds[j] for j in order] if transmission is None else None   # a motor's unit is no joint's
     cross = cross if cross.shape == (k, k) else np.zeros((k, k))
     case = _Case(q, qd, qdd, tau, ratio, terms)
     figures = {}
@@ -125,7 +131,7 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         ss0, _ = case.residual_ss()
         screen = case if screen_rows is None else case.take(screen_rows)
         best = None
-        for hyp in _hypotheses(screen, case, terms, ss0):
+        for hyp in _hypotheses(screen, case, terms, ss0, kinds):
             ss1, _ = hyp["case"].residual_ss()
             gain = _gain(ss0, ss1)
             if best is None or gain > best["gain"]:
@@ -143,13 +149,22 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     return {"joints": figures, "findings": findings}
 
 
-def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray):
-    """Every change tried (zeros, directions, torque signs, ratio terms), screened on ``screen``
-    (some of ``case``'s rows, or ``case``): those that come near a finding there, made on ``case``
-    (whose scores are ``ss_case``)."""
+def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, kinds: list[str] | None = None):
+    """Every change tried (zeros, directions, torque signs, units of the joints' motion where their
+    ``kinds`` are given, ratio terms), screened on ``screen`` (some of ``case``'s rows, or ``case``):
+    those that come near a finding there, made on ``case`` (whose scores are ``ss_case``)."""
     k = case.q.shape[1]
     ss_screen, _ = screen.residual_ss()
     near = lambda c: _gain(ss_screen, c.residual_ss()[0]) >= GAIN_MIN / 2    # noqa: E731
+
+    def rescaled(c, s):
+        return _Case(c.q * s, c.qd * s, c.qdd * s, c.tau, c.ratio, terms)
+
+    # a recorder writes every joint in one unit: the whole arm's slip first (one joint's alone would
+    # leave the others' torques, which its angle enters, worse)
+    for factor, unit, said in UNIT_SLIPS[kinds[0]] if kinds and k > 1 and len(set(kinds)) == 1 else ():
+        if near(rescaled(screen, factor)):
+            yield {"kind": "unit", "joint": None, "unit": unit, "said": said, "case": rescaled(case, factor)}
     for i in range(k):
         for quarter in QUARTERS:
             def moved(c, i=i, quarter=quarter):
@@ -169,6 +184,11 @@ def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray):
             return _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))
         if near(reversed_(screen)):
             yield {"kind": "torque-sign", "joint": i, "motor": i, "case": reversed_(case)}
+        for factor, unit, said in UNIT_SLIPS[kinds[i]] if kinds else ():
+            s = np.ones(k)
+            s[i] = factor
+            if near(rescaled(screen, s)):
+                yield {"kind": "unit", "joint": i, "unit": unit, "said": said, "case": rescaled(case, s)}
     for m in range(k):
         for j in range(k):
             if case.ratio[m, j] == 0.0:
@@ -221,7 +241,7 @@ def _matrix(r: np.ndarray) -> str:
 def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, motor_side: bool, m: int,
               before: float, after: float) -> dict:
     i = best["joint"]
-    joint = names[i]
+    joint = names[i] if i is not None else ", ".join(names)    # None: every joint
     where = f"motor {m + 1}'s torque" if motor_side else f"joint {names[m]}'s tau_m"
     fig = f"what the robot model and friction leave of {where} falls from {before:.3g} to {after:.3g} Nm RMS"
     kind = best["kind"]
@@ -243,6 +263,11 @@ def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, mot
             line = f"[transmission] ratio = {_matrix(new)} (the joint's column negated)"
         else:
             line = f"joint {joint}'s q, qd and tau_m: scale negated"
+    elif kind == "unit":
+        cause = (f"{'its' if i is not None else 'their'} position and velocity are in {best['unit']}, read as "
+                 f"{best['said']}")
+        line = (f"{'joint ' + joint if i is not None else 'every joint'}'s q and qd: unit \"{best['unit']}\" and "
+                f"\"{best['unit']}/s\" in the mapping")
     elif kind == "torque-sign":
         cause = f"{'motor ' + str(i + 1) + ' of' if motor_side else 'its'} torque has the wrong sign"
         line = (f"joint {joint}'s tau_motor: scale negated" if motor_side else f"joint {joint}'s tau_m: scale negated")
@@ -261,7 +286,7 @@ def _describe(best: dict, names: list[str], case: _Case, offset: np.ndarray, mot
             cause = (f"the coupling term of motor {mm + 1} on joint {joint} is {old:.6g} in the mapping; "
                      f"{old * f:.4g} fits")
             line = f"[transmission] ratio = {_matrix(new)} (row {mm + 1}, column {i + 1})"
-    message = f"joint {joint}: {cause}: {fig} with {line}"
+    message = f"{'joint' if i is not None else 'joints'} {joint}: {cause}: {fig} with {line}"
     return {"joint": joint, "cause": kind, "line": line, "rms_before": before, "rms_after": after,
             "gain": best["gain"], "message": message}
 

@@ -1,10 +1,11 @@
 """A skeleton mapping (TOML) from a recording's first line and a URDF: ``fricli import --template``.
 
-The URDF gives the joints that move (their names and order); the recording's first line gives
-the columns: a header names them, and a column whose name holds a signal's word (position, q,
-velocity, qd, v, current, i, torque, effort, tau) and a joint's number or URDF name is taken for that
-signal of that joint; a line of numbers only gives their count. Every guess is marked; what
-cannot be guessed is left as a comment to fill in. The skeleton is a start to be checked, not a
+The URDF gives the joints that move (their names, order and kind); the recording's first line
+gives the columns: a header names them, and a column whose name holds a signal's word (position,
+q, velocity, qd, v, current, amps, i, torque, force, effort, tau) and a joint's number or URDF name is taken for
+that signal of that joint, in the unit its name states (``q1_deg``, ``time_ms``, ``i_2_mA``) or
+else the default of the joint's kind; a line of numbers only gives their count. Every guess is
+marked; what cannot be guessed is left as a comment to fill in. The skeleton is a start to be checked, not a
 mapping to trust: ``fricli import --urdf`` then checks the result against the robot model.
 """
 
@@ -14,24 +15,36 @@ import re
 import xml.etree.ElementTree as ET
 
 from fricli.core.errors import LogError, ModelFileError, one_line
+from fricli.core.logs import CANONICAL, column_unit
 from fricli.robot.recording import NUMBER
 
 _WORDS = {  # signal: words in a column name, most specific first
     "q": ("position", "pos", "angle", "q"),
     "qd": ("velocity", "vel", "speed", "qd", "dq", "v"),
-    "i_m": ("current", "cur", "i", "iq"),
-    "tau_m": ("torque", "effort", "tau", "trq"),
+    "i_m": ("current", "cur", "amps", "amp", "i", "iq"),
+    "tau_m": ("torque", "force", "effort", "tau", "trq"),
 }
-_UNITS = {"q": "rad", "qd": "rad/s", "i_m": "A", "tau_m": "Nm"}
+_TIME_WORDS = ("t", "time", "timestamp", "stamp")
+# a word of a column's name that states its unit -> the unit, per signal (the joint's kind picks among them)
+_UNIT_WORDS = {
+    "t": {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "msec": "ms", "us": "us", "usec": "us",
+          "ns": "ns", "nsec": "ns", "nanosec": "ns"},
+    "q": {"rad": "rad", "deg": "deg", "degree": "deg", "degrees": "deg", "m": "m", "mm": "mm"},
+    "qd": {"rad": "rad/s", "deg": "deg/s", "degree": "deg/s", "degrees": "deg/s", "dps": "deg/s", "m": "m/s",
+           "mm": "mm/s"},
+    "i_m": {"a": "A", "amp": "A", "amps": "A", "ampere": "A", "ma": "mA"},
+    "tau_m": {"nm": "Nm", "n": "N"},
+}
 
 
-def urdf_joints(text: str, name: str) -> list[str]:
-    """The URDF's moving joints (not fixed), in the file's order."""
+def urdf_joints(text: str, name: str) -> list[tuple[str, str]]:
+    """The URDF's moving joints (not fixed), in the file's order: (name, "rotary" or "linear")."""
     try:
         root = ET.fromstring(text)
     except ET.ParseError as exc:
         raise ModelFileError(f"{name}: not a usable URDF ({exc})") from None
-    joints = [j.get("name") for j in root.findall("joint") if j.get("type") not in (None, "fixed")]
+    joints = [(j.get("name"), "linear" if j.get("type") == "prismatic" else "rotary")
+              for j in root.findall("joint") if j.get("type") not in (None, "fixed")]
     if not joints:
         raise ModelFileError(f"{name}: the URDF has no moving joint")
     return joints
@@ -77,6 +90,18 @@ def _guess(fields: list[str], signal: str, k: int, joint: str) -> int | None:
     return None
 
 
+def _unit(field: str, signal: str, kind: str, skip: set[str] = frozenset()) -> str | None:
+    """The unit the column name ``field`` states for ``signal`` on a joint of ``kind``, or None: the
+    first word of the name (past the words in ``skip``) that names a unit fitting them."""
+    if signal == "t" and field.strip().startswith("%time"):
+        return "ns"   # rostopic echo -p writes the receipt time in ns as %time
+    for token in _tokens(field):
+        unit = _UNIT_WORDS[signal].get(token)
+        if token not in skip and unit is not None and column_unit(signal, unit)[0] in (None, kind):
+            return unit
+    return None
+
+
 def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
     """The skeleton mapping of the recording ``data`` for the URDF ``urdf_text``."""
     joints = urdf_joints(urdf_text, urdf_name)
@@ -92,28 +117,35 @@ def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
         lines.append(f"delimiter = {delimiter!r}".replace("'", '"'))
     time = None
     if fields:
-        time = next((c for c, f in enumerate(fields, 1) if _tokens(f)[:1] in (["t"], ["time"], ["timestamp"])), None)
+        time = next((c for c, f in enumerate(fields, 1) if _tokens(f)[:1] in [[w] for w in _TIME_WORDS]), None)
     if time:
-        lines.append(f'time = {{column = {time}, unit = "s"}}        # guessed from the header; check the unit')
+        unit = _unit(fields[time - 1], "t", "rotary")
+        lines.append(f'time = {{column = {time}, unit = "{unit or "s"}"}}        # guessed from the header'
+                     + ("" if unit else "; check the unit"))
     else:
         lines.append('time = {column = 1, unit = "s"}             # FILL IN: the time column (or time = {rate = HZ})')
     lines += ["", "[robot]", 'match = "name"                              # joints matched to the URDF by name', ""]
-    for k, joint in enumerate(joints, 1):
+    for k, (joint, kind) in enumerate(joints, 1):
         lines += ["[[joints]]", f'name = "{joint}"                 # URDF joint {k} of {len(joints)}']
+        default = dict(CANONICAL[kind], tau_m=CANONICAL[kind]["tau"], i_m="A")
         found = False
         for signal in ("q", "qd", "tau_m", "i_m"):
             column = _guess(fields, signal, k, joint) if fields else None
             if column is not None and not (signal == "i_m" and found):
                 found = found or signal in ("tau_m", "i_m")
-                lines.append(f'{signal} = {{column = {column}, unit = "{_UNITS[signal]}"}}'
-                             f"        # guessed from {one_line(fields[column - 1])!r}; check the unit")
+                unit = _unit(fields[column - 1], signal, kind,
+                             {str(k), *_tokens(joint), *(set(_WORDS[signal]) - set(_UNIT_WORDS[signal]))})
+                lines.append(f'{signal} = {{column = {column}, unit = "{unit or default[signal]}"}}'
+                             f"        # guessed from {one_line(fields[column - 1])!r}"
+                             + ("" if unit else "; check the unit"))
                 if signal == "i_m":
                     lines.append("# kt = VALUE                                 # FILL IN: the drive gain [Nm/A] (torque "
                                  "constant x gear ratio), or --kt")
             elif signal == "q":
-                lines.append(f'# q = {{column = N, unit = "rad"}}          # FILL IN: joint {k}\'s position')
+                lines.append(f'# q = {{column = N, unit = "{default["q"]}"}}          # FILL IN: joint {k}\'s position')
         if not found:
-            lines.append('# tau_m = {column = N, unit = "Nm"}         # FILL IN: the torque, or i_m with kt [Nm/A]')
+            lines.append(f'# tau_m = {{column = N, unit = "{default["tau_m"]}"}}         # FILL IN: the torque, or i_m '
+                         f'with kt [{default["tau_m"]}/A]')
         lines.append("")
     lines += ["# A motor-side recording: theta and tau_motor per joint and a [transmission]", "# (docs/drives.md).", ""]
     return "\n".join(lines) + "\n"
