@@ -240,9 +240,11 @@ def test_decimal_columns_are_read_as_numbers():
 
 
 @pytest.mark.parametrize("scale,unit,warned", [(1e9, "s", True), (1e9, "ns", False), (1.0, "s", False),
-                                               (1e-7, "s", True)])
+                                               (1e-7, "s", True), (1e3, "s", True), (1e3, "ms", False),
+                                               (10.0, "s", False)])
 def test_a_time_step_no_controller_samples_at_is_flagged(scale, unit, warned):
-    """Nanoseconds labelled as seconds: every derivative and rate would be off by 1e9."""
+    """Nanoseconds labelled as seconds: every derivative and rate would be off by 1e9; milliseconds
+    as seconds make the 100 Hz log a 0.1 Hz one (10 Hz, the slowest a controller samples at, passes)."""
     table = make_table()
     t = table.column("t").to_numpy() * scale
     table = table.set_column(0, pa.field("t", pa.float64(), metadata={"unit": unit}), pa.array(t))

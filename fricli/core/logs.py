@@ -29,8 +29,8 @@ from fricli.core.jsontext import is_finite_number
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
                                  read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
                                  write_table)
-from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, lowpass, lowpass_applies,  # noqa: F401
-                                     not_measured, rate_mismatch)
+from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, implausible_step,  # noqa: F401
+                                     lowpass, lowpass_applies, not_measured, rate_mismatch)
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -309,7 +309,6 @@ def declared_zero(schema: pa.Schema, name: str, zero=()) -> tuple[str, ...]:
 # No robot signal reaches this magnitude in canonical units (rad, m, rad/s, Nm, N, A, degC);
 # a value beyond it is garbage (uninitialised memory), and squares of it would overflow
 MAGNITUDE_LIMIT = 1e9
-PLAUSIBLE_STEP = (1e-5, 60.0)    # s: a controller's sample period lies between these (100 kHz, one a minute)
 
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)   # m/s^2 in the URDF's base frame, as a level-mounted arm sees it
@@ -524,7 +523,7 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
         table = take_rows(table, mask)
     # the first 100,000 steps tell the sample period (and cost a millisecond on a log of any length)
     step = float(np.median(np.diff(sig["t"][:100_001]))) if len(sig["t"]) > 1 and not later_batch else None
-    if warn and step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+    if warn and implausible_step(step):
         warn(f"warning: {name}: the median time step is {step:.3g} s, which no controller samples at: check the "
              "unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)")
     where = name if selected is None else f"{name}, joint {joint}"   # what one joint's rows show

@@ -1,11 +1,19 @@
 """A log's motion columns filtered and differentiated: the zero-phase low-pass, qd and qdd derived
-where missing, and rate columns that cannot be measurements."""
+where missing, and rate columns and time steps that cannot be measurements."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from fricli.core.errors import DataError
+
+PLAUSIBLE_STEP = (1e-5, 0.1)    # s: a controller's sample period lies between these (100 kHz, 10 Hz)
+
+
+def implausible_step(step: float | None) -> bool:
+    """Whether a median time step [s] lies outside ``PLAUSIBLE_STEP`` (by more than 1 ppm: recorded
+    timestamps carry rounding): a time column in the wrong unit."""
+    return step is not None and not PLAUSIBLE_STEP[0] * (1 - 1e-6) <= step <= PLAUSIBLE_STEP[1] * (1 + 1e-6)
 
 
 def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:

@@ -35,7 +35,6 @@ class Imported:
     source: str = ""                 # what was imported: the name, or a bag's topic in it
 
 
-PLAUSIBLE_STEP = logs.PLAUSIBLE_STEP
 
 
 def is_bag(path: str) -> bool:
@@ -182,10 +181,10 @@ def _notices(meta: dict, name: str, read) -> list[tuple[str, str]]:
                     f"the joints in another order than most messages "
                     f"({where({'count': d.count, 'messages': d.ranges}, 'message')}): reordered by name"))
     step = meta["time_step_s"]
-    if step is not None and not PLAUSIBLE_STEP[0] <= step <= PLAUSIBLE_STEP[1]:
+    if logs.implausible_step(step):
         out.append(("warning", f"warning: {name}: the median time step is {step:.3g} s, which no controller samples "
-                    "at: check the time column's unit in the mapping (s or ms; a scale for other units, e.g. 1e-9 "
-                    "for ns)"))
+                    "at: check the time column's unit in the mapping (s, ms, us or ns; a time in ms mapped as s "
+                    "makes a 1 kHz log a 1 Hz one)"))
     if meta["i_m_left_out"]:
         left = meta["i_m_left_out"]
         out.append(("note", f"note: {name}: the effort of joint{'s' if len(left) > 1 else ''} {', '.join(left)} is a "
