@@ -249,6 +249,22 @@ def test_a_mass_the_torques_cannot_tell_apart_is_flagged_as_the_priors(arm):
     assert "no joint torque determines this mass alone: it trades with " + tied[name][0] in line
 
 
+def test_a_moved_armature_names_a_stribeck_bump_only_beside_linear_friction(arm):
+    """Friction rising towards rest peaks at reversals, where the acceleration does: a linear friction
+    model leaves it to the armature, and the flagged change says so and names the remedy."""
+    model, _, fit, _ = arm
+    cal = cb.calibrate(RobotModel(URDF, "cad"), motion(*fit, simulate(model, *fit)))
+    nj = len(cal.joints)
+    x0 = cal.x0.copy()
+    x0[10 * nj + 1] = 0.01                                       # joint j2's prior armature [kg m^2]
+    for x in (cal.x, np.concatenate([cal.x, np.zeros(nj)])):     # linear friction, then with Fs - Fc (stribeck)
+        x = x.copy()
+        x[10 * nj + 1] = 0.03                                    # +200 %
+        moved = cb.Calibration(x=x, x0=x0, names=cal.names, bodies=cal.bodies, joints=cal.joints, report={})
+        line = next(w for w in cb.suspicious(moved) if w.startswith("joint j2: armature"))
+        assert line.endswith("(--friction stribeck fits it)") == (len(x) == 14 * nj), line
+
+
 def test_the_excitation_report_does_not_depend_on_the_prior(arm):
     """The condition number is the run's: of its regressor over the structural base parameters
     (those of ``base_parameters``), whatever prior the fit then uses."""

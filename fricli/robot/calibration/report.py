@@ -158,16 +158,20 @@ def suspicious(cal: Calibration, tied: dict | None = None) -> list[str]:
             else:
                 out.append(f"{change}; also consistent with: {causes}")
     nj = len(cal.joints)
+    # friction rising towards rest peaks where a reversing joint's acceleration does: linear friction
+    # leaves it to the inertia
+    bump = "" if len(cal.x) == 15 * nj else ("; friction that rises towards rest, which linear friction cannot "
+                                             "follow (--friction stribeck fits it)")
     for j in range(nj):
         a0, a = cal.x0[10 * nj + j], cal.x[10 * nj + j]
         if a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS and j in (cal.motors or ()):
             out.append(f"{cal.motor_of(j)}: rotor inertia {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
                        "also consistent with: a drive gain off on the joints it drives; a gear ratio off; inertia "
-                       "of those links' own axes that the data cannot tell from the rotor's")
+                       f"of those links' own axes that the data cannot tell from the rotor's{bump}")
         elif a0 > 0 and abs(a / a0 - 1) > SUSPICIOUS:
             out.append(f"joint {cal.joints[j]}: armature {a0:.4g} -> {a:.4g} kg m^2 ({100 * (a / a0 - 1):+.0f} %); "
                        "also consistent with: a drive gain off on that joint; inertia of the link's own axis "
-                       "that the data cannot tell from the armature")
+                       f"that the data cannot tell from the armature{bump}")
         fc, offset = cal.x[11 * nj + 3 * j + 1], cal.x[11 * nj + 3 * j + 2]
         if fc >= 0 and abs(offset) > fc:     # a negative Fc: the warning of ``consistency``
             out.append(f"{cal.motor_of(j)}: friction offset {offset:.4g} exceeds its Coulomb level {fc:.4g}: a "
