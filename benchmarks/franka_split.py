@@ -1,4 +1,4 @@
-"""train-base on the Franka joint-2 friction files: fitted on the first 60 % of each file's time,
+"""train-base on the Franka joint friction files (joint 2 by default): fitted on the first 60 % of each file's time,
 scored on the last 40 % (RMS of the published friction target minus the prediction, every row).
 
     python benchmarks/franka_split.py                          # the default against --ensemble 5
@@ -11,7 +11,8 @@ command's wall time; with --memory, ``--memory off`` (the network alone) and ``-
 (Maxwell-slip elements where held-out blocks choose them) instead. The last 40 % is predicted
 with the state (pre-sliding deflection, slip elements) that the first 60 % leaves. The files hold the joint's
 friction torque as their authors extracted it (no gravity or dynamics left: --no-gravity
---no-dynamics). Data: ../shared/data/franka (see ../shared/data/README.md), or --data.
+--no-dynamics). Data: ../shared/data/franka (see ../shared/data/README.md), or --data; the files
+``jointN_SPEED.csv`` of joint N = 2, or ``--joint N``.
 """
 
 from __future__ import annotations
@@ -35,14 +36,15 @@ FIT_SHARE = 0.6
 UNITS = {"t": "s", "q": "rad", "qd": "rad/s", "tau_m": "Nm"}
 
 
-def split(csv: str, folder: str, name: str) -> tuple[str, str]:
+def split(csv: str, folder: str, name: str, joint: int = 2) -> tuple[str, str]:
     """The file's first FIT_SHARE of time and the rest, as fricli logs (tau_m the friction)."""
     d = np.genfromtxt(csv, delimiter=",", names=True)
     t = d["time"]
     cut = t[0] + FIT_SHARE * (t[-1] - t[0])
     paths = []
     for part, rows in (("fit", t <= cut), ("test", t > cut)):
-        cols = {"t": t[rows], "q": d["q2"][rows], "qd": d["dq2"][rows], "tau_m": d["q2_tau_J_compensate"][rows]}
+        cols = {"t": t[rows], "q": d[f"q{joint}"][rows], "qd": d[f"dq{joint}"][rows],
+                "tau_m": d[f"q{joint}_tau_J_compensate"][rows]}
         schema = pa.schema([pa.field(k, pa.float64(), metadata={"unit": UNITS[k]}) for k in cols])
         path = os.path.join(folder, f"{name}_{part}.parquet")
         pq.write_table(pa.table([pa.array(v) for v in cols.values()], schema=schema), path)
@@ -78,11 +80,12 @@ def rms_on(model_path: str, fit: str, test: str) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA)
+    ap.add_argument("--joint", type=int, default=2, help="the joint whose files (jointN_SPEED.csv) to read")
     ap.add_argument("--option", action="append", default=[], help="add to every train-base (repeatable)")
     ap.add_argument("--memory", action="store_true", help="--memory off against --memory auto")
     ap.add_argument("--json", default=None, help="also write the figures to this file")
     args = ap.parse_args()
-    if not os.path.exists(os.path.join(args.data, "joint2_slow.csv")):
+    if not os.path.exists(os.path.join(args.data, f"joint{args.joint}_slow.csv")):
         raise SystemExit(f"no Franka data at {args.data}")
     flags = ["--no-gravity", "--no-dynamics", "-q"]
     variants = ({"--memory off": ["--memory", "off"], "--memory auto": ["--memory", "auto"]} if args.memory else
@@ -90,7 +93,7 @@ def main() -> None:
     out = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in FILES:
-            fit, test = split(os.path.join(args.data, f"joint2_{name}.csv"), tmp, name)
+            fit, test = split(os.path.join(args.data, f"joint{args.joint}_{name}.csv"), tmp, name, args.joint)
             row = {}
             for label, extra in variants.items():
                 path = os.path.join(tmp, "nn.npz")

@@ -3,7 +3,11 @@ three speeds (../shared/data/franka, see ../shared/data/README.md), fricli's mod
 the models published with the data; writes docs/studies/case-study-franka.md.
 
     python studies/franka/run_case_study.py                 # about 25 s on 2 cores
-    python studies/franka/run_case_study.py --out /tmp/x.md --data DIR
+    python studies/franka/run_case_study.py --out /tmp/x.md --data DIR [--joint N]
+
+DIR holds ``jointN_slow.csv``, ``jointN_middle.csv`` and ``jointN_high.csv`` (N = 2 by default) with
+the columns ``time``, ``qN``, ``dqN`` and ``qN_tau_J_compensate`` and any of the published models'
+columns (a published model missing from the files shows as —).
 
 Protocol: per file, every model is fitted on the first 60 % of the file's time span and scored
 (RMS error against the friction target) on the last 40 %, its state carried over from the fitted
@@ -42,15 +46,23 @@ FIT_SHARE = 0.6
 GAP_S = 10.0     # the time between the two recordings joined for the across-speeds fit
 
 
-def read(data: str, speed: str) -> tuple[dict, dict]:
+def read(data: str, speed: str, joint: int = 2) -> tuple[dict, dict]:
     """(signals in fricli's log contract, published predictions) of one file. The target is the
     authors' friction torque, given as tau_m with tau_g = tau_dyn = 0 (nothing left to remove);
-    the file's acceleration column is all zeros (not measured) and is not read."""
-    d = np.genfromtxt(os.path.join(data, f"joint2_{speed}.csv"), delimiter=",", names=True)
+    the file's acceleration column is all zeros (not measured) and is not read. A published
+    model the file lacks is NaN."""
+    d = np.genfromtxt(os.path.join(data, f"joint{joint}_{speed}.csv"), delimiter=",", names=True)
     n = len(d)
-    sig = {"t": d["time"], "q": d["q2"], "qd": d["dq2"], "tau_m": d["q2_tau_J_compensate"],
+    sig = {"t": d["time"], "q": d[f"q{joint}"], "qd": d[f"dq{joint}"], "tau_m": d[f"q{joint}_tau_J_compensate"],
            "tau_g": np.zeros(n), "tau_dyn": np.zeros(n)}
-    return sig, {c: d[c] for c in CLASSICAL + LEARNED + ("NNFM",)}
+    return sig, {c: d[c] if c in d.dtype.names else np.full(n, np.nan) for c in CLASSICAL + LEARNED + ("NNFM",)}
+
+
+def best(scores: dict, names: tuple) -> float:
+    """The least of ``scores`` over ``names`` (NaN: a published model the files lack; inf: one that
+    diverged); NaN when none was published."""
+    got = [scores[c] for c in names if not np.isnan(scores[c])]
+    return min(got) if got else float("nan")
 
 
 def rows(sig: dict, mask: np.ndarray) -> dict:
@@ -58,6 +70,10 @@ def rows(sig: dict, mask: np.ndarray) -> dict:
 
 
 def rms(e: np.ndarray) -> float:
+    """RMS of e; inf when any value is not finite (a diverged prediction), NaN when all are NaN
+    (a published model the files lack)."""
+    if np.isnan(e).all():
+        return float("nan")
     with np.errstate(over="ignore"):
         return float(np.sqrt(np.mean(e * e))) if np.isfinite(e).all() else float("inf")
 
@@ -125,11 +141,12 @@ def online(train: dict, test: dict, kinds: tuple[str, ...]) -> tuple[dict, list[
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", default=DEFAULT_DATA)
+    ap.add_argument("--joint", type=int, default=2, help="the joint whose files (jointN_SPEED.csv) to read")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "studies", "case-study-franka.md"))
     args = ap.parse_args(argv)
     per_file, models = [], {}
     for speed in FILES:
-        sig, pub = read(args.data, speed)
+        sig, pub = read(args.data, speed, args.joint)
         t = sig["t"]
         fit_rows = t < t[0] + FIT_SHARE * (t[-1] - t[0])
         train, test = rows(sig, fit_rows), rows(sig, ~fit_rows)
@@ -138,17 +155,18 @@ def main(argv=None) -> int:
         y = test["tau_m"]
         published = {c: rms(pub[c][~fit_rows] - y) for c in pub}
         per_file.append({"file": speed, "n_fit": int(fit_rows.sum()), "n_test": int((~fit_rows).sum()),
+                         "duration": float(t[-1] - t[0]), "rate": float(1.0 / np.median(np.diff(t))),
                          "fricli": {k: score(m, train, test) for k, (m, _) in kinds.items()},
                          "seconds": {k: s for k, (_, s) in kinds.items()},
-                         "classical": min(published[c] for c in CLASSICAL),
-                         "learned": min(published[c] for c in LEARNED), "nnfm": published["NNFM"],
+                         "classical": best(published, CLASSICAL),
+                         "learned": best(published, LEARNED), "nnfm": published["NNFM"],
                          "published": published, "lugre_warnings": warned["warnings"]})
         print(speed, {k: round(v, 3) for k, v in per_file[-1]["fricli"].items()}, file=sys.stderr)
     # across speeds: fit on slow + middle (one log, the middle recording 10 s after the end of the slow one)
-    both = [read(args.data, s)[0] for s in ("slow", "middle")]
+    both = [read(args.data, s, args.joint)[0] for s in ("slow", "middle")]
     train = {k: np.concatenate([b[k] for b in both]) for k in both[0]}
     train["t"] = np.concatenate([both[0]["t"], both[1]["t"] - both[1]["t"][0] + both[0]["t"][-1] + GAP_S])
-    high, pub_high = read(args.data, "high")
+    high, pub_high = read(args.data, "high", args.joint)
     kinds, kinds_warned = fit_kinds(train)
     kinds["lugre_warnings"], kinds["lugre_notes"] = kinds_warned["warnings"], kinds_warned["notes"]
     kinds["vmax_high"] = float(np.abs(high["qd"]).max())
@@ -166,18 +184,23 @@ def main(argv=None) -> int:
     kinds["online"], kinds["commands"] = online(train, high, ("lugre", "gms"))
     print("online", kinds["online"], file=sys.stderr)
     print("across", {k: round(v, 3) for k, v in across.items()}, file=sys.stderr)
-    atomic_write_bytes(args.out, render(per_file, across, across_pub, models, kinds).encode())
+    data = "../shared/data/franka" if os.path.abspath(args.data) == os.path.abspath(DEFAULT_DATA) else args.data
+    atomic_write_bytes(args.out, render(per_file, across, across_pub, models, kinds, args.joint, data).encode())
     print(f"wrote {args.out}", file=sys.stderr)
     return 0
 
 
-def render(per_file, across, across_pub, models, across_models) -> str:
+def render(per_file, across, across_pub, models, across_models, joint: int = 2,
+           data: str = "../shared/data/franka") -> str:
     f3 = lambda x: "—" if not np.isfinite(x) else f"{x:.3f}"  # noqa: E731
+    f2 = lambda x: "—" if not np.isfinite(x) else f"{x:.2f}"  # noqa: E731
+    run = "python studies/franka/run_case_study.py" + ("" if joint == 2 else f" --joint {joint}")
     lines = ["# Case study: friction with memory on a Franka Emika joint", "",
-             "Written by `python studies/franka/run_case_study.py` (data: `../shared/data/franka`, joint 2 of a",
-             "Franka Emika arm on one continuous Cartesian trajectory at three speeds, 60 s each at about",
-             "500 Hz, no constant-velocity holds; the friction target is the authors' extracted joint",
-             "friction). Do not edit by hand.", "",
+             f"Written by `{run}` (data: `{data}`, joint {joint} of a",
+             "Franka Emika arm on one continuous Cartesian trajectory at three speeds, "
+             f"{np.mean([r['duration'] for r in per_file]):.0f} s each at about",
+             f"{np.mean([r['rate'] for r in per_file]):.0f} Hz, no constant-velocity holds; the friction target is the "
+             "authors' extracted joint", "friction). Do not edit by hand.", "",
              "## Per file: fit on the first 60 % of the time, score the last 40 %", "",
              "Every fricli model is fitted by the library call `fricli identify` makes (`--until 60%`;",
              "`--kind lugre` (the default), `--kind linear`, `--kind gms`) and scored over the last 40 %",
@@ -191,10 +214,11 @@ def render(per_file, across, across_pub, models, across_models) -> str:
         g = r["fricli"]["gms"]
         lines.append(f"| {r['file']} | {f3(r['fricli']['lugre'])} | {f3(r['fricli']['linear'])} | **{f3(g)}** | "
                      f"{f3(r['classical'])} | {f3(r['learned'])} | {f3(r['nnfm'])} | "
-                     f"{g / r['classical']:.2f} | {g / r['nnfm']:.2f} |")
+                     f"{f2(g / r['classical'])} | {f2(g / r['nnfm'])} |")
     lines += ["", "Fit times [s] (this machine, 2 cores shared): " + "; ".join(
         f"{r['file']}: " + ", ".join(f"{k} {v:.2f}" for k, v in r["seconds"].items()) for r in per_file) + ".",
-        "", "Each published column on the last 40 % [Nm] (a non-finite prediction shows as —):", "",
+        "", "Each published column on the last 40 % [Nm] (— : a prediction that is not finite, or a model the files "
+        "do not hold):", "",
         "| file | " + " | ".join(per_file[0]["published"]) + " |",
         "|---|" + "---|" * len(per_file[0]["published"])]
     for r in per_file:
@@ -205,7 +229,7 @@ def render(per_file, across, across_pub, models, across_models) -> str:
               "| fricli lugre | fricli linear | fricli gms | best classical | best of SVM, Transformer, PINN | NNFM |",
               "|---|---|---|---|---|---|",
               f"| {f3(across['lugre'])} | {f3(across['linear'])} | **{f3(across['gms'])}** | "
-              f"{f3(min(across_pub[c] for c in CLASSICAL))} | {f3(min(across_pub[c] for c in LEARNED))} | "
+              f"{f3(best(across_pub, CLASSICAL))} | {f3(best(across_pub, LEARNED))} | "
               f"{f3(across_pub['NNFM'])} |", "",
               "(The published columns here are the published models' predictions of the high-speed file, which",
               "they were fitted on; fricli's models never saw it.)", "",
@@ -238,6 +262,8 @@ def render(per_file, across, across_pub, models, across_models) -> str:
     for name, warned in [*((r["file"], r["lugre_warnings"]) for r in per_file),
                          ("slow + middle", across_models["lugre_warnings"])]:
         lines += [f"- {name}: " + ("none" if not warned else " / ".join(warned))]
+    offsets, left, fv = across_models["offsets"], across_models["left"], across_models["gms"][0].fv
+    vmax_high, vmax_train = across_models["vmax_high"], across_models["vmax_train"]
     lines += ["",
               "## What limits the figure", "",
               "- The friction of this joint has memory: near each reversal it builds up over a travel of",
@@ -247,34 +273,38 @@ def render(per_file, across, across_pub, models, across_models) -> str:
               "- The target is a torque extracted by the authors (measured joint torque minus their rigid-body",
               "  model): part of what is left is the rigid-body model's error, a torque of the position; the gms",
               "  kind keeps a few position terms apart for it (its robot-model error), chosen on held-out blocks.",
-              "- 36 s of one trajectory per file: the position terms and the Coulomb level along the travel are",
+              f"- {FIT_SHARE * np.mean([r['duration'] for r in per_file]):.0f} s of one trajectory per file: the position terms and the Coulomb level along the travel are",
               "  learned on the part of the travel the first 60 % covers; beyond it they keep their end values.",
               "- The sliding curve is one Stribeck term of fixed shape (vs chosen among percentiles of the speeds) and",
               "  a viscous slope; the paper's network has a free-form curve (and, the data's notes assume,",
               "  saw the whole file).",
               "- Across speeds the two training files are two recordings joined with a pause: the gms fit gives",
-              "  each its own offset of the robot-model error (here " + ", ".join(f"{o:.3f}" for o in across_models["offsets"])
-              + " Nm: the middle file's", f"  extracted friction sits {np.ptp(across_models['offsets']):.2f} Nm higher "
-              "in both directions of motion) and predicts a new",
+              "  each its own offset of the robot-model error (here " + ", ".join(f"{o:.3f}" for o in offsets)
+              + " Nm: the middle file's", f"  extracted friction sits {np.ptp(offsets):.2f} Nm "
+              f"{'higher' if offsets[-1] >= offsets[0] else 'lower'} in both directions of motion) and predicts a new",
               "  recording with their mean. Its held-out error within the two files is "
               f"{across_models['heldout']:.3f} Nm (per file {per_file[0]['fricli']['gms']:.3f} and "
               f"{per_file[1]['fricli']['gms']:.3f}).",
-              f"- On the high file the gms model's error has a mean of {across_models['left']['shift']:+.3f} Nm: the high recording's",
+              f"- On the high file the gms model's error has a mean of {left['shift']:+.3f} Nm: the high recording's",
               "  own offset, which no model of q and qd can know; without it the error would be "
-              f"{across_models['left']['without_shift']:.3f} Nm. A controller learns it as it runs: with the offset",
+              f"{left['without_shift']:.3f} Nm. A controller learns it as it runs: with the offset",
               "  adapted online the gms model's error on the high file is "
               f"{across_models['online']['gms']['scale and offset']:.3f} Nm (the scale alone: "
               f"{across_models['online']['gms']['scale']:.3f} Nm).",
-              f"- The high file's speeds (up to {across_models['vmax_high']:.2f} rad/s) lie beyond those of the training files (up to "
-              f"{across_models['vmax_train']:.2f} rad/s),",
-              f"  but the error on its rows within the training speeds ({across_models['left']['inside']:.3f} Nm) is nearly "
-              f"that beyond them ({across_models['left']['beyond']:.3f} Nm,",
-              f"  {100 * across_models['left']['share_beyond']:.0f} % of the rows): the velocity law is not what fails. The "
-              f"fit finds no viscous slope (fv = {across_models['gms'][0].fv:.3g}):",
-              "  over these files the friction does not grow with speed. What remains beside the offset is",
-              "  friction of the high recording that differs from that of the slower ones at the same position",
-              "  and speed (its rows within the training speeds are no better predicted), which the learned",
-              "  models, fitted on the high file itself, capture.",
+              f"- The high file's speeds (up to {vmax_high:.2f} rad/s) lie {'beyond' if vmax_high > vmax_train else 'within'} "
+              f"those of the training files (up to {vmax_train:.2f} rad/s)" + (
+                  "." if not 0 < left["share_beyond"] < 1 else ";"),
+              *([] if not 0 < left["share_beyond"] < 1 else [
+                  f"  the error on its rows within the training speeds is {left['inside']:.3f} Nm, beyond them "
+                  f"{left['beyond']:.3f} Nm ({100 * left['share_beyond']:.0f} % of the rows)" + (
+                      ": the velocity law is not what fails." if left["inside"] >= 0.8 * left["beyond"] else
+                      ": the velocity law's extrapolation beyond the training speeds adds to the error.")]),
+              ("  The fit finds no viscous slope (fv = 0): over these files the friction does not grow with speed."
+               if fv == 0 else f"  The fit's viscous slope is fv = {fv:.3g} Nm s/rad."),
+              *(["  What remains beside the offset is friction of the high recording that differs from that of the",
+                 "  slower ones at the same position and speed (its rows within the training speeds are no better",
+                 "  predicted), which the learned models, fitted on the high file itself, capture."]
+                if left["inside"] >= 0.8 * left["beyond"] else []),
               ""]
     return "\n".join(lines)
 
