@@ -257,6 +257,24 @@ def test_a_time_step_no_controller_samples_at_is_flagged(scale, unit, warned):
                            "check the unit of 't' (Parquet field metadata 'unit': s, ms, us or ns; docs/log-format.md)"]
 
 
+def test_a_rotary_position_that_wraps_is_differentiated_unwrapped():
+    """A log without qd whose position is recorded within one turn: its velocity comes from the
+    unwrapped position (no spike of 2 pi / dt where it wraps), with a note."""
+    t = np.arange(2000) / 100.0
+    turning = 3.0 + 0.5 * np.sin(0.5 * t)                       # crosses pi back and forth
+    wrapped = np.angle(np.exp(1j * turning))
+    tau = 5 * np.sign(np.cos(0.5 * t))
+    got = {}
+    for name, q in (("turning", turning), ("wrapped", wrapped)):
+        table = pa.table({"t": t, "q": q, "tau_m": tau})
+        table = table.replace_schema_metadata({b"fricli.zero_columns": b'["tau_g", "tau_dyn"]'})
+        messages = []
+        got[name] = logs.from_table(table, name=name, warn=messages.append, cutoff_hz=5.0).signals["qd"]
+        assert any("jumps by a turn where it wraps" in m for m in messages) == (name == "wrapped"), messages
+    np.testing.assert_allclose(got["wrapped"], got["turning"], atol=1e-9)
+    assert np.abs(got["wrapped"]).max() < 0.3
+
+
 @pytest.mark.parametrize("header,row_end", [("t,q,tau,\n", ""), ("t,q,tau\n", ","), ("t,q,tau,\n", ",")])
 def test_a_delimiter_ending_the_header_or_every_row_is_no_column(header, row_end):
     """Spreadsheet and LabVIEW exports end lines with a delimiter, sometimes the header's only."""

@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
@@ -209,6 +210,34 @@ def test_step_parts_gives_friction_and_model_error_apart(kind, sim_models, tmp_p
         assert np.max(np.abs(got - ref) / (ABS + REL * np.abs(ref))) <= 1.0
     text = c.export(sim_models[kind], "fr")
     assert f"fr_HAS_MODEL_ERROR = {int(has_error)} }}" in text
+
+
+@needs_cc
+@pytest.mark.parametrize("kind", ["gms", "augmented-hysteresis"])
+def test_a_position_that_wraps_at_a_turn_moves_the_slip_elements_by_its_step(kind, sim_models, tmp_path):
+    """A continuous joint recorded within one turn jumps by 2 pi where it wraps. No joint moves half
+    a turn in one sample: the Maxwell-slip elements take the step less the turn, in Python as in C,
+    and so hold the states of the position recorded without the wrap."""
+    table = pq.read_table(SAMPLE / "joint2_extended_asym.parquet")
+    i = table.schema.get_field_index("q")
+    q = table.column("q").to_numpy()
+    turning = q + (np.pi - np.median(q))                       # half the rows beyond pi
+    wrapped = np.angle(np.exp(1j * turning))                   # in (-pi, pi]
+    assert (np.abs(np.diff(wrapped)) > np.pi).sum() >= 2
+    paths = {}
+    for name, values in (("turning", turning), ("wrapped", wrapped)):
+        paths[name] = str(tmp_path / f"{name}.parquet")
+        pq.write_table(table.set_column(i, table.schema.field(i), pa.array(values)), paths[name])
+    assert _compare(sim_models[kind], paths["wrapped"], tmp_path) <= 1.0
+    model, _ = models.load(sim_models[kind])
+    sig = {name: logs.load_log(path).signals for name, path in paths.items()}
+    if kind == "gms":                                          # its level and error also read q along the travel
+        from fricli.models.gms import element_states
+
+        got, want = (element_states(sig[n]["q"], sig[n]["qd"], model.deflection)[0] for n in ("wrapped", "turning"))
+    else:
+        got, want = (model.predict(sig[n])[0] for n in ("wrapped", "turning"))
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
 
 
 @needs_cc

@@ -525,6 +525,33 @@ def test_a_continuous_joint_recorded_wrapped_is_derived_unwrapped(rng):
     assert np.abs(sigs[3]["qd"]).max() < 2.5
 
 
+def test_a_revolute_joint_recorded_wrapped_is_derived_unwrapped_too(rng):
+    """A revolute joint whose limits pass +-pi (the UR's +-2 pi), reported within one turn by its
+    driver, jumps by 2 pi as a continuous one does: derived from its unwrapped position."""
+    pytest.importorskip("pinocchio")
+    import test_calibrate as arm
+    from fricli.robot.dynamics import RobotModel
+    from fricli.robot.importing import robot_terms
+    from fricli.robot.mapping import JointMap, Mapping
+
+    t = np.arange(3000) / 100.0
+    q = np.column_stack([3.0 + 0.5 * np.sin(0.5 * t), 0.4 * np.sin(0.7 * t), 0.3 * np.sin(0.9 * t), 0.2 * t])
+    wrapped = q.copy()
+    wrapped[:, 0] = np.angle(np.exp(1j * q[:, 0]))                  # j1 (revolute) crosses pi
+    model = RobotModel(arm.URDF, "four")
+    assert model.continuous[0] is False
+    mapping = Mapping(time=None, joints=[JointMap(name=k, columns={}) for k in range(1, 5)], match="order")
+    sigs = [{"q": wrapped[:, k].copy()} for k in range(4)]
+    record = robot_terms(model, mapping, t, sigs, "rotary", 20.0)
+    truth = [{"q": q[:, k].copy()} for k in range(4)]
+    robot_terms(model, mapping, t, truth, "rotary", 20.0)
+    assert record["unwrapped"] == ["1"]
+    inner = slice(100, -100)
+    for k in range(4):
+        np.testing.assert_allclose(sigs[k]["qd"][inner], truth[k]["qd"][inner], atol=1e-9)
+        np.testing.assert_allclose(sigs[k]["tau_g"], truth[k]["tau_g"], atol=1e-9)
+
+
 def test_import_derives_an_acceleration_column_of_zeros_for_the_robot_terms(tmp_path, rng):
     """A recorder that fills the acceleration column with zeros (the Franka friction files: ddq2 is 0 on
     every row): with --urdf, import reports it and derives qdd for tau_dyn, as when no qdd is mapped;

@@ -80,13 +80,13 @@ def _choice_line(record: dict) -> str | None:
 
 
 def _robot_notes(record: dict | None, name: str) -> list[str]:
-    """The stderr lines on how the robot terms were computed: continuous joints unwrapped, the cut-off chosen."""
+    """The stderr lines on how the robot terms were computed: joints unwrapped, the cut-off chosen."""
     if not record:
         return []
     out = []
     if record.get("unwrapped"):
         joints = record["unwrapped"]
-        out.append(f"note: {name}: the position of continuous joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} "
+        out.append(f"note: {name}: the position of joint{'s' if len(joints) > 1 else ''} {', '.join(joints)} "
                    "jumps by a turn where it wraps: qd and qdd are derived from it unwrapped (q is kept as recorded)")
     if _choice_line(record):
         out.append(_choice_line(record))

@@ -27,10 +27,9 @@ from fricli.core.errors import DataError, InvalidRows, LogError, NoValidRows
 from fricli.core.jsontext import is_finite_number
 # reading and writing Parquet, and the motion's filter and derivatives, importable from here as before
 from fricli.core.logs_io import (STREAMING, not_parquet, pa, parquet_file, parquet_options, pq,  # noqa: F401
-                                 read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns,
-                                 write_table)
+                                 read_bytes, read_table, stdin_parquet, table_from_arrays, unique_columns, write_table)
 from fricli.core.logs_motion import (_contradicts, dead_torque, derive_motion, implausible_step,  # noqa: F401
-                                     lowpass, lowpass_applies, not_measured, rate_mismatch)
+                                     lowpass, lowpass_applies, not_measured, rate_mismatch, wraps)
 
 TORQUES = ("tau_m", "tau_g", "tau_dyn", "tau_ext", "tau_f_true")
 KNOWN = ("t", "joint", "q", "qd", "qdd", "i_m", "temp") + TORQUES
@@ -534,7 +533,9 @@ def from_table(table: pa.Table, *, name: str, sha256: str = "", joint=None, kt: 
     mismatch = None if later_batch else rate_mismatch(sig)
     if mismatch and warn:
         warn(f"warning: {where}: {mismatch}")
-    derived = derive_motion(sig, cutoff_hz, qdd)
+    derived = derive_motion(sig, cutoff_hz, qdd, rotary=axis == "rotary")
+    if derived.get("unwrapped") and warn:
+        warn(f"note: {where}: the position jumps by a turn where it wraps: qd is derived from it unwrapped")
     dead = dead_torque(sig, CANONICAL[axis]["tau"])
     if dead and warn:
         warn(f"warning: {where}: {dead}")

@@ -3,9 +3,13 @@ where missing, and rate columns and time steps that cannot be measurements."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from fricli.core.errors import DataError
+
+HALF_TURN = math.pi   # rad: no joint moves half a turn between two samples; a step beyond it is a wrap at a turn
 
 PLAUSIBLE_STEP = (1e-5, 0.1)    # s: a controller's sample period lies between these (100 kHz, 10 Hz)
 
@@ -14,6 +18,12 @@ def implausible_step(step: float | None) -> bool:
     """Whether a median time step [s] lies outside ``PLAUSIBLE_STEP`` (by more than 1 ppm: recorded
     timestamps carry rounding): a time column in the wrong unit."""
     return step is not None and not PLAUSIBLE_STEP[0] * (1 - 1e-6) <= step <= PLAUSIBLE_STEP[1] * (1 + 1e-6)
+
+
+def wraps(q: np.ndarray) -> bool:
+    """Whether rotary positions q (n,) [rad] step by more than half a turn between two samples
+    anywhere: recorded within one turn (a continuous joint, or a driver that wraps), not a motion."""
+    return len(q) > 1 and bool(np.abs(np.diff(q)).max() > HALF_TURN)
 
 
 def lowpass_applies(t: np.ndarray, cutoff_hz: float) -> bool:
@@ -119,17 +129,20 @@ def derives_qdd(has_qd: bool, has_qdd: bool, qdd: bool = True) -> bool:
     return not has_qdd and (qdd or not has_qd)
 
 
-def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float, qdd: bool = True) -> dict:
+def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float, qdd: bool = True, rotary: bool = False) -> dict:
     """Fill in missing qd and qdd in place: zero-phase low-pass, then central differences.
     ``qdd`` False: a missing qdd stays missing where qd is measured (a reader that reads no
-    acceleration spares the zero-phase filter of qd, which needs the whole log)."""
+    acceleration spares the zero-phase filter of qd, which needs the whole log). ``rotary``: a
+    position that wraps at a turn (``wraps``) is differentiated unwrapped (``"unwrapped": True``)."""
     derived = []
     t = sig["t"]
     acceleration = derives_qdd("qd" in sig, "qdd" in sig, qdd)
     if len(t) < 3 and ("qd" not in sig or acceleration):
         raise DataError("too few samples to derive velocity and acceleration")
+    unwrapped = False
     if "qd" not in sig:
-        sig["qd"] = np.gradient(lowpass(sig["q"], t, cutoff_hz), t)
+        unwrapped = rotary and wraps(sig["q"])
+        sig["qd"] = np.gradient(lowpass(np.unwrap(sig["q"]) if unwrapped else sig["q"], t, cutoff_hz), t)
         derived.append("qd")
         if acceleration:
             sig["qdd"] = np.gradient(sig["qd"], t)
@@ -137,4 +150,5 @@ def derive_motion(sig: dict[str, np.ndarray], cutoff_hz: float, qdd: bool = True
     elif acceleration:
         sig["qdd"] = np.gradient(lowpass(sig["qd"], t, cutoff_hz), t)
         derived.append("qdd")
-    return {"columns": derived, "cutoff_hz": cutoff_hz} if derived else {}
+    return ({"columns": derived, "cutoff_hz": cutoff_hz, **({"unwrapped": True} if unwrapped else {})}
+            if derived else {})

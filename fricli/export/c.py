@@ -72,6 +72,15 @@ PRELUDE = f"""\
 """
 
 
+def position_step(dq: str) -> str:
+    """C statements that take a position step in the variable ``dq`` beyond half a turn as a wrap at
+    a turn, as ``fricli.numerics.physics.position_steps`` does."""
+    from fricli.core.logs_motion import HALF_TURN
+
+    half, turn = num(HALF_TURN), num(2 * HALF_TURN)
+    return f"if ({dq} > {half}) {dq} -= {turn}; else if ({dq} < -{half}) {dq} += {turn};"
+
+
 def num(x: float) -> str:
     """A C double literal that reads back as exactly ``x`` ("%.17g")."""
     x = float(x)

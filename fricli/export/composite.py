@@ -7,7 +7,7 @@ friction apart from robot-model errors). Children are emitted with their own emi
 from __future__ import annotations
 
 from fricli.export import terms as T
-from fricli.export.c import Context, Part, comment, emit, emitter, num
+from fricli.export.c import Context, Part, comment, emit, emitter, num, position_step
 
 
 def _state(name: str, fields: list[str]) -> list[str]:
@@ -96,8 +96,8 @@ def augmented(model, name: str, ctx: Context) -> Part:
         body += ["    const double gear = s->gear;"] if held_gear else []
     if limits:
         q = ctx.signal("q")
-        body.append(f"    {{ const double dq = s->slip_started ? {q} - s->slip_q : 0.0; s->slip_q = {q}; "
-                    "s->slip_started = 1;")
+        body.append(f"    {{ double dq = s->slip_started ? {q} - s->slip_q : 0.0; s->slip_q = {q}; "
+                    f"s->slip_started = 1; {position_step('dq')}")
         body += [f"      s->{T.slip_name(d)} = fmin(fmax(s->{T.slip_name(d)} + dq, -{num(d)}), {num(d)});" for d in limits]
         body.append("    }")
     for terms, coef, sum_ in ((model.terms, model.coef, "acc"), (model.error_terms, model.error_coef, "err")):

@@ -1,7 +1,7 @@
 """C code of the Generalized Maxwell-slip model (``fricli.models.gms``), in the order of
 operations of ``GMSModel.predict_parts``: the element deflections
 
-    z_i = clip(z_i + (q - q_prev), -d_i, d_i)
+    z_i = clip(z_i + (q - q_prev), -d_i, d_i)   (a step beyond half a turn less a turn: a wrap)
 
 (the first sample starts every element slipped in its direction of motion, sign(qd) d_i), the
 friction sum_i F_i z_i / d_i + (c(u) + kc |tau_g|) s + fst exp(-(qd/vs)^2) s + fv qd (s the
@@ -11,7 +11,7 @@ a sample was seen, and the direction of motion held at rest."""
 
 from __future__ import annotations
 
-from fricli.export.c import Context, Part, array, emitter, num
+from fricli.export.c import Context, Part, array, emitter, num, position_step
 from fricli.export.composite import _with_parts
 
 
@@ -30,8 +30,10 @@ def gms(m, name: str, ctx: Context) -> Part:
                  f"        for (i = 0; i < {n}; i++) s->z[i] = {ctx.sgn}(v) * d[i];",
                  "        s->q_prev = q;",
                  "    }",
+                 "    double dq = q - s->q_prev;",
+                 f"    {position_step('dq')}",
                  f"    for (i = 0; i < {n}; i++) {{",
-                 "        double z = s->z[i] + (q - s->q_prev);",
+                 "        double z = s->z[i] + dq;",
                  "        z = z < d[i] ? z : d[i];",
                  "        z = z > -d[i] ? z : -d[i];",
                  "        s->z[i] = z;",

@@ -18,7 +18,10 @@ Python loop over samples. These functions are the one implementation of the equa
 simulator and identification call them.
 
 Maxwell-slip elements (the ``gms`` kind, the ``slip`` term factor): the stop operator, ``stop``,
-z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d) for each element of deflection limit d.
+z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d) for each element of deflection limit d, where a step
+q[k] - q[k-1] beyond half a turn (pi) is a position that wrapped at a turn (a continuous joint
+recorded within one turn), less that turn (``position_steps``): no joint moves half a turn in one
+sample.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import math
 import numpy as np
 
 from fricli.core import lazy
+from fricli.core.logs_motion import HALF_TURN
 
 scipy_blas = lazy.module("scipy.linalg.blas")
 
@@ -150,10 +154,19 @@ STOP_BLOCK = 64   # rows per block of the stop operator's vector passes
 STOP_PASSES = 16  # at most this many passes over the blocks, then block by block
 
 
+def position_steps(q: np.ndarray, q0: float) -> np.ndarray:
+    """q[k] - q[k-1] (n,) from q0 before the first row, a step beyond half a turn taken as a wrap at
+    a turn: less 2 pi (the exported C steps alike: a test, then one subtraction)."""
+    dq = np.diff(q, prepend=float(q0))
+    dq[dq > HALF_TURN] -= 2 * HALF_TURN
+    dq[dq < -HALF_TURN] += 2 * HALF_TURN
+    return dq
+
+
 def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
     """Deflections z (n, N) [rad or m] of Maxwell-slip elements of limits d (N,) > 0 over positions
-    q (n,) (the stop operator): z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), from z0 (N,) at
-    position q0.
+    q (n,) (the stop operator): z[k] = clip(z[k-1] + q[k] - q[k-1], -d, d), the steps by
+    ``position_steps``, from z0 (N,) at position q0.
 
     The same bits as stepping row by row in plain floats, faster: the rows are cut into blocks of
     STOP_BLOCK, every block is stepped at once from a guess of its first state (numpy over the
@@ -166,7 +179,7 @@ def stop(q: np.ndarray, d, z0, q0: float) -> np.ndarray:
     n = len(q)
     if not n:
         return out
-    dq = np.diff(q, prepend=float(q0))
+    dq = position_steps(q, q0)
     starts = np.broadcast_to(np.asarray(z0, dtype=np.float64), d.shape).tolist()
     blocks = -(-n // STOP_BLOCK)
     if blocks < 4:

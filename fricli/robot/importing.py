@@ -262,10 +262,12 @@ def robot_terms(model, mapping: Mapping, t: np.ndarray, per_joint: list[dict], a
                    f"zero with --hold {model.joints[k]} and left out of the mapping (a ROS bag without a mapping "
                    "leaves held joints out itself)")
         require_positions(sig, f"joint {jm.name}")
-    # a continuous joint recorded wrapped to one turn jumps by 2 pi: velocity and acceleration are
-    # derived from its unwrapped position (the log keeps q as recorded; the terms read cos q, sin q)
+    # a rotary joint recorded wrapped to one turn (a continuous joint, or a revolute one whose limits
+    # pass +-pi, as some drivers report it) jumps by 2 pi, which no joint moves in one sample: velocity
+    # and acceleration are derived from its unwrapped position (the log keeps q as recorded; the terms
+    # read it through cos q, sin q, the Maxwell-slip elements take the step less the turn)
     unwrapped = [str(jm.name) for jm, sig, k in zip(mapping.joints, per_joint, order)
-                 if model.continuous[k] and len(sig["q"]) > 1 and np.abs(np.diff(sig["q"])).max() > np.pi]
+                 if model.kinds[k] == "rotary" and logs.wraps(sig["q"])]
     derivable = [dict(sig, q=np.unwrap(sig["q"])) if str(jm.name) in unwrapped else sig
                  for jm, sig in zip(mapping.joints, per_joint)]
     choice = None
