@@ -131,10 +131,11 @@ def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
     assert abs(fitted - 32.0) < 0.2, lines
 
 
-def joint_side_import(folder, degrees: list[int]) -> list[str]:
+def joint_side_import(folder, degrees: list[int], milli: list[int] = ()) -> list[str]:
     """A joint-side recording of the six-joint arm (q, qd, tau_m per joint; friction Fv 2 qd +
-    Fc 3 sign(qd)) with the joints ``degrees`` (0-based) written in degrees, imported with a mapping
-    that says rad for every joint: the import's lines on the mapping."""
+    Fc 3 sign(qd)) with the joints ``degrees`` (0-based) written in degrees and the torques of the
+    joints ``milli`` in mNm, imported with a mapping that says rad and Nm for every joint: the
+    import's lines on the mapping."""
     from fricli.robot.dynamics import RobotModel
 
     t = np.arange(int(20 * RATE)) / RATE
@@ -145,7 +146,9 @@ def joint_side_import(folder, degrees: list[int]) -> list[str]:
     tau = g + d + 2.0 * qd + 3.0 * np.tanh(qd / 0.01) + rng.normal(size=q.shape) * 0.05
     scale = np.ones(6)
     scale[degrees] = 180 / np.pi
-    cols = [t, *(q * scale).T, *(qd * scale).T, *tau.T]
+    milli_scale = np.ones(6)
+    milli_scale[list(milli)] = 1000.0
+    cols = [t, *(q * scale).T, *(qd * scale).T, *(tau * milli_scale).T]
     names = ["t"] + [f"{s}{k}" for s in ("q", "qd", "tau") for k in range(1, 7)]
     np.savetxt(folder / "rec.csv", np.column_stack(cols), delimiter=",", header=",".join(names), comments="",
                fmt="%.12g")
@@ -171,6 +174,18 @@ def test_a_joint_side_motion_in_degrees_read_as_radians_is_flagged(tmp_path, deg
     else:
         assert len(lines) == 1 and said in lines[0], lines
         assert ('q and qd: unit "deg" and "deg/s" in the mapping') in lines[0]
+
+
+def test_a_torque_in_the_wrong_unit_is_flagged_as_one(tmp_path):
+    """Torques in mNm mapped as Nm: the joint's torque is 1000 times the robot model's. It is named
+    as a unit (without it, the other changes took the motion read 1000 times too small, as a chain
+    of gear ratios)."""
+    lines = joint_side_import(tmp_path, [], milli=[1, 3])
+    assert len(lines) == 2, lines
+    for line, joint in zip(lines, ("j2", "j4")):
+        assert f"joint {joint}: its torque is x1e+03 of the robot model's, a current in mA mapped as A or a torque in " \
+               "mNm mapped as Nm" in line, line
+        assert line.endswith(f"with joint {joint}'s tau_m: scale multiplied by 0.001"), line
 
 
 def test_a_template_from_a_header_and_a_urdf_imports_as_it_is(tmp_path):

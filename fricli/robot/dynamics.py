@@ -107,6 +107,9 @@ class RobotModel:
                                      "(revolute, continuous and prismatic only)")
             self.kinds.append("rotary" if short[0] == "R" else "linear")
             self.continuous.append(joint.nq == 2)
+        # each joint's position limits (joints, 2) [rad or m]; NaN for a continuous joint
+        self.limits = np.array([(model.lowerPositionLimit[j.idx_q], model.upperPositionLimit[j.idx_q]) if j.nq == 1
+                                else (np.nan, np.nan) for j in model.joints[1:]], dtype=float).reshape(-1, 2)
         self.payload_parameters = np.zeros((model.nv, 10))   # a declared payload in each body's parameters
         if payload is not None and payload.mass > 0:
             if not model.existFrame(payload.frame):

@@ -39,10 +39,14 @@ MAX_FINDINGS = 3
 QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/2
 GROSS = (0.8, 1.25)                        # a diagonal ratio's or drive gain's factor inside this is no mistake
 FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then refined)
+# a joint-side torque whose least-squares scale against the robot model's is about 1/1000 or 1000 (within
+# a factor UNIT_WITHIN), and which that factor explains (GAIN_MIN): a current or torque in the wrong unit
+UNIT, UNIT_WITHIN = 1e3, 2.0
 # a joint's motion (q, qd, qdd) in another unit than the mapping says, by the joint's kind: (the factor
 # that makes it right, the unit it is in, the unit the mapping gave)
 UNIT_SLIPS = {"rotary": ((math.pi / 180, "deg", "rad"), (180 / math.pi, "rad", "deg")),
               "linear": ((1e-3, "mm", "m"), (1e3, "m", "mm"))}
+LIMIT_MARGIN = 0.05   # a position within this share of the span beyond a URDF limit is within it
 
 
 class _Case:
@@ -109,7 +113,9 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         return g[:, order], d[:, order] + aa @ cross.T
 
     ratio = np.array(transmission.ratio, dtype=float) if transmission is not None else np.eye(k)
-    kinds = [model.kinds[j] for j in order] if transmission is None else None   # a motor's unit is no joint's
+    slips = [] if transmission is None else None   # a motor's unit is no joint's
+    if slips is not None:
+        slips = _unit_slips(q, [model.kinds[j] for j in order], model.limits[order])
     cross = cross if cross.shape == (k, k) else np.zeros((k, k))
     case = _Case(q, qd, qdd, tau, ratio, terms)
     figures = {}
@@ -122,6 +128,8 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
                          "rms_tau_m": float(np.sqrt(np.mean(tau[:, i] ** 2))),
                          "rms_model": float(np.sqrt(np.mean(model_tau ** 2)))}
     findings = []
+    if transmission is None:
+        findings, case = _torque_units(case, names, figures)
     given = getattr(transmission, "offset", None)
     offset = None if transmission is not None and given is None else \
         np.array(given, dtype=float) if transmission is not None else np.zeros(k)
@@ -131,7 +139,7 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         ss0, _ = case.residual_ss()
         screen = case if screen_rows is None else case.take(screen_rows)
         best = None
-        for hyp in _hypotheses(screen, case, terms, ss0, kinds):
+        for hyp in _hypotheses(screen, case, terms, ss0, slips):
             ss1, _ = hyp["case"].residual_ss()
             gain = _gain(ss0, ss1)
             if best is None or gain > best["gain"]:
@@ -149,10 +157,63 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     return {"joints": figures, "findings": findings}
 
 
-def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, kinds: list[str] | None = None):
-    """Every change tried (zeros, directions, torque signs, units of the joints' motion where their
-    ``kinds`` are given, ratio terms), screened on ``screen`` (some of ``case``'s rows, or ``case``):
-    those that come near a finding there, made on ``case`` (whose scores are ``ss_case``)."""
+def _torque_units(case: _Case, names: list[str], figures: dict) -> tuple[list[dict], _Case]:
+    """Findings of joint-side torques at about 1/UNIT or UNIT times the robot model's torque (the
+    least-squares ``scale`` of ``figures``) that the factor UNIT explains, and ``case`` with them
+    corrected. Only these two factors: the hypotheses of ``check`` would explain a torque mapped
+    too small as well by motion read too small (every torque of the model small with it)."""
+    findings = []
+    for i, name in enumerate(names):
+        corr, scale = figures[name]["correlation"], figures[name]["scale"]
+        for f, why in ((UNIT, "a current in A mapped as mA or a torque in Nm mapped as mNm"),
+                       (1 / UNIT, "a current in mA mapped as A or a torque in mNm mapped as Nm")):
+            if scale is not None and scale > 0 and abs(math.log(scale * f)) <= math.log(UNIT_WITHIN):
+                ss0, _ = case.residual_ss()
+                s = np.where(np.arange(len(names)) == i, f, 1.0)
+                fixed = _Case(case.q, case.qd, case.qdd, case.tau * s, case.ratio, None, (case.g, case.d))
+                ss1, _ = fixed.residual_ss()
+                if 1.0 - ss1[i] / max(ss0[i], 1e-300) < GAIN_MIN:
+                    continue
+                case, n = fixed, len(case.tau)
+                before, after = math.sqrt(ss0[i] / n), math.sqrt(ss1[i] / n)
+                line = f"joint {name}'s tau_m: scale multiplied by {f:g}"
+                told = "" if corr is None else f"; correlation {corr:.2f}"
+                message = (f"joint {name}: its torque is x{scale:.3g} of the robot model's, {why} (least-squares "
+                           f"scale{told}): what the robot model and friction leave of joint {name}'s tau_m "
+                           f"falls from {before:.3g} to {after:.3g} Nm RMS with {line}")
+                findings.append({"joint": name, "cause": "torque-unit", "line": line, "rms_before": before,
+                                 "rms_after": after, "gain": float(1.0 - ss1[i] / max(ss0[i], 1e-300)),
+                                 "message": message})
+    return findings, case
+
+
+def _unit_slips(q: np.ndarray, kinds: list[str], limits: np.ndarray) -> list[tuple]:
+    """The unit slips (``UNIT_SLIPS``) worth trying on positions q (n, k) of joints of ``kinds`` with
+    URDF ``limits`` (k, 2) (NaN: none): (joint index, or None for every joint; factor; unit; the
+    mapping's unit). Motion read 57 (or 1000) times too small makes every torque of the robot
+    model small: it would explain a torque mapped in the wrong unit as well. So a slip that shrinks
+    the motion is tried only where a position read as the mapping says lies beyond its limits and
+    within them once shrunk; one that enlarges it only where it stays within them."""
+    span = limits[:, 1] - limits[:, 0]
+    inside = lambda x: (~np.isfinite(span)) | ((x.min(axis=0) >= limits[:, 0] - LIMIT_MARGIN * span)  # noqa: E731
+                                              & (x.max(axis=0) <= limits[:, 1] + LIMIT_MARGIN * span))
+    as_read = inside(q)
+    out = []
+    for kind in sorted(set(kinds)):
+        mine = np.array([k == kind for k in kinds])
+        for factor, unit, said in UNIT_SLIPS[kind]:
+            fits = inside(q * factor)
+            ok = fits & ~as_read & np.isfinite(span) if factor < 1 else fits
+            if mine.all() and len(kinds) > 1 and fits.all() and (factor > 1 or ok.any()):
+                out.append((None, factor, unit, said))
+            out += [(i, factor, unit, said) for i in np.flatnonzero(mine & ok)]
+    return out
+
+
+def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, slips: list[tuple] | None = None):
+    """Every change tried (zeros, directions, torque signs, the unit ``slips`` of the joints' motion,
+    ratio terms), screened on ``screen`` (some of ``case``'s rows, or ``case``): those that come
+    near a finding there, made on ``case`` (whose scores are ``ss_case``)."""
     k = case.q.shape[1]
     ss_screen, _ = screen.residual_ss()
     near = lambda c: _gain(ss_screen, c.residual_ss()[0]) >= GAIN_MIN / 2    # noqa: E731
@@ -160,11 +221,12 @@ def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, kinds: l
     def rescaled(c, s):
         return _Case(c.q * s, c.qd * s, c.qdd * s, c.tau, c.ratio, terms)
 
-    # a recorder writes every joint in one unit: the whole arm's slip first (one joint's alone would
+    # a recorder writes every joint in one unit: the whole arm's slip too (one joint's alone would
     # leave the others' torques, which its angle enters, worse)
-    for factor, unit, said in UNIT_SLIPS[kinds[0]] if kinds and k > 1 and len(set(kinds)) == 1 else ():
-        if near(rescaled(screen, factor)):
-            yield {"kind": "unit", "joint": None, "unit": unit, "said": said, "case": rescaled(case, factor)}
+    for joint, factor, unit, said in slips or ():
+        s = np.full(k, factor) if joint is None else np.where(np.arange(k) == joint, factor, 1.0)
+        if near(rescaled(screen, s)):
+            yield {"kind": "unit", "joint": joint, "unit": unit, "said": said, "case": rescaled(case, s)}
     for i in range(k):
         for quarter in QUARTERS:
             def moved(c, i=i, quarter=quarter):
@@ -184,11 +246,6 @@ def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, kinds: l
             return _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))
         if near(reversed_(screen)):
             yield {"kind": "torque-sign", "joint": i, "motor": i, "case": reversed_(case)}
-        for factor, unit, said in UNIT_SLIPS[kinds[i]] if kinds else ():
-            s = np.ones(k)
-            s[i] = factor
-            if near(rescaled(screen, s)):
-                yield {"kind": "unit", "joint": i, "unit": unit, "said": said, "case": rescaled(case, s)}
     for m in range(k):
         for j in range(k):
             if case.ratio[m, j] == 0.0:
