@@ -249,6 +249,23 @@ def test_a_template_takes_the_unit_a_column_name_states(tmp_path):
     assert 'time = {column = 1, unit = "ns"}' in res.stdout
 
 
+@pytest.mark.parametrize("names,q_columns", [
+    # Universal Robots' RTDE recorder: joints counted from 0, the commanded signals beside the measured ones
+    ([f"{w}_{s}_{k}" for w in ("target", "actual") for s in ("q", "qd", "current") for k in range(3)], [11, 12, 13]),
+    # a ROS JointState flattened to columns (PlotJuggler): position[0] is the first joint
+    ([f"/joint_states/{s}[{k}]" for s in ("position", "velocity", "effort") for k in range(3)], [2, 3, 4])])
+def test_a_template_counts_joints_from_zero_and_takes_measured_signals_first(tmp_path, names, q_columns):
+    (tmp_path / "arm3.urdf").write_text(_ARM3)
+    names = ["timestamp"] + names
+    (tmp_path / "rec.csv").write_text(",".join(names) + "\n" + ",".join(["0.5"] * len(names)) + "\n")
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--template", "--urdf", str(tmp_path / "arm3.urdf"),
+                                   "-o", "-"])
+    assert res.exit_code == 0, res.stderr
+    got = [int(ln.split("column = ")[1].split(",")[0]) for ln in res.stdout.splitlines() if ln.startswith("q = {")]
+    assert got == q_columns, res.stdout
+    assert "target" not in res.stdout.split("# The recording has")[1].split("\n", 1)[1]
+
+
 def test_a_template_of_a_linear_axis_defaults_to_metres_and_newtons(tmp_path):
     (tmp_path / "gantry.urdf").write_text(
         '<robot name="g"><link name="b"/><link name="c"/><joint name="x" type="prismatic"><parent link="b"/>'

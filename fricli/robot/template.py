@@ -25,6 +25,8 @@ _WORDS = {  # signal: words in a column name, most specific first
     "tau_m": ("torque", "force", "effort", "tau", "trq"),
 }
 _TIME_WORDS = ("t", "time", "timestamp", "stamp")
+# words of a commanded signal's column (``target_q_0`` beside ``actual_q_0``): taken only when no measured one fits
+_COMMAND_WORDS = {"target", "desired", "des", "cmd", "command", "commanded", "ref", "reference", "setpoint", "goal"}
 # a word of a column's name that states its unit -> the unit, per signal (the joint's kind picks among them)
 _UNIT_WORDS = {
     "t": {"s": "s", "sec": "s", "secs": "s", "seconds": "s", "ms": "ms", "msec": "ms", "us": "us", "usec": "us",
@@ -80,13 +82,24 @@ def _tokens(field: str) -> list[str]:
     return [t for t in re.split(r"[^a-z0-9]+|(?<=[a-z])(?=[0-9])", field.lower()) if t]
 
 
-def _guess(fields: list[str], signal: str, k: int, joint: str) -> int | None:
-    """The 1-based column of ``signal`` of the k-th joint (1-based), or None."""
-    for word in _WORDS[signal]:
-        for c, f in enumerate(fields, 1):
-            tokens = _tokens(f)
-            if word in tokens and (str(k) in tokens or joint.lower() in f.lower()):
-                return c
+def _first_number(fields: list[str]) -> int:
+    """0 when the columns that name a signal count the joints from 0 (``actual_q_0``, as Universal
+    Robots' RTDE recorder writes them, ``position[0]``), else 1."""
+    words = {w for ws in _WORDS.values() for w in ws}
+    return 0 if any("0" in tokens and words & set(tokens) for tokens in map(_tokens, fields)) else 1
+
+
+def _guess(fields: list[str], signal: str, k: int, joint: str, first: int = 1) -> int | None:
+    """The 1-based column of ``signal`` of the k-th joint (1-based; counted from ``first`` in the
+    names), or None; a measured signal before a commanded one (``_COMMAND_WORDS``)."""
+    number = str(k - 1 + first)
+    for commanded in (False, True):
+        for word in _WORDS[signal]:
+            for c, f in enumerate(fields, 1):
+                tokens = _tokens(f)
+                if (word in tokens and (number in tokens or joint.lower() in f.lower())
+                        and bool(_COMMAND_WORDS & set(tokens)) == commanded):
+                    return c
     return None
 
 
@@ -125,12 +138,13 @@ def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
     else:
         lines.append('time = {column = 1, unit = "s"}             # FILL IN: the time column (or time = {rate = HZ})')
     lines += ["", "[robot]", 'match = "name"                              # joints matched to the URDF by name', ""]
+    first = _first_number(fields) if fields else 1
     for k, (joint, kind) in enumerate(joints, 1):
         lines += ["[[joints]]", f'name = "{joint}"                 # URDF joint {k} of {len(joints)}']
         default = dict(CANONICAL[kind], tau_m=CANONICAL[kind]["tau"], i_m="A")
         found = False
         for signal in ("q", "qd", "tau_m", "i_m"):
-            column = _guess(fields, signal, k, joint) if fields else None
+            column = _guess(fields, signal, k, joint, first) if fields else None
             if column is not None and not (signal == "i_m" and found):
                 found = found or signal in ("tau_m", "i_m")
                 unit = _unit(fields[column - 1], signal, kind,
