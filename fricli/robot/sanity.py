@@ -161,7 +161,10 @@ def _torque_units(case: _Case, names: list[str], figures: dict) -> tuple[list[di
     """Findings of joint-side torques at about 1/UNIT or UNIT times the robot model's torque (the
     least-squares ``scale`` of ``figures``) that the factor UNIT explains, and ``case`` with them
     corrected. Only these two factors: the hypotheses of ``check`` would explain a torque mapped
-    too small as well by motion read too small (every torque of the model small with it)."""
+    too small as well by motion read too small (every torque of the model small with it). Judged
+    by the share of the torque's variance left unexplained, which no scale of the torque changes by
+    itself (its residual does): the factor must leave at most half of it, and half of what is left
+    without it."""
     findings = []
     for i, name in enumerate(names):
         corr, scale = figures[name]["correlation"], figures[name]["scale"]
@@ -172,7 +175,9 @@ def _torque_units(case: _Case, names: list[str], figures: dict) -> tuple[list[di
                 s = np.where(np.arange(len(names)) == i, f, 1.0)
                 fixed = _Case(case.q, case.qd, case.qdd, case.tau * s, case.ratio, None, (case.g, case.d))
                 ss1, _ = fixed.residual_ss()
-                if 1.0 - ss1[i] / max(ss0[i], 1e-300) < GAIN_MIN:
+                left0, left1 = (ss[i] / max(float(np.sum((x - x.mean()) ** 2)), 1e-300)
+                                for ss, x in ((ss0, case.tau[:, i]), (ss1, fixed.tau[:, i])))
+                if not (left1 <= GAIN_MIN and left1 <= GAIN_MIN * left0):
                     continue
                 case, n = fixed, len(case.tau)
                 before, after = math.sqrt(ss0[i] / n), math.sqrt(ss1[i] / n)
