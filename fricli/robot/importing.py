@@ -35,8 +35,6 @@ class Imported:
     source: str = ""                 # what was imported: the name, or a bag's topic in it
 
 
-
-
 def is_bag(path: str) -> bool:
     """True when ``path`` is a ROS bag (a rosbag2 folder or a ROS 1 .bag file)."""
     from fricli.robot import rosbag

@@ -40,7 +40,7 @@ QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/
 GROSS = (0.8, 1.25)                        # a diagonal ratio's or drive gain's factor inside this is no mistake
 FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then refined)
 # a joint-side torque whose least-squares scale against the robot model's is about 1/1000 or 1000 (within
-# a factor UNIT_WITHIN), and which that factor explains (GAIN_MIN): a current or torque in the wrong unit
+# a factor UNIT_WITHIN), and which that factor explains (``_torque_units``): a current or torque in the wrong unit
 UNIT, UNIT_WITHIN = 1e3, 2.0
 # a joint's motion (q, qd, qdd) in another unit than the mapping says, by the joint's kind: (the factor
 # that makes it right, the unit it is in, the unit the mapping gave)
@@ -113,9 +113,8 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         return g[:, order], d[:, order] + aa @ cross.T
 
     ratio = np.array(transmission.ratio, dtype=float) if transmission is not None else np.eye(k)
-    slips = [] if transmission is None else None   # a motor's unit is no joint's
-    if slips is not None:
-        slips = _unit_slips(q, [model.kinds[j] for j in order], model.limits[order])
+    # a motor's unit is no joint's: the motion's units are tried on joint-side mappings only
+    slips = None if transmission is not None else _unit_slips(q, [model.kinds[j] for j in order], model.limits[order])
     cross = cross if cross.shape == (k, k) else np.zeros((k, k))
     case = _Case(q, qd, qdd, tau, ratio, terms)
     figures = {}
