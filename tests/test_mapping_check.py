@@ -131,11 +131,11 @@ def test_a_coupling_term_off_by_two_in_thirty_two_is_flagged(folder):
     assert abs(fitted - 32.0) < 0.2, lines
 
 
-def joint_side_import(folder, degrees: list[int], milli: list[int] = ()) -> list[str]:
+def joint_side_import(folder, degrees: list[int], milli: list[int] = (), mapped_deg: list[int] = ()) -> list[str]:
     """A joint-side recording of the six-joint arm (q, qd, tau_m per joint; friction Fv 2 qd +
     Fc 3 sign(qd)) with the joints ``degrees`` (0-based) written in degrees and the torques of the
-    joints ``milli`` in mNm, imported with a mapping that says rad and Nm for every joint: the
-    import's lines on the mapping."""
+    joints ``milli`` in mNm, imported with a mapping that says rad and Nm for every joint but deg
+    for the joints ``mapped_deg``: the import's lines on the mapping."""
     from fricli.robot.dynamics import RobotModel
 
     t = np.arange(int(20 * RATE)) / RATE
@@ -153,7 +153,11 @@ def joint_side_import(folder, degrees: list[int], milli: list[int] = ()) -> list
     np.savetxt(folder / "rec.csv", np.column_stack(cols), delimiter=",", header=",".join(names), comments="",
                fmt="%.12g")
     (folder / "arm6.urdf").write_text(urdf_text())
-    joints = "".join(f'[[joints]]\nname = "j{k}"\nq = "q{k}"\nqd = "qd{k}"\ntau_m = "tau{k}"\n' for k in range(1, 7))
+    joints = ""
+    for k in range(1, 7):
+        q_unit, qd_unit = ("deg", "deg/s") if k - 1 in mapped_deg else ("rad", "rad/s")
+        joints += (f'[[joints]]\nname = "j{k}"\nq = {{column = "q{k}", unit = "{q_unit}"}}\n'
+                   f'qd = {{column = "qd{k}", unit = "{qd_unit}"}}\ntau_m = "tau{k}"\n')
     (folder / "map.toml").write_text('header = true\ntime = "t"\n[robot]\nmatch = "name"\n' + joints)
     res = CliRunner().invoke(cli, ["import", str(folder / "rec.csv"), "--mapping", str(folder / "map.toml"), "--urdf",
                                    str(folder / "arm6.urdf"), "-o", str(folder / "log.parquet")])
@@ -161,19 +165,21 @@ def joint_side_import(folder, degrees: list[int], milli: list[int] = ()) -> list
     return [line for line in res.stderr.splitlines() if "the mapping disagrees" in line]
 
 
-@pytest.mark.parametrize("degrees,said", [
-    ([], None),
-    ([0, 1, 2, 3, 4, 5], "joints j1, j2, j3, j4, j5, j6: their position and velocity are in deg, read as rad"),
-    ([2], "joint j3: its position and velocity are in deg, read as rad")])
-def test_a_joint_side_motion_in_degrees_read_as_radians_is_flagged(tmp_path, degrees, said):
+@pytest.mark.parametrize("degrees,mapped_deg,said,unit", [
+    ([], [], None, None),
+    ([0, 1, 2, 3, 4, 5], [], "joints j1, j2, j3, j4, j5, j6: their position and velocity are in deg, read as rad", "deg"),
+    ([2], [], "joint j3: its position and velocity are in deg, read as rad", "deg"),
+    ([], [2], "joint j3: its position and velocity are in rad, read as deg", "rad")])
+def test_a_joint_side_motion_in_degrees_read_as_radians_is_flagged(tmp_path, degrees, mapped_deg, said, unit):
     """A recorder that writes degrees, mapped with the default unit rad: the robot model's gravity then
-    turns with 57 times the angle, and the check names the unit (and only where it is wrong)."""
-    lines = joint_side_import(tmp_path, degrees)
+    turns with 57 times the angle, and the check names the unit (and only where it is wrong); the
+    same for radians mapped as degrees."""
+    lines = joint_side_import(tmp_path, degrees, mapped_deg=mapped_deg)
     if said is None:
         assert lines == []
     else:
         assert len(lines) == 1 and said in lines[0], lines
-        assert ('q and qd: unit "deg" and "deg/s" in the mapping') in lines[0]
+        assert f'q and qd: unit "{unit}" and "{unit}/s" in the mapping' in lines[0]
 
 
 def test_a_torque_in_the_wrong_unit_is_flagged_as_one(tmp_path):
