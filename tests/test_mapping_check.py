@@ -182,6 +182,25 @@ def test_a_joint_side_motion_in_degrees_read_as_radians_is_flagged(tmp_path, deg
         assert f'q and qd: unit "{unit}" and "{unit}/s" in the mapping' in lines[0]
 
 
+def test_a_drive_gain_off_on_a_joint_side_mapping_is_flagged(tmp_path):
+    """Joint-side torques with a drive gain off (x0.5 and x2.5 in the mapping's scale): each joint is
+    named with the factor that explains its torque; the positions are left as they are."""
+    joint_side_import(tmp_path, [])
+    text = (tmp_path / "map.toml").read_text()
+    for k, f in ((2, 0.5), (4, 2.5)):
+        text = text.replace(f'tau_m = "tau{k}"', f'tau_m = {{column = "tau{k}", scale = {f}}}')
+    (tmp_path / "map.toml").write_text(text)
+    res = CliRunner().invoke(cli, ["import", str(tmp_path / "rec.csv"), "--mapping", str(tmp_path / "map.toml"), "--urdf",
+                                   str(tmp_path / "arm6.urdf"), "-o", str(tmp_path / "log.parquet")])
+    lines = [line for line in res.stderr.splitlines() if "the mapping disagrees" in line]
+    assert len(lines) == 2, lines
+    for line, joint, f in zip(lines, ("j2", "j4"), (2.0, 0.4)):
+        assert f"joint {joint}: its torque is x" in line and "of the robot model's, a drive gain (kt)" in line, line
+        scale = float(line.split("its torque is x")[1].split(" ")[0])
+        fix = float(line.split("scale multiplied by ")[1])
+        assert abs(scale * f - 1) < 0.05 and abs(fix / f - 1) < 0.05, line
+
+
 def test_a_torque_in_the_wrong_unit_is_flagged_as_one(tmp_path):
     """Torques in mNm mapped as Nm: the joint's torque is 1000 times the robot model's. It is named
     as a unit (without it, the other changes took the motion read 1000 times too small, as a chain

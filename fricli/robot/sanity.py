@@ -40,7 +40,7 @@ QUARTERS = (1, 2, -1)                      # zero offsets tried: +pi/2, pi, -pi/
 GROSS = (0.8, 1.25)                        # a diagonal ratio's or drive gain's factor inside this is no mistake
 FACTORS = np.geomspace(0.25, 4.0, 41)      # factors tried on a ratio term (then refined)
 # a joint-side torque whose least-squares scale against the robot model's is about 1/1000 or 1000 (within
-# a factor UNIT_WITHIN), and which that factor explains (``_torque_units``): a current or torque in the wrong unit
+# a factor UNIT_WITHIN), and which that factor explains (``_torque_scales``): a current or torque in the wrong unit
 UNIT, UNIT_WITHIN = 1e3, 2.0
 # a joint's motion (q, qd, qdd) in another unit than the mapping says, by the joint's kind: (the factor
 # that makes it right, the unit it is in, the unit the mapping gave)
@@ -117,18 +117,10 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
     slips = None if transmission is not None else _unit_slips(q, [model.kinds[j] for j in order], model.limits[order])
     cross = cross if cross.shape == (k, k) else np.zeros((k, k))
     case = _Case(q, qd, qdd, tau, ratio, terms)
-    figures = {}
-    for i, name in enumerate(names):
-        model_tau = case.g[:, i] + case.d[:, i]
-        sd = float(np.std(model_tau)) * float(np.std(tau[:, i]))
-        corr = float(np.corrcoef(model_tau, tau[:, i])[0, 1]) if sd > 0 else None
-        denom = float(model_tau @ model_tau)
-        figures[name] = {"correlation": corr, "scale": float(model_tau @ tau[:, i]) / denom if denom > 0 else None,
-                         "rms_tau_m": float(np.sqrt(np.mean(tau[:, i] ** 2))),
-                         "rms_model": float(np.sqrt(np.mean(model_tau ** 2)))}
+    figures = {name: _figures(case, i) for i, name in enumerate(names)}
     findings = []
     if transmission is None:
-        findings, case = _torque_units(case, names, figures)
+        findings, case = _torque_scales(case, names, units_only=True)
     given = getattr(transmission, "offset", None)
     offset = None if transmission is not None and given is None else \
         np.array(given, dtype=float) if transmission is not None else np.zeros(k)
@@ -153,41 +145,64 @@ def check(model, mapping, order: list[int], per_joint: list[dict], transmission=
         if best["kind"] == "offset" and offset is not None:
             offset = offset - best["delta"] * case.ratio[:, best["joint"]]
         case = best["case"]
+    if transmission is None:
+        more, case = _torque_scales(case, names, units_only=False)
+        findings += more
     return {"joints": figures, "findings": findings}
 
 
-def _torque_units(case: _Case, names: list[str], figures: dict) -> tuple[list[dict], _Case]:
-    """Findings of joint-side torques at about 1/UNIT or UNIT times the robot model's torque (the
-    least-squares ``scale`` of ``figures``) that the factor UNIT explains, and ``case`` with them
-    corrected. Only these two factors: the hypotheses of ``check`` would explain a torque mapped
-    too small as well by motion read too small (every torque of the model small with it). Judged
-    by the share of the torque's variance left unexplained, which no scale of the torque changes by
-    itself (its residual does): the factor must leave at most half of it, and half of what is left
-    without it."""
+def _figures(case: _Case, i: int) -> dict:
+    """Joint i's torque against the robot model's tau_g + tau_dyn: their correlation (None when
+    either is constant), the least-squares scale of tau_m on it, and both RMS [Nm]."""
+    model_tau, tau = case.g[:, i] + case.d[:, i], case.tau[:, i]
+    sd = float(np.std(model_tau)) * float(np.std(tau))
+    denom = float(model_tau @ model_tau)
+    return {"correlation": float(np.corrcoef(model_tau, tau)[0, 1]) if sd > 0 else None,
+            "scale": float(model_tau @ tau) / denom if denom > 0 else None,
+            "rms_tau_m": float(np.sqrt(np.mean(tau ** 2))), "rms_model": float(np.sqrt(np.mean(model_tau ** 2)))}
+
+
+def _torque_scales(case: _Case, names: list[str], units_only: bool) -> tuple[list[dict], _Case]:
+    """Findings of joint-side torques whose least-squares scale against the robot model's torque
+    tau_g + tau_dyn (``_figures``) lies outside ``GROSS`` and whose inverse explains them (a drive gain off; about
+    1/UNIT or UNIT: a unit), and ``case`` with them corrected. Judged by the share of the torque's
+    variance the fit leaves unexplained, which no scale of the torque changes by itself (its residual
+    does, so the hypotheses of ``check`` do not scale a joint-side torque): the factor must leave at
+    most half of it, and half of what is left without it. ``units_only``: the units alone (they
+    come first: a torque mapped 1000 times too small lets any change that shrinks the model's
+    torques win; the other factors come last, once the positions are right)."""
     findings = []
     for i, name in enumerate(names):
-        corr, scale = figures[name]["correlation"], figures[name]["scale"]
-        for f, why in ((UNIT, "a current in A mapped as mA or a torque in Nm mapped as mNm"),
-                       (1 / UNIT, "a current in mA mapped as A or a torque in mNm mapped as Nm")):
-            if scale is not None and scale > 0 and abs(math.log(scale * f)) <= math.log(UNIT_WITHIN):
-                ss0, _ = case.residual_ss()
-                s = np.where(np.arange(len(names)) == i, f, 1.0)
-                fixed = _Case(case.q, case.qd, case.qdd, case.tau * s, case.ratio, None, (case.g, case.d))
-                ss1, _ = fixed.residual_ss()
-                left0, left1 = (ss[i] / max(float(np.sum((x - x.mean()) ** 2)), 1e-300)
-                                for ss, x in ((ss0, case.tau[:, i]), (ss1, fixed.tau[:, i])))
-                if not (left1 <= GAIN_MIN and left1 <= GAIN_MIN * left0):
-                    continue
-                case, n = fixed, len(case.tau)
-                before, after = math.sqrt(ss0[i] / n), math.sqrt(ss1[i] / n)
-                line = f"joint {name}'s tau_m: scale multiplied by {f:g}"
-                told = "" if corr is None else f"; correlation {corr:.2f}"
-                message = (f"joint {name}: its torque is x{scale:.3g} of the robot model's, {why} (least-squares "
-                           f"scale{told}): what the robot model and friction leave of joint {name}'s tau_m "
-                           f"falls from {before:.3g} to {after:.3g} Nm RMS with {line}")
-                findings.append({"joint": name, "cause": "torque-unit", "line": line, "rms_before": before,
-                                 "rms_after": after, "gain": float(1.0 - ss1[i] / max(ss0[i], 1e-300)),
-                                 "message": message})
+        fig = _figures(case, i)
+        corr, scale = fig["correlation"], fig["scale"]
+        if scale is None or not scale > 0 or GROSS[0] <= scale <= GROSS[1]:
+            continue
+        f, why = 1.0 / scale, ("a drive gain (kt) or a gear ratio off, or the robot model's own error: the URDF's "
+                               "masses (fricli calibrate) or a payload not declared (--payload-mass)")
+        for unit, text in ((UNIT, "a current in A mapped as mA or a torque in Nm mapped as mNm"),
+                           (1 / UNIT, "a current in mA mapped as A or a torque in mNm mapped as Nm")):
+            if abs(math.log(scale * unit)) <= math.log(UNIT_WITHIN):
+                f, why = unit, text
+        if units_only != (f in (UNIT, 1 / UNIT)):
+            continue
+        ss0, _ = case.residual_ss()
+        s = np.where(np.arange(len(names)) == i, f, 1.0)
+        fixed = _Case(case.q, case.qd, case.qdd, case.tau * s, case.ratio, None, (case.g, case.d))
+        ss1, _ = fixed.residual_ss()
+        left0, left1 = (ss[i] / max(float(np.sum((x - x.mean()) ** 2)), 1e-300)
+                        for ss, x in ((ss0, case.tau[:, i]), (ss1, fixed.tau[:, i])))
+        if not (left1 <= GAIN_MIN and left1 <= GAIN_MIN * left0):
+            continue
+        case, n = fixed, len(case.tau)
+        before, after = math.sqrt(ss0[i] / n), math.sqrt(ss1[i] / n)
+        line = f"joint {name}'s tau_m: scale multiplied by {f:.4g}"
+        told = "" if corr is None else f"; correlation {corr:.2f}"
+        message = (f"joint {name}: its torque is x{scale:.3g} of the robot model's, {why} (least-squares "
+                   f"scale{told}): what the robot model and friction leave of joint {name}'s tau_m "
+                   f"falls from {before:.3g} to {after:.3g} Nm RMS with {line}")
+        findings.append({"joint": name, "cause": "torque-scale", "line": line, "rms_before": before,
+                         "rms_after": after, "gain": float(1.0 - ss1[i] / max(ss0[i], 1e-300)),
+                         "message": message})
     return findings, case
 
 
@@ -250,7 +265,7 @@ def _hypotheses(screen: _Case, case: _Case, terms, ss_case: np.ndarray, slips: l
             return _Case(c.q, c.qd, c.qdd, c.tau @ sign.T, c.ratio, None, (c.g, c.d))
         if near(reversed_(screen)):
             yield {"kind": "torque-sign", "joint": i, "motor": i, "case": reversed_(case)}
-    for m in range(k):
+    for m in range(k if slips is None else 0):    # a joint-side torque's scale: ``_torque_scales``
         for j in range(k):
             if case.ratio[m, j] == 0.0:
                 continue
