@@ -3,8 +3,9 @@
 A mapping written by hand goes wrong in a few ways that an import cannot see by itself: a joint's
 zero a quarter or half turn away from the URDF's (an encoder offset left out), a joint turning the
 other way than the URDF's axis (a sign), a joint's motion in degrees read as radians (or mm as m,
-and the reverse; joint-side mappings), a gear ratio or drive gain off by a large factor, a
-coupling term of a wrist guessed wrong. Each leaves ``tau_m`` far from what the robot model and
+and the reverse; joint-side mappings), a gear ratio or drive gain off by a large factor (a
+joint-side torque's, a unit's 1000 among them: ``_torque_scales``), a coupling term of a wrist
+guessed wrong. Each leaves ``tau_m`` far from what the robot model and
 friction explain. ``check`` scores the mapping as it is and under each such change:
 
     score   motor by motor (joint by joint without a transmission), the sum of squares that the
@@ -164,13 +165,13 @@ def _figures(case: _Case, i: int) -> dict:
 
 def _torque_scales(case: _Case, names: list[str], units_only: bool) -> tuple[list[dict], _Case]:
     """Findings of joint-side torques whose least-squares scale against the robot model's torque
-    tau_g + tau_dyn (``_figures``) lies outside ``GROSS`` and whose inverse explains them (a drive gain off; about
-    1/UNIT or UNIT: a unit), and ``case`` with them corrected. Judged by the share of the torque's
-    variance the fit leaves unexplained, which no scale of the torque changes by itself (its residual
-    does, so the hypotheses of ``check`` do not scale a joint-side torque): the factor must leave at
-    most half of it, and half of what is left without it. ``units_only``: the units alone (they
-    come first: a torque mapped 1000 times too small lets any change that shrinks the model's
-    torques win; the other factors come last, once the positions are right)."""
+    tau_g + tau_dyn (``_figures``) lies outside ``GROSS`` and whose inverse explains them (a drive
+    gain off; about 1/UNIT or UNIT: a unit), and ``case`` with them corrected. Judged by the share
+    of the torque's variance the fit leaves unexplained, which no scale of the torque changes by
+    itself (its residual does, so the hypotheses of ``check`` do not scale a joint-side torque):
+    the factor must leave at most half of it, and half of what is left without it. ``units_only``:
+    the units alone (they come first: a torque mapped 1000 times too small lets any change that
+    shrinks the model's torques win; the other factors come last, once the positions are right)."""
     findings = []
     for i, name in enumerate(names):
         fig = _figures(case, i)
