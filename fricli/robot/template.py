@@ -148,7 +148,7 @@ def skeleton(data: bytes, name: str, urdf_text: str, urdf_name: str) -> str:
             if column is not None and not (signal == "i_m" and found):
                 found = found or signal in ("tau_m", "i_m")
                 unit = _unit(fields[column - 1], signal, kind,
-                             {str(k), *_tokens(joint), *(set(_WORDS[signal]) - set(_UNIT_WORDS[signal]))})
+                             {*_tokens(joint), *(set(_WORDS[signal]) - set(_UNIT_WORDS[signal]))})
                 lines.append(f'{signal} = {{column = {column}, unit = "{unit or default[signal]}"}}'
                              f"        # guessed from {one_line(fields[column - 1])!r}"
                              + ("" if unit else "; check the unit"))
